@@ -1,0 +1,1 @@
+"""lmm-studio application layer: the dearpygui studio and the ``lmm-studio`` command."""

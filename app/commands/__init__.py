@@ -1,0 +1,1 @@
+"""One module per ``lmm-studio`` subcommand; each defines ``add_arguments(parser)`` and ``main(args) -> int``."""

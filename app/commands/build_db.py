@@ -1,0 +1,46 @@
+"""``lmm-studio build-db``: build the motion database (or load it from the cache) and report its size."""
+from __future__ import annotations
+
+import sys
+
+
+def add_arguments(p) -> None:
+    p.add_argument("--manifest", help="dataset manifest (JSON or TOML); default: the shipped LAFAN1 locomotion set")
+    p.add_argument("--out", help="write the database .npz here instead of the cache folder")
+    p.add_argument("--rebuild", action="store_true", help="ignore the cache and build again")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def main(args) -> int:
+    from lmm.bvh import BVHError
+    from lmm.database import DatabaseError, load_or_build
+    from lmm.manifest import ManifestError
+    from lmm.progress import Progress
+
+    bar = None
+
+    def progress(done, total, label):
+        nonlocal bar
+        if args.quiet:
+            return
+        if bar is None:
+            bar = Progress(total, "build-db")
+        bar.update(1, postfix=label)
+
+    try:
+        db, info = load_or_build(args.manifest, progress=progress, rebuild=args.rebuild, out_path=args.out)
+    except (BVHError, ManifestError, DatabaseError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 1
+    finally:
+        if bar is not None:
+            bar.close()
+    source = "cache" if info.cached else "built"
+    print(f"database  {db.name} ({source} in {info.seconds:.2f} s)")
+    print(f"file      {info.path}")
+    print(f"clips     {db.n_ranges} ranges ({int(db.range_mirrored.sum())} mirrored)")
+    print(f"frames    {db.n_frames} at {db.fps:g} fps")
+    print(f"seconds   {db.seconds:.1f}")
+    print(f"bones     {db.n_bones}")
+    print(f"bytes     {db.pose_bytes()} ({db.pose_bytes() / 2**20:.1f} MiB pose data)")
+    return 0

@@ -1,0 +1,112 @@
+"""The controller interface shared by motion matching and learned motion matching.
+
+Everything downstream (viewer, studio panels, recorder, metrics, benchmarks) talks to a
+:class:`Controller` and reads :class:`DebugSnapshot` objects, so MM and LMM side by side are two
+instances, not two code paths. Data flows one way each tick::
+
+    InputState -> Controller.step(input, dt) -> (Pose, DebugSnapshot)
+
+A controller reads its :class:`lmm.tuning.Tuning` object on every step, so a value changed between
+two steps acts on the next one.
+"""
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass
+class InputState:
+    """One tick of user input. Sticks in [-1, 1]; y up on the stick means 'away from the camera'."""
+    left_x: float = 0.0
+    left_y: float = 0.0
+    right_x: float = 0.0
+    right_y: float = 0.0
+    walk: bool = False
+    strafe: bool = False
+    camera_azimuth: float = 0.0  # radians, rotation of the camera about +Y (0: camera looks along +Z)
+
+    def copy(self) -> "InputState":
+        return InputState(**self.__dict__)
+
+
+@dataclass
+class Pose:
+    """The character's pose this tick, in world space (metres), database skeleton (bone 0 = simulation/root)."""
+    local_positions: np.ndarray   # (J, 3) float32
+    local_rotations: np.ndarray   # (J, 4) float32 (w, x, y, z)
+    global_positions: np.ndarray  # (J, 3) float32
+    global_rotations: np.ndarray  # (J, 4) float32
+    contacts: np.ndarray          # (2,) bool: left, right foot contact
+
+
+@dataclass
+class Candidates:
+    """Ranked search candidates for the debugger (best first)."""
+    frames: np.ndarray            # (K,) int64 database frame indices
+    costs: np.ndarray             # (K,) float32 total cost (channel costs + bias)
+    channel_costs: np.ndarray     # (K, C) float32 per feature channel
+    bias: np.ndarray              # (K,) float32 transition cost / continuing-pose bias added
+    channel_names: list[str] = field(default_factory=list)
+
+    @classmethod
+    def empty(cls, n_channels: int = 0, channel_names=None) -> "Candidates":
+        return cls(np.zeros(0, np.int64), np.zeros(0, np.float32), np.zeros((0, n_channels), np.float32),
+                   np.zeros(0, np.float32), list(channel_names or []))
+
+
+@dataclass
+class DebugSnapshot:
+    """Everything the studio draws for one tick of one controller. Plain arrays: cheap to keep in a ring buffer."""
+    controller: str                      # "mm" or "lmm"
+    tick: int
+    time_s: float
+    input: InputState
+    # simulation object (the 'desired' character) and its predicted future
+    simulation_position: np.ndarray      # (3,)
+    simulation_rotation: np.ndarray      # (4,)
+    simulation_velocity: np.ndarray      # (3,)
+    desired_velocity: np.ndarray         # (3,)
+    desired_rotation: np.ndarray         # (4,)
+    trajectory_positions: np.ndarray     # (T, 3) world, at the feature offsets
+    trajectory_rotations: np.ndarray     # (T, 4) world
+    trajectory_offsets: np.ndarray       # (T,) frames ahead
+    # matching
+    query: np.ndarray                    # (D,) normalised query features
+    current_features: np.ndarray         # (D,) normalised features of the pose being played
+    matched_frame: int                   # database frame being played (MM) / nearest frame (LMM)
+    matched_features: np.ndarray         # (D,) normalised features of the matched frame
+    candidates: Candidates
+    searched: bool                       # a search (MM) / projection (LMM) ran this tick
+    forced_search: bool                  # ... because the input changed sharply
+    transitioned: bool                   # the played frame jumped (inertialization started)
+    best_cost: float
+    # pose, ghost and contacts
+    pose: Pose
+    matched_pose_positions: np.ndarray   # (J, 3) the matched frame's pose placed at the character root (ghost)
+    foot_contacts: np.ndarray            # (2,) bool
+    foot_locked: np.ndarray              # (2,) bool
+    timings_us: dict[str, float] = field(default_factory=dict)
+    # learned motion matching extras (None for MM)
+    latent: np.ndarray | None = None             # (L,)
+    projected_features: np.ndarray | None = None  # (D,) projector output, normalised
+    nn_frame: int = -1                            # exact nearest neighbour of the same query
+    nn_cost: float = float("nan")
+    projected_cost: float = float("nan")          # query cost of the projector's features
+    matched_latent: np.ndarray | None = None      # (L,) compressor latent of the matched frame (MM, if networks loaded)
+
+
+class Controller(ABC):
+    """A character animation controller: reset, then step once per tick."""
+
+    name: str = "controller"
+
+    @abstractmethod
+    def reset(self, position=None, rotation=None, frame: int | None = None) -> None:
+        """Put the character (and its simulation object) at a start state."""
+
+    @abstractmethod
+    def step(self, inp: InputState, dt: float) -> tuple[Pose, DebugSnapshot]:
+        """Advance one tick of ``dt`` seconds with the given input."""

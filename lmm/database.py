@@ -1,0 +1,398 @@
+"""The motion database: every frame of every clip range, at 60 Hz, mirrored, with a simulation bone.
+
+Built from a manifest (see :mod:`lmm.manifest`) in the order of the reference pipeline:
+BVH -> local rotations/positions (unit scaled) -> trim to ranges -> cubic resample to the target fps
+-> left/right mirror copy -> prepend the simulation (root) bone -> velocities and angular velocities
+-> foot contacts. Bone 0 is always the simulation bone; its position/velocity are in world space and
+every other bone is local to its parent (velocities and angular velocities in the parent's frame).
+
+The result is cached as a pickle-free ``.npz`` keyed by a hash of the file contents and settings.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from . import DEFAULT_MANIFEST, bvh, quat
+from .filters import catmull_rom, central_difference, median_filter, savgol_smooth
+from .manifest import Manifest, ManifestError, load_manifest
+
+DB_FORMAT_VERSION = 3
+SIMULATION_BONE = "Simulation"
+
+
+class DatabaseError(RuntimeError):
+    pass
+
+
+@dataclass
+class Database:
+    names: list[str]
+    parents: np.ndarray            # (J,) int64, parents[0] == -1 (simulation bone)
+    positions: np.ndarray          # (N, J, 3) float32, local (bone 0: world)
+    rotations: np.ndarray          # (N, J, 4) float32, local (bone 0: world)
+    velocities: np.ndarray         # (N, J, 3) float32, local, m/s
+    angular_velocities: np.ndarray  # (N, J, 3) float32, local, rad/s
+    contacts: np.ndarray           # (N, 2) bool: left toe, right toe
+    range_starts: np.ndarray       # (R,) int64
+    range_stops: np.ndarray        # (R,) int64 (exclusive)
+    range_names: list[str]
+    range_mirrored: np.ndarray     # (R,) bool
+    fps: float = 60.0
+    bone_roles: dict[str, str] = field(default_factory=dict)  # role -> bone name (hips, left_foot, ...)
+    mirror_map: np.ndarray | None = None  # (J,) bone index of each bone's mirror counterpart
+    key: str = ""                  # hash of inputs + settings
+    name: str = "dataset"
+
+    # -- sizes -----------------------------------------------------------------------------
+    @property
+    def n_frames(self) -> int:
+        return int(self.positions.shape[0])
+
+    @property
+    def n_bones(self) -> int:
+        return int(self.positions.shape[1])
+
+    @property
+    def dt(self) -> float:
+        return 1.0 / self.fps
+
+    @property
+    def seconds(self) -> float:
+        return self.n_frames / self.fps
+
+    @property
+    def n_ranges(self) -> int:
+        return int(len(self.range_starts))
+
+    def pose_bytes(self) -> int:
+        """Bytes of the pose data a motion matching runtime keeps in memory."""
+        return int(sum(a.nbytes for a in (self.positions, self.rotations, self.velocities,
+                                          self.angular_velocities, self.contacts, self.range_starts,
+                                          self.range_stops)))
+
+    def bone(self, name_or_role: str) -> int:
+        name = self.bone_roles.get(name_or_role, name_or_role)
+        try:
+            return self.names.index(name)
+        except ValueError:
+            raise KeyError(f"no bone named {name_or_role!r} in the database") from None
+
+    # -- frame bookkeeping -----------------------------------------------------------------
+    def range_index(self, frames) -> np.ndarray:
+        """Index of the range that holds each frame."""
+        return np.searchsorted(self.range_stops, np.asarray(frames), side="right")
+
+    def range_stop_of(self, frames) -> np.ndarray:
+        return self.range_stops[self.range_index(frames)]
+
+    def future_frame(self, frames, offset: int) -> np.ndarray:
+        """frames + offset, clamped to the last frame of the frame's own range."""
+        frames = np.asarray(frames)
+        return np.minimum(frames + offset, self.range_stop_of(frames) - 1)
+
+    # -- kinematics ------------------------------------------------------------------------
+    def global_transforms(self, frames=slice(None)):
+        """Global rotations (n, J, 4) and positions (n, J, 3) of the given frames (float64)."""
+        return quat.forward_kinematics(self.rotations[frames].astype(np.float64),
+                                       self.positions[frames].astype(np.float64), self.parents)
+
+    def global_kinematics(self, frames=slice(None)):
+        """Global rotations, positions, velocities and angular velocities (float64)."""
+        return quat.forward_kinematics_velocity(
+            self.rotations[frames].astype(np.float64), self.positions[frames].astype(np.float64),
+            self.velocities[frames].astype(np.float64), self.angular_velocities[frames].astype(np.float64),
+            self.parents)
+
+    # -- persistence -----------------------------------------------------------------------
+    def to_arrays(self) -> dict[str, np.ndarray]:
+        return {
+            "format_version": np.array(DB_FORMAT_VERSION),
+            "names": np.array(self.names), "parents": self.parents,
+            "positions": self.positions, "rotations": self.rotations, "velocities": self.velocities,
+            "angular_velocities": self.angular_velocities, "contacts": self.contacts,
+            "range_starts": self.range_starts, "range_stops": self.range_stops,
+            "range_names": np.array(self.range_names), "range_mirrored": self.range_mirrored,
+            "fps": np.array(self.fps),
+            "bone_roles": np.array(json.dumps(self.bone_roles)),
+            "mirror_map": self.mirror_map if self.mirror_map is not None else np.arange(self.n_bones),
+            "key": np.array(self.key), "name": np.array(self.name),
+        }
+
+    def save(self, path) -> None:
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(path.name + f".{os.getpid()}.tmp")
+        with open(tmp, "wb") as f:
+            np.savez(f, **self.to_arrays())
+        os.replace(tmp, path)  # atomic: a killed build never leaves a half-written cache
+
+    @classmethod
+    def load(cls, path) -> "Database":
+        path = Path(path)
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                if int(z["format_version"]) != DB_FORMAT_VERSION:
+                    raise DatabaseError(f"{path}: database format {int(z['format_version'])}, expected {DB_FORMAT_VERSION}")
+                return cls(
+                    names=[str(s) for s in z["names"]], parents=z["parents"].astype(np.int64),
+                    positions=z["positions"], rotations=z["rotations"], velocities=z["velocities"],
+                    angular_velocities=z["angular_velocities"], contacts=z["contacts"],
+                    range_starts=z["range_starts"].astype(np.int64), range_stops=z["range_stops"].astype(np.int64),
+                    range_names=[str(s) for s in z["range_names"]], range_mirrored=z["range_mirrored"],
+                    fps=float(z["fps"]), bone_roles=json.loads(str(z["bone_roles"])),
+                    mirror_map=z["mirror_map"].astype(np.int64), key=str(z["key"]), name=str(z["name"]))
+        except DatabaseError:
+            raise
+        except (OSError, KeyError, ValueError, EOFError) as e:
+            raise DatabaseError(f"{path}: not a valid lmm-studio database cache ({e})") from None
+
+
+# ---------------------------------------------------------------------------------------------
+# building blocks (pure functions over arrays)
+# ---------------------------------------------------------------------------------------------
+
+def mirror_map(names: list[str], pairs) -> np.ndarray:
+    """For each joint the index of its left/right counterpart (itself when it has none)."""
+    index = {n: i for i, n in enumerate(names)}
+    out = np.arange(len(names))
+    for i, n in enumerate(names):
+        for left, right in pairs:
+            for a, b in ((left, right), (right, left)):
+                if a in n:
+                    j = index.get(n.replace(a, b))
+                    if j is not None:
+                        out[i] = j
+                        break
+            if out[i] != i:
+                break
+    return out
+
+
+def local_to_global(local_rot, local_pos, parents):
+    return quat.forward_kinematics(local_rot, local_pos, parents)
+
+
+def global_to_local(global_rot, global_pos, parents):
+    local_rot = np.array(global_rot, copy=True)
+    local_pos = np.array(global_pos, copy=True)
+    for j, p in enumerate(parents):
+        if p >= 0:
+            local_rot[..., j, :] = quat.inv_mul(global_rot[..., p, :], global_rot[..., j, :])
+            local_pos[..., j, :] = quat.inv_mul_vec(global_rot[..., p, :], global_pos[..., j, :] - global_pos[..., p, :])
+    return local_rot, local_pos
+
+
+def mirror_local(local_rot, local_pos, parents, mirror_idx):
+    """Reflect a motion across the world YZ plane (negate X) and swap left/right joints."""
+    g_rot, g_pos = local_to_global(local_rot, local_pos, parents)
+    g_pos = g_pos * np.array([-1.0, 1.0, 1.0])
+    g_rot = g_rot * np.array([1.0, 1.0, -1.0, -1.0])  # M R M with M = diag(-1, 1, 1)
+    g_rot, g_pos = g_rot[..., mirror_idx, :], g_pos[..., mirror_idx, :]
+    return global_to_local(g_rot, g_pos, parents)
+
+
+def resample(local_rot, local_pos, source_fps: float, target_fps: float, speed_scale: float = 1.0):
+    """Cubic resampling of one contiguous range; ``speed_scale`` > 1 plays the motion faster."""
+    n = local_rot.shape[0]
+    step = source_fps * speed_scale / target_fps
+    if abs(step - 1.0) < 1e-12:
+        return local_rot.copy(), local_pos.copy()
+    t = np.arange(0.0, n - 1 + 1e-9, step)
+    rot = quat.normalize(catmull_rom(quat.unroll(local_rot, axis=0), t))
+    pos = catmull_rom(local_pos, t)
+    return rot, pos
+
+
+def simulation_bone(global_rot, global_pos, spine: int, hips: int, hips_forward_axis, manifest: Manifest):
+    """Smoothed ground projection of the spine (position) and of the hips' forward axis (facing)."""
+    sim_pos = global_pos[:, spine] * np.array([1.0, 0.0, 1.0])
+    sim_pos = savgol_smooth(sim_pos, manifest.simulation_position_window, manifest.simulation_order)
+    sim_pos[:, 1] = 0.0
+    forward = quat.mul_vec(global_rot[:, hips], np.asarray(hips_forward_axis, dtype=np.float64))
+    forward = forward * np.array([1.0, 0.0, 1.0])
+    forward /= np.maximum(np.linalg.norm(forward, axis=-1, keepdims=True), 1e-8)
+    forward = savgol_smooth(forward, manifest.simulation_direction_window, manifest.simulation_order)
+    forward[:, 1] = 0.0
+    forward /= np.maximum(np.linalg.norm(forward, axis=-1, keepdims=True), 1e-8)
+    angle = np.arctan2(forward[:, 0], forward[:, 2])
+    sim_rot = quat.from_axis_angle(np.array([0.0, 1.0, 0.0]), angle)
+    return sim_rot, sim_pos
+
+
+def quat_central_difference(q: np.ndarray, dt: float) -> np.ndarray:
+    """Angular velocity (rad/s, in the frame q is expressed in) by central differences along axis 0."""
+    n = q.shape[0]
+    out = np.zeros(q.shape[:-1] + (3,), dtype=np.float64)
+    if n < 2:
+        return out
+    out[1:-1] = quat.to_scaled_angle_axis(quat.abs_(quat.mul_inv(q[2:], q[:-2]))) / (2 * dt)
+    out[0] = quat.to_scaled_angle_axis(quat.abs_(quat.mul_inv(q[1], q[0]))) / dt
+    out[-1] = quat.to_scaled_angle_axis(quat.abs_(quat.mul_inv(q[-1], q[-2]))) / dt
+    return out
+
+
+def foot_contacts(toe_global_pos: np.ndarray, dt: float, threshold: float, window: int):
+    """Contact where the median-filtered toe speed is under the threshold. Returns (contacts, filtered speed)."""
+    speed = np.linalg.norm(central_difference(toe_global_pos, dt), axis=-1)
+    filtered = median_filter(speed, window)
+    return filtered < threshold, filtered
+
+
+# ---------------------------------------------------------------------------------------------
+# the build
+# ---------------------------------------------------------------------------------------------
+
+def _file_digest(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def manifest_key(manifest: Manifest) -> str:
+    """Hash of everything the build reads: file contents, settings and the build code's version."""
+    h = hashlib.sha256()
+    h.update(f"lmm-db-v{DB_FORMAT_VERSION}".encode())
+    h.update(json.dumps(manifest.settings(), sort_keys=True).encode())
+    for clip in manifest.clips:
+        h.update(_file_digest(clip.file).encode())
+    return h.hexdigest()
+
+
+def default_cache_dir() -> Path:
+    env = os.environ.get("LMM_STUDIO_CACHE")
+    if env:
+        return Path(env)
+    base = os.environ.get("XDG_CACHE_HOME") or (Path.home() / ".cache")
+    return Path(base) / "lmm-studio"
+
+
+def build(manifest: Manifest, progress=None) -> Database:
+    """Build the database from a parsed manifest. ``progress(done, total, label)`` is called per range."""
+    pieces = []  # (name, mirrored, local_rot, local_pos)
+    names = parents = None
+    total_ranges = sum(len(c.ranges) if c.ranges else 1 for c in manifest.clips) * (2 if manifest.mirror else 1)
+    done = 0
+    mpath = manifest.path
+    for ci, clip in enumerate(manifest.clips):
+        anim = bvh.load(clip.file)  # BVHError names the file and line
+        if names is None:
+            names, parents = list(anim.names), np.asarray(anim.parents, dtype=np.int64)
+            for role, bone_name in manifest.bones.items():
+                if bone_name not in names:
+                    raise ManifestError(mpath, f"bones.{role}",
+                                        f"joint {bone_name!r} not in {clip.file.name} (joints: {', '.join(names)})")
+            mirror_idx = mirror_map(names, manifest.mirror_name_pairs)
+        elif list(anim.names) != names or not np.array_equal(anim.parents, parents):
+            raise ManifestError(mpath, f"clips[{ci}].file",
+                                f"{clip.file.name} has a different skeleton from {manifest.clips[0].file.name}")
+        local_rot = anim.local_rotations()
+        local_pos = anim.local_positions() * manifest.unit_scale
+        source_fps = 1.0 / anim.frame_time
+        ranges = clip.ranges or [(0, anim.n_frames)]
+        for ri, (start, stop) in enumerate(ranges):
+            if stop > anim.n_frames:
+                raise ManifestError(mpath, f"clips[{ci}].ranges[{ri}]",
+                                    f"stop {stop} is past the last frame of {clip.file.name} ({anim.n_frames} frames)")
+            if stop - start < 4:
+                raise ManifestError(mpath, f"clips[{ci}].ranges[{ri}]", "a range needs at least 4 frames")
+            rot, pos = resample(quat.unroll(local_rot[start:stop]), local_pos[start:stop], source_fps,
+                                manifest.target_fps, manifest.speed_scale)
+            base = f"{clip.file.name.split('.')[0]}[{start}:{stop}]"
+            pieces.append((base, False, rot, pos))
+            done += 1
+            if progress:
+                progress(done, total_ranges, base)
+            if manifest.mirror:
+                mrot, mpos = mirror_local(rot, pos, parents, mirror_idx)
+                pieces.append((base + " mirrored", True, quat.unroll(mrot), mpos))
+                done += 1
+                if progress:
+                    progress(done, total_ranges, base + " mirrored")
+
+    hips, spine = names.index(manifest.bones["hips"]), names.index(manifest.bones["spine"])
+    toes = [names.index(manifest.bones["left_toe"]), names.index(manifest.bones["right_toe"])]
+    dt = 1.0 / manifest.target_fps
+    all_names = [SIMULATION_BONE] + names
+    all_parents = np.concatenate([[-1], np.where(parents < 0, 0, parents + 1)]).astype(np.int64)
+    out = {k: [] for k in ("pos", "rot", "vel", "ang", "contacts")}
+    starts, stops, range_names, mirrored = [], [], [], []
+    offset = 0
+    for name, is_mirror, rot, pos in pieces:
+        g_rot, g_pos = local_to_global(rot, pos, parents)
+        sim_rot, sim_pos = simulation_bone(g_rot, g_pos, spine, hips, manifest.hips_forward_axis, manifest)
+        # re-parent every root of the file under the simulation bone
+        rot = rot.copy()
+        pos = pos.copy()
+        for j in np.where(parents < 0)[0]:
+            rot[:, j] = quat.inv_mul(sim_rot, rot[:, j])
+            pos[:, j] = quat.inv_mul_vec(sim_rot, pos[:, j] - sim_pos)
+        full_rot = quat.unroll(np.concatenate([sim_rot[:, None], rot], axis=1), axis=0)
+        full_pos = np.concatenate([sim_pos[:, None], pos], axis=1)
+        out["rot"].append(full_rot)
+        out["pos"].append(full_pos)
+        out["vel"].append(central_difference(full_pos, dt))
+        out["ang"].append(quat_central_difference(full_rot, dt))
+        contacts = np.stack([foot_contacts(g_pos[:, t], dt, manifest.contact_speed_threshold_m_s,
+                                           manifest.contact_median_window)[0] for t in toes], axis=-1)
+        out["contacts"].append(contacts)
+        n = rot.shape[0]
+        starts.append(offset)
+        stops.append(offset + n)
+        range_names.append(name)
+        mirrored.append(is_mirror)
+        offset += n
+
+    mirror_full = np.concatenate([[0], mirror_idx + 1]).astype(np.int64)
+    return Database(
+        names=all_names, parents=all_parents,
+        positions=np.concatenate(out["pos"]).astype(np.float32),
+        rotations=np.concatenate(out["rot"]).astype(np.float32),
+        velocities=np.concatenate(out["vel"]).astype(np.float32),
+        angular_velocities=np.concatenate(out["ang"]).astype(np.float32),
+        contacts=np.concatenate(out["contacts"]).astype(bool),
+        range_starts=np.array(starts, dtype=np.int64), range_stops=np.array(stops, dtype=np.int64),
+        range_names=range_names, range_mirrored=np.array(mirrored, dtype=bool),
+        fps=float(manifest.target_fps), bone_roles=dict(manifest.bones), mirror_map=mirror_full,
+        key=manifest_key(manifest), name=manifest.name)
+
+
+@dataclass
+class LoadInfo:
+    path: Path
+    cached: bool
+    seconds: float
+
+
+def load_or_build(manifest_path=None, cache_dir=None, progress=None, rebuild: bool = False,
+                  out_path=None) -> tuple[Database, LoadInfo]:
+    """The database for a manifest, from the cache when its key matches, else built and cached."""
+    t0 = time.perf_counter()
+    manifest = load_manifest(manifest_path or DEFAULT_MANIFEST)
+    key = manifest_key(manifest)
+    path = Path(out_path) if out_path else Path(cache_dir or default_cache_dir()) / f"db-{manifest.name}-{key[:16]}.npz"
+    if not rebuild and path.is_file():
+        try:
+            db = Database.load(path)
+            if db.key == key:
+                return db, LoadInfo(path, True, time.perf_counter() - t0)
+        except DatabaseError:
+            pass  # stale or damaged cache: rebuild below
+    db = build(manifest, progress=progress)
+    try:
+        db.save(path)
+    except OSError:
+        pass  # a read-only cache location must not stop the tool
+    return db, LoadInfo(path, False, time.perf_counter() - t0)
+
+
+def load_default(progress=None) -> Database:
+    return load_or_build(progress=progress)[0]

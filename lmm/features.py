@@ -1,0 +1,214 @@
+"""Matching features: the layout is data, the database features are computed once, weights rescale.
+
+The default layout is the paper's 27-D vector (section 3):
+
+====== =========================================================================
+dims   channel
+====== =========================================================================
+0-2    left foot position, root space          (weight 0.75)
+3-5    right foot position, root space         (weight 0.75)
+6-8    left foot velocity, root space          (weight 1.0)
+9-11   right foot velocity, root space         (weight 1.0)
+12-14  hip velocity, root space                (weight 1.0)
+15-20  future root positions (x, z) at +20/+40/+60 frames, root space (weight 1.0)
+21-26  future root facing (x, z) at +20/+40/+60 frames, root space    (weight 1.5)
+====== =========================================================================
+
+Each channel is one normalisation group: offset = per-dimension mean over the database,
+scale = (mean of the channel's per-dimension standard deviations) / weight. Matching cost is the
+squared Euclidean distance between normalised vectors. Changing a weight only rescales.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from typing import Callable, Sequence
+
+import numpy as np
+
+from . import quat
+
+KINDS = ("bone_position", "bone_velocity", "trajectory_position", "trajectory_direction")
+FORWARD = np.array([0.0, 0.0, 1.0])  # the simulation bone faces +Z in its own space
+
+
+@dataclass(frozen=True)
+class Channel:
+    """One group of feature dimensions.
+
+    kind: ``bone_position`` / ``bone_velocity`` (3 dims: a bone in the simulation bone's space) or
+    ``trajectory_position`` / ``trajectory_direction`` (2 dims per future offset: ground-plane x, z).
+    bone: a bone name or a role from the database's ``bone_roles`` (e.g. ``left_foot``).
+    offsets: frames ahead, at the database rate, for trajectory channels.
+    """
+    name: str
+    kind: str
+    bone: str | None = None
+    offsets: tuple[int, ...] = ()
+    weight: float = 1.0
+
+    def __post_init__(self):
+        if self.kind not in KINDS:
+            raise ValueError(f"feature channel {self.name!r}: unknown kind {self.kind!r} (expected one of {KINDS})")
+        if self.kind.startswith("bone") and not self.bone:
+            raise ValueError(f"feature channel {self.name!r}: kind {self.kind} needs a bone")
+        if self.kind.startswith("trajectory") and (not self.offsets or any(o <= 0 for o in self.offsets)):
+            raise ValueError(f"feature channel {self.name!r}: trajectory channels need positive frame offsets")
+        if not (self.weight >= 0.0):
+            raise ValueError(f"feature channel {self.name!r}: weight must be >= 0, got {self.weight}")
+
+    @property
+    def dims(self) -> int:
+        return 3 if self.kind.startswith("bone") else 2 * len(self.offsets)
+
+    def to_dict(self) -> dict:
+        d = {"name": self.name, "kind": self.kind, "weight": self.weight}
+        if self.bone:
+            d["bone"] = self.bone
+        if self.offsets:
+            d["offsets"] = list(self.offsets)
+        return d
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "Channel":
+        return cls(name=d["name"], kind=d["kind"], bone=d.get("bone"), offsets=tuple(d.get("offsets", ())),
+                   weight=float(d.get("weight", 1.0)))
+
+
+DEFAULT_LAYOUT: tuple[Channel, ...] = (
+    Channel("left_foot_position", "bone_position", "left_foot", weight=0.75),
+    Channel("right_foot_position", "bone_position", "right_foot", weight=0.75),
+    Channel("left_foot_velocity", "bone_velocity", "left_foot", weight=1.0),
+    Channel("right_foot_velocity", "bone_velocity", "right_foot", weight=1.0),
+    Channel("hip_velocity", "bone_velocity", "hips", weight=1.0),
+    Channel("trajectory_position", "trajectory_position", offsets=(20, 40, 60), weight=1.0),
+    Channel("trajectory_direction", "trajectory_direction", offsets=(20, 40, 60), weight=1.5),
+)
+
+
+def layout_slices(layout: Sequence[Channel]) -> list[slice]:
+    out, start = [], 0
+    for ch in layout:
+        out.append(slice(start, start + ch.dims))
+        start += ch.dims
+    return out
+
+
+def compute_raw(db, layout: Sequence[Channel] = DEFAULT_LAYOUT) -> np.ndarray:
+    """Raw (unnormalised) features of every database frame, (N, D) float32, vectorised over frames."""
+    g_rot, g_pos, g_vel, _ = db.global_kinematics()
+    root_rot, root_pos = g_rot[:, 0], g_pos[:, 0]
+    frames = np.arange(db.n_frames)
+    cols = []
+    for ch in layout:
+        if ch.kind == "bone_position":
+            b = db.bone(ch.bone)
+            cols.append(quat.inv_mul_vec(root_rot, g_pos[:, b] - root_pos))
+        elif ch.kind == "bone_velocity":
+            b = db.bone(ch.bone)
+            cols.append(quat.inv_mul_vec(root_rot, g_vel[:, b]))
+        elif ch.kind == "trajectory_position":
+            for off in ch.offsets:
+                f = db.future_frame(frames, off)
+                cols.append(quat.inv_mul_vec(root_rot, root_pos[f] - root_pos)[:, [0, 2]])
+        else:  # trajectory_direction
+            for off in ch.offsets:
+                f = db.future_frame(frames, off)
+                cols.append(quat.inv_mul_vec(root_rot, quat.mul_vec(root_rot[f], FORWARD))[:, [0, 2]])
+    return np.concatenate(cols, axis=1).astype(np.float32)
+
+
+@dataclass
+class Features:
+    """Database features plus their normalisation; ``normalized`` is what search compares against."""
+    layout: list[Channel]
+    raw: np.ndarray              # (N, D) float32
+    mean: np.ndarray             # (D,) float32
+    channel_std: np.ndarray      # (C,) float32: mean per-dim std of each channel (weight-free)
+    weights: np.ndarray = field(default=None)  # (C,) float32
+    normalized: np.ndarray = field(default=None, repr=False)  # (N, D) float32
+    inv_scale: np.ndarray = field(default=None, repr=False)   # (D,) float32 = weight / channel std
+
+    def __post_init__(self):
+        self.layout = list(self.layout)
+        self.slices = layout_slices(self.layout)
+        self.channel_of_dim = np.concatenate([np.full(ch.dims, i) for i, ch in enumerate(self.layout)])
+        if self.weights is None:
+            self.weights = np.array([ch.weight for ch in self.layout], dtype=np.float32)
+        self._rescale()
+
+    @property
+    def n_dims(self) -> int:
+        return int(self.raw.shape[1])
+
+    @property
+    def names(self) -> list[str]:
+        return [ch.name for ch in self.layout]
+
+    def channel_index(self, name: str) -> int:
+        for i, ch in enumerate(self.layout):
+            if ch.name == name:
+                return i
+        raise KeyError(f"no feature channel named {name!r} (channels: {', '.join(self.names)})")
+
+    def _rescale(self) -> None:
+        std = np.maximum(self.channel_std, 1e-8)
+        self.inv_scale = (self.weights / std)[self.channel_of_dim].astype(np.float32)
+        self.normalized = ((self.raw - self.mean) * self.inv_scale).astype(np.float32)
+
+    def set_weights(self, weights) -> bool:
+        """Set channel weights (sequence in layout order, or {name: weight}); rescales, no raw recompute.
+
+        Returns True when anything changed.
+        """
+        new = self.weights.copy()
+        if isinstance(weights, dict):
+            for name, w in weights.items():
+                new[self.channel_index(name)] = w
+        else:
+            new[:] = np.asarray(weights, dtype=np.float32)
+        if np.any(~np.isfinite(new)) or np.any(new < 0):
+            raise ValueError(f"feature weights must be finite and >= 0, got {new.tolist()}")
+        if np.array_equal(new, self.weights):
+            return False
+        self.weights = new.astype(np.float32)
+        self._rescale()
+        return True
+
+    def normalize(self, raw: np.ndarray) -> np.ndarray:
+        return ((raw - self.mean) * self.inv_scale).astype(np.float32)
+
+    def denormalize(self, x: np.ndarray) -> np.ndarray:
+        """Inverse of normalize for channels with non-zero weight (zero-weight dims come back as the mean)."""
+        safe = np.where(self.inv_scale > 0, self.inv_scale, 1.0)
+        return np.where(self.inv_scale > 0, x / safe + self.mean, self.mean).astype(np.float32)
+
+    def channel_costs(self, query_norm: np.ndarray, frames_norm: np.ndarray) -> np.ndarray:
+        """Per-channel squared distances, (..., C)."""
+        d2 = (frames_norm - query_norm) ** 2
+        return np.stack([d2[..., s].sum(-1) for s in self.slices], axis=-1)
+
+    def layout_dicts(self) -> list[dict]:
+        return [replace(ch, weight=float(w)).to_dict() for ch, w in zip(self.layout, self.weights)]
+
+
+def build_features(db, layout: Sequence[Channel] = DEFAULT_LAYOUT) -> Features:
+    raw = compute_raw(db, layout)
+    mean = raw.mean(axis=0)
+    std = raw.std(axis=0)
+    slices = layout_slices(layout)
+    channel_std = np.array([std[s].mean() for s in slices], dtype=np.float32)
+    return Features(layout=list(layout), raw=raw, mean=mean.astype(np.float32), channel_std=channel_std)
+
+
+def build_query(features: Features, current_raw: np.ndarray,
+                trajectory_at: Callable[[int], tuple[np.ndarray, np.ndarray]]) -> np.ndarray:
+    """A raw query vector: pose channels copied from ``current_raw`` (the playing frame's features),
+    trajectory channels from ``trajectory_at(offset) -> (position, direction)``, both 3-vectors in the
+    simulation object's space."""
+    q = np.array(current_raw, dtype=np.float32, copy=True)
+    for ch, s in zip(features.layout, features.slices):
+        if ch.kind == "trajectory_position":
+            q[s] = np.concatenate([trajectory_at(o)[0][[0, 2]] for o in ch.offsets])
+        elif ch.kind == "trajectory_direction":
+            q[s] = np.concatenate([trajectory_at(o)[1][[0, 2]] for o in ch.offsets])
+    return q

@@ -1,0 +1,280 @@
+"""Vectorised quaternion maths.
+
+Quaternions are numpy arrays with the scalar first: ``q[..., :] = (w, x, y, z)``.
+Every function broadcasts over leading dimensions (frames, joints, ...), works in
+float32 or float64 and never loops in Python over frames or joints.
+Rotations act on column vectors: ``mul_vec(q, v)`` rotates ``v`` by ``q``.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+_AXES = {"x": 0, "y": 1, "z": 2}
+
+
+def identity(shape=(), dtype=np.float64) -> np.ndarray:
+    q = np.zeros(tuple(np.atleast_1d(shape)) + (4,) if shape != () else (4,), dtype=dtype)
+    q[..., 0] = 1.0
+    return q
+
+
+def normalize(q: np.ndarray, eps: float = 1e-10) -> np.ndarray:
+    return q / np.maximum(np.linalg.norm(q, axis=-1, keepdims=True), eps)
+
+
+def conj(q: np.ndarray) -> np.ndarray:
+    """Inverse of a unit quaternion."""
+    return q * np.array([1.0, -1.0, -1.0, -1.0], dtype=q.dtype)
+
+
+inv = conj
+
+
+def mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Hamilton product a * b (apply b first, then a)."""
+    aw, ax, ay, az = a[..., 0], a[..., 1], a[..., 2], a[..., 3]
+    bw, bx, by, bz = b[..., 0], b[..., 1], b[..., 2], b[..., 3]
+    return np.stack([
+        aw * bw - ax * bx - ay * by - az * bz,
+        aw * bx + ax * bw + ay * bz - az * by,
+        aw * by - ax * bz + ay * bw + az * bx,
+        aw * bz + ax * by - ay * bx + az * bw,
+    ], axis=-1)
+
+
+def inv_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """conj(a) * b."""
+    return mul(conj(a), b)
+
+
+def mul_inv(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a * conj(b)."""
+    return mul(a, conj(b))
+
+
+def mul_vec(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Rotate vectors v (..., 3) by unit quaternions q (..., 4)."""
+    w = q[..., :1]
+    u = q[..., 1:]
+    t = 2.0 * np.cross(u, v)
+    return v + w * t + np.cross(u, t)
+
+
+def inv_mul_vec(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Rotate vectors v by the inverse of q."""
+    return mul_vec(conj(q), v)
+
+
+def from_axis_angle(axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
+    axis = np.asarray(axis, dtype=np.float64)
+    angle = np.asarray(angle, dtype=np.float64)
+    half = angle[..., None] * 0.5
+    return np.concatenate([np.cos(half), np.sin(half) * axis], axis=-1)
+
+
+def from_scaled_angle_axis(v: np.ndarray, eps: float = 1e-8) -> np.ndarray:
+    """Exponential map: rotation vector (axis * angle, radians) -> quaternion."""
+    return exp(v * 0.5, eps)
+
+
+def to_scaled_angle_axis(q: np.ndarray, eps: float = 1e-8) -> np.ndarray:
+    """Logarithm map: quaternion -> rotation vector (axis * angle, radians)."""
+    return 2.0 * log(q, eps)
+
+
+def exp(v: np.ndarray, eps: float = 1e-8) -> np.ndarray:
+    half = np.linalg.norm(v, axis=-1, keepdims=True)
+    small = half < eps
+    safe = np.where(small, 1.0, half)
+    w = np.cos(half)
+    xyz = np.where(small, v, np.sin(half) / safe * v)
+    return normalize(np.concatenate([w, xyz], axis=-1))
+
+
+def log(q: np.ndarray, eps: float = 1e-8) -> np.ndarray:
+    q = abs_(q)
+    length = np.linalg.norm(q[..., 1:], axis=-1, keepdims=True)
+    small = length < eps
+    safe = np.where(small, 1.0, length)
+    halfangle = np.arctan2(length, np.clip(q[..., :1], -1.0, 1.0))
+    return np.where(small, q[..., 1:], halfangle / safe * q[..., 1:])
+
+
+def abs_(q: np.ndarray) -> np.ndarray:
+    """The quaternion with non-negative w that represents the same rotation."""
+    return np.where(q[..., :1] < 0.0, -q, q)
+
+
+def from_euler(angles: np.ndarray, order: str) -> np.ndarray:
+    """Euler angles (radians) -> quaternion.
+
+    ``order`` names the axes in the order the channels appear in a BVH file,
+    e.g. ``"zyx"`` for ``Zrotation Yrotation Xrotation``; ``angles[..., i]`` is the
+    angle about axis ``order[i]``. The rotation is R = R(order[0]) R(order[1]) R(order[2])
+    (intrinsic, the BVH convention).
+    """
+    order = order.lower()
+    if len(order) != 3 or any(c not in _AXES for c in order):
+        raise ValueError(f"bad Euler order {order!r}")
+    angles = np.asarray(angles)
+    q = None
+    for i, c in enumerate(order):
+        axis = np.zeros(3)
+        axis[_AXES[c]] = 1.0
+        qi = from_axis_angle(axis, angles[..., i])
+        q = qi if q is None else mul(q, qi)
+    return q
+
+
+def to_euler(q: np.ndarray, order: str) -> np.ndarray:
+    """Quaternion -> Euler angles (radians) in ``order`` (see from_euler).
+
+    Works for any of the 6 Tait-Bryan orders through the rotation matrix.
+    """
+    order = order.lower()
+    m = to_matrix(q)
+    i, j, k = (_AXES[c] for c in order)
+    if len({i, j, k}) != 3:
+        raise ValueError(f"only Tait-Bryan orders are supported, got {order!r}")
+    # sign of the permutation (i, j, k): +1 for cyclic (xyz, yzx, zxy)
+    sign = 1.0 if (j - i) % 3 == 1 else -1.0
+    # R = Ri(a) Rj(b) Rk(c): R[i, k] = sign * sin(b)
+    sb = np.clip(sign * m[..., i, k], -1.0, 1.0)
+    b = np.arcsin(sb)
+    a = np.arctan2(-sign * m[..., j, k], m[..., k, k])
+    c = np.arctan2(-sign * m[..., i, j], m[..., i, i])
+    # gimbal lock: cos(b) ~ 0, put everything into a
+    lock = np.abs(sb) > 1.0 - 1e-9
+    if np.any(lock):
+        a_lock = np.arctan2(sign * m[..., k, j], m[..., j, j])
+        a = np.where(lock, a_lock, a)
+        c = np.where(lock, 0.0, c)
+    return np.stack([a, b, c], axis=-1)
+
+
+def to_matrix(q: np.ndarray) -> np.ndarray:
+    w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    xx, yy, zz = x * x, y * y, z * z
+    xy, xz, yz = x * y, x * z, y * z
+    wx, wy, wz = w * x, w * y, w * z
+    m = np.stack([
+        1 - 2 * (yy + zz), 2 * (xy - wz), 2 * (xz + wy),
+        2 * (xy + wz), 1 - 2 * (xx + zz), 2 * (yz - wx),
+        2 * (xz - wy), 2 * (yz + wx), 1 - 2 * (xx + yy),
+    ], axis=-1)
+    return m.reshape(q.shape[:-1] + (3, 3))
+
+
+def from_matrix(m: np.ndarray) -> np.ndarray:
+    """Rotation matrix (..., 3, 3) -> unit quaternion (w >= 0), robust branch per element."""
+    m00, m11, m22 = m[..., 0, 0], m[..., 1, 1], m[..., 2, 2]
+    trace = m00 + m11 + m22
+    cands = np.stack([
+        np.stack([1 + trace, m[..., 2, 1] - m[..., 1, 2], m[..., 0, 2] - m[..., 2, 0], m[..., 1, 0] - m[..., 0, 1]], -1),
+        np.stack([m[..., 2, 1] - m[..., 1, 2], 1 + m00 - m11 - m22, m[..., 0, 1] + m[..., 1, 0], m[..., 0, 2] + m[..., 2, 0]], -1),
+        np.stack([m[..., 0, 2] - m[..., 2, 0], m[..., 0, 1] + m[..., 1, 0], 1 - m00 + m11 - m22, m[..., 1, 2] + m[..., 2, 1]], -1),
+        np.stack([m[..., 1, 0] - m[..., 0, 1], m[..., 0, 2] + m[..., 2, 0], m[..., 1, 2] + m[..., 2, 1], 1 - m00 - m11 + m22], -1),
+    ], axis=-2)
+    best = np.argmax(np.stack([trace, m00, m11, m22], -1), axis=-1)
+    q = np.take_along_axis(cands, best[..., None, None], axis=-2)[..., 0, :]
+    return abs_(normalize(q))
+
+
+def to_xform_xy(q: np.ndarray) -> np.ndarray:
+    """The first two columns of the rotation matrix, (..., 3, 2): the 6-D '2-axis' encoding."""
+    return to_matrix(q)[..., :2]
+
+
+def from_xform_xy(xy: np.ndarray) -> np.ndarray:
+    """Gram-Schmidt the two columns (..., 3, 2) back to a rotation, then to a quaternion."""
+    a = xy[..., 0]
+    a = a / np.maximum(np.linalg.norm(a, axis=-1, keepdims=True), 1e-8)
+    b = xy[..., 1]
+    b = b - np.sum(a * b, axis=-1, keepdims=True) * a
+    b = b / np.maximum(np.linalg.norm(b, axis=-1, keepdims=True), 1e-8)
+    c = np.cross(a, b)
+    return from_matrix(np.stack([a, b, c], axis=-1))
+
+
+def unroll(q: np.ndarray, axis: int = 0) -> np.ndarray:
+    """Flip signs along ``axis`` (time) so consecutive quaternions lie in the same hemisphere."""
+    q = np.moveaxis(np.array(q, copy=True), axis, 0)
+    if q.shape[0] > 1:
+        dots = np.sum(q[1:] * q[:-1], axis=-1)
+        flips = np.cumsum(dots < 0.0, axis=0) % 2
+        sign = np.concatenate([np.ones_like(flips[:1]), 1 - 2 * flips], axis=0)
+        q = q * sign[..., None]
+    return np.moveaxis(q, 0, axis)
+
+
+def slerp(a: np.ndarray, b: np.ndarray, t: np.ndarray, eps: float = 1e-6) -> np.ndarray:
+    """Shortest-path spherical interpolation."""
+    t = np.asarray(t)[..., None] if np.ndim(t) else t
+    dot = np.sum(a * b, axis=-1, keepdims=True)
+    b = np.where(dot < 0, -b, b)
+    dot = np.abs(dot)
+    theta = np.arccos(np.clip(dot, -1.0, 1.0))
+    sin_t = np.sin(theta)
+    near = sin_t < eps
+    safe = np.where(near, 1.0, sin_t)
+    wa = np.where(near, 1.0 - t, np.sin((1.0 - t) * theta) / safe)
+    wb = np.where(near, t, np.sin(t * theta) / safe)
+    return normalize(wa * a + wb * b)
+
+
+def between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Shortest rotation taking direction a onto direction b."""
+    c = np.cross(a, b)
+    w = np.sqrt(np.sum(a * a, -1) * np.sum(b * b, -1)) + np.sum(a * b, -1)
+    return normalize(np.concatenate([w[..., None], c], axis=-1))
+
+
+def angular_velocity(q0: np.ndarray, q1: np.ndarray, dt: float) -> np.ndarray:
+    """World-space angular velocity (rad/s) taking q0 to q1 in dt seconds."""
+    return to_scaled_angle_axis(abs_(mul_inv(q1, q0))) / dt
+
+
+def forward_kinematics(local_rot: np.ndarray, local_pos: np.ndarray, parents) -> tuple[np.ndarray, np.ndarray]:
+    """Global rotations and positions from local ones.
+
+    local_rot (..., J, 4), local_pos (..., J, 3); ``parents[j] < j`` (topological order), -1 for roots.
+    The loop is over joints (tens), vectorised over everything else (frames).
+    """
+    g_rot = np.empty(np.broadcast_shapes(local_rot.shape[:-1]) + (4,), dtype=np.result_type(local_rot, local_pos))
+    g_pos = np.empty(local_pos.shape, dtype=g_rot.dtype)
+    for j, p in enumerate(parents):
+        if p < 0:
+            g_rot[..., j, :] = local_rot[..., j, :]
+            g_pos[..., j, :] = local_pos[..., j, :]
+        else:
+            g_rot[..., j, :] = mul(g_rot[..., p, :], local_rot[..., j, :])
+            g_pos[..., j, :] = mul_vec(g_rot[..., p, :], local_pos[..., j, :]) + g_pos[..., p, :]
+    return g_rot, g_pos
+
+
+def forward_kinematics_velocity(local_rot, local_pos, local_vel, local_angvel, parents):
+    """Global rotations, positions, velocities and angular velocities.
+
+    local_vel / local_angvel are expressed in the parent's frame (as stored in the
+    database); global velocities include the contribution of the parent's spin.
+    """
+    shape = local_pos.shape
+    g_rot = np.empty(shape[:-1] + (4,), dtype=local_pos.dtype)
+    g_pos = np.empty(shape, dtype=local_pos.dtype)
+    g_vel = np.empty(shape, dtype=local_pos.dtype)
+    g_ang = np.empty(shape, dtype=local_pos.dtype)
+    for j, p in enumerate(parents):
+        if p < 0:
+            g_rot[..., j, :] = local_rot[..., j, :]
+            g_pos[..., j, :] = local_pos[..., j, :]
+            g_vel[..., j, :] = local_vel[..., j, :]
+            g_ang[..., j, :] = local_angvel[..., j, :]
+        else:
+            pr = g_rot[..., p, :]
+            offset = mul_vec(pr, local_pos[..., j, :])
+            g_rot[..., j, :] = mul(pr, local_rot[..., j, :])
+            g_pos[..., j, :] = offset + g_pos[..., p, :]
+            g_vel[..., j, :] = (g_vel[..., p, :] + mul_vec(pr, local_vel[..., j, :])
+                                + np.cross(g_ang[..., p, :], offset))
+            g_ang[..., j, :] = mul_vec(pr, local_angvel[..., j, :]) + g_ang[..., p, :]
+    return g_rot, g_pos, g_vel, g_ang
