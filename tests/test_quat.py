@@ -1,0 +1,154 @@
+"""lmm.quat against slow, independent per-element implementations built on 3x3 / 4x4 matrices."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from lmm import quat
+
+ORDERS = ["xyz", "xzy", "yxz", "yzx", "zxy", "zyx"]
+
+
+def slow_axis_matrix(axis: str, angle: float) -> np.ndarray:
+    c, s = math.cos(angle), math.sin(angle)
+    if axis == "x":
+        return np.array([[1, 0, 0], [0, c, -s], [0, s, c]], dtype=float)
+    if axis == "y":
+        return np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]], dtype=float)
+    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]], dtype=float)
+
+
+def slow_euler_matrix(angles, order: str) -> np.ndarray:
+    """R = R(order[0], a0) @ R(order[1], a1) @ R(order[2], a2), one element at a time."""
+    m = np.eye(3)
+    for axis, a in zip(order, angles):
+        m = m @ slow_axis_matrix(axis, float(a))
+    return m
+
+
+def slow_quat_matrix(q) -> np.ndarray:
+    """Rotation matrix of a unit quaternion via Rodrigues' formula on its axis/angle."""
+    w, v = float(q[0]), np.asarray(q[1:], dtype=float)
+    s = np.linalg.norm(v)
+    if s < 1e-15:
+        return np.eye(3)
+    angle = 2.0 * math.atan2(s, w)
+    k = v / s
+    kx = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    return np.eye(3) + math.sin(angle) * kx + (1 - math.cos(angle)) * kx @ kx
+
+
+def random_quats(rng, n):
+    return quat.normalize(rng.normal(size=(n, 4)))
+
+
+@pytest.fixture
+def rng():
+    return np.random.default_rng(1234)
+
+
+def test_to_matrix_matches_rodrigues(rng):
+    q = random_quats(rng, 200)
+    fast = quat.to_matrix(q)
+    for i in range(len(q)):
+        np.testing.assert_allclose(fast[i], slow_quat_matrix(q[i]), atol=1e-12)
+
+
+@pytest.mark.parametrize("order", ORDERS)
+def test_from_euler_matches_matrix_product(order, rng):
+    angles = rng.uniform(-math.pi, math.pi, size=(300, 3))
+    q = quat.from_euler(angles, order)
+    np.testing.assert_allclose(np.linalg.norm(q, axis=-1), 1.0, atol=1e-12)
+    for i in range(len(angles)):
+        np.testing.assert_allclose(slow_quat_matrix(q[i]), slow_euler_matrix(angles[i], order), atol=1e-12)
+
+
+@pytest.mark.parametrize("order", ORDERS)
+def test_from_euler_broadcasts(order, rng):
+    angles = rng.uniform(-3, 3, size=(5, 7, 3))
+    q = quat.from_euler(angles, order)
+    assert q.shape == (5, 7, 4)
+    np.testing.assert_allclose(q[2, 3], quat.from_euler(angles[2, 3], order), atol=1e-15)
+
+
+@pytest.mark.parametrize("order", ORDERS)
+def test_to_euler_inverts_from_euler(order, rng):
+    # inside the principal range the angles themselves come back
+    n = 500
+    angles = np.stack([rng.uniform(-math.pi, math.pi, n),
+                       rng.uniform(-math.pi / 2 + 1e-3, math.pi / 2 - 1e-3, n),
+                       rng.uniform(-math.pi, math.pi, n)], axis=-1)
+    back = quat.to_euler(quat.from_euler(angles, order), order)
+    np.testing.assert_allclose(back, angles, atol=1e-9)
+
+
+@pytest.mark.parametrize("order", ORDERS)
+def test_to_euler_of_any_rotation_gives_the_same_rotation(order, rng):
+    q = random_quats(rng, 300)
+    angles = quat.to_euler(q, order)
+    assert np.all(np.abs(angles[:, 1]) <= math.pi / 2 + 1e-12)
+    for i in range(len(q)):
+        np.testing.assert_allclose(slow_euler_matrix(angles[i], order), slow_quat_matrix(q[i]), atol=1e-9)
+
+
+@pytest.mark.parametrize("order", ORDERS)
+@pytest.mark.parametrize("middle", [math.pi / 2, -math.pi / 2, math.pi / 2 - 1e-7, -math.pi / 2 + 1e-9])
+def test_to_euler_gimbal_lock(order, middle, rng):
+    n = 50
+    angles = np.stack([rng.uniform(-3, 3, n), np.full(n, middle), rng.uniform(-3, 3, n)], axis=-1)
+    back = quat.to_euler(quat.from_euler(angles, order), order)
+    assert np.all(np.isfinite(back))
+    for i in range(n):
+        np.testing.assert_allclose(slow_euler_matrix(back[i], order), slow_euler_matrix(angles[i], order),
+                                   atol=1e-6)
+
+
+def test_mul_and_mul_vec_match_matrices(rng):
+    a, b = random_quats(rng, 100), random_quats(rng, 100)
+    v = rng.normal(size=(100, 3))
+    ab = quat.mul(a, b)
+    rv = quat.mul_vec(a, v)
+    for i in range(100):
+        np.testing.assert_allclose(slow_quat_matrix(ab[i]), slow_quat_matrix(a[i]) @ slow_quat_matrix(b[i]),
+                                   atol=1e-12)
+        np.testing.assert_allclose(rv[i], slow_quat_matrix(a[i]) @ v[i], atol=1e-12)
+
+
+def _slow_fk(local_rot, local_pos, parents):
+    """Per frame, per joint 4x4 homogeneous transforms: G[j] = G[parent] @ T(local)."""
+    F, J = local_pos.shape[:2]
+    g_mat = np.zeros((F, J, 3, 3))
+    g_pos = np.zeros((F, J, 3))
+    for f in range(F):
+        world = [None] * J
+        for j in range(J):
+            t = np.eye(4)
+            t[:3, :3] = slow_quat_matrix(local_rot[f, j])
+            t[:3, 3] = local_pos[f, j]
+            world[j] = t if parents[j] < 0 else world[parents[j]] @ t
+            g_mat[f, j] = world[j][:3, :3]
+            g_pos[f, j] = world[j][:3, 3]
+    return g_mat, g_pos
+
+
+@pytest.mark.parametrize("parents", [
+    [-1, 0, 1, 2, 3],
+    [-1, 0, 0, 1, 2, 2, 0],
+    [-1, 0, -1, 2, 2, 0],  # two roots
+])
+def test_forward_kinematics_matches_slow_loop(parents, rng):
+    F, J = 12, len(parents)
+    local_rot = random_quats(rng, F * J).reshape(F, J, 4)
+    local_pos = rng.normal(scale=10.0, size=(F, J, 3))
+    g_rot, g_pos = quat.forward_kinematics(local_rot, local_pos, np.array(parents))
+    s_mat, s_pos = _slow_fk(local_rot, local_pos, parents)
+    np.testing.assert_allclose(g_pos, s_pos, atol=1e-9)
+    np.testing.assert_allclose(quat.to_matrix(g_rot), s_mat, atol=1e-12)
+
+
+def test_matrix_round_trip(rng):
+    q = random_quats(rng, 500)
+    back = quat.from_matrix(quat.to_matrix(q))
+    np.testing.assert_allclose(back, quat.abs_(q), atol=1e-12)
