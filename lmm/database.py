@@ -23,7 +23,7 @@ from . import DEFAULT_MANIFEST, bvh, quat
 from .filters import catmull_rom, central_difference, median_filter, savgol_smooth
 from .manifest import Manifest, ManifestError, load_manifest
 
-DB_FORMAT_VERSION = 3
+DB_FORMAT_VERSION = 5  # 5: mirrored clips keep the original bone offsets
 SIMULATION_BONE = "Simulation"
 
 
@@ -40,6 +40,7 @@ class Database:
     velocities: np.ndarray         # (N, J, 3) float32, local, m/s
     angular_velocities: np.ndarray  # (N, J, 3) float32, local, rad/s
     contacts: np.ndarray           # (N, 2) bool: left toe, right toe
+    toe_speeds: np.ndarray         # (N, 2) float32: median-filtered toe speed (m/s) the contacts come from
     range_starts: np.ndarray       # (R,) int64
     range_stops: np.ndarray        # (R,) int64 (exclusive)
     range_names: list[str]
@@ -117,7 +118,7 @@ class Database:
             "names": np.array(self.names), "parents": self.parents,
             "positions": self.positions, "rotations": self.rotations, "velocities": self.velocities,
             "angular_velocities": self.angular_velocities, "contacts": self.contacts,
-            "range_starts": self.range_starts, "range_stops": self.range_stops,
+            "toe_speeds": self.toe_speeds, "range_starts": self.range_starts, "range_stops": self.range_stops,
             "range_names": np.array(self.range_names), "range_mirrored": self.range_mirrored,
             "fps": np.array(self.fps),
             "bone_roles": np.array(json.dumps(self.bone_roles)),
@@ -143,14 +144,14 @@ class Database:
                 return cls(
                     names=[str(s) for s in z["names"]], parents=z["parents"].astype(np.int64),
                     positions=z["positions"], rotations=z["rotations"], velocities=z["velocities"],
-                    angular_velocities=z["angular_velocities"], contacts=z["contacts"],
+                    angular_velocities=z["angular_velocities"], contacts=z["contacts"], toe_speeds=z["toe_speeds"],
                     range_starts=z["range_starts"].astype(np.int64), range_stops=z["range_stops"].astype(np.int64),
                     range_names=[str(s) for s in z["range_names"]], range_mirrored=z["range_mirrored"],
                     fps=float(z["fps"]), bone_roles=json.loads(str(z["bone_roles"])),
                     mirror_map=z["mirror_map"].astype(np.int64), key=str(z["key"]), name=str(z["name"]))
         except DatabaseError:
             raise
-        except (OSError, KeyError, ValueError, EOFError) as e:
+        except Exception as e:  # zipfile.BadZipFile, OSError, KeyError, ValueError...: all mean "not a cache"
             raise DatabaseError(f"{path}: not a valid lmm-studio database cache ({e})") from None
 
 
@@ -189,11 +190,35 @@ def global_to_local(global_rot, global_pos, parents):
     return local_rot, local_pos
 
 
+# local-space reflections S a skeleton's left/right offsets may follow (o[mirror] = S o), each with
+# the quaternion of the proper rotation M S (M = diag(-1, 1, 1), the world mirror)
+_OFFSET_REFLECTIONS = ((np.array([-1.0, 1.0, 1.0]), np.array([1.0, 0.0, 0.0, 0.0])),
+                       (np.array([1.0, -1.0, 1.0]), np.array([0.0, 0.0, 0.0, 1.0])),
+                       (np.array([1.0, 1.0, -1.0]), np.array([0.0, 0.0, 1.0, 0.0])))
+
+
+def mirror_frame_rotation(offsets, parents, mirror_idx) -> np.ndarray:
+    """The constant rotation C that keeps mirrored local frames those of the original skeleton.
+
+    M R M alone turns every bone offset o into M o, a different skeleton (LAFAN1: legs point along -X),
+    so inertializing or blending across mirrored/unmirrored frames would shrink bones through zero.
+    With S the reflection relating left and right offsets (o[mirror] ~ S o), M R S = (M R M) (M S)
+    gives back the original offsets, so C = M S.
+    """
+    child = np.asarray(parents) >= 0
+    errors = [np.abs(offsets[mirror_idx][child] - s * offsets[child]).sum() for s, _ in _OFFSET_REFLECTIONS]
+    return _OFFSET_REFLECTIONS[int(np.argmin(errors))][1]
+
+
 def mirror_local(local_rot, local_pos, parents, mirror_idx):
-    """Reflect a motion across the world YZ plane (negate X) and swap left/right joints."""
+    """Reflect a motion across the world YZ plane (negate X) and swap left/right joints.
+
+    Bone offsets stay those of the original skeleton (see :func:`mirror_frame_rotation`).
+    """
     g_rot, g_pos = local_to_global(local_rot, local_pos, parents)
     g_pos = g_pos * np.array([-1.0, 1.0, 1.0])
     g_rot = g_rot * np.array([1.0, 1.0, -1.0, -1.0])  # M R M with M = diag(-1, 1, 1)
+    g_rot = quat.mul(g_rot, mirror_frame_rotation(np.asarray(local_pos)[0], parents, mirror_idx))
     g_rot, g_pos = g_rot[..., mirror_idx, :], g_pos[..., mirror_idx, :]
     return global_to_local(g_rot, g_pos, parents)
 
@@ -297,6 +322,8 @@ def build(manifest: Manifest, progress=None) -> Database:
         local_rot = anim.local_rotations()
         local_pos = anim.local_positions() * manifest.unit_scale
         source_fps = 1.0 / anim.frame_time
+        if abs(source_fps - round(source_fps)) < 0.01:
+            source_fps = float(round(source_fps))  # "Frame Time: 0.033333" means 30 fps, not 30.0003
         ranges = clip.ranges or [(0, anim.n_frames)]
         for ri, (start, stop) in enumerate(ranges):
             if stop > anim.n_frames:
@@ -323,7 +350,7 @@ def build(manifest: Manifest, progress=None) -> Database:
     dt = 1.0 / manifest.target_fps
     all_names = [SIMULATION_BONE] + names
     all_parents = np.concatenate([[-1], np.where(parents < 0, 0, parents + 1)]).astype(np.int64)
-    out = {k: [] for k in ("pos", "rot", "vel", "ang", "contacts")}
+    out = {k: [] for k in ("pos", "rot", "vel", "ang", "contacts", "toe_speeds")}
     starts, stops, range_names, mirrored = [], [], [], []
     offset = 0
     for name, is_mirror, rot, pos in pieces:
@@ -341,9 +368,11 @@ def build(manifest: Manifest, progress=None) -> Database:
         out["pos"].append(full_pos)
         out["vel"].append(central_difference(full_pos, dt))
         out["ang"].append(quat_central_difference(full_rot, dt))
-        contacts = np.stack([foot_contacts(g_pos[:, t], dt, manifest.contact_speed_threshold_m_s,
-                                           manifest.contact_median_window)[0] for t in toes], axis=-1)
-        out["contacts"].append(contacts)
+        speeds = np.stack([foot_contacts(g_pos[:, t], dt, manifest.contact_speed_threshold_m_s,
+                                         manifest.contact_median_window)[1] for t in toes], axis=-1).astype(np.float32)
+        out["toe_speeds"].append(speeds)
+        # threshold the stored float32 speeds so the invariant holds exactly on what is saved
+        out["contacts"].append(speeds < np.float32(manifest.contact_speed_threshold_m_s))
         n = rot.shape[0]
         starts.append(offset)
         stops.append(offset + n)
@@ -359,6 +388,7 @@ def build(manifest: Manifest, progress=None) -> Database:
         velocities=np.concatenate(out["vel"]).astype(np.float32),
         angular_velocities=np.concatenate(out["ang"]).astype(np.float32),
         contacts=np.concatenate(out["contacts"]).astype(bool),
+        toe_speeds=np.concatenate(out["toe_speeds"]),
         range_starts=np.array(starts, dtype=np.int64), range_stops=np.array(stops, dtype=np.int64),
         range_names=range_names, range_mirrored=np.array(mirrored, dtype=bool),
         fps=float(manifest.target_fps), bone_roles=dict(manifest.bones), mirror_map=mirror_full,

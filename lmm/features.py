@@ -26,6 +26,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from . import quat
+from .filters import central_difference
 
 KINDS = ("bone_position", "bone_velocity", "trajectory_position", "trajectory_direction")
 FORWARD = np.array([0.0, 0.0, 1.0])  # the simulation bone faces +Z in its own space
@@ -95,9 +96,14 @@ def layout_slices(layout: Sequence[Channel]) -> list[slice]:
 
 def compute_raw(db, layout: Sequence[Channel] = DEFAULT_LAYOUT) -> np.ndarray:
     """Raw (unnormalised) features of every database frame, (N, D) float32, vectorised over frames."""
-    g_rot, g_pos, g_vel, _ = db.global_kinematics()
+    g_rot, g_pos = db.global_transforms()
     root_rot, root_pos = g_rot[:, 0], g_pos[:, 0]
     frames = np.arange(db.n_frames)
+    # bone velocities: central differences of the global positions inside each range (one-sided at the
+    # range ends), i.e. how fast the bone really moves through space, the quantity foot skating measures
+    g_vel = np.empty_like(g_pos)
+    for s, e in zip(db.range_starts, db.range_stops):
+        g_vel[s:e] = central_difference(g_pos[s:e], db.dt)
     cols = []
     for ch in layout:
         if ch.kind == "bone_position":
