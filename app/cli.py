@@ -14,34 +14,40 @@ import sys
 COMMANDS: dict[str, tuple[str, str]] = {
     "build-db": ("build_db", "build (or load from cache) the motion database and print its size"),
     "view": ("view", "play a BVH file in a 3D window"),
+    "train": ("train", "train the learned motion matching networks (needs torch)"),
 }
 
 
-def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+def _top_parser() -> argparse.ArgumentParser:
+    lines = "\n".join(f"  {name:<12} {help_text}" for name, (_, help_text) in COMMANDS.items())
+    return argparse.ArgumentParser(
         prog="lmm-studio",
         description="Visual debugger and tuning studio for Motion Matching and Learned Motion Matching.",
+        epilog=f"commands:\n{lines}\n\nRun 'lmm-studio COMMAND --help' for a command's options.",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    for name, (module, help_text) in COMMANDS.items():
-        p = sub.add_parser(name, help=help_text, description=help_text)
-        p.set_defaults(_module=module)
-        importlib.import_module(f"app.commands.{module}").add_arguments(p)
-    return parser
 
 
 def main(argv: list[str] | None = None) -> int:
-    argv = sys.argv[1:] if argv is None else argv
+    argv = list(sys.argv[1:] if argv is None else argv)
     # no subcommand (or only studio options): open the studio
-    if not argv or argv[0].startswith("-") and argv[0] not in ("-h", "--help"):
-        if "studio" in COMMANDS:
-            argv = ["studio", *argv]
-    parser = _parser()
-    args = parser.parse_args(argv)
-    if args.command is None:
-        parser.print_help()
+    if (not argv or (argv[0].startswith("-") and argv[0] not in ("-h", "--help"))) and "studio" in COMMANDS:
+        argv = ["studio", *argv]
+    if not argv or argv[0] in ("-h", "--help"):
+        _top_parser().print_help()
         return 0
-    module = importlib.import_module(f"app.commands.{args._module}")
+    name = argv[0]
+    if name not in COMMANDS:
+        _top_parser().print_usage(sys.stderr)
+        print(f"lmm-studio: error: unknown command {name!r} (commands: {', '.join(COMMANDS)})", file=sys.stderr)
+        return 2
+    module_name, help_text = COMMANDS[name]
+    # import only the chosen command: `run` never pays for dearpygui, `build-db` never for torch
+    module = importlib.import_module(f"app.commands.{module_name}")
+    parser = argparse.ArgumentParser(prog=f"lmm-studio {name}", description=help_text)
+    module.add_arguments(parser)
+    args = parser.parse_args(argv[1:])
+    args.command = name
     try:
         return int(module.main(args) or 0)
     except KeyboardInterrupt:
