@@ -1,0 +1,120 @@
+"""``lmm-studio view FILE.bvh``: play a BVH file in a 3D window, or save one frame headless.
+
+Keys in the window: space pause, left/right step (shift: 10 frames), [ ] speed, F follow,
+R reframe, Home restart, Esc/Q quit; mouse: left-drag orbit, right/middle-drag pan, wheel zoom.
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from pathlib import Path
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("file", help="BVH file (.bvh or .bvh.gz), any units, Y up")
+    parser.add_argument("--screenshot", metavar="PNG",
+                        help="render one frame headless (EGL, no display needed) to PNG and exit")
+    parser.add_argument("--frame", type=int, default=0, help="frame to start at / to screenshot (default 0)")
+    parser.add_argument("--width", type=int, default=1280, help="window or image width (default 1280)")
+    parser.add_argument("--height", type=int, default=720, help="window or image height (default 720)")
+    parser.add_argument("--samples", type=int, default=None,
+                        help="multisampling samples (0 disables; default 4 on a GPU, 0 on a software renderer)")
+    parser.add_argument("--paused", action="store_true", help="start paused")
+    parser.add_argument("--no-follow", action="store_true", help="start with the camera not following the root")
+    # for tests and scripted captures of the real window
+    parser.add_argument("--frames", type=int, default=None, metavar="N",
+                        help="close the window after N frames (for tests)")
+    parser.add_argument("--window-screenshot", metavar="PNG", default=None,
+                        help="with --frames: save the window's framebuffer after the last frame")
+
+
+def _error(message: str) -> None:
+    print(f"error: {message}", file=sys.stderr)
+
+
+def _has_display() -> bool:
+    if sys.platform.startswith("linux"):
+        return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+    return True
+
+
+def _load(path: str):
+    """(name, parents, positions (F,J,3), frame_time) or an error message."""
+    from lmm import bvh
+
+    try:
+        anim = bvh.load(path)
+        positions = anim.global_positions()
+    except bvh.BVHError as e:
+        return str(e)
+    except (OSError, EOFError) as e:  # missing file, unreadable, broken gzip
+        reason = e.strerror if isinstance(e, OSError) and e.strerror else str(e) or type(e).__name__
+        return f"{path}: cannot read: {reason}"
+    except Exception as e:  # any other surprise in a bad file: a message, not a traceback
+        return f"{path}: cannot load: {type(e).__name__}: {e}"
+    if anim.n_frames < 1 or positions.ndim != 3 or positions.shape[1] < 1:
+        return f"{path}: no frames to show"
+    name = Path(path).name
+    return name, anim.parents, positions, float(anim.frame_time)
+
+
+def _screenshot(args, parents, positions) -> int:
+    import numpy as np
+    from PIL import Image
+
+    from viewer.context import ContextError, create_headless_context
+    from viewer.player import AnimationView
+    from viewer.renderer import Renderer
+
+    try:
+        ctx = create_headless_context()
+    except ContextError as e:
+        _error(str(e))
+        return 1
+    view = AnimationView(ctx, parents, positions, aspect=args.width / args.height, follow=not args.no_follow)
+    view.reset_camera(args.frame)
+    view.set_frame(args.frame)
+    renderer = Renderer(ctx, args.width, args.height, samples=args.samples)
+    image = renderer.render(view.scene, view.camera, dtype=np.uint8)
+    out = Path(args.screenshot)
+    if out.parent and not out.parent.exists():
+        out.parent.mkdir(parents=True, exist_ok=True)
+    Image.fromarray(image[..., :3]).save(out)
+    print(f"saved frame {args.frame} of {len(positions)} to {out}")
+    return 0
+
+
+def main(args: argparse.Namespace) -> int:
+    if args.width < 16 or args.height < 16:
+        _error("--width and --height must be at least 16")
+        return 2
+    if not args.screenshot and not _has_display():
+        _error("no display to open a window on (DISPLAY is not set); "
+               "use --screenshot PNG to render a frame headless, or run under Xvfb")
+        return 2
+    loaded = _load(args.file)
+    if isinstance(loaded, str):
+        _error(loaded)
+        return 1
+    name, parents, positions, frame_time = loaded
+    n = len(positions)
+    if not -n <= args.frame < n:
+        _error(f"--frame {args.frame} is out of range: {args.file} has {n} frames")
+        return 2
+    args.frame %= n
+    if args.screenshot:
+        return _screenshot(args, parents, positions)
+
+    from viewer.window import PlayerWindow, WindowError
+
+    try:
+        window = PlayerWindow(parents, positions, frame_time, title=f"lmm-studio view {name}",
+                              width=args.width, height=args.height, samples=args.samples,
+                              start_frame=args.frame)
+    except WindowError as e:
+        _error(str(e))
+        return 2
+    window.view.follow = not args.no_follow
+    window.playback.paused = args.paused
+    return window.run(max_frames=args.frames, screenshot_path=args.window_screenshot)

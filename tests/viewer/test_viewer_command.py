@@ -1,0 +1,147 @@
+"""``lmm-studio view``: headless screenshots of shipped and synthetic takes, and bad files."""
+import argparse
+import os
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from viewer_testutil import ROOT, colour_mask, mask_bbox, near_any, run_view, write_bvh
+
+SKELETON_ORANGE = (0.95, 0.55, 0.15)   # AnimationView's default character colour
+TAKES = sorted((ROOT / "lmm" / "data" / "lafan1").glob("*.bvh.gz"))
+W, H = 960, 540
+
+
+def no_display_env():
+    env = dict(os.environ)
+    env.pop("DISPLAY", None)
+    env.pop("WAYLAND_DISPLAY", None)
+    return env
+
+
+def expected_camera(gl_ctx, path, frame, width, height):
+    """The camera ``view --screenshot`` uses for ``frame``, rebuilt in-process to project joints."""
+    bvh = pytest.importorskip("lmm.bvh")
+    from viewer.player import AnimationView
+
+    anim = bvh.load(path)
+    positions = anim.global_positions()
+    view = AnimationView(gl_ctx, anim.parents, positions, aspect=width / height)
+    view.reset_camera(frame)
+    view.set_frame(frame)
+    camera = view.camera
+    view.scene.release()
+    return camera, positions[frame], anim
+
+
+def check_framed(image, camera, pose, width, height, name):
+    mask = colour_mask(image, SKELETON_ORANGE)
+    hips = camera.project(pose[:1], width, height)[0]
+    assert near_any(mask, hips, 12), f"{name}: no skeleton pixels near the projected hips {hips}"
+    box = mask_bbox(mask)
+    assert box is not None, f"{name}: no skeleton pixels"
+    x0, y0, x1, y1 = box
+    assert x0 > 0 and y0 > 0 and x1 < width - 1 and y1 < height - 1, f"{name}: skeleton cut off {box}"
+    extent = max((x1 - x0) / width, (y1 - y0) / height)
+    assert extent > 0.25, f"{name}: skeleton too small {box}"
+    # near the centre of the frame
+    cx, cy = (x0 + x1) / 2 / width, (y0 + y1) / 2 / height
+    assert 0.25 < cx < 0.75 and 0.2 < cy < 0.8, f"{name}: skeleton off-centre {box}"
+
+
+@pytest.mark.skipif(not TAKES, reason="no shipped LAFAN1 takes")
+def test_screenshot_of_a_shipped_take_without_display(gl_ctx, out_dir):
+    take = min(TAKES, key=lambda p: p.stat().st_size)
+    png = out_dir / "view_lafan1.png"
+    frame = 200
+    result = run_view([take, "--screenshot", png, "--frame", frame, "--width", W, "--height", H],
+                      env=no_display_env())
+    assert result.returncode == 0, result.stderr
+    assert "Traceback" not in result.stderr
+    image = np.array(Image.open(png))
+    assert image.shape[:2] == (H, W)
+    camera, pose, _ = expected_camera(gl_ctx, take, frame, W, H)
+    check_framed(image, camera, pose, W, H, take.name)
+
+
+# a skeleton in other units and proportions: names unlike LAFAN1, Y up, offsets in ``unit``
+CREATURE_NAMES = ["pelvis", "back", "skull", "arm_l", "hand_l", "arm_r", "hand_r", "thigh_l", "shin_l",
+                  "thigh_r", "shin_r"]
+CREATURE_PARENTS = [-1, 0, 1, 1, 3, 1, 5, 0, 7, 0, 9]
+CREATURE_OFFSETS_M = np.array([
+    [0, 0, 0], [0, 0.5, 0], [0, 0.45, 0.05], [0.3, 0.35, 0], [0.45, 0, 0], [-0.3, 0.35, 0], [-0.45, 0, 0],
+    [0.15, -0.05, 0], [0, -0.6, 0.05], [-0.15, -0.05, 0], [0, -0.6, 0.05],
+])
+
+
+@pytest.mark.parametrize("unit_name,unit_per_m,floor_m", [("m", 1.0, 0.0), ("in", 39.37, 0.0), ("mm", 1000.0, 0.4)])
+def test_screenshot_frames_other_units_and_proportions(gl_ctx, out_dir, tmp_path, unit_name, unit_per_m, floor_m):
+    frames = 40
+    t = np.arange(frames) / 30.0
+    root_m = np.c_[3.0 + 0.8 * t, 0.72 + floor_m + 0.02 * np.sin(6 * t), -2.0 + 0.3 * t]   # walks away from the origin
+    path = tmp_path / f"creature_{unit_name}.bvh"
+    write_bvh(path, CREATURE_NAMES, CREATURE_PARENTS, CREATURE_OFFSETS_M * unit_per_m, root_m * unit_per_m)
+    png = out_dir / f"view_creature_{unit_name}.png"
+    frame = 25
+    result = run_view([path, "--screenshot", png, "--frame", frame, "--width", W, "--height", H],
+                      env=no_display_env())
+    assert result.returncode == 0, result.stderr
+    image = np.array(Image.open(png))
+    camera, pose, anim = expected_camera(gl_ctx, path, frame, W, H)
+    assert anim.names == CREATURE_NAMES
+    check_framed(image, camera, pose, W, H, path.name)
+
+
+def run_in_process(argv, capsys):
+    from app.commands import view
+
+    parser = argparse.ArgumentParser()
+    view.add_arguments(parser)
+    code = view.main(parser.parse_args([str(a) for a in argv]))
+    captured = capsys.readouterr()
+    return code, captured.err
+
+
+CORPUS = sorted((ROOT / "tests" / "bvh_corpus").glob("*.bvh*"))
+
+
+@pytest.mark.parametrize("bad", CORPUS, ids=[p.name for p in CORPUS])
+def test_bad_files_give_one_line_errors(bad, capsys, tmp_path):
+    pytest.importorskip("lmm.bvh")
+    code, err = run_in_process([bad, "--screenshot", tmp_path / "x.png"], capsys)
+    assert code == 1
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: ") and bad.name in lines[0], err
+    assert not (tmp_path / "x.png").exists()
+
+
+def test_bad_file_subprocess_has_no_traceback(tmp_path):
+    pytest.importorskip("lmm.bvh")
+    bad = tmp_path / "broken.bvh"
+    bad.write_text("HIERARCHY\nROOT Hips\n{\n  OFFSET 0 0\n")
+    result = run_view([bad, "--screenshot", tmp_path / "x.png"], env=no_display_env())
+    assert result.returncode == 1
+    assert "Traceback" not in result.stderr
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: ") and "broken.bvh:" in lines[0]
+
+
+def test_missing_file(capsys, tmp_path):
+    code, err = run_in_process([tmp_path / "nope.bvh", "--screenshot", tmp_path / "x.png"], capsys)
+    assert code == 1 and err.startswith("error: ") and "nope.bvh" in err and len(err.strip().splitlines()) == 1
+
+
+def test_window_without_display_exits_2(capsys, monkeypatch, tmp_path):
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    code, err = run_in_process([tmp_path / "whatever.bvh"], capsys)
+    assert code == 2 and "--screenshot" in err and "Traceback" not in err
+
+
+def test_frame_out_of_range(capsys, tmp_path):
+    pytest.importorskip("lmm.bvh")
+    path = tmp_path / "short.bvh"
+    write_bvh(path, CREATURE_NAMES, CREATURE_PARENTS, CREATURE_OFFSETS_M, np.zeros((3, 3)) + [0, 1, 0])
+    code, err = run_in_process([path, "--screenshot", tmp_path / "x.png", "--frame", 7], capsys)
+    assert code == 2 and "3 frames" in err

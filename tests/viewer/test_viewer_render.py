@@ -1,0 +1,255 @@
+"""Headless EGL rendering: a known pose, a trajectory, markers, ghosts and the readback paths.
+
+Every test projects world points with the camera used to render and checks the pixels there;
+images are saved under tests/viewer/_out/ for inspection.
+"""
+import numpy as np
+import pytest
+from PIL import Image
+
+from viewer import Arrows, Ground, Lines, OrbitCamera, Renderer, Scene, Skeleton, Spheres
+from viewer_testutil import (TPOSE_PARENTS, TPOSE_POSITIONS, colour_mask, mask_bbox, near_any,
+                             segment_distance_map)
+
+W, H = 640, 480
+ORANGE = (0.95, 0.5, 0.1)
+GREEN = (0.95, 0.85, 0.1)   # a trajectory colour (yellow: unlike the green Y axis)
+MAGENTA = (0.9, 0.15, 0.75)
+BLUE = (0.15, 0.4, 1.0)
+OFFSET = np.array([1.5, 0.0, -1.0])  # away from the world axes at the origin
+
+
+@pytest.fixture(scope="module")
+def renderer(gl_ctx):
+    r = Renderer(gl_ctx, W, H, samples=4)
+    yield r
+    r.release()
+
+
+def camera_on(points):
+    cam = OrbitCamera(yaw_deg=20.0, pitch_deg=12.0)
+    cam.fit(points, aspect=W / H)
+    return cam
+
+
+def near_world_axes(cam, length=1.0, px=4):
+    """Pixels within ``px`` of the ground's X/Y/Z axes (saturated colours of their own)."""
+    axes = cam.project([[0, 0, 0], [length, 0, 0], [0, length, 0], [0, 0, length]], W, H)
+    return segment_distance_map((H, W), np.array([[axes[0], axes[k]] for k in (1, 2, 3)])) < px
+
+
+def bone_segments(cam, positions, parents):
+    px = cam.project(positions, W, H)
+    return np.array([[px[p], px[j]] for j, p in enumerate(parents) if p >= 0])
+
+
+def test_known_pose_lands_on_skeleton_coloured_pixels(gl_ctx, renderer, out_dir):
+    pose = TPOSE_POSITIONS + OFFSET
+    scene = Scene()
+    scene.add(Ground(gl_ctx))
+    skel = scene.add(Skeleton(gl_ctx, TPOSE_PARENTS, color=ORANGE, joint_radius=0.03, bone_radius=0.02))
+    skel.update(pose)
+    cam = camera_on(pose)
+    img = renderer.render(scene, cam)
+    Image.fromarray(img).save(out_dir / "render_tpose.png")
+    assert img.shape == (H, W, 4) and img.dtype == np.uint8
+
+    mask = colour_mask(img, ORANGE)
+    joints_px = cam.project(pose, W, H)
+    for j, (x, y) in enumerate(joints_px):
+        assert mask[int(y), int(x)], f"joint {j} at pixel {(int(x), int(y))} is {img[int(y), int(x)]}"
+
+    # midpoints of the bones too
+    segs = bone_segments(cam, pose, TPOSE_PARENTS)
+    for a, b in segs:
+        m = (a + b) / 2
+        assert mask[int(m[1]), int(m[0])]
+
+    # nothing orange far from the bones, and far pixels are grey ground/background
+    dist = segment_distance_map((H, W), segs)
+    joint_px_radius = 0.03 / np.tan(np.radians(cam.fov_y_deg) / 2) / cam.distance * H / 2 * 1.5
+    assert not mask[dist > joint_px_radius + 3].any()
+    far = img[(dist > 40) & ~near_world_axes(cam)][:, :3].astype(int)
+    assert (far.max(axis=1) - far.min(axis=1)).max() < 40      # unsaturated: ground, grid, sky
+    # the skeleton fills the frame the way fit() promised
+    x0, y0, x1, y1 = mask_bbox(mask)
+    assert 0 < x0 and x1 < W - 1 and 0 < y0 and y1 < H - 1
+    assert (y1 - y0) > 0.4 * H
+
+
+def test_ground_and_background(gl_ctx, renderer, out_dir):
+    scene = Scene(background=(0.1, 0.2, 0.3))
+    scene.add(Ground(gl_ctx, size_m=20.0, tile_m=1.0))
+    cam = OrbitCamera(target=[0, 0, 0], distance=6.0, yaw_deg=30.0, pitch_deg=25.0)
+    img = renderer.render(scene, cam)
+    Image.fromarray(img).save(out_dir / "render_ground.png")
+    assert np.allclose(img[2, W // 2, :3], np.array([0.1, 0.2, 0.3]) * 255, atol=2)  # sky is background
+    # the floor under the target is a grey checker, two tile shades visible
+    below = img[H // 2 + 20:, :, :3].reshape(-1, 3).astype(int)
+    assert (below.max(axis=1) - below.min(axis=1) < 30).mean() > 0.9
+    assert len(np.unique(below[:, 0] // 8)) >= 2
+    # world axes at the origin: X red, Z blue near their projected midpoints
+    px = cam.project([[0.5, 0, 0], [0, 0, 0.5], [0, 0.5, 0]], W, H)
+    assert near_any(colour_mask(img, (0.9, 0.2, 0.2), min_sat=0.4), px[0], 2)
+    assert near_any(colour_mask(img, (0.25, 0.45, 0.95), min_sat=0.4), px[1], 2)
+    assert near_any(colour_mask(img, (0.25, 0.85, 0.3), min_sat=0.4), px[2], 2)
+
+
+def test_trajectory_polyline_pixels(gl_ctx, renderer, out_dir):
+    scene = Scene()
+    scene.add(Ground(gl_ctx))
+    t = np.linspace(0, np.pi, 9)
+    traj = np.c_[2.0 + 1.2 * np.cos(t), np.zeros_like(t), 1.0 + 0.8 * np.sin(t)]
+    line = scene.add(Lines(gl_ctx, color=GREEN, width_px=3.0))
+    line.update(traj, mode="strip")
+    cam = OrbitCamera(target=[2.0, 0.0, 1.2], distance=4.0, yaw_deg=15.0, pitch_deg=35.0)
+    img = renderer.render(scene, cam)
+    Image.fromarray(img).save(out_dir / "render_trajectory.png")
+    mask = colour_mask(img, GREEN)
+    mids = cam.project((traj[1:] + traj[:-1]) / 2, W, H)
+    for m in mids:
+        assert near_any(mask, m, 1), f"no line colour at {m}"
+    # a 3 px line: thin, and only near the polyline
+    dist = segment_distance_map((H, W), np.stack([cam.project(traj[:-1], W, H), cam.project(traj[1:], W, H)], 1))
+    assert not mask[(dist > 4) & ~near_world_axes(cam)].any()
+    assert mask[dist < 0.7].mean() > 0.9
+
+    # segments mode and per-point colours
+    line.update(np.r_[traj[:2], traj[4:6]], mode="segments", colors=np.array([GREEN, GREEN, MAGENTA, MAGENTA]))
+    img = renderer.render(scene, cam)
+    m01 = cam.project([(traj[0] + traj[1]) / 2, (traj[4] + traj[5]) / 2, (traj[2] + traj[3]) / 2], W, H)
+    assert near_any(colour_mask(img, GREEN), m01[0], 1)
+    assert near_any(colour_mask(img, MAGENTA), m01[1], 1)
+    assert not near_any(colour_mask(img, GREEN) | colour_mask(img, MAGENTA), m01[2], 1)   # gap: not drawn
+
+
+def test_line_crossing_the_near_plane_is_clipped_not_lost(gl_ctx, renderer):
+    scene = Scene()
+    line = scene.add(Lines(gl_ctx, color=GREEN, width_px=4.0))
+    cam = OrbitCamera(target=[0, 0, 0], distance=3.0, yaw_deg=0.0, pitch_deg=0.0)
+    line.update([[0.3, 0.0, -2.0], [0.3, 0.0, 10.0]])   # ends behind the eye (eye at z=3)
+    img = renderer.render(scene, cam)
+    assert near_any(colour_mask(img, GREEN), cam.project([[0.3, 0.0, -1.0]], W, H)[0], 1)
+
+
+def test_spheres_and_arrows(gl_ctx, renderer, out_dir):
+    scene = Scene()
+    scene.add(Ground(gl_ctx))
+    centers = np.array([[x, 0.1, z] for x in (-1.0, 0.0, 1.0) for z in (-0.5, 0.5)]) + [0.3, 0, 0.2]
+    spheres = scene.add(Spheres(gl_ctx, radius=0.08))
+    colors = np.array([MAGENTA, BLUE] * 3)
+    spheres.update(centers, colors=colors)
+    arrows = scene.add(Arrows(gl_ctx, color=ORANGE, shaft_radius=0.02, head_radius=0.05, head_length=0.15))
+    origins = np.array([[-1.0, 0.5, 0.0], [1.0, 0.5, 0.0]])
+    dirs = np.array([[0.0, 0.0, 0.8], [0.6, 0.0, -0.4]])
+    arrows.update(origins, dirs)
+    cam = OrbitCamera(target=[0, 0.3, 0], distance=4.0, yaw_deg=20.0, pitch_deg=40.0)
+    img = renderer.render(scene, cam)
+    Image.fromarray(img).save(out_dir / "render_markers.png")
+    px = cam.project(centers, W, H)
+    for c, (x, y) in zip(colors, px):
+        assert colour_mask(img, c)[int(y), int(x)]
+    orange = colour_mask(img, ORANGE)
+    for p in cam.project(np.r_[origins + 0.4 * dirs, origins + 0.93 * dirs], W, H):  # shaft and head
+        assert near_any(orange, p, 1)
+    # one radius for all, then per-sphere radii: a big sphere covers more pixels
+    spheres.update(centers[:1], radii=[0.3], colors=MAGENTA)
+    big = colour_mask(renderer.render(scene, cam), MAGENTA).sum()
+    spheres.update(centers[:1], radii=0.1, colors=MAGENTA)
+    small = colour_mask(renderer.render(scene, cam), MAGENTA).sum()
+    assert big > 5 * small > 0
+
+
+def test_ghost_skeleton_blends_over_the_scene(gl_ctx, renderer, out_dir):
+    pose = TPOSE_POSITIONS + OFFSET
+    ghost_pose = pose + [0.0, 0.0, 0.6]
+    scene = Scene()
+    scene.add(Ground(gl_ctx))
+    solid = scene.add(Skeleton(gl_ctx, TPOSE_PARENTS, color=ORANGE))
+    solid.update(pose)
+    ghost = scene.add(Skeleton(gl_ctx, TPOSE_PARENTS, color=BLUE, alpha=0.5))
+    ghost.update(ghost_pose)
+    cam = camera_on(np.r_[pose, ghost_pose])
+    blended = renderer.render(scene, cam).astype(float)
+    Image.fromarray(blended.astype(np.uint8)).save(out_dir / "render_ghost.png")
+    ghost.alpha = 1.0
+    opaque = renderer.render(scene, cam).astype(float)
+    ghost.visible = False
+    behind = renderer.render(scene, cam).astype(float)
+    px = cam.project(ghost_pose, W, H).astype(int)
+    for x, y in px:
+        expected = 0.5 * opaque[y, x, :3] + 0.5 * behind[y, x, :3]
+        assert np.abs(blended[y, x, :3] - expected).max() <= 6, (blended[y, x], expected)
+        assert blended[y, x, 3] == 255   # the image stays opaque
+    # where the ghost passes in front of the solid skeleton, the orange shows through
+    assert colour_mask(behind.astype(np.uint8), ORANGE).sum() > 0
+    ghost.visible = True
+    ghost.alpha = 0.5
+    assert ghost.transparent and scene.draw_order()[-1] is ghost
+
+
+def test_float_readback_unflipped_and_render_to_target(gl_ctx, renderer):
+    scene = Scene()
+    skel = scene.add(Skeleton(gl_ctx, TPOSE_PARENTS, color=ORANGE))
+    skel.update(TPOSE_POSITIONS)
+    cam = camera_on(TPOSE_POSITIONS)
+    u8 = renderer.render(scene, cam)
+    # dearpygui-style: a float32 texture array filled in place, rows bottom-up
+    tex = np.zeros(W * H * 4, dtype=np.float32)
+    out = renderer.render(scene, cam, dtype=np.float32, out=tex, flip=False)
+    assert np.shares_memory(out, tex)
+    assert np.abs(tex.reshape(H, W, 4)[::-1] * 255 - u8).max() <= 1
+    # resolve into someone else's framebuffer (a window's screen, a studio texture)
+    target_tex = gl_ctx.texture((W, H), 4)
+    target = gl_ctx.framebuffer(color_attachments=[target_tex])
+    renderer.render_to(scene, cam, target=target)
+    got = np.frombuffer(target.read(components=4), dtype=np.uint8).reshape(H, W, 4)[::-1]
+    assert np.array_equal(got, u8)
+    target.release()
+    target_tex.release()
+
+
+def test_previous_framebuffer_is_bound_again(gl_ctx, renderer):
+    other_tex = gl_ctx.texture((32, 32), 4)
+    other = gl_ctx.framebuffer(color_attachments=[other_tex])
+    other.use()
+    renderer.render_to(Scene(), OrbitCamera())
+    assert gl_ctx.fbo is other
+    other.release()
+    other_tex.release()
+
+
+def test_resize_and_no_msaa(gl_ctx):
+    r = Renderer(gl_ctx, 100, 80, samples=0)
+    scene = Scene()
+    skel = scene.add(Skeleton(gl_ctx, TPOSE_PARENTS, color=ORANGE))
+    skel.update(TPOSE_POSITIONS)
+    cam = camera_on(TPOSE_POSITIONS)
+    assert r.render(scene, cam).shape == (80, 100, 4)
+    r.resize(200, 120)
+    img = r.render(scene, cam)
+    assert img.shape == (120, 200, 4)
+    assert colour_mask(img, ORANGE).any()
+    r.release()
+
+
+def test_buffers_grow_and_shrink_without_new_objects(gl_ctx, renderer):
+    scene = Scene()
+    line = scene.add(Lines(gl_ctx, color=GREEN))
+    buffer = line._buf.buffer
+    for n in (2, 5000, 3, 0, 800):
+        line.update(np.c_[np.linspace(0, 1, n), np.zeros(n), np.zeros(n)])
+        renderer.render_to(scene, OrbitCamera())
+        assert line._buf.count == max(n - 1, 0)
+    assert line._buf.buffer is buffer and buffer.size >= 4999 * 14 * 4
+
+
+def test_bad_input_is_rejected(gl_ctx):
+    skel = Skeleton(gl_ctx, TPOSE_PARENTS)
+    with pytest.raises(ValueError, match="16 joints"):
+        skel.update(np.zeros((3, 3)))
+    line = Lines(gl_ctx)
+    with pytest.raises(ValueError, match="even"):
+        line.update(np.zeros((3, 3)), mode="segments")
+    with pytest.raises(ValueError, match="mode"):
+        line.update(np.zeros((3, 3)), mode="loop")

@@ -1,0 +1,177 @@
+"""Orbit camera and projection math (pure numpy, no GL).
+
+Scene coordinates are Y-up and right-handed. Matrices are row-major float32 and act on column
+vectors (``clip = proj @ view @ [x, y, z, 1]``); upload them to GLSL transposed.
+
+Camera controls are plain functions of input deltas (pixels, wheel steps), so the studio and the
+glfw player drive one camera type the same way.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+_UP = np.array([0.0, 1.0, 0.0])
+
+
+def look_at(eye, target, up=(0.0, 1.0, 0.0)) -> np.ndarray:
+    """World -> view matrix of a camera at ``eye`` looking at ``target`` (view looks down -Z)."""
+    eye = np.asarray(eye, dtype=np.float64)
+    forward = np.asarray(target, dtype=np.float64) - eye
+    forward /= max(np.linalg.norm(forward), 1e-12)
+    right = np.cross(forward, np.asarray(up, dtype=np.float64))
+    n = np.linalg.norm(right)
+    if n < 1e-9:  # looking straight along `up`: any right vector will do
+        right = np.cross(forward, [0.0, 0.0, 1.0])
+        n = np.linalg.norm(right)
+    right /= n
+    true_up = np.cross(right, forward)
+    m = np.eye(4)
+    m[0, :3], m[1, :3], m[2, :3] = right, true_up, -forward
+    m[:3, 3] = -m[:3, :3] @ eye
+    return m.astype(np.float32)
+
+
+def perspective(fov_y_deg: float, aspect: float, near: float, far: float) -> np.ndarray:
+    """OpenGL perspective projection (NDC depth in [-1, 1])."""
+    f = 1.0 / np.tan(np.radians(fov_y_deg) / 2.0)
+    m = np.zeros((4, 4))
+    m[0, 0] = f / aspect
+    m[1, 1] = f
+    m[2, 2] = (far + near) / (near - far)
+    m[2, 3] = 2.0 * far * near / (near - far)
+    m[3, 2] = -1.0
+    return m.astype(np.float32)
+
+
+def project_points(points, view_proj: np.ndarray, width: int, height: int):
+    """Project world points to pixel coordinates.
+
+    Returns ``(pixels (N,2), ndc_depth (N,), in_front (N,) bool)``; pixels are (x right, y down)
+    from the top-left corner of the image as returned by ``Renderer.render`` (row 0 = top), so
+    ``image[int(y), int(x)]`` is the pixel the point lands on.
+    """
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    clip = np.c_[p, np.ones(len(p))] @ np.asarray(view_proj, dtype=np.float64).T
+    w = clip[:, 3]
+    in_front = w > 1e-9
+    safe_w = np.where(in_front, w, 1.0)
+    ndc = clip[:, :3] / safe_w[:, None]
+    pixels = np.c_[(ndc[:, 0] + 1.0) * 0.5 * width, (1.0 - ndc[:, 1]) * 0.5 * height]
+    return pixels, ndc[:, 2], in_front
+
+
+@dataclass
+class OrbitCamera:
+    """A camera orbiting ``target`` at ``distance``.
+
+    ``yaw_deg`` turns about +Y (0 looks from +Z towards -Z); ``pitch_deg`` is the elevation of the
+    eye above the target's horizontal plane (positive looks down). Near/far planes follow the
+    distance so any unit (m, cm, inches) works once ``fit`` has sized the camera.
+    """
+
+    target: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.9, 0.0]))
+    distance: float = 4.0
+    yaw_deg: float = 30.0
+    pitch_deg: float = 15.0
+    fov_y_deg: float = 45.0
+    min_distance: float = 1e-3
+    max_distance: float = 1e6
+    min_pitch_deg: float = -85.0
+    max_pitch_deg: float = 89.0
+    near_ratio: float = 0.01   # near plane = near_ratio * distance
+    far_ratio: float = 200.0   # far plane = far_ratio * distance
+
+    def __post_init__(self):
+        self.target = np.asarray(self.target, dtype=np.float64).copy()
+
+    # ---- geometry ---------------------------------------------------------------------------
+    @property
+    def eye(self) -> np.ndarray:
+        yaw, pitch = np.radians(self.yaw_deg), np.radians(self.pitch_deg)
+        offset = np.array([np.cos(pitch) * np.sin(yaw), np.sin(pitch), np.cos(pitch) * np.cos(yaw)])
+        return self.target + self.distance * offset
+
+    @property
+    def near(self) -> float:
+        return self.distance * self.near_ratio
+
+    @property
+    def far(self) -> float:
+        return self.distance * self.far_ratio
+
+    def view_matrix(self) -> np.ndarray:
+        return look_at(self.eye, self.target, _UP)
+
+    def projection_matrix(self, aspect: float) -> np.ndarray:
+        return perspective(self.fov_y_deg, aspect, self.near, self.far)
+
+    def view_projection(self, aspect: float) -> np.ndarray:
+        return self.projection_matrix(aspect) @ self.view_matrix()
+
+    def basis(self):
+        """(right, up, forward) unit vectors of the camera in world space."""
+        v = self.view_matrix().astype(np.float64)
+        return v[0, :3], v[1, :3], -v[2, :3]
+
+    def project(self, points, width: int, height: int) -> np.ndarray:
+        """Pixel coordinates (N,2), x right / y down from the image's top-left corner."""
+        pixels, _, _ = project_points(points, self.view_projection(width / height), width, height)
+        return pixels
+
+    # ---- controls (plain functions of input deltas) ------------------------------------------
+    def orbit(self, dx_px: float, dy_px: float, deg_per_px: float = 0.4) -> None:
+        """Drag right turns the scene right; drag down looks from higher up."""
+        self.yaw_deg = (self.yaw_deg - dx_px * deg_per_px) % 360.0
+        self.pitch_deg = float(np.clip(self.pitch_deg + dy_px * deg_per_px,
+                                       self.min_pitch_deg, self.max_pitch_deg))
+
+    def zoom(self, steps: float, factor: float = 1.15) -> None:
+        """Positive steps (wheel up) move closer; each step divides the distance by ``factor``."""
+        self.distance = float(np.clip(self.distance * factor ** (-steps),
+                                      self.min_distance, self.max_distance))
+
+    def pan(self, dx_px: float, dy_px: float, viewport_height_px: float) -> None:
+        """Move the target in the view plane so that points at the target's depth follow the cursor."""
+        right, up, _ = self.basis()
+        world_per_px = 2.0 * self.distance * np.tan(np.radians(self.fov_y_deg) / 2.0) / viewport_height_px
+        self.target = self.target + (-dx_px * right + dy_px * up) * world_per_px
+
+    def follow(self, position, blend: float = 1.0, keep_height: bool = True) -> None:
+        """Track a character root: move the target towards ``position`` (horizontally by default,
+        so the root's bobbing does not shake the view). ``blend`` in (0, 1] smooths the motion."""
+        goal = np.asarray(position, dtype=np.float64).copy()
+        if keep_height:
+            goal[1] = self.target[1]
+        self.target = self.target + float(blend) * (goal - self.target)
+
+    def fit(self, points, aspect: float = 16 / 9, margin: float = 1.15) -> None:
+        """Aim at the bounding box centre of ``points`` and set the distance so their bounding
+        sphere (times ``margin``) fits the narrower field of view. Keeps yaw and pitch."""
+        p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        p = p[np.isfinite(p).all(axis=1)]
+        if len(p) == 0:
+            return
+        lo, hi = p.min(axis=0), p.max(axis=0)
+        center = (lo + hi) / 2.0
+        radius = max(float(np.linalg.norm(p - center, axis=1).max()), 1e-6)
+        half_fov_y = np.radians(self.fov_y_deg) / 2.0
+        half_fov_x = np.arctan(np.tan(half_fov_y) * aspect)
+        self.target = center
+        self.distance = float(np.clip(radius * margin / np.sin(min(half_fov_y, half_fov_x)),
+                                      self.min_distance, self.max_distance))
+
+
+def apply_drag(camera: OrbitCamera, button: str, dx_px: float, dy_px: float,
+               viewport_height_px: float) -> None:
+    """Mouse drag: left orbits, right or middle pans."""
+    if button == "left":
+        camera.orbit(dx_px, dy_px)
+    elif button in ("right", "middle"):
+        camera.pan(dx_px, dy_px, viewport_height_px)
+
+
+def apply_scroll(camera: OrbitCamera, wheel_steps: float) -> None:
+    """Mouse wheel: zoom towards the target."""
+    camera.zoom(wheel_steps)

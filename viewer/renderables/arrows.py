@@ -1,0 +1,57 @@
+"""Arrows (facing directions, velocities): a cylinder shaft and a cone head per arrow."""
+from __future__ import annotations
+
+import moderngl
+import numpy as np
+
+from .base import (MESH_INSTANCE_FLOATS, FrameState, InstanceBuffer, Renderable, Resources,
+                   as_rgba, draw_mesh_instances)
+
+
+class Arrows(Renderable):
+    """``Arrows(ctx, color, shaft_radius, head_radius, head_length)``; ``update(origins (N,3),
+    directions (N,3), colors=None)``: each arrow goes from origin to origin + direction. The head
+    is at most half the arrow's length, so short arrows stay arrows."""
+
+    def __init__(self, ctx: moderngl.Context, color=(0.95, 0.95, 0.3), shaft_radius: float = 0.01,
+                 head_radius: float = 0.03, head_length: float = 0.08):
+        self.ctx = ctx
+        self.color = color
+        self.shaft_radius = float(shaft_radius)
+        self.head_radius = float(head_radius)
+        self.head_length = float(head_length)
+        self.visible = True
+        res = Resources.of(ctx)
+        self._shafts = InstanceBuffer(ctx, MESH_INSTANCE_FLOATS)
+        self._heads = InstanceBuffer(ctx, MESH_INSTANCE_FLOATS)
+        self._shaft_vao = res.mesh_vao("cylinder", self._shafts.buffer)
+        self._head_vao = res.mesh_vao("cone", self._heads.buffer)
+
+    def update(self, origins, directions, colors=None) -> None:
+        o = np.asarray(origins, dtype=np.float32).reshape(-1, 3)
+        d = np.broadcast_to(np.asarray(directions, dtype=np.float32).reshape(-1, 3), o.shape)
+        length = np.linalg.norm(d, axis=1)
+        head = np.minimum(self.head_length, 0.5 * length)
+        unit = d / np.maximum(length, 1e-12)[:, None]
+        neck = o + unit * (length - head)[:, None]
+        rgba = as_rgba(self.color if colors is None else colors)
+        shafts = self._shafts.staging(len(o))
+        shafts[:, 0:3] = o
+        shafts[:, 3:6] = neck
+        shafts[:, 6] = self.shaft_radius
+        shafts[:, 7:11] = rgba
+        self._shafts.upload(shafts)
+        heads = self._heads.staging(len(o))
+        heads[:, 0:3] = neck
+        heads[:, 3:6] = o + d
+        heads[:, 6] = self.head_radius
+        heads[:, 7:11] = rgba
+        self._heads.upload(heads)
+
+    def draw(self, frame: FrameState) -> None:
+        draw_mesh_instances(frame, self._shaft_vao, self._shafts.count)
+        draw_mesh_instances(frame, self._head_vao, self._heads.count, cone=True)
+
+    def release(self) -> None:
+        for obj in (self._shaft_vao, self._head_vao, self._shafts, self._heads):
+            obj.release()

@@ -1,0 +1,405 @@
+"""What every renderable shares: the frame state, per-context GL resources (programs and the
+unit meshes drawn instanced) and growable instance buffers.
+
+One context holds one set of programs and meshes (cached on ``ctx.extra``), so two skeletons and
+all debug geometry cost a handful of instanced draw calls.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import moderngl
+import numpy as np
+
+# ---------------------------------------------------------------------------------------------
+# shaders
+
+# Instanced "oriented mesh": each instance is a segment a->b with a radius and a colour. Mesh
+# vertices give radial offsets (x, z) and an axial offset (y) in radius units plus a parameter t
+# along the segment, so one vertex format draws spheres (a == b), cylinders and cones.
+MESH_VS = """
+#version 330
+uniform mat4 u_view_proj;
+uniform float u_cone;  // 1 for meshes stretched along the axis (cone sides): fixes normals
+in vec3 in_pos;
+in float in_t;
+in vec3 in_normal;
+in vec3 i_a;
+in vec3 i_b;
+in float i_radius;
+in vec4 i_color;
+out vec3 v_normal;
+out vec3 v_world;
+out vec4 v_color;
+void main() {
+    vec3 d = i_b - i_a;
+    float len = length(d);
+    vec3 axis = len > 1e-9 ? d / len : vec3(0.0, 1.0, 0.0);
+    vec3 helper = abs(axis.y) < 0.99 ? vec3(0.0, 1.0, 0.0) : vec3(1.0, 0.0, 0.0);
+    vec3 u = normalize(cross(axis, helper));
+    vec3 v = cross(u, axis);
+    vec3 world = i_a + axis * (in_t * len + in_pos.y * i_radius)
+               + i_radius * (in_pos.x * u + in_pos.z * v);
+    vec3 n = in_normal;
+    if (u_cone > 0.5) {
+        // the cone is scaled by (r, len, r); normals take the inverse scale
+        n = vec3(n.x * len, n.y * i_radius, n.z * len);
+    }
+    v_normal = n.x * u + n.y * axis + n.z * v;
+    v_world = world;
+    v_color = i_color;
+    gl_Position = u_view_proj * vec4(world, 1.0);
+}
+"""
+
+MESH_FS = """
+#version 330
+uniform vec3 u_light_dir;   // towards the light, world space
+uniform vec3 u_eye;
+uniform float u_ambient;
+uniform float u_diffuse;
+uniform float u_specular;
+in vec3 v_normal;
+in vec3 v_world;
+in vec4 v_color;
+out vec4 f_color;
+void main() {
+    vec3 n = normalize(v_normal);
+    vec3 l = normalize(u_light_dir);
+    vec3 to_eye = normalize(u_eye - v_world);
+    float sky = 0.75 + 0.25 * n.y;                        // hemisphere ambient
+    float diffuse = max(dot(n, l), 0.0);
+    float fill = 0.2 * max(dot(n, to_eye), 0.0);          // keeps the shadow side readable
+    float spec = pow(max(dot(n, normalize(l + to_eye)), 0.0), 32.0) * u_specular;
+    vec3 rgb = v_color.rgb * (u_ambient * sky + u_diffuse * diffuse + fill) + vec3(spec);
+    f_color = vec4(rgb, v_color.a);
+}
+"""
+
+# Screen-space thick lines: each instance is a segment, expanded to a quad of u_width_px pixels
+# (with square caps so polyline corners have no gaps). Segments crossing the near plane are clipped
+# in clip space. Vertices are pulled slightly towards the camera so lines lying on the ground win
+# the depth test without visibly moving.
+LINE_VS = """
+#version 330
+uniform mat4 u_view;
+uniform mat4 u_proj;
+uniform vec2 u_viewport;
+uniform float u_width_px;
+uniform float u_depth_pull;
+in vec2 in_corner;   // x: 0 start / 1 end, y: -1 / +1 side
+in vec3 i_p0;
+in vec3 i_p1;
+in vec4 i_c0;
+in vec4 i_c1;
+out vec4 v_color;
+vec4 to_clip(vec3 p) {
+    vec4 v = u_view * vec4(p, 1.0);
+    v.xyz *= 1.0 - u_depth_pull;
+    return u_proj * v;
+}
+void main() {
+    vec4 c0 = to_clip(i_p0);
+    vec4 c1 = to_clip(i_p1);
+    float d0 = c0.z + c0.w;   // >= 0 in front of the near plane
+    float d1 = c1.z + c1.w;
+    if (d0 < 0.0 && d1 < 0.0) {
+        gl_Position = vec4(2.0, 2.0, 2.0, 1.0);   // fully behind: outside the clip volume
+        v_color = vec4(0.0);
+        return;
+    }
+    if (d0 < 0.0) c0 = mix(c0, c1, d0 / (d0 - d1));
+    if (d1 < 0.0) c1 = mix(c1, c0, d1 / (d1 - d0));
+    vec2 s0 = c0.xy / c0.w * 0.5 * u_viewport;
+    vec2 s1 = c1.xy / c1.w * 0.5 * u_viewport;
+    vec2 dir = s1 - s0;
+    float n = length(dir);
+    dir = n > 1e-6 ? dir / n : vec2(1.0, 0.0);
+    vec2 side = vec2(-dir.y, dir.x);
+    vec4 c = in_corner.x < 0.5 ? c0 : c1;
+    vec2 offset = 0.5 * u_width_px * (side * in_corner.y + dir * (in_corner.x * 2.0 - 1.0));
+    c.xy += offset / (0.5 * u_viewport) * c.w;
+    gl_Position = c;
+    v_color = in_corner.x < 0.5 ? i_c0 : i_c1;
+}
+"""
+
+LINE_FS = """
+#version 330
+in vec4 v_color;
+out vec4 f_color;
+void main() { f_color = v_color; }
+"""
+
+
+# ---------------------------------------------------------------------------------------------
+# frame state passed to renderables
+
+@dataclass
+class Light:
+    """A directional light (``direction`` points towards the light) plus ambient and specular."""
+
+    direction: tuple = (0.45, 1.0, 0.65)
+    ambient: float = 0.4
+    diffuse: float = 0.55
+    specular: float = 0.15
+
+
+@dataclass
+class FrameState:
+    """Everything a renderable needs to draw one frame."""
+
+    ctx: moderngl.Context
+    fbo: moderngl.Framebuffer
+    view: np.ndarray
+    proj: np.ndarray
+    eye: np.ndarray
+    target: np.ndarray
+    width: int
+    height: int
+    background: tuple
+
+    @property
+    def view_proj(self) -> np.ndarray:
+        return self.proj @ self.view
+
+
+def mat_bytes(m: np.ndarray) -> bytes:
+    """A row-major numpy matrix as the column-major bytes GLSL expects."""
+    return np.ascontiguousarray(np.asarray(m, dtype=np.float32).T).tobytes()
+
+
+# ---------------------------------------------------------------------------------------------
+# unit meshes: vertices (in_pos 3f, in_t 1f, in_normal 3f), uint32 triangle indices
+
+def _fix_winding(verts: np.ndarray, tris: np.ndarray) -> np.ndarray:
+    """Orient every triangle counter-clockwise seen from outside (along the vertex normals)."""
+    p = verts[:, :3].copy()
+    p[:, 1] += verts[:, 3]  # unit-length configuration: axial offset = y + t
+    n = verts[:, 4:7]
+    a, b, c = p[tris[:, 0]], p[tris[:, 1]], p[tris[:, 2]]
+    face = np.cross(b - a, c - a)
+    flip = (face * (n[tris[:, 0]] + n[tris[:, 1]] + n[tris[:, 2]])).sum(axis=1) < 0
+    tris = tris.copy()
+    tris[flip] = tris[flip][:, ::-1]
+    return tris
+
+
+def sphere_mesh(slices: int = 16, stacks: int = 10):
+    theta = np.linspace(0.0, np.pi, stacks + 1)           # from +Y to -Y
+    phi = np.linspace(0.0, 2.0 * np.pi, slices + 1)
+    th, ph = np.meshgrid(theta, phi, indexing="ij")
+    xyz = np.stack([np.sin(th) * np.cos(ph), np.cos(th), np.sin(th) * np.sin(ph)], axis=-1).reshape(-1, 3)
+    verts = np.c_[xyz, np.zeros(len(xyz)), xyz]
+    tris = []
+    row = slices + 1
+    for i in range(stacks):
+        for j in range(slices):
+            a, b = i * row + j, i * row + j + 1
+            c, d = a + row, b + row
+            if i > 0:
+                tris.append((a, b, c))
+            if i < stacks - 1:
+                tris.append((b, d, c))
+    tris = np.array(tris, dtype=np.int64)
+    return verts.astype(np.float32), _fix_winding(verts, tris).astype(np.uint32)
+
+
+def _ring(segments: int):
+    phi = np.linspace(0.0, 2.0 * np.pi, segments, endpoint=False)
+    return np.cos(phi), np.sin(phi)
+
+
+def cylinder_mesh(segments: int = 16):
+    """Radius 1 along the segment (t from 0 to 1), with flat caps."""
+    c, s = _ring(segments)
+    z0 = np.zeros(segments)
+    side0 = np.c_[c, z0, s, z0, c, z0, s]
+    side1 = np.c_[c, z0, s, z0 + 1, c, z0, s]
+    cap0 = np.c_[c, z0, s, z0, z0, z0 - 1, z0]
+    cap1 = np.c_[c, z0, s, z0 + 1, z0, z0 + 1, z0]
+    centers = np.array([[0, 0, 0, 0, 0, -1, 0], [0, 0, 0, 1, 0, 1, 0]], dtype=np.float64)
+    verts = np.r_[side0, side1, cap0, cap1, centers]
+    k = np.arange(segments)
+    k1 = (k + 1) % segments
+    n = segments
+    tris = np.r_[
+        np.c_[k, k1, n + k], np.c_[k1, n + k1, n + k],          # side quads
+        np.c_[2 * n + k, 2 * n + k1, np.full(n, 4 * n)],         # cap at t=0
+        np.c_[3 * n + k, 3 * n + k1, np.full(n, 4 * n + 1)],     # cap at t=1
+    ]
+    return verts.astype(np.float32), _fix_winding(verts, tris).astype(np.uint32)
+
+
+def cone_mesh(segments: int = 16):
+    """Base radius 1 at t=0, apex at t=1, closed base. Draw with ``u_cone = 1``."""
+    c, s = _ring(segments)
+    z0 = np.zeros(segments)
+    # one apex vertex per side so each face keeps its own normal
+    mid = np.pi / segments
+    cm, sm = np.cos(np.arange(segments) * 2 * mid + mid), np.sin(np.arange(segments) * 2 * mid + mid)
+    side = np.c_[c, z0, s, z0, c, z0 + 1, s]
+    apex = np.c_[z0, z0, z0, z0 + 1, cm, z0 + 1, sm]
+    base = np.c_[c, z0, s, z0, z0, z0 - 1, z0]
+    center = np.array([[0, 0, 0, 0, 0, -1, 0]], dtype=np.float64)
+    verts = np.r_[side, apex, base, center]
+    k = np.arange(segments)
+    k1 = (k + 1) % segments
+    n = segments
+    tris = np.r_[np.c_[k, k1, n + k], np.c_[2 * n + k, 2 * n + k1, np.full(n, 3 * n)]]
+    # winding from the geometry itself: the apex normals are only approximate for _fix_winding
+    return verts.astype(np.float32), _fix_winding(verts, tris).astype(np.uint32)
+
+
+# ---------------------------------------------------------------------------------------------
+# per-context resources
+
+MESH_INSTANCE_FLOATS = 11   # a(3) b(3) radius(1) color(4)
+LINE_INSTANCE_FLOATS = 14   # p0(3) p1(3) c0(4) c1(4)
+
+
+class Resources:
+    """Programs and unit meshes of one context; get it with ``Resources.of(ctx)``."""
+
+    def __init__(self, ctx: moderngl.Context):
+        self.ctx = ctx
+        self.mesh_program = ctx.program(vertex_shader=MESH_VS, fragment_shader=MESH_FS)
+        self.line_program = ctx.program(vertex_shader=LINE_VS, fragment_shader=LINE_FS)
+        self.meshes = {}
+        for name, (verts, tris) in {"sphere": sphere_mesh(), "cylinder": cylinder_mesh(),
+                                    "cone": cone_mesh()}.items():
+            self.meshes[name] = (ctx.buffer(verts.tobytes()), ctx.buffer(tris.tobytes()))
+        corners = np.array([[0, -1], [0, 1], [1, -1], [1, 1]], dtype=np.float32)
+        self.line_corners = ctx.buffer(corners.tobytes())
+
+    @classmethod
+    def of(cls, ctx: moderngl.Context) -> "Resources":
+        if ctx.extra is None:
+            ctx.extra = {}
+        store = ctx.extra if isinstance(ctx.extra, dict) else _fallback_store.setdefault(id(ctx), {})
+        res = store.get("viewer.resources")
+        if res is None:
+            res = store["viewer.resources"] = cls(ctx)
+        return res
+
+    def mesh_vao(self, mesh: str, instances: moderngl.Buffer) -> moderngl.VertexArray:
+        vbo, ibo = self.meshes[mesh]
+        return self.ctx.vertex_array(
+            self.mesh_program,
+            [(vbo, "3f 1f 3f", "in_pos", "in_t", "in_normal"),
+             (instances, "3f 3f 1f 4f/i", "i_a", "i_b", "i_radius", "i_color")],
+            index_buffer=ibo, index_element_size=4)
+
+    def line_vao(self, instances: moderngl.Buffer) -> moderngl.VertexArray:
+        return self.ctx.vertex_array(
+            self.line_program,
+            [(self.line_corners, "2f", "in_corner"),
+             (instances, "3f 3f 4f 4f/i", "i_p0", "i_p1", "i_c0", "i_c1")])
+
+    def begin_frame(self, frame: FrameState, light: Light) -> None:
+        """Write the per-frame uniforms shared by all renderables."""
+        mp = self.mesh_program
+        mp["u_view_proj"].write(mat_bytes(frame.view_proj))
+        direction = np.asarray(light.direction, dtype=np.float64)
+        mp["u_light_dir"].value = tuple(direction / np.linalg.norm(direction))
+        mp["u_eye"].value = tuple(float(x) for x in frame.eye)
+        mp["u_ambient"].value = light.ambient
+        mp["u_diffuse"].value = light.diffuse
+        mp["u_specular"].value = light.specular
+        lp = self.line_program
+        lp["u_view"].write(mat_bytes(frame.view))
+        lp["u_proj"].write(mat_bytes(frame.proj))
+        lp["u_viewport"].value = (float(frame.width), float(frame.height))
+
+
+_fallback_store: dict = {}
+
+
+class InstanceBuffer:
+    """A GPU buffer of per-instance float32 records that grows by orphaning, never shrinks, and
+    keeps its identity so vertex arrays built on it stay valid."""
+
+    def __init__(self, ctx: moderngl.Context, floats_per_instance: int, capacity: int = 32):
+        self.floats = floats_per_instance
+        self.buffer = ctx.buffer(reserve=capacity * floats_per_instance * 4, dynamic=True)
+        self.count = 0
+        self._staging = np.zeros((capacity, floats_per_instance), dtype=np.float32)
+
+    def staging(self, n: int) -> np.ndarray:
+        """A reusable (n, floats) float32 array to fill before ``upload``."""
+        if len(self._staging) < n:
+            self._staging = np.zeros((max(n, 2 * len(self._staging)), self.floats), dtype=np.float32)
+        return self._staging[:n]
+
+    def upload(self, data: np.ndarray) -> None:
+        data = np.ascontiguousarray(data, dtype=np.float32)
+        if data.nbytes > self.buffer.size:
+            self.buffer.orphan(max(data.nbytes, 2 * self.buffer.size))
+        if data.nbytes:
+            self.buffer.write(data)
+        self.count = len(data)
+
+    def release(self) -> None:
+        self.buffer.release()
+
+
+def as_rgba(color, n: int | None = None, alpha: float = 1.0) -> np.ndarray:
+    """Colours as float32 RGBA: one colour (3|4,) -> (4,), or per item (n, 3|4) -> (n, 4)."""
+    c = np.asarray(color, dtype=np.float32)
+    if c.ndim == 1:
+        out = np.empty(4, dtype=np.float32)
+        out[:3] = c[:3]
+        out[3] = c[3] if len(c) > 3 else alpha
+        if n is not None:
+            out = np.broadcast_to(out, (n, 4))
+        return out
+    out = np.empty((len(c), 4), dtype=np.float32)
+    out[:, :3] = c[:, :3]
+    out[:, 3] = c[:, 3] if c.shape[1] > 3 else alpha
+    return out
+
+
+class Renderable:
+    """Base of everything a Scene draws. Subclasses fill their buffers in ``update(...)`` and
+    issue their draws in ``draw(frame)``; ``transparent`` ones are drawn after opaque ones."""
+
+    visible: bool = True
+
+    @property
+    def transparent(self) -> bool:
+        return False
+
+    def draw(self, frame: FrameState) -> None:  # pragma: no cover - interface
+        raise NotImplementedError
+
+    def release(self) -> None:
+        pass
+
+
+def draw_mesh_instances(frame: FrameState, vao: moderngl.VertexArray, count: int,
+                        cone: bool = False) -> None:
+    if count <= 0:
+        return
+    vao.program["u_cone"].value = 1.0 if cone else 0.0
+    vao.render(moderngl.TRIANGLES, instances=count)
+
+
+def set_depth_write(fbo: moderngl.Framebuffer, enabled: bool) -> None:
+    fbo.depth_mask = enabled
+    fbo.use()  # moderngl applies a framebuffer's masks when it is bound
+
+
+def draw_transparent(frame: FrameState, draws) -> None:
+    """Single-layer transparency: a depth-only pass, then colour where depth matches, so a ghost
+    shows its front surface blended over the scene without its own insides."""
+    ctx, fbo = frame.ctx, frame.fbo
+    fbo.color_mask = (False, False, False, False)
+    fbo.use()  # moderngl applies a framebuffer's masks when it is bound
+    for draw in draws:
+        draw()
+    fbo.color_mask = (True, True, True, True)
+    fbo.use()
+    ctx.depth_func = "<="
+    for draw in draws:
+        draw()
+    ctx.depth_func = "<"

@@ -1,0 +1,31 @@
+"""A Scene: the renderables to draw, a light and a background colour."""
+from __future__ import annotations
+
+from .renderables.base import Light, Renderable
+
+
+class Scene:
+    """Holds renderables in draw order. Opaque ones are drawn first (in order), then transparent
+    ones (in order), so ghosts blend over everything else."""
+
+    def __init__(self, background=(0.17, 0.18, 0.21), light: Light | None = None):
+        self.background = tuple(background)
+        self.light = light or Light()
+        self.renderables: list[Renderable] = []
+
+    def add(self, *renderables: Renderable):
+        """Add renderables; returns the single one given, or the tuple."""
+        self.renderables.extend(renderables)
+        return renderables[0] if len(renderables) == 1 else renderables
+
+    def remove(self, renderable: Renderable) -> None:
+        self.renderables.remove(renderable)
+
+    def draw_order(self) -> list[Renderable]:
+        visible = [r for r in self.renderables if r.visible]
+        return [r for r in visible if not r.transparent] + [r for r in visible if r.transparent]
+
+    def release(self) -> None:
+        for r in self.renderables:
+            r.release()
+        self.renderables.clear()
