@@ -12,9 +12,12 @@ import sys
 
 # name -> (module under app.commands, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
+    "studio": ("studio", "open the studio (default when no command is given)"),
     "build-db": ("build_db", "build (or load from cache) the motion database and print its size"),
     "view": ("view", "play a BVH file in a 3D window"),
     "train": ("train", "train the learned motion matching networks (needs torch)"),
+    "eval": ("eval", "quality metrics of the learned motion matching networks"),
+    "export-onnx": ("export_onnx", "export the decompressor, stepper and projector as ONNX"),
 }
 
 

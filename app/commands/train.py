@@ -1,0 +1,62 @@
+"""``lmm-studio train [all|decompressor|stepper|projector]``: train the learned motion matching networks.
+
+Writes ``default.npz`` (decompressor, stepper, projector), ``compressor.npz`` and
+``training_log.csv`` into ``--out``. The default recipe is the fast one measured to train the whole
+pipeline on the shipped database in under 45 minutes on 2 CPU cores (see lmm/data/weights/README.md).
+"""
+from __future__ import annotations
+
+import json
+import sys
+import time
+
+STAGES = ("all", "decompressor", "stepper", "projector")
+
+
+def add_arguments(p) -> None:
+    p.add_argument("stage", nargs="?", default="all", choices=STAGES,
+                   help="what to train (default: all; decompressor trains the compressor with it)")
+    p.add_argument("--iterations", type=int, help="iterations per network (default: the recipe's)")
+    p.add_argument("--batch", type=int, help="batch size per network (default: the recipe's)")
+    p.add_argument("--lr", type=float, help="peak learning rate (default: the recipe's)")
+    p.add_argument("--out", default="lmm-weights", help="output folder (default: ./lmm-weights)")
+    p.add_argument("--manifest", help="dataset manifest (default: the shipped LAFAN1 locomotion set)")
+    p.add_argument("--seed", type=int, default=1234, help="random seed (default 1234)")
+    p.add_argument("--threads", type=int, default=2, help="torch threads (default 2)")
+    p.add_argument("--frames", type=int, help="train on the first N database frames only (quick checks)")
+    p.add_argument("--log-every", type=int, default=200, help="print a loss line every N iterations")
+    p.add_argument("--quiet", action="store_true", help="no progress bar or loss lines")
+
+
+def main(args) -> int:
+    import numpy as np
+
+    from lmm.database import load_or_build
+    from lmm.features import build_features
+    from lmm.training import NETWORKS, Recipe, train_pipeline
+    from lmm.weights import WeightsError
+
+    db, _ = load_or_build(args.manifest)
+    features = build_features(db)
+    recipe = Recipe(seed=args.seed, threads=args.threads, log_every=args.log_every)
+    stages = NETWORKS if args.stage == "all" else (args.stage,)
+    for name in stages:
+        s = recipe.stage(name)
+        if args.iterations:
+            s.iterations = args.iterations
+        if args.batch:
+            s.batch = args.batch
+        if args.lr:
+            s.lr = args.lr
+    frames = np.arange(min(args.frames, db.n_frames)) if args.frames else None
+    print(f"training {', '.join(stages)} on {db.name} ({db.n_frames} frames, key {db.key[:16]}) -> {args.out}",
+          file=sys.stderr)
+    t0 = time.perf_counter()
+    try:
+        summary = train_pipeline(db, features, stages, recipe, args.out, frames=frames, quiet=args.quiet)
+    except (WeightsError, FileNotFoundError) as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 1
+    summary["command_wall_s"] = round(time.perf_counter() - t0, 1)
+    print(json.dumps(summary, indent=2))
+    return 0

@@ -1,0 +1,217 @@
+"""Learned motion matching: the pose source is the state ``[features, latent]`` of three small networks.
+
+Per tick (Holden et al. 2020, section 4):
+
+* when a search would run (the same search interval, forced searches and :class:`lmm.tuning.Tuning`
+  as motion matching), the **projector** maps the query to the ``[features, latent]`` of its nearest
+  neighbour; when the projected features match the query better than the playing state does (by more
+  than the transition cost) the state jumps there and the base class inertializes the pose jump;
+* every tick the **stepper** advances the state by ``dt`` and the **decompressor** turns it into a pose.
+
+The networks run in numpy (:mod:`lmm.nn`); torch is never imported here. For the debugger the snapshot
+also carries the latent, the projector's features and what the exact nearest-neighbour search returns
+for the same query (``compare_with_search``; off in benchmarks).
+
+The networks work in the feature normalisation they were trained with (stored in the weights file);
+changing feature weights in the tuning changes the queries' exact costs and the nearest-neighbour
+comparison, not what the networks learned.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from . import quat
+from .character import CharacterController, SearchOutcome, SourcePose
+from .controller import Candidates
+from .mm import default_start_frame
+from .nn import MLP, pose_vector_slices
+from .search import SearchIndex
+from .tuning import Tuning
+from .weights import WeightsError, load as load_weights
+
+WEIGHTS_DIR = Path(__file__).resolve().parent / "data" / "weights"
+DEFAULT_WEIGHTS = WEIGHTS_DIR / "default.npz"
+RUNTIME_NETWORKS = ("decompressor", "stepper", "projector")
+
+
+@dataclass
+class LMMNetworks:
+    """The three runtime networks plus the feature space they were trained in."""
+    decompressor: MLP
+    stepper: MLP
+    projector: MLP
+    feature_mean: np.ndarray       # (D,) raw feature offset of the networks' feature space
+    feature_inv_scale: np.ndarray  # (D,)
+    n_features: int
+    n_latent: int
+    n_bones: int
+    metadata: dict
+    path: Path | None = None
+
+    @classmethod
+    def load(cls, path, db=None, features=None) -> "LMMNetworks":
+        """Load and validate (against ``db``'s key and ``features``' layout when given)."""
+        wf = load_weights(path, require=RUNTIME_NETWORKS, db_key=None if db is None else db.key,
+                          layout_dicts=None if features is None else features.layout_dicts())
+        meta = wf.metadata
+        nets = {n: MLP.from_arrays(wf.arrays, n, wf.spec(n)["activation"]) for n in RUNTIME_NETWORKS}
+        n_features = len(meta["feature_mean"])
+        n_latent = int(meta["latent"])
+        n_bones = int(meta["n_bones"])
+        state = n_features + n_latent
+        checks = (("decompressor", nets["decompressor"].n_in, state), ("stepper", nets["stepper"].n_in, state),
+                  ("stepper", nets["stepper"].n_out, state), ("projector", nets["projector"].n_in, n_features),
+                  ("projector", nets["projector"].n_out, state),
+                  ("decompressor", nets["decompressor"].n_out, pose_vector_slices(n_bones)["contacts"].stop))
+        for name, got, want in checks:
+            if got != want:
+                raise WeightsError(f"{wf.path}: {name} has a {got}-wide input/output where {want} is expected")
+        if db is not None and n_bones != db.n_bones:
+            raise WeightsError(f"{wf.path}: trained for {n_bones} bones, the database has {db.n_bones}")
+        return cls(nets["decompressor"], nets["stepper"], nets["projector"],
+                   np.asarray(meta["feature_mean"], np.float32), np.asarray(meta["feature_inv_scale"], np.float32),
+                   n_features, n_latent, n_bones, meta, wf.path)
+
+    def nbytes(self) -> int:
+        """Bytes the runtime keeps for the networks (weights, biases, normalisation)."""
+        return self.decompressor.nbytes() + self.stepper.nbytes() + self.projector.nbytes()
+
+    def to_network_space(self, raw: np.ndarray) -> np.ndarray:
+        return ((raw - self.feature_mean) * self.feature_inv_scale).astype(np.float32)
+
+    def from_network_space(self, x: np.ndarray) -> np.ndarray:
+        return (x / self.feature_inv_scale + self.feature_mean).astype(np.float32)
+
+
+def load_default_networks(db, features, path=None) -> LMMNetworks:
+    """The shipped networks (``lmm/data/weights/default.npz``), checked against ``db`` and ``features``."""
+    return LMMNetworks.load(path or DEFAULT_WEIGHTS, db, features)
+
+
+def decode_source_pose(y: np.ndarray, n_bones: int, slices: dict | None = None) -> SourcePose:
+    """A decompressor output vector as a :class:`SourcePose` (float64; bone 0 carries root velocities)."""
+    s = slices or pose_vector_slices(n_bones)
+    j = n_bones - 1
+    y = y.astype(np.float64)
+    pos = np.zeros((n_bones, 3))
+    rot = np.zeros((n_bones, 4))
+    vel = np.zeros((n_bones, 3))
+    ang = np.zeros((n_bones, 3))
+    pos[1:] = y[s["positions"]].reshape(j, 3)
+    rot[0, 0] = 1.0
+    rot[1:] = quat.from_xform_xy(y[s["rotations"]].reshape(j, 3, 2))
+    vel[1:] = y[s["velocities"]].reshape(j, 3)
+    ang[1:] = y[s["angular_velocities"]].reshape(j, 3)
+    vel[0] = y[s["root_velocity"]]
+    ang[0] = y[s["root_angular_velocity"]]
+    return SourcePose(pos, rot, vel, ang, y[s["contacts"]] > 0.5, -1)
+
+
+class LearnedMotionMatchingController(CharacterController):
+    """Learned motion matching over ``db``/``features`` with ``networks`` (default: the shipped ones)."""
+
+    name = "lmm"
+
+    def __init__(self, db, features, tuning: Tuning | None = None, networks: LMMNetworks | None = None,
+                 compare_with_search: bool = True):
+        self.nets = networks if networks is not None else load_default_networks(db, features)
+        if self.nets.n_bones != db.n_bones:
+            raise WeightsError(f"{self.nets.path}: networks for {self.nets.n_bones} bones, database has {db.n_bones}")
+        self.compare_with_search = compare_with_search
+        self._slices = pose_vector_slices(db.n_bones)
+        d = self.nets.n_features
+        self.state = np.zeros(d + self.nets.n_latent, np.float32)
+        self._deriv = np.zeros_like(self.state)
+        self._pose_vec = np.zeros(self.nets.decompressor.n_out, np.float32)
+        self._index: SearchIndex | None = None
+        self._all_frames = np.ones(db.n_frames, dtype=bool)
+        self._nn_frame = -1
+        self._nn_cost = float("nan")
+        self._projected = None
+        self._projected_cost = float("nan")
+        super().__init__(db, features, tuning)
+
+    # -- the networks ---------------------------------------------------------------------------
+    def project(self, query_norm: np.ndarray) -> np.ndarray:
+        """Projector on a query normalised with the controller's current feature weights -> state."""
+        raw = self.features.denormalize(query_norm)
+        return self.nets.projector(self.nets.to_network_space(raw))
+
+    def decompress(self, state: np.ndarray) -> SourcePose:
+        self.nets.decompressor(state, out=self._pose_vec)
+        return decode_source_pose(self._pose_vec, self.n_bones, self._slices)
+
+    def exact_nearest(self, query_norm: np.ndarray):
+        """The exact nearest neighbour of a query over every frame (no exclusions): (frame, cost, result)."""
+        if self._index is None:
+            self._index = SearchIndex(self.features.normalized)
+        self._index.update(self.features.normalized)
+        res = self._index.search(query_norm, mask=self._all_frames, current=-1, transition_cost=0.0,
+                                 exclude_window=0, top_k=int(self.tuning.top_k), slices=self.features.slices)
+        return res.best_frame, res.best_cost, res
+
+    # -- hooks ----------------------------------------------------------------------------------
+    def _reset_source(self, frame: int | None) -> None:
+        frame = default_start_frame(self.db) if frame is None else int(frame)
+        if not 0 <= frame < self.db.n_frames:
+            raise ValueError(f"start frame {frame} is outside the database (0..{self.db.n_frames - 1})")
+        self.state[:] = self.nets.projector(self.nets.to_network_space(self.features.raw[frame]))
+        self._nn_frame = frame
+        self._nn_cost = 0.0
+        self._projected = self.features.normalize(self.nets.from_network_space(self.state[:self.nets.n_features]))
+        self._projected_cost = float("nan")
+
+    def _source_features(self) -> np.ndarray:
+        return self.nets.from_network_space(self.state[:self.nets.n_features])
+
+    def _source_frame(self) -> int:
+        return int(self._nn_frame)
+
+    def _on_features_changed(self) -> None:
+        if self._index is not None:
+            self._index.update(self.features.normalized)
+
+    def _search(self, query_norm: np.ndarray, forced: bool) -> SearchOutcome:
+        timings = {}
+        t0 = time.perf_counter()
+        projected = self.project(query_norm)
+        timings["projector"] = (time.perf_counter() - t0) * 1e6
+        d = self.nets.n_features
+        proj_norm = self.features.normalize(self.nets.from_network_space(projected[:d]))
+        projected_cost = float(np.sum((query_norm - proj_norm) ** 2))
+        current_norm = self.features.normalize(self._source_features())
+        current_cost = float(np.sum((query_norm - current_norm) ** 2))
+        self._projected, self._projected_cost = proj_norm, projected_cost
+        candidates = None
+        if self.compare_with_search:
+            t0 = time.perf_counter()
+            nn, nn_cost, res = self.exact_nearest(query_norm)
+            timings["nn_search"] = (time.perf_counter() - t0) * 1e6
+            self._nn_frame, self._nn_cost = int(nn), float(nn_cost)
+            candidates = Candidates(frames=res.frames, costs=res.costs, channel_costs=res.channel_costs,
+                                    bias=res.bias, channel_names=self.features.names)
+        target = None
+        if projected_cost + float(self.tuning.transition_cost) < current_cost:
+            self.state[:] = projected
+            t0 = time.perf_counter()
+            target = self.decompress(self.state)
+            timings["decompressor_transition"] = (time.perf_counter() - t0) * 1e6
+        return SearchOutcome(target=target, best_frame=self._nn_frame, best_cost=projected_cost,
+                             candidates=candidates, timings_us=timings)
+
+    def _advance_pose(self, dt: float) -> SourcePose:
+        if dt > 0:
+            self.nets.stepper(self.state, out=self._deriv)
+            self.state += np.float32(dt) * self._deriv
+        return self.decompress(self.state)
+
+    def _snapshot_extras(self) -> dict:
+        d = self.nets.n_features
+        return {"latent": self.state[d:].copy(),
+                "projected_features": None if self._projected is None else self._projected.copy(),
+                "nn_frame": int(self._nn_frame), "nn_cost": float(self._nn_cost),
+                "projected_cost": float(self._projected_cost)}

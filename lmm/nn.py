@@ -1,0 +1,174 @@
+"""Numpy runtime for the learned motion matching networks (no torch on this path).
+
+A :class:`MLP` evaluates ``y = out_mean + out_std * mlp((x - in_mean) / in_std)`` in float32 with
+preallocated buffers, so a batch-1 step allocates nothing. The weight layout is the one
+:meth:`lmm.networks.NormalizedMLP.to_arrays` writes: ``{name}.W{i}`` (in x out), ``{name}.b{i}``
+and the four normalisation vectors.
+
+This module also knows the decompressor's pose vector (338 dims for 23 bones):
+
+=====================  ==========================================================
+slice                  content (bones 1.., i.e. everything below the simulation bone)
+=====================  ==========================================================
+``positions``          local positions (J-1) x 3
+``rotations``          local rotations as 2-axis rotation matrices (J-1) x 3 x 2
+``velocities``         local velocities (J-1) x 3
+``angular_velocities`` local angular velocities (J-1) x 3
+``root_velocity``      simulation-bone velocity in its own space, 3
+``root_angular_velocity`` simulation-bone angular velocity in its own space, 3
+``contacts``           left / right foot contact, 2
+=====================  ==========================================================
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from . import quat
+
+
+def pose_vector_slices(n_bones: int) -> dict[str, slice]:
+    """Slices of the decompressor's pose vector for a skeleton of ``n_bones`` (incl. the simulation bone)."""
+    j = n_bones - 1
+    sizes = (("positions", 3 * j), ("rotations", 6 * j), ("velocities", 3 * j), ("angular_velocities", 3 * j),
+             ("root_velocity", 3), ("root_angular_velocity", 3), ("contacts", 2))
+    out, start = {}, 0
+    for name, size in sizes:
+        out[name] = slice(start, start + size)
+        start += size
+    return out
+
+
+def pose_vector_size(n_bones: int) -> int:
+    return pose_vector_slices(n_bones)["contacts"].stop
+
+
+def decode_pose_vector(y: np.ndarray, n_bones: int) -> dict[str, np.ndarray]:
+    """Split pose vectors (..., P) into named arrays; rotations come back as unit quaternions (Gram-Schmidt)."""
+    s = pose_vector_slices(n_bones)
+    lead = y.shape[:-1]
+    j = n_bones - 1
+    return {
+        "positions": y[..., s["positions"]].reshape(lead + (j, 3)),
+        "rotations": quat.from_xform_xy(y[..., s["rotations"]].reshape(lead + (j, 3, 2))),
+        "velocities": y[..., s["velocities"]].reshape(lead + (j, 3)),
+        "angular_velocities": y[..., s["angular_velocities"]].reshape(lead + (j, 3)),
+        "root_velocity": y[..., s["root_velocity"]],
+        "root_angular_velocity": y[..., s["root_angular_velocity"]],
+        "contacts": y[..., s["contacts"]],
+    }
+
+
+# -- encoding database frames (the training targets and the compressor input) ---------------------
+
+def character_parents(parents: np.ndarray) -> np.ndarray:
+    """Parents of bones 1.. re-indexed from 0, with the simulation bone removed (-1 for its children)."""
+    return np.asarray(parents[1:], dtype=np.int64) - 1
+
+
+def pose_vectors(db, frames=slice(None)) -> np.ndarray:
+    """Decompressor targets (n, P) float32: see :func:`lmm.nn.pose_vector_slices`."""
+    pos = db.positions[frames, 1:].astype(np.float64)
+    rot = db.rotations[frames, 1:].astype(np.float64)
+    n = pos.shape[0]
+    root_rot = db.rotations[frames, 0].astype(np.float64)
+    root_vel = quat.inv_mul_vec(root_rot, db.velocities[frames, 0].astype(np.float64))
+    root_ang = quat.inv_mul_vec(root_rot, db.angular_velocities[frames, 0].astype(np.float64))
+    return np.concatenate([
+        pos.reshape(n, -1), quat.to_xform_xy(rot).reshape(n, -1),
+        db.velocities[frames, 1:].reshape(n, -1), db.angular_velocities[frames, 1:].reshape(n, -1),
+        root_vel, root_ang, db.contacts[frames].astype(np.float64),
+    ], axis=1).astype(np.float32)
+
+
+def character_space(db, frames=slice(None)) -> np.ndarray:
+    """Character-space (simulation bone removed) positions, 2-axis rotations, velocities and angular
+    velocities of bones 1.., (n, 15 (J-1)) float32."""
+    g_rot, g_pos, g_vel, g_ang = quat.forward_kinematics_velocity(
+        db.rotations[frames, 1:].astype(np.float64), db.positions[frames, 1:].astype(np.float64),
+        db.velocities[frames, 1:].astype(np.float64), db.angular_velocities[frames, 1:].astype(np.float64),
+        character_parents(db.parents))
+    n = g_pos.shape[0]
+    return np.concatenate([g_pos.reshape(n, -1), quat.to_xform_xy(g_rot).reshape(n, -1),
+                           g_vel.reshape(n, -1), g_ang.reshape(n, -1)], axis=1).astype(np.float32)
+
+
+class MLP:
+    """One network, float32, ReLU or ELU hidden activations, linear output."""
+
+    def __init__(self, weights: list[np.ndarray], biases: list[np.ndarray], activation: str,
+                 in_mean: np.ndarray, in_std: np.ndarray, out_mean: np.ndarray, out_std: np.ndarray,
+                 name: str = "mlp"):
+        if activation not in ("relu", "elu"):
+            raise ValueError(f"{name}: unknown activation {activation!r}")
+        self.name = name
+        self.activation = activation
+        self.weights = [np.ascontiguousarray(w, dtype=np.float32) for w in weights]
+        self.biases = [np.ascontiguousarray(b, dtype=np.float32) for b in biases]
+        self.in_mean = np.asarray(in_mean, np.float32)
+        # multiply, not divide, per call
+        self.in_inv_std = (1.0 / np.asarray(in_std, np.float32)).astype(np.float32)
+        self.out_mean = np.asarray(out_mean, np.float32)
+        self.out_std = np.asarray(out_std, np.float32)
+        self._buffers: dict[int, list[np.ndarray]] = {}
+
+    @classmethod
+    def from_arrays(cls, arrays: dict, prefix: str, activation: str) -> "MLP":
+        n = 0
+        while f"{prefix}.W{n}" in arrays:
+            n += 1
+        return cls([arrays[f"{prefix}.W{i}"] for i in range(n)], [arrays[f"{prefix}.b{i}"] for i in range(n)],
+                   activation, arrays[f"{prefix}.in_mean"], arrays[f"{prefix}.in_std"],
+                   arrays[f"{prefix}.out_mean"], arrays[f"{prefix}.out_std"], name=prefix)
+
+    @property
+    def n_in(self) -> int:
+        return self.weights[0].shape[0]
+
+    @property
+    def n_out(self) -> int:
+        return self.weights[-1].shape[1]
+
+    def nbytes(self) -> int:
+        arrays = [*self.weights, *self.biases, self.in_mean, self.in_inv_std, self.out_mean, self.out_std]
+        return int(sum(a.nbytes for a in arrays))
+
+    def parameter_count(self) -> int:
+        return int(sum(w.size + b.size for w, b in zip(self.weights, self.biases)))
+
+    def _bufs(self, batch: int) -> list[np.ndarray]:
+        bufs = self._buffers.get(batch)
+        if bufs is None:
+            bufs = [np.empty((batch, self.n_in), np.float32)] + [np.empty((batch, w.shape[1]), np.float32) for w in self.weights]
+            if len(self._buffers) > 8:
+                self._buffers.clear()
+            self._buffers[batch] = bufs
+        return bufs
+
+    def __call__(self, x: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """Evaluate on (D,) or (B, D); returns a new array (or writes into ``out``)."""
+        single = x.ndim == 1
+        x2 = x.reshape(1, -1) if single else x
+        bufs = self._bufs(x2.shape[0])
+        h = bufs[0]
+        np.subtract(x2, self.in_mean, out=h)
+        np.multiply(h, self.in_inv_std, out=h)
+        last = len(self.weights) - 1
+        for i, (w, b) in enumerate(zip(self.weights, self.biases)):
+            nxt = bufs[i + 1]
+            np.matmul(h, w, out=nxt)
+            nxt += b
+            if i < last:
+                if self.activation == "relu":
+                    np.maximum(nxt, 0.0, out=nxt)
+                else:  # ELU(alpha=1): x if x > 0 else exp(x) - 1
+                    neg = np.minimum(nxt, 0.0)
+                    np.expm1(neg, out=neg)
+                    np.maximum(nxt, 0.0, out=nxt)
+                    nxt += neg
+            h = nxt
+        y = h * self.out_std
+        y += self.out_mean
+        if out is not None:
+            out[...] = y[0] if single else y
+            return out
+        return y[0] if single else y

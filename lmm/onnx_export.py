@@ -1,0 +1,71 @@
+"""ONNX export of the runtime networks, written directly from the numpy weights with ``onnx.helper``.
+
+Each network becomes one small graph, input ``x`` (batch, n_in) float32, output ``y`` (batch, n_out):
+``Sub(in_mean) -> Div(in_std) -> [Gemm -> Relu|Elu] x hidden -> Gemm -> Mul(out_std) -> Add(out_mean)``,
+the same function as :class:`lmm.nn.MLP` and :class:`lmm.networks.NormalizedMLP`. No torch needed.
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+OPSET = 17
+
+
+def mlp_to_onnx(mlp, name: str, metadata: dict | None = None):
+    import onnx
+    from onnx import TensorProto, helper, numpy_helper
+
+    inits = [numpy_helper.from_array(mlp.in_mean.astype(np.float32), f"{name}_in_mean"),
+             numpy_helper.from_array((1.0 / mlp.in_inv_std).astype(np.float32), f"{name}_in_std"),
+             numpy_helper.from_array(mlp.out_mean.astype(np.float32), f"{name}_out_mean"),
+             numpy_helper.from_array(mlp.out_std.astype(np.float32), f"{name}_out_std")]
+    nodes = [helper.make_node("Sub", ["x", f"{name}_in_mean"], ["centred"]),
+             helper.make_node("Div", ["centred", f"{name}_in_std"], ["h0"])]
+    h = "h0"
+    last = len(mlp.weights) - 1
+    for i, (w, b) in enumerate(zip(mlp.weights, mlp.biases)):
+        inits += [numpy_helper.from_array(w.astype(np.float32), f"{name}_W{i}"),
+                  numpy_helper.from_array(b.astype(np.float32), f"{name}_b{i}")]
+        lin = f"linear{i}"
+        nodes.append(helper.make_node("Gemm", [h, f"{name}_W{i}", f"{name}_b{i}"], [lin]))
+        if i < last:
+            act = "Relu" if mlp.activation == "relu" else "Elu"
+            kwargs = {"alpha": 1.0} if act == "Elu" else {}
+            nodes.append(helper.make_node(act, [lin], [f"h{i + 1}"], **kwargs))
+            h = f"h{i + 1}"
+        else:
+            h = lin
+    nodes += [helper.make_node("Mul", [h, f"{name}_out_std"], ["scaled"]),
+              helper.make_node("Add", ["scaled", f"{name}_out_mean"], ["y"])]
+    graph = helper.make_graph(
+        nodes, f"lmm_{name}",
+        [helper.make_tensor_value_info("x", TensorProto.FLOAT, ["batch", mlp.n_in])],
+        [helper.make_tensor_value_info("y", TensorProto.FLOAT, ["batch", mlp.n_out])], inits)
+    model = helper.make_model(graph, opset_imports=[helper.make_opsetid("", OPSET)], producer_name="lmm-studio")
+    model.ir_version = 8
+    for k, v in (metadata or {}).items():
+        entry = model.metadata_props.add()
+        entry.key, entry.value = k, v if isinstance(v, str) else json.dumps(v)
+    onnx.checker.check_model(model)
+    return model
+
+
+def export_networks(nets, out_dir) -> list[Path]:
+    """Write decompressor.onnx, stepper.onnx and projector.onnx for an :class:`lmm.lmm.LMMNetworks`."""
+    import onnx
+
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    meta = {k: nets.metadata.get(k) for k in ("database_key", "feature_layout", "feature_mean",
+                                              "feature_inv_scale", "latent", "bone_names", "pose_vector_size")}
+    meta["dt_s"] = 1.0 / 60.0
+    paths = []
+    for name in ("decompressor", "stepper", "projector"):
+        model = mlp_to_onnx(getattr(nets, name), name, meta)
+        path = out_dir / f"{name}.onnx"
+        onnx.save(model, str(path))
+        paths.append(path)
+    return paths
