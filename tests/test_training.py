@@ -1,0 +1,112 @@
+"""Tiny training runs on a slice of the default database: every network's loss drops, seeds are fixed,
+the pipeline writes loadable weights, a CSV log and a summary."""
+import csv
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch")
+
+from lmm import training as T  # noqa: E402
+from lmm.database import load_or_build  # noqa: E402
+from lmm.features import build_features  # noqa: E402
+
+SLICE = np.arange(3000)
+
+
+@pytest.fixture(scope="module")
+def dbf():
+    db, _ = load_or_build()
+    return db, build_features(db)
+
+
+@pytest.fixture(scope="module")
+def data(dbf):
+    torch.set_num_threads(1)
+    return T.prepare(*dbf, frames=SLICE)
+
+
+def tiny(iterations=60, batch=32, lr=2e-3):
+    return T.StageSettings(iterations, batch, lr)
+
+
+def test_torch_kinematics_reproduce_the_database(data):
+    """The loss terms of the ground truth against itself are zero: the torch FK matches lmm.quat's."""
+    f = torch.arange(0, 3000, 37)
+    z = torch.zeros(len(f) * 2, 32)
+    y, q = torch.cat([data.Y[f]] * 2), torch.cat([data.Q[f]] * 2)
+    terms = T.decompressor_losses(y, y, q, z, data, len(f))
+    for name, v in terms.items():
+        assert float(v) < 1e-5, name
+
+
+def test_decompressor_loss_drops_and_is_seeded(data):
+    c, d, log = T.train_decompressor(data, tiny(), seed=3, hidden=64, log_every=10, quiet=True)
+    assert log.last_loss < 0.85 * log.first_loss
+    c2, d2, log2 = T.train_decompressor(data, tiny(20), seed=3, hidden=64, log_every=10, quiet=True)
+    c3, d3, log3 = T.train_decompressor(data, tiny(20), seed=3, hidden=64, log_every=10, quiet=True)
+    assert log2.rows[-1]["loss"] == log3.rows[-1]["loss"]
+    np.testing.assert_array_equal(d2.to_arrays("d")["d.W0"], d3.to_arrays("d")["d.W0"])
+
+
+def smooth_latents(data):
+    # a stand-in latent that varies smoothly over time, as a trained compressor's does
+    return data.X @ (torch.randn(data.X.shape[1], 32, generator=torch.Generator().manual_seed(0)) * 0.3)
+
+
+def test_stepper_loss_drops(data):
+    Z = smooth_latents(data)
+    stepper, log = T.train_stepper(data, Z, tiny(60, 16), window=8, hidden=64, log_every=10, quiet=True)
+    assert log.last_loss < 0.9 * log.first_loss
+
+
+def test_projector_loss_drops(data):
+    Z = smooth_latents(data)
+    projector, log = T.train_projector(data, Z, tiny(60, 64), hidden=64, log_every=10, quiet=True)
+    assert log.last_loss < 0.7 * log.first_loss
+
+
+def test_nearest_neighbours_are_exact(data):
+    X = data.X[:2000]
+    q = X[:50] + 0.3 * torch.randn(50, X.shape[1])
+    idx, cost = T.nearest_neighbours(q, X, chunk=700)
+    brute = ((q[:, None] - X[None]) ** 2).sum(-1)
+    assert torch.equal(idx, brute.argmin(1))
+    assert torch.allclose(cost, brute.min(1).values, rtol=1e-5, atol=1e-6)
+
+
+def test_window_starts_stay_in_ranges(dbf, data):
+    db, _ = dbf
+    w = T.window_starts_from(data, 20)
+    assert len(w) > 0
+    assert np.all(db.range_index(w) == db.range_index(w + 19))
+    assert np.all(w + 19 < 3000)
+
+
+def test_pipeline_writes_loadable_files(dbf, tmp_path):
+    from lmm.lmm import LMMNetworks
+    from lmm.evaluation import load_compressor
+
+    db, features = dbf
+    r = T.Recipe(decompressor=tiny(8), stepper=tiny(6, 8), projector=tiny(6, 32), stepper_window=6, hidden=32,
+                 threads=1, log_every=2)
+    summary = T.train_pipeline(db, features, T.NETWORKS, r, tmp_path, frames=SLICE, quiet=True)
+    assert set(summary["wall_s"]) >= {"decompressor", "stepper", "projector"}
+    nets = LMMNetworks.load(tmp_path / "default.npz", db, features)
+    assert nets.metadata["recipe"]["seed"] == r.seed and nets.metadata["database_key"] == db.key
+    assert len(nets.metadata["latent_mean"]) == 32
+    load_compressor(tmp_path / "compressor.npz", db, features)
+    with open(tmp_path / "training_log.csv", newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert {r["network"] for r in rows} == {"decompressor", "stepper", "projector"}
+    # retraining one stage keeps the others
+    summary = T.train_pipeline(db, features, ("projector",), r, tmp_path, frames=SLICE, quiet=True)
+    nets2 = LMMNetworks.load(tmp_path / "default.npz", db, features)
+    np.testing.assert_array_equal(nets.stepper.weights[0], nets2.stepper.weights[0])
+
+
+def test_train_command(tmp_path, capsys):
+    from app.cli import main
+    rc = main(["train", "stepper", "--out", str(tmp_path), "--iterations", "2", "--frames", "2000", "--quiet"])
+    assert rc == 1  # no decompressor trained in this folder yet: a clear error
+    assert "compressor.npz" in capsys.readouterr().err
