@@ -274,3 +274,67 @@ def write_plots(out_dir, artifacts: dict, loss_csv=None) -> list[str]:
         plt.close(fig)
         written.append(str(out_dir / "per_joint_error.png"))
     return written
+
+
+# ---------------------------------------------------------------------------------------------
+# benchmark figures (the paper's Table 3): used by `lmm-studio bench`
+# ---------------------------------------------------------------------------------------------
+
+def mm_runtime_bytes(db, features) -> dict:
+    """What motion matching keeps in memory at run time: features, pose database, search structure."""
+    from .search import SearchIndex
+    index = SearchIndex(features.normalized)
+    if hasattr(index, "nbytes"):
+        search = int(index.nbytes() if callable(index.nbytes) else index.nbytes)
+    else:  # every array the index holds, except views of the features themselves
+        search = sum(v.nbytes for v in vars(index).values()
+                     if isinstance(v, np.ndarray) and not np.shares_memory(v, features.normalized))
+    return {"features": int(features.normalized.nbytes), "pose": int(db.pose_bytes()), "search": int(search)}
+
+
+def benchmark_lmm(db, features, nets=None, inputs="builtin:random:1", steps: int = 600, warmup: int = 60) -> dict:
+    """``frame.lmm_us`` (median learned-controller step, debug comparison off), the per-network
+    costs, and ``memory.mm_bytes`` / ``memory.lmm_bytes``."""
+    from .inputs import open_input
+    from .lmm import LearnedMotionMatchingController, load_default_networks
+
+    nets = nets if nets is not None else load_default_networks(db, features)
+    ctrl = LearnedMotionMatchingController(db, features, networks=nets, compare_with_search=False)
+    log = open_input(inputs, (steps + warmup) / 60.0 + 1.0)
+    dt = 1.0 / 60.0
+    step_us, adv_us, proj_us = [], [], []
+    for i in range(steps + warmup):
+        t0 = time.perf_counter()
+        _, snap = ctrl.step(log.at(i * dt), dt)
+        if i >= warmup:
+            step_us.append((time.perf_counter() - t0) * 1e6)
+            adv_us.append(snap.timings_us.get("advance", np.nan))
+            if "projector" in snap.timings_us:
+                proj_us.append(snap.timings_us["projector"])
+    # the networks alone at batch 1, as in the paper's table
+    state = np.zeros(nets.n_features + nets.n_latent, np.float32)
+    query = np.zeros(nets.n_features, np.float32)
+
+    def median_us(fn, n=300):
+        fn()
+        ts = []
+        for _ in range(n):
+            t0 = time.perf_counter()
+            fn()
+            ts.append((time.perf_counter() - t0) * 1e6)
+        return float(np.median(ts))
+
+    mm = mm_runtime_bytes(db, features)
+    return {
+        "frame.lmm_us": float(np.median(step_us)),
+        "frame.lmm_advance_us": float(np.nanmedian(adv_us)),
+        "frame.lmm_projector_us": float(np.median(proj_us)) if proj_us else float("nan"),
+        "network.decompressor_us": median_us(lambda: nets.decompressor(state)),
+        "network.stepper_us": median_us(lambda: nets.stepper(state)),
+        "network.projector_us": median_us(lambda: nets.projector(query)),
+        "memory.mm_bytes": int(sum(mm.values())),
+        "memory.mm_features_bytes": mm["features"], "memory.mm_pose_bytes": mm["pose"],
+        "memory.mm_search_bytes": mm["search"],
+        "memory.lmm_bytes": int(nets.nbytes()),
+        "memory.lmm_over_mm": float(nets.nbytes() / max(sum(mm.values()), 1)),
+    }

@@ -92,6 +92,32 @@ def load_default_networks(db, features, path=None) -> LMMNetworks:
     return LMMNetworks.load(path or DEFAULT_WEIGHTS, db, features)
 
 
+_QUAT_DIAG_SIGNS = np.array([[1.0, 1.0, 1.0], [1.0, -1.0, -1.0], [-1.0, 1.0, -1.0], [-1.0, -1.0, 1.0]])
+
+
+def xform_xy_to_quat(xy: np.ndarray) -> np.ndarray:
+    """2-axis rotations (J, 3, 2) -> unit quaternions (J, 4) via Gram-Schmidt, in few numpy calls.
+
+    Same rotations as :func:`lmm.quat.from_xform_xy` (up to sign), about 5x faster for one pose: the
+    quaternion's magnitudes come from the matrix diagonal, its signs from the off-diagonal differences.
+    """
+    a = xy[:, :, 0]
+    a = a / np.sqrt(np.einsum("ij,ij->i", a, a))[:, None]
+    b = xy[:, :, 1]
+    b = b - np.einsum("ij,ij->i", a, b)[:, None] * a
+    b = b / np.sqrt(np.einsum("ij,ij->i", b, b))[:, None]
+    c = np.empty_like(a)
+    c[:, 0] = a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1]
+    c[:, 1] = a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2]
+    c[:, 2] = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+    diag = np.stack([a[:, 0], b[:, 1], c[:, 2]])             # (3, J): m00, m11, m22
+    q = 0.5 * np.sqrt(np.maximum(_QUAT_DIAG_SIGNS @ diag + 1.0, 0.0)).T   # (J, 4) magnitudes
+    q[:, 1] *= np.where(b[:, 2] - c[:, 1] < 0.0, -1.0, 1.0)  # sign(m21 - m12)
+    q[:, 2] *= np.where(c[:, 0] - a[:, 2] < 0.0, -1.0, 1.0)  # sign(m02 - m20)
+    q[:, 3] *= np.where(a[:, 1] - b[:, 0] < 0.0, -1.0, 1.0)  # sign(m10 - m01)
+    return q / np.sqrt(np.einsum("ij,ij->i", q, q))[:, None]
+
+
 def decode_source_pose(y: np.ndarray, n_bones: int, slices: dict | None = None) -> SourcePose:
     """A decompressor output vector as a :class:`SourcePose` (float64; bone 0 carries root velocities)."""
     s = slices or pose_vector_slices(n_bones)
@@ -103,7 +129,7 @@ def decode_source_pose(y: np.ndarray, n_bones: int, slices: dict | None = None) 
     ang = np.zeros((n_bones, 3))
     pos[1:] = y[s["positions"]].reshape(j, 3)
     rot[0, 0] = 1.0
-    rot[1:] = quat.from_xform_xy(y[s["rotations"]].reshape(j, 3, 2))
+    rot[1:] = xform_xy_to_quat(y[s["rotations"]].reshape(j, 3, 2))
     vel[1:] = y[s["velocities"]].reshape(j, 3)
     ang[1:] = y[s["angular_velocities"]].reshape(j, 3)
     vel[0] = y[s["root_velocity"]]

@@ -1,0 +1,126 @@
+"""The learned motion matching runtime: numpy networks vs torch, the controller, its snapshot, bone lengths."""
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from lmm.controller import InputState
+from lmm.database import load_or_build
+from lmm.features import build_features
+from lmm.lmm import DEFAULT_WEIGHTS, LearnedMotionMatchingController, LMMNetworks, xform_xy_to_quat
+from lmm.weights import WeightsError
+
+
+@pytest.fixture(scope="module")
+def dbf():
+    db, _ = load_or_build()
+    return db, build_features(db)
+
+
+@pytest.fixture(scope="module")
+def nets(dbf, tmp_path_factory):
+    """The shipped networks when they fit the database, else a tiny freshly trained set."""
+    db, features = dbf
+    try:
+        return LMMNetworks.load(DEFAULT_WEIGHTS, db, features)
+    except WeightsError:
+        pytest.importorskip("torch")
+        from lmm import training as T
+        out = tmp_path_factory.mktemp("lmm-weights")
+        r = T.Recipe(decompressor=T.StageSettings(20, 32, 2e-3), stepper=T.StageSettings(10, 8, 2e-3),
+                     projector=T.StageSettings(10, 32, 2e-3), stepper_window=6, hidden=64, threads=1)
+        T.train_pipeline(db, features, T.NETWORKS, r, out, frames=np.arange(3000), quiet=True)
+        return LMMNetworks.load(out / "default.npz", db, features)
+
+
+def test_numpy_matches_torch(nets):
+    torch = pytest.importorskip("torch")
+    from lmm.networks import MLPSpec, NormalizedMLP
+    from lmm.weights import load
+    wf = load(nets.path)
+    rng = np.random.default_rng(0)
+    for name in ("decompressor", "stepper", "projector"):
+        net = NormalizedMLP(MLPSpec.from_dict(wf.spec(name)))
+        net.load_arrays(wf.arrays, name)
+        mlp = getattr(nets, name)
+        x = (rng.normal(size=(64, mlp.n_in)) * 1.5).astype(np.float32)
+        with torch.no_grad():
+            ref = net(torch.from_numpy(x)).numpy()
+        assert np.max(np.abs(mlp(x) - ref)) < 1e-4, name
+        assert np.max(np.abs(mlp(x[0]) - ref[0])) < 1e-4, name
+
+
+def test_fast_quaternion_decode_matches_gram_schmidt(dbf):
+    from lmm import quat
+    db, _ = dbf
+    rot = db.rotations[::97, 1:].astype(np.float64)
+    xy = quat.to_xform_xy(rot) + np.random.default_rng(1).normal(scale=0.1, size=rot.shape[:-1] + (3, 2))
+    ref = quat.from_xform_xy(xy)
+    got = np.stack([xform_xy_to_quat(x) for x in xy])
+    assert np.max(np.abs(np.abs(np.sum(ref * got, -1)) - 1.0)) < 1e-9
+
+
+def test_wrong_database_is_refused(dbf, nets):
+    db, features = dbf
+    import copy
+    other = copy.copy(db)
+    other.key = "0" * 64
+    with pytest.raises(WeightsError, match="different database"):
+        LMMNetworks.load(nets.path, other, features)
+
+
+def test_controller_runs_and_fills_the_snapshot(dbf, nets):
+    db, features = dbf
+    ctrl = LearnedMotionMatchingController(db, features, networks=nets)
+    assert ctrl.name == "lmm"
+    searched = transitioned = 0
+    for i in range(240):
+        inp = InputState(left_x=np.sin(i / 40.0), left_y=1.0 if i < 160 else 0.0)
+        pose, snap = ctrl.step(inp, 1.0 / 60.0)
+        searched += snap.searched
+        transitioned += snap.transitioned
+        assert np.all(np.isfinite(pose.global_positions))
+        assert snap.latent.shape == (32,)
+        assert snap.controller == "lmm"
+    assert searched >= 20  # every 0.1 s
+    assert snap.projected_features.shape == (features.n_dims,)
+    assert 0 <= snap.nn_frame < db.n_frames
+    # the exact nearest neighbour is never worse than the projection
+    assert snap.nn_cost <= snap.projected_cost + 1e-4
+    assert np.isfinite(snap.projected_cost)
+    assert "advance" in snap.timings_us
+
+
+def test_no_torch_on_the_runtime_path():
+    code = ("import sys\n"
+            "from lmm.database import load_or_build\nfrom lmm.features import build_features\n"
+            "from lmm.lmm import LearnedMotionMatchingController, LMMNetworks\n"
+            "import lmm.evaluation, lmm.nn, lmm.weights\n"
+            "assert 'torch' not in sys.modules, 'torch imported'\nprint('ok')\n")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert "ok" in r.stdout
+
+
+@pytest.mark.slow
+def test_ten_minutes_of_random_input_stay_sane(dbf, nets):
+    """10 minutes of builtin:random:1: no NaN, no pose explosion, bone lengths within 1 cm."""
+    from lmm.inputs import open_input
+    db, features = dbf
+    seconds = 600.0
+    log = open_input("builtin:random:1", seconds)
+    ctrl = LearnedMotionMatchingController(db, features, networks=nets, compare_with_search=False)
+    ref = np.linalg.norm(db.positions[0, 2:].astype(np.float64), axis=-1)
+    parents = db.parents[2:]
+    dt = 1.0 / 60.0
+    worst = 0.0
+    for i in range(int(seconds / dt)):
+        pose, snap = ctrl.step(log.at(i * dt), dt)
+        g = pose.global_positions.astype(np.float64)
+        if not np.all(np.isfinite(g)) or not np.all(np.isfinite(snap.latent)):
+            pytest.fail(f"non-finite pose at tick {i}")
+        lengths = np.linalg.norm(g[2:] - g[parents], axis=-1)
+        worst = max(worst, float(np.max(np.abs(lengths - ref))))
+        assert np.linalg.norm(g[1] - g[0]) < 2.0, f"hips 2 m from the root at tick {i}"
+    assert worst < 0.01, f"bone length off by {worst * 100:.2f} cm"
