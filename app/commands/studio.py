@@ -1,0 +1,69 @@
+"""``lmm-studio`` (or ``lmm-studio studio``): open the studio.
+
+Motion matching and learned motion matching characters driven by the same input, every internal
+visible live, every tunable on a slider. ``--frames N --screenshot PATH`` runs N frames, saves a
+screenshot of the whole window and exits (tests, documentation).
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--manifest", help="database manifest (default: the embedded LAFAN1 locomotion set)")
+    parser.add_argument("--weights", help="LMM network weights (.npz; default: the shipped networks)")
+    parser.add_argument("--layout", metavar="NAME|PATH",
+                        help="window layout: default, compare, tuning or an .ini file "
+                             "(default: your last layout, else 'default')")
+    parser.add_argument("--input", metavar="CSV|builtin:NAME",
+                        help="replay an input log instead of live keyboard/gamepad input "
+                             "(builtin: circle, zigzag, stop-and-go, strafe, turns, random:SEED)")
+    parser.add_argument("--frames", type=int, metavar="N", help="run N frames (one 60 Hz tick each), then exit")
+    parser.add_argument("--screenshot", metavar="PATH", help="with --frames: save the whole window as PNG at the end")
+    parser.add_argument("--width", type=int, default=1600, help="window width (default 1600)")
+    parser.add_argument("--height", type=int, default=900, help="window height (default 900)")
+    parser.add_argument("--no-lmm", action="store_true", help="motion matching only")
+    parser.add_argument("--samples", type=int, default=-1,
+                        help="3D view multisampling, e.g. 0 or 4 (default: 4 on a GPU, 0 on software OpenGL)")
+    parser.add_argument("--no-gamepads", action="store_true", help="do not open gamepads (keyboard only)")
+    parser.add_argument("--fixed-step", action="store_true",
+                        help="one 60 Hz tick per rendered frame (default with --frames/--script: reproducible)")
+    # for tests and documentation
+    parser.add_argument("--script", metavar="JSON", help=argparse.SUPPRESS)
+    parser.add_argument("--dump-state", metavar="JSON", help=argparse.SUPPRESS)
+    parser.add_argument("--no-save-layout", action="store_true", help="do not save the window layout on exit")
+    parser.add_argument("--write-layouts", metavar="DIR", help=argparse.SUPPRESS)
+
+
+def _has_display() -> bool:
+    if sys.platform.startswith("linux"):
+        return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+    return True
+
+
+def main(args: argparse.Namespace) -> int:
+    if args.screenshot and args.frames is None:
+        print("lmm-studio: error: --screenshot needs --frames N", file=sys.stderr)
+        return 2
+    if args.frames is not None and args.frames < 1:
+        print("lmm-studio: error: --frames must be at least 1", file=sys.stderr)
+        return 2
+    if args.width < 640 or args.height < 400:
+        print("lmm-studio: error: the window must be at least 640x400", file=sys.stderr)
+        return 2
+    if not _has_display():
+        # dearpygui aborts the whole process without a display: say so instead
+        print("lmm-studio: error: no display (DISPLAY is not set). Run it on a desktop, or under Xvfb: "
+              "xvfb-run -a lmm-studio ...", file=sys.stderr)
+        return 2
+    from app.studio import Studio, StudioOptions
+
+    opts = StudioOptions(manifest=args.manifest, weights=args.weights, layout=args.layout, input=args.input,
+                         frames=args.frames, screenshot=args.screenshot, width=args.width, height=args.height,
+                         lmm=not args.no_lmm, script=args.script, dump_state=args.dump_state,
+                         fixed_step=args.fixed_step, gamepads=not args.no_gamepads,
+                         save_layout=not args.no_save_layout, write_layouts=args.write_layouts,
+                         samples=args.samples)
+    return Studio(opts).run()

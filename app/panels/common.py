@@ -1,0 +1,138 @@
+"""What every panel shares: the window registry (fixed ids, so layout files work), colours, the
+per-frame view the panels read, and small dearpygui helpers.
+
+A panel is a class with ``build()`` (create every item once), ``update(view)`` (only ``set_value``/
+``configure_item`` on existing items, from the displayed snapshot) and ``state()`` (what it shows,
+as plain data, for the test dump). Panels write only to the tuning object (and, through the studio,
+to the session's controls: pause, scrub, record).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+# key -> (fixed item id, title). The ids key the windows in layout (.ini) files: never renumber.
+WINDOWS: dict[str, tuple[int, str]] = {
+    "viewport": (10001, "3D Viewport"),
+    "features": (10002, "Feature Vectors"),
+    "latent": (10003, "Latent Traces"),
+    "search": (10004, "Nearest Neighbour vs Projector"),
+    "candidates": (10005, "Search Candidates"),
+    "tuning": (10006, "Tuning"),
+    "stats": (10007, "Stats"),
+    "timeline": (10008, "Timeline"),
+    "recording": (10009, "Recording & Input"),
+}
+
+
+def window_tag(key: str) -> int:
+    return WINDOWS[key][0]
+
+
+def window_alias(key: str) -> str:
+    return f"win_{key}"
+
+
+# character colours (RGB 0..1); plots use the same ones so a glance links a curve to a character
+COLORS = {
+    "mm": (0.96, 0.56, 0.16),
+    "lmm": (0.22, 0.66, 1.00),
+}
+SHORT = {"mm": "MM", "lmm": "LMM"}
+QUERY_COLOR = (0.92, 0.92, 0.92)
+GOOD = (0.35, 0.85, 0.45)
+BAD = (0.95, 0.35, 0.30)
+
+
+def rgb255(c, alpha: float = 1.0) -> tuple[int, int, int, int]:
+    return (int(round(c[0] * 255)), int(round(c[1] * 255)), int(round(c[2] * 255)), int(round(alpha * 255)))
+
+
+def lighter(c, t: float = 0.45):
+    return tuple(float(x + (1.0 - x) * t) for x in c)
+
+
+def darker(c, t: float = 0.35):
+    return tuple(float(x * (1.0 - t)) for x in c)
+
+
+def cost_color(t: float) -> tuple[int, int, int, int]:
+    """Green (t=0, cheapest) -> yellow -> red (t=1, dearest), as RGBA 0..255 for table cells."""
+    t = float(np.clip(t, 0.0, 1.0)) if np.isfinite(t) else 0.5
+    if t < 0.5:
+        r, g = 2.0 * t, 1.0
+    else:
+        r, g = 1.0, 2.0 * (1.0 - t)
+    return (int(40 + 150 * r), int(40 + 130 * g), 50, 150)
+
+
+def short_channel_name(name: str) -> str:
+    """``left_foot_position`` -> ``L foot pos``; readable tick labels for narrow plots."""
+    words = name.replace("trajectory", "traj").replace("position", "pos").replace("velocity", "vel") \
+        .replace("direction", "dir").replace("left_", "L ").replace("right_", "R ").replace("_", " ")
+    return words
+
+
+@dataclass
+class View:
+    """What the panels show this frame: the displayed tick (live or scrubbed) and context."""
+    tick: object                 # app.history.Tick or None before the first tick
+    live: bool
+    paused: bool
+    inspected: str               # controller the single-controller panels inspect
+    history: object              # app.history.History
+    session: object              # app.session.Session
+    frame: int = 0               # studio frame counter
+    extra: dict = field(default_factory=dict)
+
+    def snap(self, name: str | None = None):
+        """The displayed snapshot of ``name`` (default: the inspected controller), or None."""
+        if self.tick is None:
+            return None
+        snaps = self.tick.snapshots
+        name = name or self.inspected
+        if name in snaps:
+            return snaps[name]
+        return next(iter(snaps.values()), None)
+
+    @property
+    def tick_number(self) -> int:
+        return -1 if self.tick is None else int(self.tick.tick)
+
+
+def fmt_num(v, digits: int = 3) -> str:
+    if v is None:
+        return "-"
+    try:
+        f = float(v)
+    except (TypeError, ValueError):
+        return str(v)
+    if not np.isfinite(f):
+        return "-"
+    return f"{f:.{digits}f}"
+
+
+def fmt_bytes(n: float) -> str:
+    n = float(n)
+    for unit in ("B", "KB", "MB", "GB"):
+        if abs(n) < 1024.0 or unit == "GB":
+            return f"{n:.0f} {unit}" if unit == "B" else f"{n:.1f} {unit}"
+        n /= 1024.0
+    return f"{n:.1f} GB"
+
+
+class TextCache:
+    """Sets a dearpygui value only when it changed (set_value on text costs a string copy)."""
+
+    def __init__(self, dpg):
+        self.dpg = dpg
+        self.values: dict = {}
+
+    def set(self, item, value) -> None:
+        if self.values.get(item) != value:
+            self.values[item] = value
+            self.dpg.set_value(item, value)
+
+    def get(self, item, default=None):
+        return self.values.get(item, default)

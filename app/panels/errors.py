@@ -1,0 +1,64 @@
+"""Errors in a dialog: a bad BVH, weights, preset, input or layout file is reported here (and on
+stderr) and the studio keeps running. Several errors queue up; OK shows the next."""
+from __future__ import annotations
+
+import sys
+import time
+
+ERROR_WINDOW = 10090
+
+
+class ErrorDialog:
+    def __init__(self, dpg):
+        self.dpg = dpg
+        self.shown: list[dict] = []     # every error reported this session (also for the test dump)
+        self.queue: list[dict] = []
+        self.built = False
+
+    def build(self) -> None:
+        dpg = self.dpg
+        with dpg.window(tag=ERROR_WINDOW, label="Error", modal=True, show=False, no_collapse=True,
+                        width=560, height=190, no_saved_settings=True):
+            dpg.add_text("", tag="err_title", color=(255, 140, 120))
+            dpg.add_text("", tag="err_message", wrap=520)
+            dpg.add_spacer(height=6)
+            with dpg.group(horizontal=True):
+                dpg.add_button(label="OK", width=80, tag="err_ok", callback=self.dismiss)
+                dpg.add_text("", tag="err_more", color=(150, 150, 160))
+        self.built = True
+        self._present()
+
+    def show(self, title: str, message: str) -> None:
+        entry = {"title": str(title), "message": str(message), "time": time.time()}
+        self.shown.append(entry)
+        self.queue.append(entry)
+        print(f"lmm-studio: {title}: {message}", file=sys.stderr)
+        if self.built:
+            self._present()
+
+    def _present(self) -> None:
+        dpg = self.dpg
+        if not self.queue:
+            dpg.configure_item(ERROR_WINDOW, show=False)
+            return
+        e = self.queue[0]
+        dpg.set_value("err_title", e["title"])
+        dpg.set_value("err_message", e["message"])
+        dpg.set_value("err_more", f"{len(self.queue) - 1} more" if len(self.queue) > 1 else "")
+        try:
+            vw, vh = dpg.get_viewport_client_width() or 1600, dpg.get_viewport_client_height() or 900
+        except Exception:  # no viewport yet (errors found while starting up)
+            vw, vh = 1600, 900
+        dpg.configure_item(ERROR_WINDOW, show=True, pos=(max(vw // 2 - 280, 0), max(vh // 2 - 95, 0)))
+
+    def dismiss(self, *args) -> None:
+        if self.queue:
+            self.queue.pop(0)
+        self._present()
+
+    @property
+    def visible(self) -> bool:
+        return bool(self.queue)
+
+    def last(self) -> dict | None:
+        return self.shown[-1] if self.shown else None

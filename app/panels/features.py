@@ -1,0 +1,119 @@
+"""Feature vector bars: the query beside the MM matched frame's features and the LMM projector's
+output, dimension by dimension, in normalised units (weights included), grouped by channel with the
+channel weights in the axis labels."""
+from __future__ import annotations
+
+import numpy as np
+
+from .common import COLORS, QUERY_COLOR, SHORT, TextCache, View, short_channel_name, window_tag
+
+BAR_WIDTH = 0.26
+
+
+def bar_layout(features) -> dict:
+    """x positions and labels of the grouped bar chart (pure, for tests).
+
+    Dimension ``d`` sits at ``x = d + gap * channel(d)``, so channels are separated by a gap; each
+    channel gets one tick label (short name and weight) at its centre and separators between them.
+    """
+    gap = 1.0
+    xs, centres, separators, labels = [], [], [], []
+    x = 0.0
+    for i, (ch, s) in enumerate(zip(features.layout, features.slices)):
+        n = s.stop - s.start
+        dims = x + np.arange(n, dtype=np.float64)
+        xs.append(dims)
+        centres.append(float(dims.mean()))
+        labels.append(f"{short_channel_name(ch.name)}\nw {float(features.weights[i]):.2f}")
+        x = dims[-1] + 1.0 + gap
+        if i < len(features.layout) - 1:
+            separators.append(float(dims[-1] + 0.5 + gap / 2.0))
+    return {"x": np.concatenate(xs), "centres": centres, "labels": labels, "separators": separators}
+
+
+def bar_values(view: View) -> dict:
+    """The series the panel plots: name -> (D,) normalised values or None (pure)."""
+    q = view.snap()
+    mm = view.snap("mm") if view.tick is not None and "mm" in view.tick.snapshots else None
+    lmm = view.snap("lmm") if view.tick is not None and "lmm" in view.tick.snapshots else None
+    return {
+        "query": None if q is None else np.asarray(q.query, np.float64),
+        "matched": None if mm is None else np.asarray(mm.matched_features, np.float64),
+        "projected": None if lmm is None or lmm.projected_features is None
+        else np.asarray(lmm.projected_features, np.float64),
+    }
+
+
+def channel_errors(features, a, b) -> list[float]:
+    """Per-channel squared distance between two normalised vectors (nan when either is missing)."""
+    if a is None or b is None:
+        return [float("nan")] * len(features.layout)
+    return [float(np.sum((a[s] - b[s]) ** 2)) for s in features.slices]
+
+
+class FeaturesPanel:
+    def __init__(self, dpg, studio):
+        self.dpg = dpg
+        self.studio = studio
+        self.tag = window_tag("features")
+        self.text = TextCache(dpg)
+        self.last = {}
+        self._weights = None
+
+    def build(self, window_kwargs: dict) -> None:
+        dpg = self.dpg
+        features = self.studio.session.features
+        self.layout = bar_layout(features)
+        x = self.layout["x"]
+        with dpg.window(tag=self.tag, label="Feature Vectors", **window_kwargs):
+            dpg.add_text("", tag="feat_summary")
+            with dpg.plot(tag="feat_plot", height=-1, width=-1, no_menus=True, no_mouse_pos=True):
+                dpg.add_plot_legend(location=dpg.mvPlot_Location_North, horizontal=True, outside=True)
+                xa = dpg.add_plot_axis(dpg.mvXAxis, tag="feat_x", no_gridlines=True)
+                dpg.set_axis_ticks(xa, tuple(zip(self.layout["labels"], self.layout["centres"])))
+                dpg.set_axis_limits(xa, float(x[0]) - 1.0, float(x[-1]) + 1.0)
+                with dpg.plot_axis(dpg.mvYAxis, tag="feat_y", label="normalised", auto_fit=True):
+                    zeros = np.zeros_like(x)
+                    dpg.add_bar_series(x - BAR_WIDTH, zeros, weight=BAR_WIDTH, label="query", tag="feat_query")
+                    dpg.add_bar_series(x, zeros, weight=BAR_WIDTH, label="MM matched", tag="feat_matched")
+                    dpg.add_bar_series(x + BAR_WIDTH, zeros, weight=BAR_WIDTH, label="LMM projected",
+                                       tag="feat_projected")
+                    dpg.add_inf_line_series(self.layout["separators"], tag="feat_sep")
+        self.studio.theme_series("feat_query", QUERY_COLOR, bar=True)
+        self.studio.theme_series("feat_matched", COLORS["mm"], bar=True)
+        self.studio.theme_series("feat_projected", COLORS["lmm"], bar=True)
+        self.studio.theme_series("feat_sep", (0.45, 0.45, 0.5), weight=1.0)
+
+    def update(self, view: View) -> None:
+        dpg = self.dpg
+        features = self.studio.session.features
+        weights = tuple(float(self.studio.session.tuning.feature_weights.get(ch.name, w))
+                        for ch, w in zip(features.layout, features.weights))
+        if weights != self._weights:  # weights changed: relabel the channels
+            self._weights = weights
+            labels = [f"{short_channel_name(ch.name)}\nw {w:.2f}" for ch, w in zip(features.layout, weights)]
+            dpg.set_axis_ticks("feat_x", tuple(zip(labels, self.layout["centres"])))
+            self.layout["labels"] = labels
+        vals = bar_values(view)
+        x = self.layout["x"]
+        for key, tag, shift in (("query", "feat_query", -BAR_WIDTH), ("matched", "feat_matched", 0.0),
+                                ("projected", "feat_projected", BAR_WIDTH)):
+            v = vals[key]
+            if v is None:
+                v = np.zeros_like(x)
+            dpg.set_value(tag, [x + shift, v])
+        inspected = SHORT.get(view.inspected, view.inspected)
+        dpg.configure_item("feat_query", label=f"query ({inspected})")
+        err_m = channel_errors(features, vals["query"], vals["matched"])
+        err_p = channel_errors(features, vals["query"], vals["projected"])
+        total_m = float(np.nansum(err_m)) if vals["matched"] is not None else float("nan")
+        total_p = float(np.nansum(err_p)) if vals["projected"] is not None else float("nan")
+        summary = f"query of {inspected}   |   cost vs MM matched: {total_m:.3f}"
+        if vals["projected"] is not None:
+            summary += f"   |   cost vs LMM projected: {total_p:.3f}"
+        self.text.set("feat_summary", summary)
+        self.last = {"query": vals["query"], "matched": vals["matched"], "projected": vals["projected"],
+                     "cost_matched": total_m, "cost_projected": total_p}
+
+    def state(self) -> dict:
+        return {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in self.last.items()}

@@ -1,0 +1,324 @@
+"""Search panels.
+
+* "Nearest Neighbour vs Projector": at each search of the learned controller, the exact nearest
+  database frame of the query and its cost beside the projector's output (its nearest frame) and its
+  cost, their feature distance, the agreement rate over time, and a cost timeline (MM best cost, LMM
+  exact and projected cost, searches and transitions marked).
+* "Search Candidates": the ranked top-K candidates of the inspected controller with per-channel
+  costs (green = cheapest to red = dearest in each column), sortable by any column.
+"""
+from __future__ import annotations
+
+import re
+
+import numpy as np
+
+from app.history import search_agreement
+
+from .common import (BAD, COLORS, GOOD, SHORT, TextCache, View, cost_color, fmt_num, short_channel_name,
+                     window_tag)
+
+MAX_ROWS = 64
+
+
+def frame_label(db, frame: int) -> tuple[str, float]:
+    """(clip name, seconds into the clip range) of a database frame."""
+    if frame is None or frame < 0 or frame >= db.n_frames:
+        return "-", float("nan")
+    r = int(db.range_index(frame))
+    r = min(r, db.n_ranges - 1)
+    name = db.range_names[r] if r < len(db.range_names) else f"range {r}"
+    name = re.sub(r"\[\d+:\d+\]", "", name).replace("_subject", " s").replace("multipleActions", "multiActions")
+    name = name.replace(" mirrored", " (mirror)")
+    if bool(db.range_mirrored[r]) and "mirror" not in name:
+        name += " (mirror)"
+    return name, (frame - int(db.range_starts[r])) / db.fps
+
+
+def candidate_rows(candidates, db=None) -> list[dict]:
+    """One dict per ranked candidate (pure, for tests): rank, frame, clip, t, total, bias, channels."""
+    rows = []
+    if candidates is None:
+        return rows
+    frames = np.asarray(candidates.frames)
+    for i in range(len(frames)):
+        clip, t = frame_label(db, int(frames[i])) if db is not None else ("-", float("nan"))
+        rows.append({"rank": i + 1, "frame": int(frames[i]), "clip": clip, "t": t,
+                     "total": float(candidates.costs[i]), "bias": float(candidates.bias[i]),
+                     "channels": [float(c) for c in np.asarray(candidates.channel_costs[i])]})
+    return rows
+
+
+def sort_rows(rows: list[dict], key: str, descending: bool = False) -> list[dict]:
+    """Sort candidate rows by a column key (``rank``, ``frame``, ``clip``, ``t``, ``total``, ``bias``
+    or ``ch<i>``); NaNs last."""
+    def value(r):
+        if key.startswith("ch"):
+            v = r["channels"][int(key[2:])]
+        else:
+            v = r[key]
+        if isinstance(v, str):
+            return (0, v)
+        return (1 if not np.isfinite(v) else 0, v)
+    out = sorted(rows, key=value, reverse=descending)
+    if descending:  # keep NaNs last
+        out = [r for r in out if value(r)[0] == 0] + [r for r in out if value(r)[0] == 1]
+    return out
+
+
+def column_fractions(rows: list[dict], key: str) -> list[float]:
+    """Each row's value of a cost column mapped to [0, 1] (min -> 0, max -> 1), for colouring."""
+    vals = np.array([r[key] if not key.startswith("ch") else r["channels"][int(key[2:])] for r in rows], float)
+    if vals.size == 0:
+        return []
+    finite = vals[np.isfinite(vals)]
+    if finite.size == 0:
+        return [0.5] * len(rows)
+    lo, hi = float(finite.min()), float(finite.max())
+    span = hi - lo
+    return [0.0 if span <= 1e-12 else float((v - lo) / span) if np.isfinite(v) else 1.0 for v in vals]
+
+
+def rolling_agreement(searched, nn, got, window: int, tolerance: int = 0) -> np.ndarray:
+    """Per tick, the agreement rate of the searches in the preceding ``window`` ticks (nan before the
+    first search)."""
+    s = (np.asarray(searched) > 0.5) & np.isfinite(nn) & (np.asarray(nn) >= 0) & np.isfinite(got)
+    agree = s & (np.abs(np.nan_to_num(got) - np.nan_to_num(nn)) <= tolerance)
+    cs = np.concatenate([[0], np.cumsum(s)])
+    ca = np.concatenate([[0], np.cumsum(agree)])
+    idx = np.arange(1, len(s) + 1)
+    lo = np.maximum(idx - window, 0)
+    n = cs[idx] - cs[lo]
+    a = ca[idx] - ca[lo]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(n > 0, a / np.maximum(n, 1), np.nan)
+
+
+class SearchPanel:
+    """Nearest neighbour vs projector, with the cost timeline."""
+
+    def __init__(self, dpg, studio):
+        self.dpg = dpg
+        self.studio = studio
+        self.tag = window_tag("search")
+        self.text = TextCache(dpg)
+        self.seconds = 10.0
+        self.tolerance = 6
+        self.last = {}
+
+    def build(self, window_kwargs: dict) -> None:
+        dpg = self.dpg
+        with dpg.window(tag=self.tag, label="Nearest Neighbour vs Projector", **window_kwargs):
+            dpg.add_text("", tag="nn_status")
+            with dpg.table(header_row=True, borders_innerH=True, borders_outerH=True, borders_innerV=True,
+                           row_background=True, policy=dpg.mvTable_SizingStretchProp, tag="nn_table"):
+                dpg.add_table_column(label="", init_width_or_weight=0.55)
+                dpg.add_table_column(label="exact NN", init_width_or_weight=1.0)
+                dpg.add_table_column(label="LMM projector", init_width_or_weight=1.0)
+                dpg.add_table_column(label="MM search", init_width_or_weight=1.0)
+                for key, label in (("frame", "frame"), ("clip", "clip, time"), ("cost", "query cost")):
+                    with dpg.table_row():
+                        dpg.add_text(label)
+                        for col in ("nn", "proj", "mm"):
+                            dpg.add_text("-", tag=f"nn_{col}_{key}")
+            with dpg.group(horizontal=True):
+                dpg.add_text("distance |proj - X[nn]|")
+                dpg.add_text("-", tag="nn_distance", color=(230, 230, 140))
+                dpg.add_text("  agreement")
+                dpg.add_text("-", tag="nn_agreement", color=(230, 230, 140))
+            with dpg.tooltip("nn_agreement"):
+                dpg.add_text("Share of the LMM searches in the window where the database frame nearest to the\n"
+                             "projector's output lies within the tolerance of the exact nearest neighbour.")
+            with dpg.plot(tag="cost_plot", height=-28, width=-1, no_menus=True, no_mouse_pos=True):
+                dpg.add_plot_legend(location=dpg.mvPlot_Location_North, horizontal=True, outside=True)
+                dpg.add_plot_axis(dpg.mvXAxis, tag="cost_x", label="seconds")
+                with dpg.plot_axis(dpg.mvYAxis, tag="cost_y", label="cost", auto_fit=True):
+                    z = [0.0]
+                    dpg.add_line_series(z, z, tag="cost_mm", label="MM best")
+                    dpg.add_line_series(z, z, tag="cost_nn", label="LMM exact NN")
+                    dpg.add_line_series(z, z, tag="cost_proj", label="LMM projected")
+                    dpg.add_scatter_series(z, z, tag="cost_transitions", label="MM transitions")
+                with dpg.plot_axis(dpg.mvYAxis2, tag="cost_y2", label="agreement", opposite=True):
+                    dpg.add_line_series(z, z, tag="cost_agree", label="agreement")
+                dpg.set_axis_limits("cost_y2", 0.0, 1.05)
+            with dpg.group(horizontal=True):
+                dpg.add_text("tolerance")
+                dpg.add_slider_int(tag="nn_tolerance", default_value=self.tolerance, min_value=0, max_value=60,
+                                   width=110, format="%d frames", callback=lambda s, a: setattr(self, "tolerance", int(a)))
+                dpg.add_text("window")
+                dpg.add_slider_float(tag="nn_seconds", default_value=self.seconds, min_value=2.0, max_value=20.0,
+                                     width=90, format="%.0f s", callback=lambda s, a: setattr(self, "seconds", a))
+        self.studio.theme_series("cost_mm", COLORS["mm"], weight=2.0)
+        self.studio.theme_series("cost_nn", (0.95, 0.95, 0.95), weight=1.5)
+        self.studio.theme_series("cost_proj", COLORS["lmm"], weight=2.0)
+        self.studio.theme_series("cost_transitions", COLORS["mm"], marker=True)
+        self.studio.theme_series("cost_agree", GOOD, weight=1.5)
+
+    def update(self, view: View) -> None:
+        dpg = self.dpg
+        session = self.studio.session
+        db = session.db
+        h = view.history
+        dt = session.dt
+        n = max(int(self.seconds / dt), 2)
+        end = view.tick_number
+        t = (np.arange(n) - (n - 1)) * dt
+        lmm = view.snap("lmm") if view.tick is not None and "lmm" in view.tick.snapshots else None
+        mm = view.snap("mm") if view.tick is not None and "mm" in view.tick.snapshots else None
+        shown = {}
+        if lmm is not None:
+            nn_frame = int(lmm.nn_frame)
+            proj = h.window("lmm", "projected_frame", end, n)
+            proj = proj[np.isfinite(proj)]
+            proj_frame = int(proj[-1]) if len(proj) else -1
+            shown["nn"] = (nn_frame, float(lmm.nn_cost))
+            shown["proj"] = (proj_frame, float(lmm.projected_cost))
+            dist = float("nan")
+            if lmm.projected_features is not None and 0 <= nn_frame < db.n_frames:
+                features = getattr(session.controllers.get("lmm"), "features", None) or session.features
+                dist = float(np.linalg.norm(np.asarray(lmm.projected_features) - features.normalized[nn_frame]))
+            rate, k = search_agreement(h, "lmm", end, n, self.tolerance)
+            agree = "-" if k == 0 else f"{100 * rate:.0f}% of {k} searches"
+            self.text.set("nn_status", "LMM projector vs exact nearest neighbour of the same query")
+        else:
+            dist, rate, k = float("nan"), float("nan"), 0
+            agree = "-"
+            reason = self.studio.lmm_problem or "LMM is not running"
+            self.text.set("nn_status", reason)
+        if mm is not None:
+            shown["mm"] = (int(mm.matched_frame), float(mm.best_cost))
+        for col in ("nn", "proj", "mm"):
+            frame, cost = shown.get(col, (-1, float("nan")))
+            clip, tc = frame_label(db, frame)
+            self.text.set(f"nn_{col}_frame", "-" if frame < 0 else str(frame))
+            self.text.set(f"nn_{col}_clip", "-" if frame < 0 else f"{clip[:22]} {tc:5.2f}s")
+            self.text.set(f"nn_{col}_cost", fmt_num(cost))
+        self.text.set("nn_distance", fmt_num(dist))
+        self.text.set("nn_agreement", agree)
+        # cost timeline
+        for name, field, tag in (("mm", "best_cost", "cost_mm"), ("lmm", "nn_cost", "cost_nn"),
+                                 ("lmm", "projected_cost", "cost_proj")):
+            y = h.window(name, field, end, n)
+            ok = np.isfinite(y)
+            if ok.any():
+                dpg.set_value(tag, [t[ok], y[ok]])
+            else:
+                dpg.set_value(tag, [t[-1:], np.zeros(1)])
+            dpg.configure_item(tag, show=bool(ok.any()))
+        tr = h.window("mm", "transitioned", end, n) > 0.5
+        cost = h.window("mm", "best_cost", end, n)
+        sel = tr & np.isfinite(cost)
+        dpg.set_value("cost_transitions", [t[sel] if sel.any() else t[-1:], cost[sel] if sel.any() else np.zeros(1)])
+        if lmm is not None:
+            ag = rolling_agreement(h.window("lmm", "searched", end, n), h.window("lmm", "nn_frame", end, n),
+                                   h.window("lmm", "projected_frame", end, n), int(2.0 / dt), self.tolerance)
+            ok = np.isfinite(ag)
+            dpg.set_value("cost_agree", [t[ok] if ok.any() else t[-1:], ag[ok] if ok.any() else np.zeros(1)])
+        dpg.configure_item("cost_agree", show=lmm is not None)
+        dpg.set_axis_limits("cost_x", float(t[0]), 0.0)
+        self.last = {"tick": end, "nn_frame": shown.get("nn", (-1,))[0], "nn_cost": shown.get("nn", (0, None))[1],
+                     "projected_frame": shown.get("proj", (-1,))[0],
+                     "projected_cost": shown.get("proj", (0, None))[1],
+                     "mm_frame": shown.get("mm", (-1,))[0], "mm_cost": shown.get("mm", (0, None))[1],
+                     "distance": dist, "agreement": rate, "searches": k}
+
+    def state(self) -> dict:
+        return {k: (None if isinstance(v, float) and not np.isfinite(v) else v) for k, v in self.last.items()}
+
+
+class CandidatesPanel:
+    """Ranked candidates of the inspected controller's last search."""
+
+    def __init__(self, dpg, studio):
+        self.dpg = dpg
+        self.studio = studio
+        self.tag = window_tag("candidates")
+        self.text = TextCache(dpg)
+        self.sort_key = "total"
+        self.descending = False
+        self._shown_for = None
+        self.rows: list[dict] = []
+        self.columns: list[str] = []
+
+    def build(self, window_kwargs: dict) -> None:
+        dpg = self.dpg
+        names = self.studio.session.features.names
+        self.columns = ["rank", "frame", "clip", "t", "total", "bias"] + [f"ch{i}" for i in range(len(names))]
+        labels = ["#", "frame", "clip", "t (s)", "total", "bias"] + [short_channel_name(n) for n in names]
+        with dpg.window(tag=self.tag, label="Search Candidates", **window_kwargs):
+            dpg.add_text("", tag="cand_status")
+            with dpg.table(tag="cand_table", header_row=True, sortable=True, callback=self._on_sort,
+                           borders_innerV=True, borders_outerH=True, borders_outerV=True, resizable=True,
+                           policy=dpg.mvTable_SizingFixedFit, scrollY=True, scrollX=True, freeze_rows=1,
+                           height=-1):
+                widths = {"rank": 18, "frame": 44, "clip": 150, "t": 40, "total": 44, "bias": 40}
+                for i, (key, label) in enumerate(zip(self.columns, labels)):
+                    dpg.add_table_column(label=label, tag=f"cand_col_{key}", user_data=key,
+                                         default_sort=(key == "total"), prefer_sort_ascending=True,
+                                         width_fixed=True, init_width_or_weight=widths.get(key, 64))
+                for r in range(MAX_ROWS):
+                    with dpg.table_row(tag=f"cand_row_{r}", show=r < 8):
+                        for key in self.columns:
+                            dpg.add_text("", tag=f"cand_{r}_{key}")
+
+    def _on_sort(self, sender, sort_specs):
+        if not sort_specs:
+            return
+        col, direction = sort_specs[0]
+        key = self.dpg.get_item_user_data(col)
+        self.sort_key = key or "total"
+        self.descending = direction < 0
+        self._shown_for = None  # redraw
+
+    def set_sort(self, key: str, descending: bool = False) -> None:
+        self.sort_key, self.descending = key, descending
+        self._shown_for = None
+
+    def update(self, view: View) -> None:
+        dpg = self.dpg
+        snap = view.snap()
+        cands = None if snap is None else snap.candidates
+        key = (id(cands), self.sort_key, self.descending, view.inspected)
+        if snap is None:
+            self.text.set("cand_status", "no search yet")
+            return
+        name = SHORT.get(view.inspected, view.inspected)
+        searched = "searched this tick" if snap.searched else "last search"
+        forced = " (forced)" if snap.forced_search else ""
+        self.text.set("cand_status", f"{name}: {searched}{forced}, best frame {snap.matched_frame}, "
+                                     f"cost {fmt_num(snap.best_cost)}")
+        if key == self._shown_for:
+            return
+        self._shown_for = key
+        rows = sort_rows(candidate_rows(cands, self.studio.session.db), self.sort_key, self.descending)
+        self.rows = rows
+        fractions = {k: column_fractions(rows, k) for k in self.columns if k == "total" or k.startswith("ch")}
+        for r in range(MAX_ROWS):
+            show = r < len(rows)
+            dpg.configure_item(f"cand_row_{r}", show=show)
+            if not show:
+                continue
+            row = rows[r]
+            for c, k in enumerate(self.columns):
+                if k.startswith("ch"):
+                    v = row["channels"][int(k[2:])]
+                    txt = f"{v:.3f}"
+                elif k == "clip":
+                    txt = row["clip"][:24]
+                elif k == "t":
+                    txt = f"{row['t']:.2f}"
+                elif k in ("total", "bias"):
+                    txt = f"{row[k]:.3f}"
+                else:
+                    txt = str(row[k])
+                self.text.set(f"cand_{r}_{k}", txt)
+                if k in fractions:
+                    dpg.highlight_table_cell("cand_table", r, c, cost_color(fractions[k][r]))
+            if row["frame"] == snap.matched_frame:
+                dpg.highlight_table_cell("cand_table", r, 1, (60, 110, 200, 170))
+            else:
+                dpg.unhighlight_table_cell("cand_table", r, 1)
+
+    def state(self) -> dict:
+        return {"sort": self.sort_key, "descending": self.descending,
+                "rows": [{k: v for k, v in r.items()} for r in self.rows]}

@@ -1,0 +1,193 @@
+"""Tuning: one widget per field of :class:`lmm.tuning.Tuning`, generated from the field metadata
+(group, range, unit, doc), grouped, with reset-to-default per group and presets saved to / loaded from
+JSON files. A widget's callback writes the tuning object, which both controllers read on their next
+step."""
+from __future__ import annotations
+
+import dataclasses
+
+from lmm.tuning import Tuning, TuningError
+
+from .common import TextCache, short_channel_name, window_tag
+
+GROUP_TITLES = {
+    "simulation": "Simulation springs & stick",
+    "speeds": "Speeds",
+    "inertialization": "Inertialization",
+    "features": "Feature weights",
+    "search": "Search: interval, forced search, transition cost, exclusions",
+    "sync": "Adjustment & clamping",
+    "ik": "Foot locking & IK",
+}
+
+OPEN_BY_DEFAULT = ("simulation", "speeds", "features", "search")
+
+
+def field_kind(f: dataclasses.Field) -> str:
+    t = f.type if isinstance(f.type, str) else getattr(f.type, "__name__", str(f.type))
+    return {"float": "float", "int": "int", "bool": "bool", "dict": "dict"}.get(t, "float")
+
+
+def pretty_label(name: str) -> str:
+    """``simulation_velocity_halflife_s`` -> ``velocity halflife``; the unit is shown by the format."""
+    words = name
+    for suffix in ("_m_s", "_s", "_m", "_deg"):
+        if words.endswith(suffix):
+            words = words[: -len(suffix)]
+            break
+    for prefix in ("simulation_", "adjustment_", "clamp_", "ik_", "inertialization_"):
+        if words.startswith(prefix) and words != prefix.rstrip("_"):
+            words = words[len(prefix):]
+    return words.replace("_", " ")
+
+
+def widget_specs(tuning_cls=Tuning) -> list[dict]:
+    """Every widget the panel builds (pure, for tests): group, field, optional channel, kind, range,
+    format and tooltip, in group order."""
+    specs = []
+    defaults = tuning_cls()
+    for group in tuning_cls.groups():
+        for f in tuning_cls.fields_in(group):
+            kind = field_kind(f)
+            md = f.metadata
+            unit = md.get("unit", "")
+            fmt_unit = f" {unit}" if unit and "|" not in unit and unit != "cost" else ""
+            if kind == "dict":
+                for channel in getattr(defaults, f.name):
+                    specs.append({"group": group, "field": f.name, "channel": channel, "kind": "float",
+                                  "min": md["min"], "max": md["max"], "label": short_channel_name(channel),
+                                  "format": "%.2f", "doc": md.get("doc", "")})
+                continue
+            fmt = "%d" + fmt_unit.replace("%", "%%") if kind == "int" else "%.3f" + fmt_unit.replace("%", "%%")
+            specs.append({"group": group, "field": f.name, "channel": None, "kind": kind, "min": md["min"],
+                          "max": md["max"], "label": pretty_label(f.name), "format": fmt,
+                          "doc": md.get("doc", "") + (f" ({unit})" if unit else "")})
+    return specs
+
+
+def widget_tag(spec: dict) -> str:
+    return f"tun_{spec['field']}" + (f"__{spec['channel']}" if spec.get("channel") else "")
+
+
+def apply_widget_value(tuning: Tuning, field: str, channel, value) -> None:
+    """What a widget's callback does to the tuning object (checked against the field's range)."""
+    f = Tuning.field_info(field)
+    kind = field_kind(f)
+    lo, hi = f.metadata["min"], f.metadata["max"]
+    if kind == "dict":
+        v = float(value)
+        if not lo <= v <= hi:
+            raise TuningError(f"{field}.{channel}: {v} is outside [{lo}, {hi}]")
+        getattr(tuning, field)[channel] = v
+        return
+    if kind == "bool":
+        setattr(tuning, field, bool(value))
+        return
+    v = int(round(value)) if kind == "int" else float(value)
+    if not lo <= v <= hi:
+        raise TuningError(f"{field}: {v} is outside [{lo}, {hi}]")
+    setattr(tuning, field, v)
+
+
+class TuningPanel:
+    def __init__(self, dpg, studio):
+        self.dpg = dpg
+        self.studio = studio
+        self.tag = window_tag("tuning")
+        self.text = TextCache(dpg)
+        self.specs = widget_specs()
+        self.changes = 0
+
+    @property
+    def tuning(self) -> Tuning:
+        return self.studio.session.tuning
+
+    def build(self, window_kwargs: dict) -> None:
+        dpg = self.dpg
+        with dpg.window(tag=self.tag, label="Tuning", **window_kwargs):
+            with dpg.group(horizontal=True):
+                dpg.add_button(label="Load preset...", callback=lambda: self.studio.open_dialog("preset_load"))
+                dpg.add_button(label="Save preset...", callback=lambda: self.studio.open_dialog("preset_save"))
+                dpg.add_button(label="Reset all", callback=self.reset_all)
+            dpg.add_text("acts on the next frame of both characters", color=(150, 150, 160))
+            current_group = None
+            header = None
+            for spec in self.specs:
+                if spec["group"] != current_group:
+                    current_group = spec["group"]
+                    header = dpg.add_collapsing_header(label=GROUP_TITLES.get(current_group, current_group),
+                                                       default_open=current_group in OPEN_BY_DEFAULT,
+                                                       tag=f"tun_group_{current_group}")
+                    dpg.add_button(label=f"Reset {current_group}", parent=header, small=True,
+                                   callback=self._on_reset_group, user_data=current_group,
+                                   tag=f"tun_reset_{current_group}")
+                self._add_widget(spec, header)
+
+    def _add_widget(self, spec: dict, parent) -> None:
+        dpg = self.dpg
+        tag = widget_tag(spec)
+        value = self._value(spec)
+        common = dict(tag=tag, parent=parent, label=spec["label"], callback=self._on_change,
+                      user_data=(spec["field"], spec["channel"]))
+        if spec["kind"] == "bool":
+            dpg.add_checkbox(default_value=bool(value), **common)
+        elif spec["kind"] == "int":
+            dpg.add_slider_int(default_value=int(value), min_value=int(spec["min"]), max_value=int(spec["max"]),
+                               format=spec["format"], width=-150, **common)
+        else:
+            dpg.add_slider_float(default_value=float(value), min_value=float(spec["min"]),
+                                 max_value=float(spec["max"]), format=spec["format"], width=-150, **common)
+        if spec["doc"]:
+            with dpg.tooltip(tag):
+                dpg.add_text(spec["doc"], wrap=360)
+
+    def _value(self, spec: dict):
+        v = getattr(self.tuning, spec["field"])
+        if spec["channel"] is not None:
+            return v.get(spec["channel"], 0.0)
+        return v
+
+    def _on_change(self, sender, value, user_data):
+        field, channel = user_data
+        try:
+            apply_widget_value(self.tuning, field, channel, value)
+            self.changes += 1
+        except TuningError as e:
+            self.studio.errors.show("Tuning", str(e))
+            self.sync()
+
+    def _on_reset_group(self, sender, value, group):
+        self.tuning.reset_group(group)
+        self.sync()
+
+    def reset_all(self, *args):
+        for g in Tuning.groups():
+            self.tuning.reset_group(g)
+        self.sync()
+
+    def set_field(self, field: str, value, channel=None) -> None:
+        """Set a widget as a user would and fire its callback (the test scripts use this)."""
+        spec = next(s for s in self.specs if s["field"] == field and s["channel"] == channel)
+        tag = widget_tag(spec)
+        self.dpg.set_value(tag, value)
+        self.dpg.get_item_callback(tag)(tag, self.dpg.get_value(tag), self.dpg.get_item_user_data(tag))
+
+    def sync(self) -> None:
+        """Every widget shows the tuning object's value (after a preset load or a reset)."""
+        for spec in self.specs:
+            self.dpg.set_value(widget_tag(spec), self._value(spec))
+
+    def load_preset(self, path) -> None:
+        t = Tuning.load(path)            # raises TuningError with the file and field
+        for f in dataclasses.fields(Tuning):
+            setattr(self.tuning, f.name, getattr(t, f.name))
+        self.sync()
+
+    def save_preset(self, path) -> None:
+        self.tuning.save(path)
+
+    def update(self, view) -> None:
+        pass
+
+    def state(self) -> dict:
+        return {"changes": self.changes, "widgets": len(self.specs)}

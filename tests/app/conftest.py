@@ -1,0 +1,123 @@
+"""Fixtures for the studio tests.
+
+GUI tests start ``Xvfb`` on a free display and run the real studio in a subprocess (dearpygui aborts
+the whole process on some errors, and a test must survive that), with ``LMM_STUDIO_CONFIG`` and
+``LMM_STUDIO_CACHE`` in temporary folders. The studio takes a ``--script`` of timed actions and writes
+a ``--dump-state`` JSON at exit, which the tests assert on. They skip cleanly where Xvfb is missing.
+"""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+CORPUS = ROOT / "tests" / "bvh_corpus"
+
+
+@pytest.fixture(scope="session")
+def xvfb_display():
+    """``:N`` of a fresh ``Xvfb :N -screen 0 1920x1080x24`` on a free display; skips without Xvfb."""
+    exe = shutil.which("Xvfb")
+    if exe is None:
+        pytest.skip("Xvfb is not installed (apt-get install xvfb)")
+    read_fd, write_fd = os.pipe()
+    # -displayfd: Xvfb picks a free display number itself and writes it to the pipe
+    proc = subprocess.Popen([exe, "-displayfd", str(write_fd), "-screen", "0", "1920x1080x24", "-nolisten", "tcp"],
+                            pass_fds=(write_fd,), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    os.close(write_fd)
+    number = b""
+    deadline = time.monotonic() + 15.0
+    os.set_blocking(read_fd, False)
+    while time.monotonic() < deadline and not number.endswith(b"\n") and proc.poll() is None:
+        try:
+            number += os.read(read_fd, 16)
+        except BlockingIOError:
+            time.sleep(0.05)
+    os.close(read_fd)
+    if not number.strip().isdigit():
+        proc.kill()
+        proc.wait()
+        pytest.skip("Xvfb did not start")
+    yield f":{number.decode().strip()}"
+    proc.terminate()
+    try:
+        proc.wait(5)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+
+
+@pytest.fixture(scope="session")
+def studio_cache(tmp_path_factory):
+    """One database cache for every studio run of the session (the first run builds it)."""
+    return tmp_path_factory.mktemp("studio-cache")
+
+
+@pytest.fixture(scope="session")
+def lmm_weights(tmp_path_factory):
+    """LMM weights for the studio: the shipped ones when they fit the database, else a tiny set trained
+    here (needs torch), else None (the studio then runs MM only and the LMM checks are skipped)."""
+    import numpy as np
+
+    from lmm.database import load_or_build
+    from lmm.features import build_features
+
+    db, _ = load_or_build()
+    features = build_features(db)
+    try:
+        from lmm.lmm import DEFAULT_WEIGHTS, LMMNetworks
+
+        LMMNetworks.load(DEFAULT_WEIGHTS, db, features)
+        return str(DEFAULT_WEIGHTS)
+    except Exception:
+        pass
+    try:
+        import torch  # noqa: F401
+        from lmm import training as T
+    except Exception:
+        return None
+    out = tmp_path_factory.mktemp("studio-weights")
+    r = T.Recipe(decompressor=T.StageSettings(20, 32, 2e-3), stepper=T.StageSettings(10, 8, 2e-3),
+                 projector=T.StageSettings(10, 32, 2e-3), stepper_window=6, hidden=64, threads=1)
+    T.train_pipeline(db, features, T.NETWORKS, r, out, frames=np.arange(3000), quiet=True)
+    return str(out / "default.npz")
+
+
+class StudioRun:
+    """One finished studio subprocess: return code, output and the state dump."""
+
+    def __init__(self, rc: int, stdout: str, stderr: str, dump: dict | None, config: Path, workdir: Path):
+        self.rc, self.stdout, self.stderr, self.dump = rc, stdout, stderr, dump
+        self.config, self.workdir = config, workdir
+
+    def __repr__(self):
+        return f"StudioRun(rc={self.rc}, stderr={self.stderr[-2000:]!r})"
+
+
+@pytest.fixture
+def run_studio(xvfb_display, studio_cache, tmp_path):
+    """``run_studio(*args, script=[...], config=None, timeout=...) -> StudioRun``."""
+
+    def run(*args, script=None, config: Path | None = None, timeout: float = 150.0, env_extra=None) -> StudioRun:
+        config = config or (tmp_path / "config")
+        config.mkdir(parents=True, exist_ok=True)
+        dump = tmp_path / f"dump-{time.monotonic_ns()}.json"
+        cmd = [sys.executable, "-m", "app.cli", *map(str, args), "--dump-state", str(dump), "--no-gamepads"]
+        if script is not None:
+            script_path = tmp_path / f"script-{time.monotonic_ns()}.json"
+            script_path.write_text(json.dumps({"actions": script}))
+            cmd += ["--script", str(script_path)]
+        env = dict(os.environ, DISPLAY=xvfb_display, LMM_STUDIO_CONFIG=str(config),
+                   LMM_STUDIO_CACHE=str(studio_cache), PYTHONPATH=str(ROOT), LP_NUM_THREADS="0")
+        env.update(env_extra or {})
+        proc = subprocess.run(cmd, cwd=tmp_path, env=env, capture_output=True, text=True, timeout=timeout)
+        data = json.loads(dump.read_text()) if dump.exists() else None
+        return StudioRun(proc.returncode, proc.stdout, proc.stderr, data, config, tmp_path)
+
+    return run

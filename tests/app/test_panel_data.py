@@ -1,0 +1,288 @@
+"""The studio's data shaping, without a display: what each panel computes from snapshots, the
+layout files, the session (controllers, recording, replay) and the tuning widgets."""
+import dataclasses
+import os
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from app.history import History, Tick
+from app.panels import layouts
+from app.panels.common import View, cost_color, fmt_bytes, short_channel_name
+from app.panels.features import bar_layout, bar_values, channel_errors
+from app.panels.latent import heat_matrix, latent_scale
+from app.panels.search import candidate_rows, column_fractions, frame_label, rolling_agreement, sort_rows
+from app.panels.stats import FrameTimes
+from app.panels.timeline import scrub_target
+from app.panels.tuning import apply_widget_value, pretty_label, widget_specs
+from app.panels.viewport import feature_markers, is_software_renderer
+from app.session import Session, load_reference_clip, make_controllers, recording_paths
+from lmm.controller import Candidates, InputState
+from lmm.tuning import Tuning, TuningError
+
+from .conftest import CORPUS
+
+
+@pytest.fixture(scope="module")
+def dbf():
+    from lmm.database import load_or_build
+    from lmm.features import build_features
+
+    db, _ = load_or_build()
+    return db, build_features(db)
+
+
+# -- feature bars ---------------------------------------------------------------------------------
+
+def test_bar_layout_groups_dimensions_by_channel(dbf):
+    _, features = dbf
+    lay = bar_layout(features)
+    assert len(lay["x"]) == features.n_dims == 27
+    assert len(lay["labels"]) == len(lay["centres"]) == len(features.layout)
+    assert len(lay["separators"]) == len(features.layout) - 1
+    # a gap between channels, none inside one
+    steps = np.diff(lay["x"])
+    assert np.sum(steps > 1.5) == len(features.layout) - 1 and np.all(steps >= 1.0)
+    assert "w 0.75" in lay["labels"][0] and "w 1.50" in lay["labels"][-1]
+    for sep, (a, b) in zip(lay["separators"], zip(features.slices[:-1], features.slices[1:])):
+        assert lay["x"][a.stop - 1] < sep < lay["x"][b.start]
+
+
+def _view(snaps: dict, inspected="mm"):
+    h = History(10)
+    t = Tick(1, 1 / 60, snaps)
+    return View(tick=t, live=True, paused=False, inspected=inspected, history=h, session=None)
+
+
+def test_bar_values_take_query_matched_and_projected():
+    q, m, p = np.arange(3.0), np.ones(3), np.full(3, 2.0)
+    mm = SimpleNamespace(query=q, matched_features=m, projected_features=None)
+    lmm = SimpleNamespace(query=q + 10, matched_features=m, projected_features=p)
+    vals = bar_values(_view({"mm": mm, "lmm": lmm}))
+    assert vals["query"].tolist() == q.tolist() and vals["matched"].tolist() == m.tolist()
+    assert vals["projected"].tolist() == p.tolist()
+    vals = bar_values(_view({"mm": mm, "lmm": lmm}, inspected="lmm"))
+    assert vals["query"].tolist() == (q + 10).tolist()
+    assert bar_values(_view({"mm": mm}))["projected"] is None
+
+
+def test_channel_errors(dbf):
+    _, features = dbf
+    a = np.zeros(27)
+    b = np.zeros(27)
+    b[features.slices[1]] = 1.0
+    err = channel_errors(features, a, b)
+    assert err[1] == 3.0 and sum(err) == 3.0
+    assert all(np.isnan(channel_errors(features, a, None)))
+
+
+# -- latent heat maps -----------------------------------------------------------------------------
+
+def test_heat_matrix_is_row_per_dimension_newest_kept():
+    v = np.arange(10 * 3, dtype=float).reshape(10, 3)     # 10 ticks, 3 dims
+    flat, cols = heat_matrix(v, max_columns=100)
+    assert cols == 10 and flat.reshape(3, 10)[1].tolist() == v[:, 1].tolist()
+    flat, cols = heat_matrix(v, max_columns=4)
+    assert cols <= 4 and flat.reshape(3, cols)[0, -1] == v[-1, 0]  # the newest column survives decimation
+    v[2, 1] = np.nan
+    assert np.isfinite(heat_matrix(v)[0]).all()
+
+
+def test_latent_scale():
+    assert latent_scale(np.zeros((5, 3))) == 0.5
+    assert latent_scale(np.full((5, 3), 4.0)) == pytest.approx(4.0)
+    assert latent_scale(np.array([np.nan])) == 1.0
+
+
+# -- search panels --------------------------------------------------------------------------------
+
+def test_candidate_rows_sort_and_colour_fractions(dbf):
+    db, _ = dbf
+    c = Candidates(frames=np.array([10, 2000, 30]), costs=np.array([1.0, 3.0, 2.0], np.float32),
+                   channel_costs=np.array([[0.5, 0.5], [2.0, 1.0], [0.1, 1.9]], np.float32),
+                   bias=np.zeros(3, np.float32), channel_names=["a", "b"])
+    rows = candidate_rows(c, db)
+    assert [r["rank"] for r in rows] == [1, 2, 3] and rows[1]["frame"] == 2000
+    assert rows[0]["clip"] != "-" and rows[0]["t"] >= 0
+    assert [r["frame"] for r in sort_rows(rows, "total", descending=True)] == [2000, 30, 10]
+    assert [r["frame"] for r in sort_rows(rows, "ch1")] == [10, 2000, 30]
+    assert [r["frame"] for r in sort_rows(rows, "frame", descending=True)] == [2000, 30, 10]
+    assert column_fractions(rows, "total") == [0.0, 1.0, 0.5]
+    assert column_fractions(rows, "ch0")[2] == 0.0
+    assert candidate_rows(None) == []
+    green, red = cost_color(0.0), cost_color(1.0)
+    assert green[1] > green[0] and red[0] > red[1]
+
+
+def test_frame_label_names_the_clip(dbf):
+    db, _ = dbf
+    name, t = frame_label(db, int(db.range_starts[1]) + 60)
+    assert "mirror" in name and t == pytest.approx(1.0)
+    assert frame_label(db, -1)[0] == "-"
+
+
+def test_rolling_agreement():
+    searched = np.array([1, 0, 1, 0, 1, 1], float)
+    nn = np.array([5, 5, 7, 7, 9, 9], float)
+    got = np.array([5, np.nan, 8, np.nan, 9, 20], float)
+    r = rolling_agreement(searched, nn, got, window=10, tolerance=0)
+    assert r[0] == 1.0 and r[2] == 0.5 and r[4] == pytest.approx(2 / 3) and r[5] == 0.5
+    assert rolling_agreement(searched, nn, got, window=10, tolerance=1)[2] == 1.0
+    assert np.isnan(rolling_agreement(np.zeros(3), nn[:3], got[:3], 5)).all()
+
+
+# -- tuning widgets -------------------------------------------------------------------------------
+
+def test_every_tunable_has_a_widget():
+    specs = widget_specs()
+    fields = {f.name for f in dataclasses.fields(Tuning)}
+    assert {s["field"] for s in specs} == fields
+    channels = {s["channel"] for s in specs if s["field"] == "feature_weights"}
+    assert channels == set(Tuning().feature_weights)
+    assert [s["group"] for s in specs] == sorted((s["group"] for s in specs), key=Tuning.groups().index)
+    for s in specs:
+        assert s["min"] < s["max"] and s["label"]
+        assert s["kind"] in ("float", "int", "bool")
+
+
+def test_widget_values_reach_the_tuning_object():
+    t = Tuning()
+    apply_widget_value(t, "run_forward_speed_m_s", None, 2.25)
+    apply_widget_value(t, "top_k", None, 12.0)
+    apply_widget_value(t, "ik_enabled", None, False)
+    apply_widget_value(t, "feature_weights", "hip_velocity", 0.0)
+    assert t.run_forward_speed_m_s == 2.25 and t.top_k == 12 and isinstance(t.top_k, int)
+    assert t.ik_enabled is False and t.feature_weights["hip_velocity"] == 0.0
+    with pytest.raises(TuningError):
+        apply_widget_value(t, "inertialization_halflife_s", None, 5.0)
+    t.validate()
+    assert pretty_label("simulation_velocity_halflife_s") == "velocity halflife"
+    assert short_channel_name("left_foot_velocity") == "L foot vel"
+
+
+# -- layouts --------------------------------------------------------------------------------------
+
+def test_shipped_layouts_hold_every_window_and_differ():
+    rects = {}
+    for name in layouts.builtin_names():
+        lay = layouts.load(name)
+        assert lay.path.name == f"{name}.ini"
+        code = layouts.BUILTIN[name]
+        assert lay.hidden == {k for k, v in code.items() if v is None}
+        for key, rect in code.items():
+            if rect is not None:
+                assert tuple(lay.windows[key]["pos"]) == rect[:2], (name, key)
+                assert tuple(lay.windows[key]["size"]) == rect[2:], (name, key)
+        rects[name] = {k: tuple(v["pos"]) + tuple(v["size"]) for k, v in lay.windows.items() if k not in lay.hidden}
+    assert rects["default"]["viewport"] != rects["compare"]["viewport"] != rects["tuning"]["viewport"]
+    assert rects["compare"]["viewport"][2] > rects["default"]["viewport"][2]   # bigger 3D view to compare
+    assert "search" in rects["compare"] and "tuning" not in rects["compare"]
+
+
+def test_broken_layout_files_are_refused(tmp_path):
+    cases = {"garbage.ini": "this is not an ini file\n", "empty.ini": "",
+             "other.ini": "[Window][###424242]\nPos=1,2\nSize=3,4\n",
+             "badpos.ini": "[Window][###10001]\nPos=a,b\nSize=3,4\n"}
+    for name, text in cases.items():
+        (tmp_path / name).write_text(text)
+        with pytest.raises(layouts.LayoutError, match=name):
+            layouts.load(str(tmp_path / name))
+    (tmp_path / "bin.ini").write_bytes(b"\x00\x01\xff\xfe")
+    with pytest.raises(layouts.LayoutError):
+        layouts.load(str(tmp_path / "bin.ini"))
+    with pytest.raises(layouts.LayoutError, match="no such layout"):
+        layouts.load("no-such-layout")
+
+
+def test_layout_helpers(tmp_path, monkeypatch):
+    assert layouts.scaled((800, 22), (800, 878), (1600, 900), (1600, 900)) == ((800, 22), (800, 878))
+    pos, size = layouts.scaled((800, 461), (800, 439), (1600, 900), (800, 461))
+    assert pos[0] == 400 and size[0] == 400 and abs(pos[1] - 241) <= 1
+    text = "[Window][###10001]\nPos=1,2\nSize=300,400\n" + layouts.extra_section(["stats"], (1280, 720))
+    lay = layouts.parse(text)
+    assert lay.hidden == {"stats"} and lay.reference_size == (1280, 720)
+    assert "[LmmStudio]" not in layouts.strip_extra_section(text)
+    monkeypatch.setenv("LMM_STUDIO_CONFIG", str(tmp_path / "cfg"))
+    assert layouts.user_layout_path() == tmp_path / "cfg" / "layout.ini"
+    monkeypatch.delenv("LMM_STUDIO_CONFIG")
+    monkeypatch.setenv("XDG_CONFIG_HOME", str(tmp_path / "xdg"))
+    assert layouts.user_config_dir() == tmp_path / "xdg" / "lmm-studio"
+
+
+# -- small helpers --------------------------------------------------------------------------------
+
+def test_feature_markers_place_features_at_the_character(dbf):
+    _, features = dbf
+    raw = features.raw[1000]
+    norm = features.normalize(raw)
+    rot = np.array([np.cos(np.pi / 4), 0.0, np.sin(np.pi / 4), 0.0])   # 90 degrees about +Y
+    m = feature_markers(features, norm, np.array([1.0, 0.0, 2.0]), rot, {"hips": np.array([1.0, 0.9, 2.0])})
+    left = raw[features.slices[0]]
+    expect = np.array([1.0 + left[2], left[1], 2.0 - left[0]])          # +Z -> +X, +X -> -Z
+    assert np.allclose(m["points"][0], expect, atol=1e-4)
+    assert m["traj"].shape == (3, 3) and m["traj_dirs"].shape == (3, 3)
+    assert np.allclose(m["traj"][:, 1], 0.0)
+    assert len(m["arrows"][0]) == 3                                       # two feet and the hips
+
+
+def test_scrub_target_and_frame_times_and_renderer_names():
+    h = History(10)
+    for i in range(1, 31):
+        h.append(Tick(i, i / 60, {}))
+    assert scrub_target(h, 30, -5) == 25 and scrub_target(h, 25, -100) == 21 and scrub_target(h, 29, 9) == 30
+    ft = FrameTimes(n=4)
+    for ms in (10, 20, 30, 40, 50):
+        ft.add(ms, {"ui": ms / 2})
+    assert ft.median() == 35.0 and ft.fps() == pytest.approx(1000 / 35) and ft.median("ui") == 17.5
+    assert np.isnan(ft.median("nothing"))
+    assert is_software_renderer("llvmpipe (LLVM 15.0.6, 256 bits)") and not is_software_renderer("NVIDIA GeForce")
+    assert fmt_bytes(5 * 1024 * 1024) == "5.0 MB"
+
+
+def test_recording_paths():
+    p = recording_paths("/x/take.bvh", ("mm", "lmm"))
+    assert p["mm"].name == "take_mm.bvh" and p["lmm"].name == "take_lmm.bvh" and p["input"].name == "take_input.csv"
+    assert recording_paths("/x/run", ("lmm",))["lmm"].name == "run.bvh"
+
+
+# -- the session, headless ------------------------------------------------------------------------
+
+def test_session_steps_records_and_replays(dbf, tmp_path):
+    from lmm import bvh
+    from lmm.inputs import load_input_csv
+
+    db, features = dbf
+    tuning = Tuning()
+    controllers, problems = make_controllers(db, features, tuning, with_lmm=False)
+    s = Session(db, features, tuning, controllers, history_seconds=1.0)
+    assert s.history.capacity == 60 and controllers["mm"].tuning is tuning
+    paths = s.start_recording(tmp_path / "take.bvh", ("mm", "lmm"))   # LMM is not running: MM only
+    assert set(paths) == {"mm", "input"} and paths["mm"].name == "take.bvh"
+    for i in range(90):
+        s.step(InputState(left_y=1.0, camera_azimuth=0.0))
+    written = s.stop_recording()
+    assert s.history.newest_tick == 90 and len(s.history) == 60
+    anim = bvh.load(written["mm"])
+    assert anim.n_frames == 90 and anim.n_joints == db.n_bones
+    pos = anim.global_positions()
+    assert np.linalg.norm(pos[-1, 0] - pos[0, 0]) > 50.0        # centimetres: it ran forward
+    log = load_input_csv(written["input"])
+    assert log.n_rows >= 1 and log.at(0.0).left_y == 1.0 and log.at(1.4).left_y == 1.0
+    # replaying the log restarts the characters and feeds the log
+    s.replay(log)
+    assert s.tick == 0 and len(s.history) == 0
+    t = s.step(s.input_for_next_tick(InputState()))
+    assert t.extra["input"].left_y == 1.0
+    mem = s.memory["mm"]
+    assert mem["pose data (Y)"] == db.pose_bytes()
+
+
+def test_reference_clip_loads_and_bad_files_raise(tmp_path):
+    from lmm.bvh import BVHError
+
+    clip = load_reference_clip(os.path.join(os.path.dirname(__file__), "..", "..", "lmm", "data", "lafan1",
+                                            "obstacles3_subject4.bvh.gz"))
+    assert clip.positions.shape[1] == 22 and 1.0 < np.ptp(clip.positions[0, :, 1]) < 2.5   # metres
+    with pytest.raises(BVHError):
+        load_reference_clip(CORPUS / "truncated_frame.bvh")

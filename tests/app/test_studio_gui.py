@@ -1,0 +1,305 @@
+"""The real studio under Xvfb, in a subprocess, driven by a script of timed actions (and once by real
+key presses through xdotool); assertions read the JSON state it dumps at exit."""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from app.panels import layouts
+
+from .conftest import CORPUS, ROOT
+
+pytestmark = pytest.mark.gui
+
+RUN_SPEEDS = ("run_forward_speed_m_s", "run_sideways_speed_m_s", "run_backwards_speed_m_s")
+
+
+def first_frame_with_tick(dump, tick):
+    return next(f for f in dump["frames"] if f["newest_tick"] == tick)
+
+
+# -----------------------------------------------------------------------------------------------
+# one scripted run: input, sliders, recording, panels
+# -----------------------------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def circle_run(xvfb_display, studio_cache, lmm_weights, tmp_path_factory):
+    """150 frames of builtin:circle with both characters (when weights exist); at frame 60 every run
+    speed goes to 1.0 m/s and a feature weight to 0 through the sliders; frames 20-120 are recorded."""
+    tmp = tmp_path_factory.mktemp("circle")
+    script = [
+        {"frame": 20, "do": "record_start", "path": str(tmp / "take.bvh"), "which": ["mm", "lmm"]},
+        *({"frame": 60, "do": "set_tuning", "field": f, "value": 1.0} for f in RUN_SPEEDS),
+        {"frame": 60, "do": "set_tuning", "field": "feature_weights", "channel": "hip_velocity", "value": 0.0},
+        {"frame": 90, "do": "inspect", "controller": "lmm"},
+        {"frame": 120, "do": "record_stop"},
+        {"frame": 149, "do": "capture", "label": "end"},
+    ]
+    args = ["--frames", 150, "--input", "builtin:circle", "--screenshot", tmp / "circle.png"]
+    if lmm_weights:
+        args += ["--weights", lmm_weights]
+    (tmp / "script.json").write_text(json.dumps({"actions": script}))
+    dump_path = tmp / "dump.json"
+    env = dict(os.environ, DISPLAY=xvfb_display, LMM_STUDIO_CONFIG=str(tmp / "config"),
+               LMM_STUDIO_CACHE=str(studio_cache), PYTHONPATH=str(ROOT), LP_NUM_THREADS="0")
+    proc = subprocess.run([sys.executable, "-m", "app.cli", *map(str, args), "--script", str(tmp / "script.json"),
+                           "--dump-state", str(dump_path), "--no-gamepads"],
+                          cwd=tmp, env=env, capture_output=True, text=True, timeout=240)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return {"dump": json.loads(dump_path.read_text()), "dir": tmp, "lmm": bool(lmm_weights), "stderr": proc.stderr}
+
+
+def test_scripted_input_moves_both_characters(circle_run):
+    d = circle_run["dump"]
+    assert d["frames_run"] == 150 and d["ticks"] == 150
+    expected = ["mm", "lmm"] if circle_run["lmm"] else ["mm"]
+    assert d["controllers"] == expected, d.get("lmm_problem")
+    assert d["shared_tuning"] is True
+    first, last = d["frames"][0]["roots"], d["frames"][-1]["roots"]
+    for name in expected:
+        moved = np.linalg.norm(np.subtract(last[name], first[name]))
+        assert moved > 1.5, (name, moved)
+    # the replayed input is what the controllers got
+    assert d["frames"][30]["input"]["left_y"] != 0.0 or d["frames"][30]["input"]["left_x"] != 0.0
+
+
+def test_screenshot_of_the_whole_window(circle_run):
+    from PIL import Image
+
+    img = Image.open(circle_run["dir"] / "circle.png")
+    assert img.size == (1600, 900)
+    a = np.asarray(img.convert("RGB"), dtype=np.float32)
+    assert a.std() > 10.0                      # not a blank frame
+
+
+def test_slider_change_reaches_the_runtime_on_the_next_frame(circle_run):
+    frames = circle_run["dump"]["frames"]
+    before, after = frames[59], frames[60]
+    for f in RUN_SPEEDS:
+        assert before["tuning_seen"][f] == pytest.approx(3.5 if f.startswith("run_forward") else
+                                                         before["tuning_seen"][f])
+        assert after["tuning_seen"][f] == 1.0
+    assert before["tuning_seen"]["feature_weights"]["hip_velocity"] == 1.0
+    assert after["tuning_seen"]["feature_weights"]["hip_velocity"] == 0.0
+    # the effect, not just the value: the desired velocity is capped by the new speeds at once
+    for name, speed in after["desired_speed"].items():
+        assert speed <= 1.0 + 1e-6, name
+        assert before["desired_speed"][name] > 1.2, name
+
+
+def test_recording_writes_bvh_our_reader_loads(circle_run):
+    from lmm import bvh
+    from lmm.inputs import load_input_csv
+
+    d = circle_run["dump"]
+    rec = d["recordings"][0]
+    assert rec["started"] == 20 and rec["stopped"] == 120
+    names = ["mm", "lmm"] if circle_run["lmm"] else ["mm"]
+    for name in names:
+        anim = bvh.load(rec["written"][name])
+        assert anim.n_frames == 100
+        pos = anim.global_positions()
+        assert np.isfinite(pos).all() and np.ptp(pos[:, 0, [0, 2]], axis=0).max() > 50.0   # cm, it moved
+    log = load_input_csv(rec["written"]["input"])
+    assert log.n_rows > 10 and log.duration == pytest.approx(100 / 60, abs=0.05)
+
+
+def test_panels_show_the_live_tick(circle_run):
+    d = circle_run["dump"]
+    end = d["labels"]["end"]
+    p = end["panels"]
+    tick = end["displayed_tick"]
+    assert tick == d["frames"][148]["newest_tick"]
+    assert p["timeline"]["tick"] == tick and p["viewport"]["tick"] == tick
+    assert p["features"]["query"] is not None and len(p["features"]["query"]) == 27
+    assert p["candidates"]["rows"] and p["candidates"]["rows"][0]["channels"]
+    assert p["stats"]["fps"] > 0
+    assert p["windows"]["viewport"]["shown"]
+    if circle_run["lmm"]:
+        assert p["features"]["projected"] is not None
+        assert p["latent"]["lmm_latest"] is not None and len(p["latent"]["lmm_latest"]) == 32
+        assert p["search"]["nn_frame"] >= 0 and p["search"]["searches"] > 0
+        assert p["search"]["projected_frame"] >= 0 and p["search"]["distance"] is not None
+        # inspecting LMM: the query bars are LMM's
+        assert np.allclose(p["features"]["query"], end["snapshot_query"]["lmm"], atol=1e-5)
+
+
+# -----------------------------------------------------------------------------------------------
+# layouts
+# -----------------------------------------------------------------------------------------------
+
+def _rects(windows):
+    return {k: tuple(v["pos"]) + tuple(v["size"]) for k, v in windows.items() if v["shown"]}
+
+
+def _expected(name):
+    return {k: tuple(v) for k, v in layouts.BUILTIN[name].items() if v is not None}
+
+
+def test_layouts_switch_and_the_users_layout_is_restored(run_studio, tmp_path):
+    config = tmp_path / "cfg"
+    script = [{"frame": 3, "do": "capture", "label": "start"},
+              {"frame": 4, "do": "layout", "name": "compare"},
+              {"frame": 8, "do": "capture", "label": "compare"},
+              {"frame": 9, "do": "layout", "name": "default"},
+              {"frame": 13, "do": "capture", "label": "default"},
+              {"frame": 14, "do": "layout", "name": str(ROOT / "layouts" / "compare.ini")}]
+    r = run_studio("--frames", 20, "--layout", "tuning", "--no-lmm", script=script, config=config)
+    assert r.rc == 0, r.stderr[-3000:]
+    d = r.dump
+    assert d["errors"] == []
+    for label, name in (("start", "tuning"), ("compare", "compare"), ("default", "default")):
+        got = _rects(d["labels"][label]["panels"]["windows"])
+        assert got == _expected(name), label
+    assert d["layout"] == "compare"
+    saved = config / "layout.ini"
+    assert saved.is_file() and "[LmmStudio][Layout]" in saved.read_text()
+    # next start, no --layout: the user's last layout (compare) comes back
+    r2 = run_studio("--frames", 4, "--no-lmm", script=[{"frame": 2, "do": "capture", "label": "start"}],
+                    config=config)
+    assert r2.rc == 0, r2.stderr[-3000:]
+    assert r2.dump["layout"] == "user"
+    assert _rects(r2.dump["labels"]["start"]["panels"]["windows"]) == _expected("compare")
+
+
+# -----------------------------------------------------------------------------------------------
+# rewind
+# -----------------------------------------------------------------------------------------------
+
+def test_rewind_scrub_shows_an_older_tick_everywhere(run_studio, tmp_path, lmm_weights):
+    from PIL import Image
+
+    script = [{"frame": 100, "do": "screenshot", "path": str(tmp_path / "live.png")},
+              {"frame": 101, "do": "pause"},
+              {"frame": 101, "do": "scrub", "back": 80},
+              {"frame": 104, "do": "screenshot", "path": str(tmp_path / "scrubbed.png")},
+              {"frame": 105, "do": "capture", "label": "scrubbed"},
+              {"frame": 106, "do": "step", "n": -1},
+              {"frame": 108, "do": "capture", "label": "stepped"},
+              {"frame": 110, "do": "live"}]
+    args = ["--frames", 130, "--input", "builtin:circle"] + (["--weights", lmm_weights] if lmm_weights else [])
+    r = run_studio(*args, script=script)
+    assert r.rc == 0, r.stderr[-3000:]
+    d = r.dump
+    frames = d["frames"]
+    newest = frames[101]["newest_tick"]
+    assert all(f["newest_tick"] == newest for f in frames[101:110])      # paused: nothing simulated
+    assert frames[-1]["newest_tick"] > newest                           # live again afterwards
+    cap = d["labels"]["scrubbed"]
+    tick = cap["displayed_tick"]
+    assert tick == newest - 80
+    # the 3D view and the panels show that older tick, exactly as it was live
+    live_then = first_frame_with_tick(d, tick)
+    for name, root in cap["panels"]["viewport"]["roots"].items():
+        assert np.allclose(root, live_then["roots"][name], atol=1e-5)
+        assert not np.allclose(root, frames[101]["roots"][name], atol=1e-2)
+    p = cap["panels"]
+    assert p["viewport"]["tick"] == tick and p["timeline"]["tick"] == tick and p["search"]["tick"] == tick
+    assert p["latent"]["end_tick"] == tick and p["timeline"]["live"] is False
+    assert np.allclose(p["features"]["query"], cap["snapshot_query"]["mm"], atol=1e-5)
+    assert d["labels"]["stepped"]["displayed_tick"] == tick - 1
+    # and the pixels of the 3D view differ from the live image
+    live = np.asarray(Image.open(tmp_path / "live.png").convert("RGB"), np.float32)
+    old = np.asarray(Image.open(tmp_path / "scrubbed.png").convert("RGB"), np.float32)
+    rect = layouts.BUILTIN["default"]["viewport"]
+    x, y, w, h = rect
+    region = (slice(y + 80, y + h - 10), slice(x + 10, x + w - 10))
+    assert np.abs(live[region] - old[region]).mean() > 2.0
+
+
+# -----------------------------------------------------------------------------------------------
+# broken files
+# -----------------------------------------------------------------------------------------------
+
+def test_broken_files_show_an_error_and_the_studio_runs_on(run_studio, tmp_path):
+    bad_preset = tmp_path / "bad_preset.json"
+    bad_preset.write_text('{"run_forward_speed_m_s": "fast"')
+    range_preset = tmp_path / "range_preset.json"
+    range_preset.write_text('{"inertialization_halflife_s": 99}')
+    good_preset = tmp_path / "good_preset.json"
+    good_preset.write_text('{"run_forward_speed_m_s": 2.0}')
+    bad_layout = tmp_path / "bad_layout.ini"
+    bad_layout.write_text("not a layout\n")
+    bad_weights = tmp_path / "bad_weights.npz"
+    bad_weights.write_bytes(b"PK\x03\x04 truncated zip")
+    bad_input = tmp_path / "bad_input.csv"
+    bad_input.write_text("time,left_x\n0,abc\n")
+    script = [{"frame": 5, "do": "open", "kind": "reference", "path": str(CORPUS / "truncated_frame.bvh")},
+              {"frame": 7, "do": "open", "kind": "preset_load", "path": str(bad_preset)},
+              {"frame": 9, "do": "open", "kind": "preset_load", "path": str(range_preset)},
+              {"frame": 11, "do": "open", "kind": "layout_load", "path": str(bad_layout)},
+              {"frame": 13, "do": "open", "kind": "weights", "path": str(bad_weights)},
+              {"frame": 15, "do": "open", "kind": "input", "path": str(bad_input)},
+              {"frame": 20, "do": "open", "kind": "preset_load", "path": str(good_preset)}]
+    r = run_studio("--frames", 30, "--no-lmm", "--input", "builtin:zigzag", script=script)
+    assert r.rc == 0, r.stderr[-3000:]
+    d = r.dump
+    msgs = [e["message"] for e in d["errors"]]
+    for f in ("truncated_frame.bvh", "bad_preset.json", "range_preset.json", "bad_layout.ini",
+              "bad_weights.npz", "bad_input.csv"):
+        assert any(f in m for m in msgs), (f, msgs)
+    assert len(msgs) == 6
+    assert d["frames_run"] == 30 and d["ticks"] == 30            # it kept simulating through the errors
+    assert d["frames"][19]["tuning_seen"]["run_forward_speed_m_s"] == 3.5
+    assert d["frames"][20]["tuning_seen"]["run_forward_speed_m_s"] == 2.0   # a good file still loads
+    assert d["layout"] == "default"
+
+
+# -----------------------------------------------------------------------------------------------
+# real keyboard input
+# -----------------------------------------------------------------------------------------------
+
+def test_keyboard_moves_the_character_xdotool(xvfb_display, studio_cache, tmp_path):
+    if shutil.which("xdotool") is None:
+        pytest.skip("xdotool is not installed")
+    stop = tmp_path / "stop"
+    (tmp_path / "script.json").write_text(json.dumps({"actions": [
+        {"frame": 0, "do": "quit_when_exists", "path": str(stop)}]}))
+    env = dict(os.environ, DISPLAY=xvfb_display, LMM_STUDIO_CONFIG=str(tmp_path / "cfg"),
+               LMM_STUDIO_CACHE=str(studio_cache), PYTHONPATH=str(ROOT), LP_NUM_THREADS="0")
+    proc = subprocess.Popen([sys.executable, "-m", "app.cli", "--no-lmm", "--no-gamepads", "--script",
+                             str(tmp_path / "script.json"), "--dump-state", str(tmp_path / "dump.json")],
+                            cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+    def xdo(*args, timeout=30):
+        return subprocess.run(["xdotool", *args], env=env, capture_output=True, text=True, timeout=timeout)
+
+    try:
+        found = xdo("search", "--sync", "--onlyvisible", "--name", "lmm-studio", timeout=90)
+        assert found.returncode == 0 and found.stdout.split(), found.stderr
+        win = found.stdout.split()[0]
+        time.sleep(3.0)          # let it settle into its frame loop
+        xdo("windowfocus", "--sync", win)
+        xdo("mousemove", "--window", win, "700", "300")
+        xdo("keydown", "w")
+        time.sleep(2.5)
+        xdo("keyup", "w")
+        time.sleep(1.0)
+        stop.write_text("")
+        out, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+    assert proc.returncode == 0, err[-3000:]
+    d = json.loads((tmp_path / "dump.json").read_text())
+    pushed = [f for f in d["frames"] if f["input"] and f["input"]["left_y"] > 0.5]
+    assert len(pushed) > 5, "the W key never reached the input"
+    start = d["frames"][0]["roots"]["mm"]
+    end = d["frames"][-1]["roots"]["mm"]
+    assert np.linalg.norm(np.subtract(end, start)) > 0.5
+
+
+def test_no_display_is_a_clear_error_not_a_crash():
+    env = {k: v for k, v in os.environ.items() if k not in ("DISPLAY", "WAYLAND_DISPLAY")}
+    env["PYTHONPATH"] = str(ROOT)
+    r = subprocess.run([sys.executable, "-m", "app.cli", "--frames", "1"], env=env, capture_output=True,
+                       text=True, timeout=60)
+    assert r.returncode == 2 and "no display" in r.stderr
