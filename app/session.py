@@ -10,7 +10,6 @@ weights.)
 """
 from __future__ import annotations
 
-import inspect
 import os
 import time
 from dataclasses import dataclass, field
@@ -31,33 +30,13 @@ TICK_RATE_HZ = 60.0
 # building the controllers
 # ------------------------------------------------------------------------------------------------
 
-def _call_with_supported(fn, **kwargs):
-    """Call ``fn`` with the keyword arguments its signature accepts (positional-or-keyword ones by name)."""
-    try:
-        params = inspect.signature(fn).parameters
-    except (TypeError, ValueError):
-        return fn(**kwargs)
-    if any(p.kind == p.VAR_KEYWORD for p in params.values()):
-        return fn(**kwargs)
-    return fn(**{k: v for k, v in kwargs.items() if k in params})
-
-
 def make_lmm_controller(db, features, tuning: Tuning, weights: str | None = None):
-    """The learned motion matching controller with its networks, or raise with a readable reason."""
-    try:
-        from lmm import lmm as lmm_module
-    except ImportError as e:
-        raise RuntimeError(f"the learned motion matching controller is not available ({e})") from None
-    loader = getattr(lmm_module, "load_default_networks", None)
-    cls = getattr(lmm_module, "LearnedMotionMatchingController", None)
-    if cls is None:
-        raise RuntimeError("lmm.lmm has no LearnedMotionMatchingController")
-    networks = None
-    if weights is not None and hasattr(lmm_module, "load_networks"):
-        networks = _call_with_supported(lmm_module.load_networks, path=weights, db=db, features=features)
-    elif loader is not None:
-        networks = _call_with_supported(loader, path=weights, weights=weights, db=db, features=features)
-    return _call_with_supported(cls, db=db, features=features, tuning=tuning, networks=networks)
+    """The learned motion matching controller with its networks (the shipped ones unless ``weights``);
+    raises with a readable reason (missing or broken file, other database or feature layout)."""
+    from lmm.lmm import LearnedMotionMatchingController, load_default_networks
+
+    networks = load_default_networks(db, features, path=weights)
+    return LearnedMotionMatchingController(db, features, tuning, networks=networks)
 
 
 def default_weights_missing() -> bool:
@@ -141,68 +120,21 @@ def _array_bytes(obj, depth: int = 0) -> int:
 # recording
 # ------------------------------------------------------------------------------------------------
 
-class _PoseRecorder:
-    """Collects local poses and writes them as BVH on close.
+class _Recorder:
+    """One controller's BVH file (:class:`lmm.recording.BVHRecorder`: streamed, crash-safe)."""
 
-    Minimal studio-side recorder: used when ``lmm.recording.BVHRecorder`` is not importable.
-    The skeleton is the database's (bone 0 = the simulation bone, with position channels), in
-    centimetres like LAFAN1.
-    """
+    def __init__(self, db, path: Path, fps: float):
+        from lmm.recording import BVHRecorder
 
-    def __init__(self, db, path: Path, scale: float = 100.0):
-        self.db, self.path, self.scale = db, Path(path), float(scale)
-        self.rotations: list[np.ndarray] = []
-        self.positions: list[np.ndarray] = []
-
-    def add(self, pose, dt: float) -> None:
-        self.rotations.append(np.asarray(pose.local_rotations, dtype=np.float64).copy())
-        self.positions.append(np.asarray(pose.local_positions, dtype=np.float64).copy())
-
-    def close(self, dt: float) -> Path:
-        from lmm import bvh
-
-        db = self.db
-        offsets = db.positions[0].astype(np.float64) * self.scale
-        offsets[0] = 0.0
-        rot = np.stack(self.rotations) if self.rotations else np.tile([1.0, 0, 0, 0], (1, db.n_bones, 1))
-        pos = (np.stack(self.positions) if self.positions else np.zeros((1, db.n_bones, 3))) * self.scale
-        anim = bvh.Animation.from_local(db.names, db.parents, offsets, rot, pos, dt)
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        bvh.save(self.path, anim)
-        return self.path
-
-
-def _make_recorder(db, path: Path):
-    try:
-        from lmm.recording import BVHRecorder  # the engine's streaming recorder, when present
-    except ImportError:
-        return _PoseRecorder(db, path)
-    return _EngineRecorder(BVHRecorder, db, path)
-
-
-class _EngineRecorder:
-    """Adapts :class:`lmm.recording.BVHRecorder` to add(pose, dt) / close(dt)."""
-
-    def __init__(self, cls, db, path: Path):
+        Path(path).parent.mkdir(parents=True, exist_ok=True)
         self.path = Path(path)
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        self.rec = _call_with_supported(cls, db=db, path=self.path, names=db.names, parents=db.parents,
-                                        fps=TICK_RATE_HZ, frame_time=1.0 / TICK_RATE_HZ)
+        self.rec = BVHRecorder(self.path, db, fps=fps)
 
-    def add(self, pose, dt: float) -> None:
-        for meth in ("add", "append", "write", "add_pose"):
-            fn = getattr(self.rec, meth, None)
-            if fn is not None:
-                fn(pose)
-                return
-        raise RuntimeError("BVHRecorder has no add/append/write method")
+    def add(self, pose) -> None:
+        self.rec.write(pose)
 
-    def close(self, dt: float) -> Path:
-        for meth in ("close", "finish", "save"):
-            fn = getattr(self.rec, meth, None)
-            if fn is not None:
-                out = fn()
-                return Path(out) if isinstance(out, (str, os.PathLike)) else self.path
+    def close(self) -> Path:
+        self.rec.close()
         return self.path
 
 
@@ -394,7 +326,7 @@ class Session:
             raise ValueError("nothing to record: none of the chosen controllers is running")
         paths = recording_paths(base, which)
         Path(paths["input"]).parent.mkdir(parents=True, exist_ok=True)
-        recorders = {n: _make_recorder(self.db, paths[n]) for n in which}
+        recorders = {n: _Recorder(self.db, paths[n], 1.0 / self.dt) for n in which}
         writer = InputCsvWriter(paths["input"], with_camera=True)
         self.recording = Recording(paths, recorders, writer, self.tick)
         return paths
@@ -404,7 +336,7 @@ class Session:
         writer_time = rec.frames * self.dt
         rec.input_writer.write(writer_time, inp)
         for name, r in rec.recorders.items():
-            r.add(tick.snapshots[name].pose, self.dt)
+            r.add(tick.snapshots[name].pose)
         rec.frames += 1
 
     def stop_recording(self) -> dict[str, Path]:
@@ -414,7 +346,7 @@ class Session:
         self.recording = None
         out = {}
         for name, r in rec.recorders.items():
-            out[name] = r.close(self.dt)
+            out[name] = r.close()
         rec.input_writer.close()
         out["input"] = rec.paths["input"]
         return out

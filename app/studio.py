@@ -709,7 +709,10 @@ class Studio:
                "desired_speed": {n: float(np.linalg.norm(s.desired_velocity)) for n, s in latest.snapshots.items()}
                if latest is not None and ticks else {},
                "input": dict(vars(latest.extra["input"])) if latest is not None and ticks else None,
-               "viewport_roots": self.viewport.drawn.get("roots", {})}
+               "viewport_roots": self.viewport.drawn.get("roots", {}),
+               "ms": {k: round(float(v), 4) for k, v in parts.items()},
+               "frame_ms": round(float(self.frame_times.frames[-1]), 4) if self.frame_times.frames else None,
+               "t": round(time.perf_counter(), 6)}
         if tuning_seen is not None:
             rec["tuning_seen"] = tuning_seen
         self.dump["frames"].append(rec)

@@ -122,6 +122,17 @@ def fmt_bytes(n: float) -> str:
     return f"{n:.1f} GB"
 
 
+def decimate(x: np.ndarray, y: np.ndarray, max_points: int) -> tuple[np.ndarray, np.ndarray]:
+    """Every k-th point (the last one always kept) so a line series has at most ``max_points``:
+    a plot a few hundred pixels wide shows no more, and each point costs raster time."""
+    n = len(x)
+    if n <= max_points:
+        return x, y
+    k = int(np.ceil(n / max_points))
+    idx = np.arange(n - 1, -1, -k)[::-1]
+    return x[idx], y[idx]
+
+
 class TextCache:
     """Sets a dearpygui value only when it changed (set_value on text costs a string copy)."""
 

@@ -7,19 +7,35 @@ import numpy as np
 
 from .common import COLORS, TextCache, View, window_tag
 
-MAX_COLUMNS = 240
+COLUMNS = 200
 
 
-def heat_matrix(values: np.ndarray, max_columns: int = MAX_COLUMNS) -> tuple[np.ndarray, int]:
-    """(T, L) series -> row-major (L, C) heat map values (one row per dimension, oldest column first),
-    decimated to at most ``max_columns`` columns; NaN becomes 0. Returns (flat values, columns)."""
+def diverging_lut(n: int = 256) -> np.ndarray:
+    """(n, 4) float32 RGBA: blue (negative) -> near white (0) -> red (positive)."""
+    t = np.linspace(-1.0, 1.0, n)[:, None]
+    neg = np.array([0.16, 0.36, 0.78])
+    mid = np.array([0.93, 0.93, 0.93])
+    pos = np.array([0.80, 0.22, 0.18])
+    a = np.abs(t) ** 0.8
+    rgb = np.where(t < 0, mid + (neg - mid) * a, mid + (pos - mid) * a)
+    return np.concatenate([rgb, np.ones((n, 1))], axis=1).astype(np.float32)
+
+
+def heat_image(values: np.ndarray, scale: float, lut: np.ndarray, columns: int = COLUMNS,
+               out: np.ndarray | None = None) -> np.ndarray:
+    """(T, L) series -> (L, columns, 4) RGBA image, one row per dimension (row 0 = dimension 0, at the
+    top), oldest tick left, newest right; ``[-scale, scale]`` spans the colour map; NaN is dark grey."""
     v = np.asarray(values, np.float64)
-    if v.ndim != 2 or v.shape[0] == 0:
-        return np.zeros(1), 1
-    step = max(1, int(np.ceil(v.shape[0] / max_columns)))
-    v = v[::-1][::step][::-1]      # keep the newest column exactly
-    v = np.nan_to_num(v, nan=0.0)
-    return np.ascontiguousarray(v.T).ravel(), v.shape[0]
+    T, L = v.shape
+    idx = np.clip(np.round(np.linspace(0, T - 1, columns)).astype(np.int64), 0, T - 1)   # newest kept
+    cols = v[idx].T                                                                       # (L, columns)
+    k = np.clip(((cols / max(scale, 1e-9)) + 1.0) * 0.5 * (len(lut) - 1), 0, len(lut) - 1)
+    img = lut[np.nan_to_num(k, nan=0.0).astype(np.int64)]
+    img[~np.isfinite(cols)] = (0.2, 0.2, 0.22, 1.0)
+    if out is not None:
+        out[...] = img
+        return out
+    return img
 
 
 def latent_scale(values: np.ndarray, floor: float = 0.5) -> float:
@@ -42,9 +58,20 @@ class LatentPanel:
         self.n_latent = 32
         self.last = {}
         self._scale = {"lmm": 1.0, "mm": 1.0}
+        self.lut = diverging_lut()
+        self._label_shown = {}
 
     def build(self, window_kwargs: dict) -> None:
         dpg = self.dpg
+        lmm = self.studio.session.controllers.get("lmm")
+        nets = getattr(lmm, "nets", None)
+        self.n_latent = int(getattr(nets, "n_latent", self.n_latent))
+        self.images = {}
+        for key in ("lmm", "mm"):
+            self.images[key] = np.zeros((self.n_latent, COLUMNS, 4), np.float32)
+            self.images[key][..., 3] = 1.0
+            dpg.add_raw_texture(COLUMNS, self.n_latent, self.images[key], format=dpg.mvFormat_Float_rgba,
+                                tag=f"lat_tex_{key}", parent="studio_textures")
         with dpg.window(tag=self.tag, label="Latent Traces", **window_kwargs):
             with dpg.group(horizontal=True):
                 dpg.add_text("window")
@@ -59,9 +86,9 @@ class LatentPanel:
                               no_box_select=True, no_title=True):
                     dpg.add_plot_axis(dpg.mvXAxis, tag=f"lat_x_{key}", no_tick_labels=key == "lmm")
                     with dpg.plot_axis(dpg.mvYAxis, tag=f"lat_y_{key}", label=title, no_tick_labels=True):
-                        dpg.add_heat_series([0.0], 1, 1, tag=f"lat_heat_{key}", format="", scale_min=-1, scale_max=1,
-                                            bounds_min=(-self.seconds, 0), bounds_max=(0, self.n_latent))
-                dpg.bind_colormap(f"lat_plot_{key}", dpg.mvPlotColormap_RdBu)
+                        # one textured quad per map: far cheaper to draw than thousands of heat-map cells
+                        dpg.add_image_series(f"lat_tex_{key}", (-self.seconds, 0), (0, self.n_latent),
+                                             tag=f"lat_heat_{key}", show=False)
             with dpg.plot(tag="lat_curve_plot", height=-1, width=-1, no_menus=True, no_mouse_pos=True):
                 dpg.add_plot_legend(location=dpg.mvPlot_Location_North, horizontal=True, outside=True)
                 dpg.add_plot_axis(dpg.mvXAxis, tag="lat_curve_x", label="seconds")
@@ -94,18 +121,19 @@ class LatentPanel:
         for key in ("lmm", "mm"):
             v = series.get(key)
             tag = f"lat_heat_{key}"
-            if v is None or v.ndim != 2:
+            if v is None or v.ndim != 2 or v.shape[1] != self.n_latent:
                 dpg.configure_item(tag, show=False)
                 continue
-            flat, cols = heat_matrix(v)
             rows = v.shape[1]
             sc = self._scale[key]
-            dpg.configure_item(tag, show=True, rows=rows, cols=cols, scale_min=-sc, scale_max=sc,
-                               bounds_min=(float(t[0]), 0.0), bounds_max=(0.0, float(rows)))
-            dpg.configure_item(f"lat_y_{key}", label=f"{key.upper()} ±{sc:.1f}")
-            dpg.set_value(tag, [flat])
+            heat_image(v, sc, self.lut, COLUMNS, out=self.images[key])   # in place: the texture shows it
+            dpg.configure_item(tag, show=True, bounds_min=(float(t[0]), 0.0), bounds_max=(0.0, float(rows)))
+            label = f"{key.upper()} ±{sc:.1f}"
             dpg.set_axis_limits(f"lat_x_{key}", float(t[0]), 0.0)
             dpg.set_axis_limits(f"lat_y_{key}", 0.0, float(rows))
+            if label != self._label_shown.get(key):
+                self._label_shown[key] = label
+                dpg.configure_item(f"lat_y_{key}", label=label)
         dim = self.dim
         for key, tag, label in (("lmm", "lat_curve_lmm", "LMM latent"), ("mm", "lat_curve_mm", "MM matched latent")):
             v = series.get(key)

@@ -15,7 +15,7 @@ import numpy as np
 
 from app.history import search_agreement
 
-from .common import (BAD, COLORS, GOOD, SHORT, TextCache, View, cost_color, fmt_num, short_channel_name,
+from .common import (COLORS, GOOD, SHORT, TextCache, View, cost_color, decimate, fmt_num, short_channel_name,
                      window_tag)
 
 MAX_ROWS = 64
@@ -201,7 +201,7 @@ class SearchPanel:
             y = h.window(name, field, end, n)
             ok = np.isfinite(y)
             if ok.any():
-                dpg.set_value(tag, [t[ok], y[ok]])
+                dpg.set_value(tag, list(decimate(t[ok], y[ok], 300)))
             else:
                 dpg.set_value(tag, [t[-1:], np.zeros(1)])
             dpg.configure_item(tag, show=bool(ok.any()))
@@ -213,7 +213,7 @@ class SearchPanel:
             ag = rolling_agreement(h.window("lmm", "searched", end, n), h.window("lmm", "nn_frame", end, n),
                                    h.window("lmm", "projected_frame", end, n), int(2.0 / dt), self.tolerance)
             ok = np.isfinite(ag)
-            dpg.set_value("cost_agree", [t[ok] if ok.any() else t[-1:], ag[ok] if ok.any() else np.zeros(1)])
+            dpg.set_value("cost_agree", list(decimate(t[ok], ag[ok], 300)) if ok.any() else [t[-1:], np.zeros(1)])
         dpg.configure_item("cost_agree", show=lmm is not None)
         dpg.set_axis_limits("cost_x", float(t[0]), 0.0)
         self.last = {"tick": end, "nn_frame": shown.get("nn", (-1,))[0], "nn_cost": shown.get("nn", (0, None))[1],

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .common import COLORS, TextCache, View, window_tag
+from .common import COLORS, TextCache, View, decimate, window_tag
 
 
 def scrub_target(history, current: int, delta: int) -> int:
@@ -87,9 +87,9 @@ class TimelinePanel:
             dpg.configure_item(f"tl_speed_{name}", show=running)
             if running:
                 y = h.window(name, "speed", newest, n)
-                dpg.set_value(f"tl_speed_{name}", [t[first:], y[first:]])
+                dpg.set_value(f"tl_speed_{name}", list(decimate(t[first:], y[first:], 400)))
         name0 = self.studio.session.names[0]
-        dpg.set_value("tl_desired", [t[first:], h.window(name0, "desired_speed", newest, n)[first:]])
+        dpg.set_value("tl_desired", list(decimate(t[first:], h.window(name0, "desired_speed", newest, n)[first:], 400)))
         dpg.set_axis_limits("tl_x", float(t[0]), 0.0)
         dpg.configure_item("tl_play", label="Play" if view.paused else "Pause")
         held = (newest - oldest + 1) * dt

@@ -342,7 +342,13 @@ class ViewportPanel:
                 dx, dy = mouse[0] - self.last_mouse[0], mouse[1] - self.last_mouse[1]
                 self.last_mouse = mouse
                 if dx or dy:
-                    self.viewer.apply_drag(self.camera, self.drag, dx, dy, max(self.size[1], 1))
+                    manager = self.studio.input
+                    if self.drag == "left" and manager is not None:
+                        # the input layer owns the azimuth (sticks are camera relative): feed it the turn
+                        manager.add_camera_orbit(float(np.radians(-dx * 0.4)))
+                        self.camera.orbit(0.0, dy)
+                    else:
+                        self.viewer.apply_drag(self.camera, self.drag, dx, dy, max(self.size[1], 1))
                     if self.drag != "left":
                         self.follow = False
                         dpg.set_value("vp_follow", False)

@@ -11,7 +11,7 @@ from app.history import History, Tick
 from app.panels import layouts
 from app.panels.common import View, cost_color, fmt_bytes, short_channel_name
 from app.panels.features import bar_layout, bar_values, channel_errors
-from app.panels.latent import heat_matrix, latent_scale
+from app.panels.latent import diverging_lut, heat_image, latent_scale
 from app.panels.search import candidate_rows, column_fractions, frame_label, rolling_agreement, sort_rows
 from app.panels.stats import FrameTimes
 from app.panels.timeline import scrub_target
@@ -79,14 +79,20 @@ def test_channel_errors(dbf):
 
 # -- latent heat maps -----------------------------------------------------------------------------
 
-def test_heat_matrix_is_row_per_dimension_newest_kept():
-    v = np.arange(10 * 3, dtype=float).reshape(10, 3)     # 10 ticks, 3 dims
-    flat, cols = heat_matrix(v, max_columns=100)
-    assert cols == 10 and flat.reshape(3, 10)[1].tolist() == v[:, 1].tolist()
-    flat, cols = heat_matrix(v, max_columns=4)
-    assert cols <= 4 and flat.reshape(3, cols)[0, -1] == v[-1, 0]  # the newest column survives decimation
-    v[2, 1] = np.nan
-    assert np.isfinite(heat_matrix(v)[0]).all()
+def test_heat_image_is_row_per_dimension_newest_right():
+    lut = diverging_lut(256)
+    assert lut.shape == (256, 4) and lut[0, 2] > lut[0, 0] and lut[-1, 0] > lut[-1, 2]   # blue .. red
+    v = np.zeros((10, 3))
+    v[-1, 0] = 1.0        # newest tick, dimension 0: full positive
+    v[0, 2] = -1.0        # oldest tick, dimension 2: full negative
+    v[5, 1] = np.nan
+    img = heat_image(v, 1.0, lut, columns=20)
+    assert img.shape == (3, 20, 4)
+    assert np.allclose(img[0, -1], lut[-1]) and np.allclose(img[2, 0], lut[0])
+    assert np.allclose(img[1, 0], lut[127], atol=0.02)          # zero is the middle of the map
+    assert np.allclose(img[1, 10, :3], 0.2, atol=0.03)          # NaN: dark grey
+    out = np.empty((3, 20, 4), np.float32)
+    assert heat_image(v, 1.0, lut, columns=20, out=out) is out
 
 
 def test_latent_scale():
@@ -264,7 +270,7 @@ def test_session_steps_records_and_replays(dbf, tmp_path):
     written = s.stop_recording()
     assert s.history.newest_tick == 90 and len(s.history) == 60
     anim = bvh.load(written["mm"])
-    assert anim.n_frames == 90 and anim.n_joints == db.n_bones
+    assert anim.n_frames == 90 and anim.n_joints == db.n_bones - 1   # the simulation bone is left out
     pos = anim.global_positions()
     assert np.linalg.norm(pos[-1, 0] - pos[0, 0]) > 50.0        # centimetres: it ran forward
     log = load_input_csv(written["input"])

@@ -279,7 +279,7 @@ def test_keyboard_moves_the_character_xdotool(xvfb_display, studio_cache, tmp_pa
         xdo("windowfocus", "--sync", win)
         xdo("mousemove", "--window", win, "700", "300")
         xdo("keydown", "w")
-        time.sleep(2.5)
+        time.sleep(3.5)
         xdo("keyup", "w")
         time.sleep(1.0)
         stop.write_text("")
@@ -293,8 +293,11 @@ def test_keyboard_moves_the_character_xdotool(xvfb_display, studio_cache, tmp_pa
     pushed = [f for f in d["frames"] if f["input"] and f["input"]["left_y"] > 0.5]
     assert len(pushed) > 5, "the W key never reached the input"
     start = d["frames"][0]["roots"]["mm"]
+    before = pushed[0]["roots"]["mm"]
     end = d["frames"][-1]["roots"]["mm"]
-    assert np.linalg.norm(np.subtract(end, start)) > 0.5
+    assert np.linalg.norm(np.subtract(before, start)) < 0.1        # standing until the key went down
+    # a fixed 60 Hz tick per frame: how far it gets depends on the frame rate; it must clearly walk off
+    assert np.linalg.norm(np.subtract(end, start)) > 0.25
 
 
 def test_no_display_is_a_clear_error_not_a_crash():

@@ -1,0 +1,127 @@
+"""Studio frame rate under Xvfb at 1600x900 with every panel shown, and the Python-side time per frame.
+
+Runs the real studio (``lmm-studio --frames N --input builtin:circle``) in a subprocess on its own Xvfb
+display (or on $DISPLAY with --display), with the default layout (all nine panels), both characters when
+LMM weights are available, and reads the per-frame timings from its state dump.
+
+    python bench/bench_studio.py [--frames 600] [--warmup 120] [--weights PATH] [--samples -1] [--json]
+
+Printed: fps (from the median frame time, and frames / wall time), and the median milliseconds per
+frame of each part: the controllers (MM, LMM), the studio's own Python (input, 3D scene update,
+panels: what this project's GUI code costs), the 3D render and its readback, and dearpygui's frame
+(UI layout and rasterisation, swap). Software OpenGL (llvmpipe) is the floor: users have GPUs.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def start_xvfb():
+    exe = shutil.which("Xvfb")
+    if exe is None:
+        sys.exit("Xvfb is not installed (apt-get install xvfb), or pass --display")
+    r, w = os.pipe()
+    proc = subprocess.Popen([exe, "-displayfd", str(w), "-screen", "0", "1920x1080x24", "-nolisten", "tcp"],
+                            pass_fds=(w,), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    os.close(w)
+    buf = b""
+    deadline = time.monotonic() + 15
+    while not buf.endswith(b"\n") and time.monotonic() < deadline:
+        buf += os.read(r, 16)
+    os.close(r)
+    return proc, f":{buf.decode().strip()}"
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--frames", type=int, default=600)
+    ap.add_argument("--warmup", type=int, default=120, help="frames left out of the statistics")
+    ap.add_argument("--weights", help="LMM weights (default: the shipped ones; MM only when missing)")
+    ap.add_argument("--samples", type=int, default=-1, help="3D multisampling (-1: auto)")
+    ap.add_argument("--display", help="use this X display instead of starting Xvfb")
+    ap.add_argument("--lp-threads", help="set LP_NUM_THREADS for llvmpipe (default: leave as is)")
+    ap.add_argument("--json", action="store_true", help="print one JSON object")
+    args = ap.parse_args()
+
+    xvfb = None
+    display = args.display
+    if display is None:
+        xvfb, display = start_xvfb()
+    tmp = Path(tempfile.mkdtemp(prefix="bench-studio-"))
+    try:
+        env = dict(os.environ, DISPLAY=display, LMM_STUDIO_CONFIG=str(tmp / "config"), PYTHONPATH=str(ROOT))
+        if args.lp_threads is not None:
+            env["LP_NUM_THREADS"] = args.lp_threads
+        dump = tmp / "dump.json"
+        cmd = [sys.executable, "-m", "app.cli", "--frames", str(args.frames), "--input", "builtin:circle",
+               "--layout", "default", "--width", "1600", "--height", "900", "--no-gamepads",
+               "--no-save-layout", "--samples", str(args.samples), "--dump-state", str(dump)]
+        if args.weights:
+            cmd += ["--weights", args.weights]
+        t0 = time.perf_counter()
+        proc = subprocess.run(cmd, env=env, cwd=tmp, capture_output=True, text=True)
+        wall = time.perf_counter() - t0
+        if proc.returncode != 0 or not dump.exists():
+            print(proc.stderr[-4000:], file=sys.stderr)
+            return 1
+        d = json.loads(dump.read_text())
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+        if xvfb is not None:
+            xvfb.terminate()
+            xvfb.wait()
+
+    frames = d["frames"][args.warmup:]
+    ms = {k: np.array([f["ms"].get(k, np.nan) for f in frames], float) for k in frames[0]["ms"]}
+    frame_ms = np.array([f["frame_ms"] for f in frames], float)
+    t = np.array([f["t"] for f in frames], float)
+    python_ms = ms["input"] + ms["viewport"] + ms["panels"]
+    controllers_ms = sum(ms[n] for n in d["controllers"])
+    out = {
+        "controllers": d["controllers"], "frames": len(frames), "window": "1600x900",
+        "fps_median": 1000.0 / float(np.median(frame_ms)),
+        "fps_wall": (len(t) - 1) / float(t[-1] - t[0]) if len(t) > 1 else float("nan"),
+        "frame_ms_median": float(np.median(frame_ms)),
+        "python_ms_median": float(np.median(python_ms)),
+        "controllers_ms_median": float(np.median(controllers_ms)),
+        "parts_ms_median": {k: float(np.nanmedian(v)) for k, v in ms.items()},
+        "viewport_3d": d["final"]["viewport"].get("size"),
+        "load_average": os.getloadavg(),
+        "cpu_count": os.cpu_count(),
+        "process_wall_s": wall,
+        "lmm_problem": d.get("lmm_problem"),
+    }
+    if args.json:
+        print(json.dumps(out, indent=2))
+        return 0
+    print(f"studio, default layout (all panels), 1600x900, {' + '.join(n.upper() for n in out['controllers'])}, "
+          f"{out['frames']} frames after {args.warmup} warm-up")
+    print(f"  fps: {out['fps_median']:.1f} (median frame {out['frame_ms_median']:.1f} ms), "
+          f"{out['fps_wall']:.1f} frames / wall second")
+    print(f"  Python-side per frame (studio: input + 3D scene update + panels): {out['python_ms_median']:.2f} ms median")
+    print(f"  controllers per frame: {out['controllers_ms_median']:.2f} ms median")
+    labels = {"input": "input", "mm": "MM step", "lmm": "LMM step", "viewport": "3D scene update (Python)",
+              "render": "3D render (GL)", "readback": "3D readback", "panels": "panels (Python)",
+              "ui": "dearpygui frame (UI raster + swap)"}
+    for k, v in out["parts_ms_median"].items():
+        print(f"    {labels.get(k, k):38s} {v:7.2f} ms")
+    print(f"  3D view {out['viewport_3d']}, load average {out['load_average'][0]:.2f} on {out['cpu_count']} CPUs")
+    if out["lmm_problem"]:
+        print(f"  note: {out['lmm_problem']}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
