@@ -87,6 +87,7 @@ def main() -> int:
     ms = {k: np.array([f["ms"].get(k, np.nan) for f in frames], float) for k in frames[0]["ms"]}
     frame_ms = np.array([f["frame_ms"] for f in frames], float)
     t = np.array([f["t"] for f in frames], float)
+    cpu = np.array([f["cpu"] for f in frames], float)
     python_ms = ms["input"] + ms["viewport"] + ms["panels"]
     controllers_ms = sum(ms[n] for n in d["controllers"])
     out = {
@@ -94,6 +95,9 @@ def main() -> int:
         "fps_median": 1000.0 / float(np.median(frame_ms)),
         "fps_wall": (len(t) - 1) / float(t[-1] - t[0]) if len(t) > 1 else float("nan"),
         "frame_ms_median": float(np.median(frame_ms)),
+        # CPU time of the studio process (all its threads, llvmpipe's included) per frame: what the
+        # frame costs whatever else the machine is doing
+        "process_cpu_ms_per_frame": 1000.0 * float(cpu[-1] - cpu[0]) / max(len(cpu) - 1, 1),
         "python_ms_median": float(np.median(python_ms)),
         "controllers_ms_median": float(np.median(controllers_ms)),
         "parts_ms_median": {k: float(np.nanmedian(v)) for k, v in ms.items()},
@@ -110,6 +114,7 @@ def main() -> int:
           f"{out['frames']} frames after {args.warmup} warm-up")
     print(f"  fps: {out['fps_median']:.1f} (median frame {out['frame_ms_median']:.1f} ms), "
           f"{out['fps_wall']:.1f} frames / wall second")
+    print(f"  process CPU time per frame: {out['process_cpu_ms_per_frame']:.1f} ms (all threads, llvmpipe included)")
     print(f"  Python-side per frame (studio: input + 3D scene update + panels): {out['python_ms_median']:.2f} ms median")
     print(f"  controllers per frame: {out['controllers_ms_median']:.2f} ms median")
     labels = {"input": "input", "mm": "MM step", "lmm": "LMM step", "viewport": "3D scene update (Python)",

@@ -9,6 +9,8 @@ ERROR_WINDOW = 10090
 
 
 class ErrorDialog:
+    window = ERROR_WINDOW
+
     def __init__(self, dpg):
         self.dpg = dpg
         self.shown: list[dict] = []     # every error reported this session (also for the test dump)

@@ -116,8 +116,8 @@ class LatentPanel:
             if z is not None:
                 series["mm"] = z
         for key, v in series.items():  # each map's colour range follows its recent values smoothly
-            if v.ndim == 2:
-                self._scale[key] = 0.9 * self._scale[key] + 0.1 * latent_scale(v[-60:])
+            if v.ndim == 2 and view.frame % 6 == 0:
+                self._scale[key] = 0.7 * self._scale[key] + 0.3 * latent_scale(v[-60:])
         for key in ("lmm", "mm"):
             v = series.get(key)
             tag = f"lat_heat_{key}"

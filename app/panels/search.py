@@ -251,7 +251,7 @@ class CandidatesPanel:
                            borders_innerV=True, borders_outerH=True, borders_outerV=True, resizable=True,
                            policy=dpg.mvTable_SizingFixedFit, scrollY=True, scrollX=True, freeze_rows=1,
                            height=-1):
-                widths = {"rank": 18, "frame": 44, "clip": 150, "t": 40, "total": 44, "bias": 40}
+                widths = {"rank": 18, "frame": 50, "clip": 150, "t": 40, "total": 46, "bias": 40}
                 for i, (key, label) in enumerate(zip(self.columns, labels)):
                     dpg.add_table_column(label=label, tag=f"cand_col_{key}", user_data=key,
                                          default_sort=(key == "total"), prefer_sort_ascending=True,

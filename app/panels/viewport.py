@@ -21,8 +21,8 @@ TRAIL_SECONDS = 4.0
 
 def world_from_root(root_pos, root_rot, local_xyz):
     """Root-space points (N, 3) to world."""
-    return np.asarray(root_pos, np.float64) + quat.mul_vec(np.asarray(root_rot, np.float64),
-                                                           np.asarray(local_xyz, np.float64))
+    return np.asarray(root_pos, np.float64) + np.asarray(local_xyz, np.float64) @ quat.to_matrix(
+        np.asarray(root_rot, np.float64)).T
 
 
 def feature_markers(features, normalized, root_pos, root_rot, bone_positions: dict) -> dict:
@@ -34,32 +34,34 @@ def feature_markers(features, normalized, root_pos, root_rot, bone_positions: di
     0.1 s of motion, and trajectory points/directions on the ground.
     """
     raw = features.denormalize(np.asarray(normalized, np.float32)).astype(np.float64)
+    rot_t = quat.to_matrix(np.asarray(root_rot, np.float64)).T     # row vectors: v @ R^T == R v
+    root = np.asarray(root_pos, np.float64)
     points, origins, vectors, traj, dirs = [], [], [], [], []
     positions_by_bone = {}
     for ch, s in zip(features.layout, features.slices):
-        v = raw[s]
         if ch.kind == "bone_position":
-            p = world_from_root(root_pos, root_rot, v[None])[0]
+            p = root + raw[s] @ rot_t
             points.append(p)
             positions_by_bone[ch.bone] = p
     for ch, s in zip(features.layout, features.slices):
         v = raw[s]
         if ch.kind == "bone_velocity":
             start = bone_positions.get(ch.bone, positions_by_bone.get(ch.bone))
-            if start is None:
-                continue
-            origins.append(start)
-            vectors.append(quat.mul_vec(np.asarray(root_rot, np.float64), v) * 0.1)
-        elif ch.kind == "trajectory_position":
+            if start is not None:
+                origins.append(start)
+                vectors.append((v @ rot_t) * 0.1)
+        elif ch.kind.startswith("trajectory"):
             xz = v.reshape(-1, 2)
-            traj.extend(world_from_root(root_pos, root_rot, np.c_[xz[:, 0], np.zeros(len(xz)), xz[:, 1]]))
-        elif ch.kind == "trajectory_direction":
-            xz = v.reshape(-1, 2)
-            dirs.extend(quat.mul_vec(np.asarray(root_rot, np.float64), np.c_[xz[:, 0], np.zeros(len(xz)), xz[:, 1]]))
+            ground = np.zeros((len(xz), 3))
+            ground[:, 0], ground[:, 2] = xz[:, 0], xz[:, 1]
+            if ch.kind == "trajectory_position":
+                traj.append(root + ground @ rot_t)
+            else:
+                dirs.append(ground @ rot_t)
     z3 = np.zeros((0, 3))
     return {"points": np.array(points) if points else z3,
             "arrows": (np.array(origins) if origins else z3, np.array(vectors) if vectors else z3),
-            "traj": np.array(traj) if traj else z3, "traj_dirs": np.array(dirs) if dirs else z3}
+            "traj": np.concatenate(traj) if traj else z3, "traj_dirs": np.concatenate(dirs) if dirs else z3}
 
 
 def is_software_renderer(name: str) -> bool:
@@ -430,10 +432,10 @@ class ViewportPanel:
             traj = np.asarray(snap.trajectory_positions, np.float64) + off + lift
             b.add_polyline(np.vstack([sim[None], traj]), d.traj_color)
             b.add_spheres(traj, 0.045, d.traj_color)
-            dirs = quat.mul_vec(np.asarray(snap.trajectory_rotations, np.float64), FORWARD) * 0.35
+            dirs = quat.to_matrix(np.asarray(snap.trajectory_rotations, np.float64))[..., :, 2] * 0.35  # +Z axis
             b.add_arrows(traj, dirs, d.traj_color)
             b.add_spheres(sim, 0.06, SIM_COLOR)
-            sim_dir = quat.mul_vec(np.asarray(snap.simulation_rotation, np.float64), FORWARD) * 0.5
+            sim_dir = quat.to_matrix(np.asarray(snap.simulation_rotation, np.float64))[:, 2] * 0.5
             b.add_arrows(np.array([sim, sim]), np.array([sim_dir, np.asarray(snap.desired_velocity) * 0.25]),
                          SIM_COLOR)
         features = self._features_of(name)
