@@ -15,6 +15,7 @@ from __future__ import annotations
 import json
 import os
 import shutil
+import signal
 import sys
 import tempfile
 import time
@@ -26,7 +27,8 @@ import numpy as np
 from lmm.controller import InputState
 
 from .panels import layouts as layout_files
-from .panels.common import COLORS, WINDOWS, View, window_alias, window_tag
+from .panels.common import WINDOWS, View, window_alias, window_tag
+from .panels.common import overlapping as overlap_keys
 from .panels.errors import ErrorDialog
 from .panels.stats import FrameTimes
 from .session import Session, load_reference_clip, make_controllers, make_lmm_controller
@@ -495,6 +497,8 @@ class Studio:
             rect = layout.windows.get(key)
             show = key not in layout.hidden and rect is not None
             dpg.configure_item(tag, show=show)
+            if rect is not None and rect.get("docked") and layout is self.layout and self.frame_index == 0:
+                continue  # docked at start: dearpygui restored the dock node from the file already
             if rect is not None and rect.get("pos") is not None and rect.get("size") is not None:
                 pos, size = layout_files.scaled(rect["pos"], rect["size"], layout.reference_size, viewport)
                 dpg.set_item_pos(tag, pos)
@@ -544,13 +548,7 @@ class Studio:
                 x, y = dpg.get_item_pos(tag)
                 w, h = dpg.get_item_rect_size(tag)
                 rects[key] = (x, y, x + w, y + h)
-        overlapping = set()
-        keys = list(rects)
-        for i, a in enumerate(keys):
-            for b in keys[i + 1:]:
-                ra, rb = rects[a], rects[b]
-                if min(ra[2], rb[2]) - max(ra[0], rb[0]) > 3 and min(ra[3], rb[3]) - max(ra[1], rb[1]) > 3:
-                    overlapping.update((a, b))
+        overlapping = overlap_keys(rects)
         for key in set(WINDOWS):
             want = key in overlapping
             if want != (key in self._opaque):
@@ -617,10 +615,13 @@ class Studio:
         t1 = time.perf_counter()
         n = self._ticks_due(frame_dt)
         tuning_seen = None
+        step_ms = dict.fromkeys(self.session.names, 0.0)
         for _ in range(n):
             inp = self.session.input_for_next_tick(live)
             tuning_seen = self.session.tuning.to_dict() if self.opts.dump_state else None
             self.session.step(inp)
+            for name in step_ms:
+                step_ms[name] += self.session.step_ms.get(name, 0.0)
         t2 = time.perf_counter()
         view = View(tick=self.displayed_tick(), live=self.scrub_tick is None and not self.paused,
                     paused=self.paused, inspected=self.inspected, history=self.session.history,
@@ -641,8 +642,7 @@ class Studio:
         parts = {"input": (t1 - t0) * 1e3, "viewport": (t3 - t2) * 1e3 - vp.render_ms - vp.readback_ms,
                  "render": vp.render_ms, "readback": vp.readback_ms, "panels": (t4 - t3) * 1e3,
                  "ui": (t5 - t4) * 1e3}
-        for name in self.session.names:
-            parts[name] = self.session.step_ms.get(name, 0.0) if n else 0.0
+        parts.update(step_ms)          # every tick of this frame
         self.frame_times.add((t5 - t0) * 1e3, parts)
         if self.opts.dump_state:
             self._dump_frame(view, n, tuning_seen, parts)
@@ -653,6 +653,12 @@ class Studio:
     # ==========================================================================================
     def run(self) -> int:
         dpg = self.dpg
+        # Ctrl-C / kill: leave the frame loop and shut down normally (the layout is saved)
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            try:
+                signal.signal(sig, lambda *_: self.quit())
+            except (ValueError, OSError):  # not the main thread
+                pass
         self.load_engine()
         self.build_ui()
         dpg.render_dearpygui_frame()          # dearpygui's GL context exists after the first frame

@@ -122,6 +122,20 @@ def fmt_bytes(n: float) -> str:
     return f"{n:.1f} GB"
 
 
+def overlapping(rects: dict, tolerance: float = 3.0) -> set:
+    """Keys of the rectangles ``(x0, y0, x1, y1)`` that overlap another by more than ``tolerance`` px
+    in both directions (windows that merely touch do not count)."""
+    keys = list(rects)
+    out = set()
+    for i, a in enumerate(keys):
+        ra = rects[a]
+        for b in keys[i + 1:]:
+            rb = rects[b]
+            if min(ra[2], rb[2]) - max(ra[0], rb[0]) > tolerance and min(ra[3], rb[3]) - max(ra[1], rb[1]) > tolerance:
+                out.update((a, b))
+    return out
+
+
 def decimate(x: np.ndarray, y: np.ndarray, max_points: int) -> tuple[np.ndarray, np.ndarray]:
     """Every k-th point (the last one always kept) so a line series has at most ``max_points``:
     a plot a few hundred pixels wide shows no more, and each point costs raster time."""

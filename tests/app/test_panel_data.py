@@ -9,7 +9,7 @@ import pytest
 
 from app.history import History, Tick
 from app.panels import layouts
-from app.panels.common import View, cost_color, fmt_bytes, short_channel_name
+from app.panels.common import View, cost_color, decimate, fmt_bytes, overlapping, short_channel_name
 from app.panels.features import bar_layout, bar_values, channel_errors
 from app.panels.latent import diverging_lut, heat_image, latent_scale
 from app.panels.search import candidate_rows, column_fractions, frame_label, rolling_agreement, sort_rows
@@ -292,3 +292,14 @@ def test_reference_clip_loads_and_bad_files_raise(tmp_path):
     assert clip.positions.shape[1] == 22 and 1.0 < np.ptp(clip.positions[0, :, 1]) < 2.5   # metres
     with pytest.raises(BVHError):
         load_reference_clip(CORPUS / "truncated_frame.bvh")
+
+
+def test_overlap_and_decimation_helpers():
+    tiled = {"a": (0, 0, 100, 100), "b": (100, 0, 200, 100), "c": (0, 100, 200, 200)}
+    assert overlapping(tiled) == set()
+    tiled["d"] = (150, 50, 250, 150)            # dragged over b and c
+    assert overlapping(tiled) == {"b", "c", "d"}
+    x = np.arange(1000.0)
+    dx, dy = decimate(x, x * 2, 300)
+    assert len(dx) <= 300 and dx[-1] == 999.0 and np.all(dy == 2 * dx)
+    assert decimate(x[:10], x[:10], 300)[0] is not None and len(decimate(x[:10], x[:10], 300)[0]) == 10
