@@ -96,6 +96,9 @@ class DebugSnapshot:
     nn_cost: float = float("nan")
     projected_cost: float = float("nan")          # query cost of the projector's features
     matched_latent: np.ndarray | None = None      # (L,) compressor latent of the matched frame (MM, if networks loaded)
+    # cost of the playing pose's features against this tick's query (a per-tick cost timeline; best_cost
+    # is the last search's best, carried between searches like ``candidates``)
+    current_cost: float = float("nan")
 
 
 class Controller(ABC):

@@ -1,0 +1,437 @@
+"""The shared character pipeline of motion matching and learned motion matching.
+
+One tick of :meth:`CharacterController.step` reads top to bottom as the animation pipeline::
+
+    input -> desired velocity/rotation -> simulation springs -> predicted trajectory -> query
+          -> [search hook, when due] -> inertialize a jump -> [advance hook] -> decay offsets
+          -> root integration -> adjustment/clamping -> forward kinematics -> foot locking + IK
+          -> snapshot
+
+Subclasses decide only *how the next pose is chosen and produced*, through five hooks:
+
+``_reset_source(frame)``
+    Put the pose source at a start state (MM: a database frame; LMM: the projected/compressed state of
+    that frame). ``frame`` may be None (the subclass picks).
+``_source_features() -> (D,) raw features``
+    The matching features of the pose the source is playing now; the query takes its pose channels
+    from here (the trajectory channels come from the simulation object).
+``_search(query_norm, forced) -> SearchOutcome``
+    Called when a search is due (interval elapsed, sharp input change, or ``_must_jump()``). Return an
+    outcome; when ``outcome.target`` is a :class:`SourcePose` the source has jumped there, and the
+    base class inertializes from the pose on screen to that target. ``target=None``: keep playing.
+``_advance_pose(dt) -> SourcePose``
+    Advance the source by ``dt`` seconds and return its new pose (the goal that the inertialization
+    offsets are added to). Called every tick, after any jump.
+``_must_jump() -> bool`` (optional, default False)
+    True when the source cannot keep playing (MM: the end of a clip range), which forces a search.
+
+Optional: ``_source_frame()`` (database frame shown in the debugger, default -1),
+``_on_features_changed()`` (feature weights changed: normalised features were rebuilt) and
+``_snapshot_extras() -> dict`` (extra :class:`DebugSnapshot` fields, e.g. the LMM latent).
+
+A :class:`SourcePose` is in the database's local form: bone 0 (the simulation/root bone) carries the
+root's velocity and angular velocity *in the root's own frame*; its position/rotation are unused,
+because the base class integrates the character root in world space itself. Every other bone is local
+to its parent, as in :class:`lmm.database.Database`.
+"""
+from __future__ import annotations
+
+import copy
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import quat
+from .controller import Candidates, Controller, DebugSnapshot, InputState, Pose
+from .features import build_query
+from .ik import FootLockState, foot_lock_update, local_rotations_from_global, solve_leg
+from .inertialize import Offsets, inertialize_apply, inertialize_decay, inertialize_transition
+from .springs import LN2, EPS
+from .trajectory import (SimulationState, desired_rotation, desired_velocity, simulation_update,
+                         stick_to_world, stick_with_deadzone, trajectory_in_root_space, trajectory_offsets,
+                         trajectory_predict)
+from .tuning import Tuning
+
+
+@dataclass
+class SourcePose:
+    """One pose of the source, database skeleton, local form (see the module doc)."""
+    positions: np.ndarray           # (J, 3) local (bone 0 unused)
+    rotations: np.ndarray           # (J, 4) local (bone 0 unused)
+    velocities: np.ndarray          # (J, 3) local; bone 0: root velocity in the root's frame
+    angular_velocities: np.ndarray  # (J, 3) local; bone 0: root angular velocity in the root's frame
+    contacts: np.ndarray            # (2,) bool
+    frame: int = -1                 # database frame it came from, if any
+
+
+@dataclass
+class SearchOutcome:
+    """What a search (MM) or projection (LMM) decided."""
+    target: SourcePose | None       # the pose the source jumped to, None when it keeps playing
+    best_frame: int = -1
+    best_cost: float = float("nan")
+    candidates: Candidates | None = None
+    timings_us: dict = field(default_factory=dict)
+
+
+def database_source_pose(db, frame: int, root_local_velocity=None, root_local_angular_velocity=None) -> SourcePose:
+    """Frame ``frame`` of the database as a :class:`SourcePose` (float64)."""
+    pos = db.positions[frame].astype(np.float64)
+    rot = db.rotations[frame].astype(np.float64)
+    vel = db.velocities[frame].astype(np.float64)
+    ang = db.angular_velocities[frame].astype(np.float64)
+    if root_local_velocity is not None:
+        vel[0] = root_local_velocity[frame]
+        ang[0] = root_local_angular_velocity[frame]
+    else:
+        vel[0] = quat.inv_mul_vec(rot[0], vel[0])
+        ang[0] = quat.inv_mul_vec(rot[0], ang[0])
+    pos[0] = 0.0
+    rot[0] = (1.0, 0.0, 0.0, 0.0)
+    return SourcePose(pos, rot, vel, ang, db.contacts[frame].copy(), int(frame))
+
+
+def root_local_velocities(db):
+    """Every frame's root velocity and angular velocity in the root's own frame, (N, 3) each."""
+    r = db.rotations[:, 0].astype(np.float64)
+    return (quat.inv_mul_vec(r, db.velocities[:, 0].astype(np.float64)),
+            quat.inv_mul_vec(r, db.angular_velocities[:, 0].astype(np.float64)))
+
+
+def forward_kinematics_pose(local_rot: np.ndarray, local_pos: np.ndarray, parents) -> tuple[np.ndarray, np.ndarray]:
+    """Global rotations (J, 4) and positions (J, 3) of one pose.
+
+    Plain Python floats: for one pose of ~20 bones this is several times faster than numpy calls on
+    tiny arrays (see :func:`lmm.quat.forward_kinematics` for frames in bulk).
+    """
+    rl = local_rot.tolist()
+    pl = local_pos.tolist()
+    n = len(rl)
+    g = [None] * n
+    p = [None] * n
+    for j in range(n):
+        w, x, y, z = rl[j]
+        px, py, pz = pl[j]
+        pj = parents[j]
+        if pj < 0:
+            g[j] = (w, x, y, z)
+            p[j] = (px, py, pz)
+            continue
+        aw, ax, ay, az = g[pj]
+        g[j] = (aw * w - ax * x - ay * y - az * z, aw * x + ax * w + ay * z - az * y,
+                aw * y - ax * z + ay * w + az * x, aw * z + ax * y - ay * x + az * w)
+        tx = 2.0 * (ay * pz - az * py)
+        ty = 2.0 * (az * px - ax * pz)
+        tz = 2.0 * (ax * py - ay * px)
+        qx, qy, qz = p[pj]
+        p[j] = (qx + px + aw * tx + (ay * tz - az * ty), qy + py + aw * ty + (az * tx - ax * tz),
+                qz + pz + aw * tz + (ax * ty - ay * tx))
+    return np.array(g), np.array(p)
+
+
+def _norm(v) -> float:
+    """Length of one small vector (np.linalg.norm costs several microseconds per call)."""
+    v = np.asarray(v, dtype=np.float64).ravel()
+    return math.sqrt(float(v @ v))
+
+
+def _damper_factor(halflife: float, dt: float) -> float:
+    return 1.0 - float(np.exp(-LN2 * dt / (halflife + EPS)))
+
+
+class CharacterController(Controller):
+    """The shared pipeline; subclasses implement the source hooks (see the module doc)."""
+
+    name = "character"
+
+    def __init__(self, db, features, tuning: Tuning | None = None):
+        self.db = db
+        # own copy: set_weights replaces the arrays, so two controllers never see each other's weights
+        self.features = copy.copy(features)
+        self.tuning = tuning if tuning is not None else Tuning()
+        for ch, w in zip(self.features.layout, self.features.weights):
+            self.tuning.feature_weights.setdefault(ch.name, float(w))
+        self.tuning.validate()
+        self.parents = [int(p) for p in db.parents]
+        self.n_bones = db.n_bones
+        self.traj_offsets = trajectory_offsets(self.features)
+        self._traj_index = {int(o): i for i, o in enumerate(self.traj_offsets)}
+        feet = ("left_foot", "right_foot")
+        toes = ("left_toe", "right_toe")
+        self.toe_bones = [db.bone(t) for t in toes]
+        self.foot_bones = [db.bone(f) for f in feet]
+        self.leg_chains = []
+        self.toe_axes = []
+        for f, t in zip(self.foot_bones, self.toe_bones):
+            knee = self.parents[f]
+            hip = self.parents[knee]
+            self.leg_chains.append((hip, knee, f, t))
+            axis = db.positions[0, t].astype(np.float64)
+            self.toe_axes.append(axis / max(_norm(axis), 1e-9))
+        self.reset()
+
+    # ------------------------------------------------------------------------------------------
+    # hooks (see module doc)
+    # ------------------------------------------------------------------------------------------
+    def _reset_source(self, frame: int | None) -> None:
+        raise NotImplementedError
+
+    def _source_features(self) -> np.ndarray:
+        raise NotImplementedError
+
+    def _search(self, query_norm: np.ndarray, forced: bool) -> SearchOutcome:
+        raise NotImplementedError
+
+    def _advance_pose(self, dt: float) -> SourcePose:
+        raise NotImplementedError
+
+    def _must_jump(self) -> bool:
+        return False
+
+    def _source_frame(self) -> int:
+        return -1
+
+    def _on_features_changed(self) -> None:
+        pass
+
+    def _snapshot_extras(self) -> dict:
+        return {}
+
+    # ------------------------------------------------------------------------------------------
+    # state
+    # ------------------------------------------------------------------------------------------
+    def reset(self, position=None, rotation=None, frame: int | None = None) -> None:
+        position = np.zeros(3) if position is None else np.asarray(position, dtype=np.float64)
+        rotation = np.array([1.0, 0, 0, 0]) if rotation is None else quat.normalize(np.asarray(rotation, np.float64))
+        self._apply_feature_weights()
+        self.sim = SimulationState(position=position.copy(), rotation=rotation.copy())
+        self.desired_rotation = rotation.copy()
+        self.desired_velocity = np.zeros(3)
+        self.root_position = position.copy()
+        self.root_rotation = rotation.copy()
+        self._reset_source(frame)
+        pose = self._current_source_pose()
+        self.source = pose
+        self.shown = (pose.positions.copy(), pose.velocities.copy(), pose.rotations.copy(),
+                      pose.angular_velocities.copy())
+        self.offsets = Offsets.zeros(self.n_bones)
+        self.foot_lock = FootLockState()
+        self._prev_toe = None
+        self._velocity_change_high = False
+        self._rotation_change_high = False
+        self._since_search = 0.0
+        self._needs_search = True
+        self.tick = 0
+        self.time_s = 0.0
+        self._last_candidates = Candidates.empty(len(self.features.layout), self.features.names)
+        self._last_best_cost = float("nan")
+        self._last_best_frame = -1
+
+    def _current_source_pose(self) -> SourcePose:
+        """The source's pose right after a reset (advance by zero)."""
+        return self._advance_pose(0.0)
+
+    def _apply_feature_weights(self) -> bool:
+        fw = self.tuning.feature_weights
+        new = np.array([fw.get(ch.name, w) for ch, w in zip(self.features.layout, self.features.weights)],
+                       dtype=np.float32)
+        if self.features.set_weights(new):
+            self._on_features_changed()
+            return True
+        return False
+
+    # ------------------------------------------------------------------------------------------
+    # the tick
+    # ------------------------------------------------------------------------------------------
+    def step(self, inp: InputState, dt: float) -> tuple[Pose, DebugSnapshot]:
+        t_start = time.perf_counter()
+        tun = self.tuning
+        timings: dict[str, float] = {}
+        self._apply_feature_weights()
+
+        # input -> desired velocity and rotation (camera relative, deadzone)
+        left = stick_to_world(stick_with_deadzone(inp.left_x, inp.left_y, tun.stick_deadzone), inp.camera_azimuth)
+        right = stick_to_world(stick_with_deadzone(inp.right_x, inp.right_y, tun.stick_deadzone), inp.camera_azimuth)
+        des_vel = desired_velocity(left, self.sim.rotation, inp.walk, tun)
+        des_rot = desired_rotation(left, right, des_vel, self.desired_rotation, inp.strafe, inp.camera_azimuth)
+        forced = self._sharp_input_change(des_vel, des_rot, dt)
+        self.desired_velocity, self.desired_rotation = des_vel, des_rot
+
+        # simulation object and its predicted future
+        self.sim = simulation_update(self.sim, des_vel, des_rot, tun.simulation_velocity_halflife_s,
+                                     tun.simulation_rotation_halflife_s, dt)
+        times = self.traj_offsets / self.db.fps
+        traj_pos, traj_rot, _ = trajectory_predict(self.sim, des_vel, des_rot, tun.simulation_velocity_halflife_s,
+                                                   tun.simulation_rotation_halflife_s, times)
+
+        # query: pose channels from the playing pose; trajectory channels from the prediction, seen from
+        # the character root (as every database frame's features are seen from its own root), so a
+        # character lagging behind the simulation object asks for the motion that catches up
+        local_pos, local_dir = trajectory_in_root_space(traj_pos, traj_rot, self.root_position, self.root_rotation)
+        index = self._traj_index
+        query_raw = build_query(self.features, self._source_features(),
+                                lambda o: (local_pos[index[o]], local_dir[index[o]]))
+        query = self.features.normalize(query_raw)
+
+        # search when due
+        # time since the last search against the interval read now, so a new interval acts at once
+        self._since_search += dt
+        searched = transitioned = False
+        must = self._must_jump()
+        if self._needs_search or forced or must or self._since_search >= tun.search_interval_s - 1e-6:
+            t0 = time.perf_counter()
+            outcome = self._search(query, forced or must)
+            timings["search"] = (time.perf_counter() - t0) * 1e6
+            timings.update(outcome.timings_us)
+            searched = True
+            self._needs_search = False
+            self._since_search = 0.0
+            if outcome.candidates is not None:
+                self._last_candidates = outcome.candidates
+            self._last_best_cost = outcome.best_cost
+            self._last_best_frame = outcome.best_frame
+            if outcome.target is not None:
+                transitioned = True
+                t = outcome.target
+                self.offsets = inertialize_transition(*self.shown, t.positions, t.velocities, t.rotations,
+                                                      t.angular_velocities)
+
+        # advance the source and blend its pose with the decaying offsets
+        t0 = time.perf_counter()
+        src = self._advance_pose(dt)
+        self.source = src
+        timings["advance"] = (time.perf_counter() - t0) * 1e6
+        self.offsets = inertialize_decay(self.offsets, tun.inertialization_halflife_s, dt)
+        pos, vel, rot, ang = inertialize_apply(self.offsets, src.positions, src.velocities, src.rotations,
+                                               src.angular_velocities)
+        self.shown = (pos, vel, rot, ang)
+
+        # root integration (character space velocities -> world)
+        root_vel_world = quat.mul_vec(self.root_rotation, vel[0])
+        root_ang_world = quat.mul_vec(self.root_rotation, ang[0])
+        self.root_position = self.root_position + root_vel_world * dt
+        self.root_rotation = quat.normalize(quat.mul(quat.from_scaled_angle_axis(root_ang_world * dt),
+                                                     self.root_rotation))
+        self._synchronize(root_vel_world, root_ang_world, dt)
+
+        # world pose, then foot locking
+        t0 = time.perf_counter()
+        local_rot = rot.copy()
+        local_pos = pos.copy()
+        local_rot[0] = self.root_rotation
+        local_pos[0] = self.root_position
+        g_rot, g_pos = forward_kinematics_pose(local_rot, local_pos, self.parents)
+        locked = np.zeros(2, dtype=bool)
+        toe_now = g_pos[self.toe_bones].copy()
+        if tun.ik_enabled:
+            toe_vel = np.zeros((2, 3)) if self._prev_toe is None or dt <= 0 else (toe_now - self._prev_toe) / dt
+            self.foot_lock, targets = foot_lock_update(
+                self.foot_lock, toe_now, toe_vel, src.contacts, tun.ik_unlock_radius_m, tun.ik_blend_halflife_s,
+                tun.ik_foot_height_m, dt)
+            locked = self.foot_lock.locked.copy()
+            new_global = {}
+            for i, chain in enumerate(self.leg_chains):
+                if not locked[i] and float(np.abs(targets[i] - toe_now[i]).max()) <= 1e-6:
+                    continue  # free and fully blended back: nothing to solve
+                ground = targets[i][1] - tun.ik_foot_height_m if locked[i] else None
+                new_global.update(solve_leg(g_pos, g_rot, chain, targets[i], self.toe_axes[i],
+                                            tun.ik_toe_length_m, ground))
+            if new_global:
+                for j in sorted(new_global):
+                    g_rot[j] = new_global[j]
+                for j, q in local_rotations_from_global(g_rot, self.parents, sorted(new_global)).items():
+                    local_rot[j] = q
+                g_rot, g_pos = forward_kinematics_pose(local_rot, local_pos, self.parents)
+        else:
+            self.foot_lock = FootLockState()
+        self._prev_toe = toe_now
+        timings["pose"] = (time.perf_counter() - t0) * 1e6
+
+        # ghost: the source pose without offsets, placed at the character root
+        ghost_rot = src.rotations.copy()
+        ghost_pos = src.positions.copy()
+        ghost_rot[0] = self.root_rotation
+        ghost_pos[0] = self.root_position
+        _, ghost = forward_kinematics_pose(ghost_rot, ghost_pos, self.parents)
+
+        pose = Pose(local_positions=local_pos.astype(np.float32), local_rotations=local_rot.astype(np.float32),
+                    global_positions=g_pos.astype(np.float32), global_rotations=g_rot.astype(np.float32),
+                    contacts=np.asarray(src.contacts, dtype=bool).copy())
+        self.tick += 1
+        self.time_s = self.tick * dt if dt > 0 else self.time_s
+        current_norm = self.features.normalize(self._source_features())
+        timings["total"] = (time.perf_counter() - t_start) * 1e6
+        frame = self._source_frame()
+        snap = DebugSnapshot(
+            controller=self.name, tick=self.tick, time_s=self.time_s, input=inp.copy(),
+            simulation_position=self.sim.position.copy(), simulation_rotation=self.sim.rotation.copy(),
+            simulation_velocity=self.sim.velocity.copy(), desired_velocity=des_vel.copy(),
+            desired_rotation=des_rot.copy(), trajectory_positions=traj_pos, trajectory_rotations=traj_rot,
+            trajectory_offsets=self.traj_offsets.copy(), query=query, current_features=current_norm,
+            matched_frame=int(frame),
+            matched_features=(self.features.normalized[frame].copy() if frame >= 0 else current_norm),
+            candidates=self._last_candidates, searched=searched, forced_search=bool(searched and (forced or must)),
+            transitioned=transitioned, best_cost=float(self._last_best_cost), pose=pose,
+            matched_pose_positions=ghost.astype(np.float32), foot_contacts=pose.contacts.copy(),
+            foot_locked=locked, timings_us=timings, current_cost=float(np.sum((query - current_norm) ** 2)),
+            **self._snapshot_extras())
+        return pose, snap
+
+    # ------------------------------------------------------------------------------------------
+    # pieces of the tick
+    # ------------------------------------------------------------------------------------------
+    def _sharp_input_change(self, des_vel, des_rot, dt) -> bool:
+        """True on the tick the desired velocity's (or rotation's) rate of change falls back under the
+        threshold after exceeding it: the end of a sharp input change, when the new trajectory is known."""
+        if dt <= 0:
+            return False
+        threshold = self.tuning.forced_search_threshold
+        vel_rate = float(_norm(des_vel - self.desired_velocity)) / dt
+        rot_rate = float(_norm(quat.to_scaled_angle_axis(
+            quat.abs_(quat.mul_inv(des_rot, self.desired_rotation))))) / dt
+        forced = False
+        if vel_rate > threshold:
+            self._velocity_change_high = True
+        elif self._velocity_change_high:
+            self._velocity_change_high = False
+            forced = True
+        if rot_rate > threshold:
+            self._rotation_change_high = True
+        elif self._rotation_change_high:
+            self._rotation_change_high = False
+            forced = True
+        return forced
+
+    def _synchronize(self, root_vel_world, root_ang_world, dt) -> None:
+        """Adjustment (pull the character root towards the simulation object) and clamping."""
+        tun = self.tuning
+        sim_pos, sim_rot = self.sim.position, self.sim.rotation
+        if tun.adjustment_enabled and dt > 0:
+            delta = (sim_pos - self.root_position) * _damper_factor(tun.adjustment_position_halflife_s, dt)
+            if tun.adjustment_by_velocity:
+                cap = tun.adjustment_max_speed_ratio * float(_norm(root_vel_world)) * dt
+                length = float(_norm(delta))
+                if length > cap:
+                    delta = delta * (cap / length)
+            self.root_position = self.root_position + delta
+            diff = quat.to_scaled_angle_axis(quat.abs_(quat.mul_inv(sim_rot, self.root_rotation)))
+            step = diff * _damper_factor(tun.adjustment_rotation_halflife_s, dt)
+            if tun.adjustment_by_velocity:
+                cap = tun.adjustment_max_speed_ratio * float(_norm(root_ang_world)) * dt
+                length = float(_norm(step))
+                if length > cap:
+                    step = step * (cap / length)
+            self.root_rotation = quat.normalize(quat.mul(quat.from_scaled_angle_axis(step), self.root_rotation))
+        if tun.clamping_enabled:
+            offset = self.root_position - sim_pos
+            dist = float(_norm(offset))
+            if dist > tun.clamp_max_distance_m:
+                self.root_position = sim_pos + offset * (tun.clamp_max_distance_m / dist)
+            diff = quat.to_scaled_angle_axis(quat.abs_(quat.mul_inv(self.root_rotation, sim_rot)))
+            angle = float(_norm(diff))
+            max_angle = np.radians(tun.clamp_max_angle_deg)
+            if angle > max_angle:
+                self.root_rotation = quat.normalize(quat.mul(quat.from_scaled_angle_axis(diff * (max_angle / angle)),
+                                                             sim_rot))

@@ -1,0 +1,126 @@
+"""Motion matching: the pose source plays database frames and jumps to the best match of each search."""
+from __future__ import annotations
+
+import numpy as np
+
+from .character import CharacterController, SearchOutcome, SourcePose, database_source_pose, root_local_velocities
+from .controller import Candidates
+from .search import SearchIndex, brute_force_search, candidate_mask
+from .tuning import Tuning
+
+
+def default_start_frame(db) -> int:
+    """A standing frame: the slowest root and hips among frames away from the ends of their ranges."""
+    root_speed = np.linalg.norm(db.velocities[:, 0], axis=-1)
+    hips_speed = np.linalg.norm(db.velocities[:, db.bone("hips")], axis=-1)
+    score = root_speed + hips_speed
+    ok = candidate_mask(db.n_frames, db.range_starts, db.range_stops, 60)
+    for start in db.range_starts:
+        ok[int(start):int(start) + 60] = False
+    if not ok.any():
+        ok[:] = True
+    return int(np.flatnonzero(ok)[np.argmin(score[ok])])
+
+
+class MotionMatchingController(CharacterController):
+    """Motion matching over ``db`` with ``features``; every tunable comes from ``tuning``.
+
+    The pose source is a database frame index advanced at the database rate (one frame per tick at
+    60 Hz; other tick rates advance by the elapsed whole frames). A search compares the query with
+    every candidate frame (exactly, accelerated by :class:`lmm.search.SearchIndex` unless
+    ``tuning.accelerated_search`` is off) and jumps when a frame other than the playing one wins.
+    """
+
+    name = "mm"
+
+    def __init__(self, db, features, tuning: Tuning | None = None):
+        self.index: SearchIndex | None = None
+        self._masks: dict[int, np.ndarray] = {}
+        self._root_vel, self._root_ang = root_local_velocities(db)
+        self.frame = 0
+        self.phase = 0.0
+        self.last_search = None
+        self._hint = None          # the last search's candidates ...
+        self._frames_since = 0     # ... and the frames played since (they seed the next search's bound)
+        self.search_log: list | None = None  # set to a list to collect (query, frame, hint) per search
+        super().__init__(db, features, tuning)
+
+    # -- hooks ----------------------------------------------------------------------------------
+    def _reset_source(self, frame: int | None) -> None:
+        self.frame = default_start_frame(self.db) if frame is None else int(frame)
+        if not 0 <= self.frame < self.db.n_frames:
+            raise ValueError(f"start frame {frame} is outside the database (0..{self.db.n_frames - 1})")
+        self.phase = 0.0
+        self._hint = None
+        self._frames_since = 0
+
+    def _source_features(self) -> np.ndarray:
+        return self.features.raw[self.frame]
+
+    def _source_frame(self) -> int:
+        return int(self.frame)
+
+    def _must_jump(self) -> bool:
+        return self.frame >= int(self.db.range_stop_of(self.frame)) - 1
+
+    def _on_features_changed(self) -> None:
+        if self.index is not None:
+            self.index.update(self.features.normalized)
+
+    def candidate_mask(self) -> np.ndarray:
+        """Frames that may be jumped to under the current tuning (the last frame of a range never)."""
+        end = max(int(self.tuning.exclude_range_end_frames), 1)
+        mask = self._masks.get(end)
+        if mask is None:
+            mask = candidate_mask(self.db.n_frames, self.db.range_starts, self.db.range_stops, end)
+            self._masks = {end: mask}
+        return mask
+
+    def search_hint(self) -> np.ndarray | None:
+        """Where the last search's candidates are now: a good first guess for the next search."""
+        return None if self._hint is None else self._hint + self._frames_since
+
+    def search(self, query_norm: np.ndarray, accelerated: bool | None = None, hint=None):
+        """Run the search for a normalised query from the current state (no side effects)."""
+        tun = self.tuning
+        if self.index is None:
+            self.index = SearchIndex(self.features.normalized)
+        self.index.update(self.features.normalized)
+        accelerated = tun.accelerated_search if accelerated is None else accelerated
+        args = dict(mask=self.candidate_mask(), current=int(self.frame), transition_cost=tun.transition_cost,
+                    exclude_window=int(tun.exclude_current_window_frames), top_k=int(tun.top_k),
+                    slices=self.features.slices)
+        if accelerated:
+            return self.index.search(query_norm, hint=self.search_hint() if hint is None else hint, **args)
+        return brute_force_search(self.features.normalized, query_norm, **args)
+
+    def _search(self, query_norm: np.ndarray, forced: bool) -> SearchOutcome:
+        if self.search_log is not None:
+            hint = self.search_hint()
+            self.search_log.append((np.array(query_norm, copy=True), int(self.frame),
+                                    None if hint is None else hint.copy()))
+        res = self.search(query_norm)
+        self.last_search = res
+        self._hint, self._frames_since = res.frames, 0
+        cands = Candidates(frames=res.frames, costs=res.costs, channel_costs=res.channel_costs, bias=res.bias,
+                           channel_names=self.features.names)
+        best = res.best_frame
+        target = None
+        if best >= 0 and best != self.frame:
+            self.frame = best
+            self.phase = 0.0
+            target = self._pose(best)
+        return SearchOutcome(target=target, best_frame=best, best_cost=res.best_cost, candidates=cands)
+
+    def _advance_pose(self, dt: float) -> SourcePose:
+        self.phase += dt * self.db.fps
+        steps = int(np.floor(self.phase + 1e-6))
+        if steps > 0:
+            self.phase -= steps
+            self._frames_since += steps
+            last = int(self.db.range_stop_of(self.frame)) - 1
+            self.frame = min(self.frame + steps, last)
+        return self._pose(self.frame)
+
+    def _pose(self, frame: int) -> SourcePose:
+        return database_source_pose(self.db, frame, self._root_vel, self._root_ang)

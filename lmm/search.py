@@ -1,0 +1,316 @@
+"""Nearest-frame search over the normalised database features: brute force and an exact accelerated index.
+
+The cost of frame ``i`` for a normalised query ``q`` is ``sum_d (X[i, d] - q[d])^2``. Candidates:
+
+* the *continuing* frame (the one being played) competes with its bare cost, unless it lies in the
+  excluded end of its range (it could not keep playing there);
+* every other frame carries ``transition_cost`` on top of its cost, and is excluded when it lies within
+  ``exclude_window`` frames of the continuing one (``|i - current| <= exclude_window``) or in the last
+  ``exclude_end`` frames of its range (see :func:`candidate_mask`).
+
+Ranking is by total cost, then continuing-before-others (a tie keeps playing), then frame index, so both
+searches give the same ordered top-K. Per-frame costs are always computed by the same ``einsum`` row
+reduction (its result for a row does not depend on how many rows are passed), so the accelerated search
+reproduces the brute-force costs bit for bit.
+
+The accelerated search (:class:`SearchIndex`) keeps axis-aligned bounding boxes of the features over
+blocks of 64 consecutive frames and, grouped under each, over its blocks of 8 frames (consecutive frames
+are close in every dimension at once, which keeps small temporal boxes tight). Per query it
+
+1. bounds the cost of every large block from below (squared distance from the query to its box);
+2. gets an upper bound ``ub`` on the k-th best cost from a few real frames: the ``hint`` (at run time
+   the previous search's candidates, advanced by the frames played since) or, without one, the best
+   small blocks of the most promising large blocks;
+3. keeps the large blocks with bound <= ub, bounds their small blocks, keeps those with bound <= ub,
+   and computes the exact cost of their frames.
+
+Every frame in the true top-K costs at most ub, so its blocks survive both cuts: the answer is exactly the
+brute-force one, whatever the hint. Bounds are shrunk by a relative 1e-5, far more than float32 rounding
+of a 27-term sum, so rounding can never make a bound exceed a computed cost.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+SMALL_BLOCK = 8   # frames per small box
+LARGE_BLOCK = 32  # frames per large box
+_BOUND_SLACK = np.float32(1.0 - 1e-5)
+_HINT_SPREAD = np.arange(-2, 3)  # a hinted frame and its neighbours seed the upper bound
+_PAD = 2                          # the candidate mask's extra False tail (hint neighbours may step outside)
+
+
+@dataclass
+class SearchResult:
+    """Top-K candidates, best first. ``frames[0]`` is the answer."""
+    frames: np.ndarray          # (K,) int64
+    costs: np.ndarray           # (K,) float32 total cost (feature cost + bias)
+    bias: np.ndarray            # (K,) float32 transition cost added (0 for the continuing frame)
+    channel_costs: np.ndarray   # (K, C) float32
+    continuing_frame: int = -1  # the playing frame, -1 when none
+    continuing_cost: float = float("nan")  # its feature cost, NaN when it could not compete
+    evaluated: int = 0          # frames whose exact cost was computed
+
+    @property
+    def best_frame(self) -> int:
+        return int(self.frames[0]) if self.frames.size else -1
+
+    @property
+    def best_cost(self) -> float:
+        return float(self.costs[0]) if self.costs.size else float("inf")
+
+
+def frame_costs(rows: np.ndarray, query: np.ndarray) -> np.ndarray:
+    """Squared distances (n,) of feature rows (n, D) to the query (D,), float32."""
+    d = rows - query
+    return np.einsum("ij,ij->i", d, d)
+
+
+def candidate_mask(n_frames: int, range_starts, range_stops, exclude_end: int) -> np.ndarray:
+    """(N,) bool: frames that may be jumped to (not in the last ``exclude_end`` frames of their range)."""
+    mask = np.ones(n_frames, dtype=bool)
+    if exclude_end > 0:
+        for start, stop in zip(np.asarray(range_starts), np.asarray(range_stops)):
+            mask[max(int(stop) - exclude_end, int(start)):int(stop)] = False
+    return mask
+
+
+def channel_costs(features_norm: np.ndarray, frames: np.ndarray, query: np.ndarray, slices) -> np.ndarray:
+    """(K, C) per-channel costs of the given frames."""
+    if not len(frames):
+        return np.zeros((0, len(slices)), dtype=np.float32)
+    d = features_norm[frames] - query
+    d *= d
+    starts = [s.start for s in slices]
+    if all(s.step in (None, 1) for s in slices) and starts == sorted(starts) and \
+            all(a.stop == b.start for a, b in zip(slices, slices[1:])) and slices[-1].stop == d.shape[1]:
+        return np.add.reduceat(d, starts, axis=1).astype(np.float32, copy=False)
+    return np.stack([d[:, s].sum(axis=1) for s in slices], axis=1).astype(np.float32)
+
+
+def _rank(frames, costs, current, cont_cost, transition_cost, top_k):
+    """Top-K of the non-continuing candidates merged with the continuing one, best first.
+
+    ``frames`` must be ascending (both searches produce them so): a stable sort by cost then breaks ties
+    by frame index. The continuing frame goes before any candidate with the same total (a tie keeps
+    playing). Returns (frames int64, total costs float32, bias float32).
+    """
+    if costs.size > 2048:
+        kth = np.partition(costs, top_k - 1)[top_k - 1]
+        keep = (costs <= kth).nonzero()[0]
+        frames, costs = frames[keep], costs[keep]
+    order = np.argsort(costs, kind="stable")[:top_k]
+    tc = np.float32(transition_cost)
+    frames = frames[order].tolist()
+    total = (costs[order] + tc).tolist()
+    bias = [float(tc)] * len(frames)
+    if current >= 0 and cont_cost == cont_cost:  # not NaN
+        at = next((i for i, t in enumerate(total) if t >= cont_cost), len(total))
+        if at < top_k:
+            frames.insert(at, int(current))
+            total.insert(at, cont_cost)
+            bias.insert(at, 0.0)
+            del frames[top_k:], total[top_k:], bias[top_k:]
+    return (np.array(frames, dtype=np.int64), np.array(total, dtype=np.float32),
+            np.array(bias, dtype=np.float32))
+
+
+def _result(features_norm, query, slices, frames, total, bias, current, cont_cost, evaluated):
+    return SearchResult(frames=frames, costs=total, bias=bias,
+                        channel_costs=channel_costs(features_norm, frames, query, slices),
+                        continuing_frame=int(current), continuing_cost=float(cont_cost), evaluated=int(evaluated))
+
+
+def _continuing_cost(features_norm, query, mask, current):
+    """The playing frame's feature cost (float32 value), NaN when it may not compete."""
+    if current >= 0 and mask[current]:
+        d = features_norm[current:current + 1] - query
+        return float(np.einsum("ij,ij->i", d, d)[0])
+    return float("nan")
+
+
+def brute_force_search(features_norm: np.ndarray, query: np.ndarray, mask: np.ndarray, current: int = -1,
+                       transition_cost: float = 0.0, exclude_window: int = 20, top_k: int = 1,
+                       slices=None) -> SearchResult:
+    """The reference search: every frame's exact cost, vectorised.
+
+    ``mask`` from :func:`candidate_mask`; ``current`` the playing frame (-1: none); ``slices`` the feature
+    channels' dimension slices (for the per-channel breakdown; default one channel with every dim).
+    """
+    query = np.asarray(query, dtype=np.float32)
+    slices = slices if slices is not None else [slice(0, features_norm.shape[1])]
+    k = max(int(top_k), 1)
+    costs = frame_costs(features_norm, query)
+    pool = np.where(mask, costs, np.float32(np.inf))
+    if current >= 0:
+        pool[max(current - exclude_window, 0):current + exclude_window + 1] = np.inf
+    kth = np.partition(pool, k - 1)[k - 1] if pool.size > k else np.float32(np.inf)
+    frames = (pool <= kth).nonzero()[0] if kth < np.inf else (pool < np.inf).nonzero()[0]
+    cont = _continuing_cost(features_norm, query, mask, current)
+    f, total, bias = _rank(frames, costs[frames], current, cont, transition_cost, k)
+    return _result(features_norm, query, slices, f, total, bias, current, cont, costs.size)
+
+
+class SearchIndex:
+    """Exact accelerated search over ``features_norm`` (N, D) with two levels of bounding boxes.
+
+    Frames are padded to a whole number of large blocks (padding is never a candidate). Boxes are stored
+    as lower and upper corners, dimension-major, so numpy's inner loops run along blocks: the large ones
+    (D1, n_large) over the ``coarse_dims`` dimensions in which blocks are thinnest relative to the spread
+    of the data (a box bound over a subset of dimensions is still a lower bound), the small ones over
+    every dimension, grouped by large block, (D, n_large, per). The frames are kept grouped by small
+    block, so the last level is one gather of contiguous rows.
+
+    Call :meth:`update` when the normalised features change (e.g. a weight change: the boxes are
+    recomputed from the new features, so the search stays exact); it is a no-op for the same array.
+    """
+
+    def __init__(self, features_norm: np.ndarray, small_block: int = SMALL_BLOCK, large_block: int = LARGE_BLOCK,
+                 coarse_dims: int = 20, seed_blocks: int = 8):
+        if large_block % small_block:
+            raise ValueError("the large block size must be a multiple of the small block size")
+        self.small_block, self.large_block = small_block, large_block
+        self.coarse_dims, self.seed_blocks = coarse_dims, seed_blocks
+        self.features_norm = None
+        self._mask_key = None
+        self.update(features_norm)
+
+    def update(self, features_norm: np.ndarray) -> bool:
+        """Recompute the bounds if ``features_norm`` is a different array. Returns True when rebuilt."""
+        if features_norm is self.features_norm:
+            return False
+        self.features_norm = features_norm
+        X = np.ascontiguousarray(features_norm, dtype=np.float32)
+        n, d = X.shape
+        self.X, self.n_frames, self.n_dims = X, n, d
+        sb, lb = self.small_block, self.large_block
+        per = lb // sb
+        n_large = max(-(-n // lb), 1)
+        pad = n_large * lb - n
+        Xp = np.concatenate([X, np.repeat(X[-1:], pad, axis=0)]) if pad else X
+        small = Xp.reshape(n_large * per, sb, d)
+        lo, hi = small.min(axis=1), small.max(axis=1)                        # (n_small, D)
+        lo_l = lo.reshape(n_large, per, d).min(axis=1)
+        hi_l = hi.reshape(n_large, per, d).max(axis=1)
+        # coarse level: the dimensions where large boxes are thinnest relative to the data's spread
+        spread = X.std(axis=0)
+        thinness = np.where(spread > 0, (hi_l - lo_l).mean(axis=0) / np.maximum(spread, 1e-12), np.inf)
+        dims = np.sort(np.argsort(thinness, kind="stable")[:max(1, min(self.coarse_dims, d))])
+        self.l1_dims = dims
+        self.l1_lo = np.ascontiguousarray(lo_l.T[dims])                      # (D1, n_large)
+        self.l1_hi = np.ascontiguousarray(hi_l.T[dims])
+        # small boxes grouped by large block, (n_large, per * D): a survivor's boxes are one contiguous row
+        self.l2_lo = np.ascontiguousarray(lo.reshape(n_large, per * d))
+        self.l2_hi = np.ascontiguousarray(hi.reshape(n_large, per * d))
+        self.rows = np.ascontiguousarray(small)                              # (n_small, sb, D) row-major
+        self.per_large, self.n_large = per, n_large
+        self._offsets = np.arange(sb)
+        self._per_offsets = np.arange(per)
+        self._q1 = np.empty_like(self.l1_lo)
+        self._g1 = np.empty_like(self.l1_lo)
+        self._ones1 = np.ones(len(dims), dtype=np.float32)
+        self._ones = np.ones(d, dtype=np.float32)
+        self._mask_key = None
+        return True
+
+    def _valid(self, mask: np.ndarray) -> np.ndarray:
+        """``mask`` padded with False to whole blocks plus two (so a hint's neighbours -2..n+1 index it
+        safely; negative indices wrap onto the padding), cached per mask array."""
+        if self._mask_key is not mask:
+            padded = np.zeros(self.n_large * self.large_block + _PAD, dtype=bool)
+            padded[:self.n_frames] = mask
+            self._mask_padded, self._mask_key = padded, mask
+        return self._mask_padded
+
+    def search(self, query: np.ndarray, mask: np.ndarray, current: int = -1, transition_cost: float = 0.0,
+               exclude_window: int = 20, top_k: int = 1, slices=None, hint=None) -> SearchResult:
+        """Same arguments and same answer as :func:`brute_force_search`.
+
+        ``hint``: frames likely to be good (e.g. the previous search's candidates advanced by the frames
+        played since). Only the speed depends on it: it and its neighbours give the first upper bound.
+        """
+        q = np.asarray(query, dtype=np.float32)
+        k = max(int(top_k), 1)
+        valid = self._valid(mask)
+        if current >= 0:  # exclude the window around the playing frame for this search only
+            lo_w, hi_w = max(current - exclude_window, 0), current + exclude_window + 1
+            saved = valid[lo_w:hi_w].copy()
+            valid[lo_w:hi_w] = False
+        try:
+            return self._search(q, valid, mask, current, transition_cost, k, slices, hint)
+        finally:
+            if current >= 0:
+                valid[lo_w:hi_w] = saved
+
+    def _search(self, q, valid, mask, current, transition_cost, k, slices, hint) -> SearchResult:
+        # 1. coarse lower bound of every large block: squared distance from the query to its box
+        q1, gap = self._q1, self._g1
+        np.copyto(q1, q[self.l1_dims, None])
+        np.maximum(q1, self.l1_lo, out=gap)
+        np.minimum(gap, self.l1_hi, out=gap)       # the query clamped into the box...
+        np.subtract(q1, gap, out=gap)              # ...and its offset from it
+        gap *= gap
+        lb_large = self._ones1 @ gap
+
+        # 2. an upper bound on the k-th best cost, from real frames
+        ub = np.float32(np.inf)
+        evaluated = 0
+        if hint is not None and len(hint):
+            seeds = np.add.outer(np.asarray(hint, dtype=np.int64), _HINT_SPREAD).ravel()
+            seeds.sort()
+            ok = valid[seeds]
+            ok[1:] &= seeds[1:] != seeds[:-1]
+            seeds = seeds[ok]
+            if seeds.size >= k:
+                ub = np.partition(frame_costs(self.X[seeds], q), k - 1)[k - 1]
+                evaluated += seeds.size
+        if not ub < np.inf:
+            ub, n = self._seed_bound(lb_large, q, valid, k)
+            evaluated += n
+        cut = ub / _BOUND_SLACK  # keep a box when bound * (1 - 1e-5) <= ub
+
+        # 3. surviving large blocks -> their small blocks' exact box bounds -> frames' exact costs
+        large = (lb_large <= cut).nonzero()[0]
+        small = np.add.outer(large * self.per_large, self._per_offsets).ravel()          # ascending
+        small = small[self._small_bounds(large, q) <= cut]
+        d = self.rows[small]                                    # (S, sb, D)
+        d.reshape(len(small), -1).__isub__(np.tile(q, self.small_block))  # long inner loops; same values
+        costs = np.einsum("ijk,ijk->ij", d, d).ravel()          # the brute force's reduction, bit for bit
+        frames = np.add.outer(small * self.small_block, self._offsets).ravel()
+        keep = valid[frames]
+        evaluated += frames.size
+        cont = _continuing_cost(self.X, q, mask, current)
+        f, total, bias = _rank(frames[keep], costs[keep], current, cont, transition_cost, k)
+        slices = slices if slices is not None else [slice(0, self.n_dims)]
+        return _result(self.X, q, slices, f, total, bias, current, cont, evaluated)
+
+    def _small_bounds(self, large: np.ndarray, q: np.ndarray) -> np.ndarray:
+        """Lower bounds (L * per,) of the small blocks of the given large blocks (before the slack)."""
+        lo = self.l2_lo[large]                                  # (L, per * D)
+        hi = self.l2_hi[large]
+        q_tile = np.tile(q, self.per_large)                     # (per * D,) matches a row's layout
+        np.maximum(lo, q_tile, out=lo)
+        np.minimum(lo, hi, out=lo)                              # the query clamped into each box...
+        np.subtract(q_tile, lo, out=lo)                         # ...and its offset from it
+        lo *= lo
+        return lo.reshape(-1, self.n_dims) @ self._ones         # (L * per,)
+
+    def _seed_bound(self, lb_large, q, valid, k):
+        """Upper bound on the k-th best cost without a hint, by a greedy descent: the exact costs of the
+        best ``seed_blocks`` small blocks within the best ``seed_blocks`` large blocks (widened until k
+        valid frames are found). Returns (bound, frames evaluated)."""
+        m = s = self.seed_blocks
+        while True:
+            large = np.argpartition(lb_large, m - 1)[:m] if m < self.n_large else np.arange(self.n_large)
+            lb_small = self._small_bounds(large, q)
+            pick = np.argpartition(lb_small, s - 1)[:s] if s < lb_small.size else np.arange(lb_small.size)
+            small = large[pick // self.per_large] * self.per_large + pick % self.per_large
+            frames = np.add.outer(small * self.small_block, self._offsets).ravel()
+            frames = frames[valid[frames]]
+            if frames.size >= k or (m >= self.n_large and s >= lb_small.size):
+                break
+            m, s = min(m * 4, self.n_large), s * 4
+        if frames.size < k:
+            return np.float32(np.inf), 0
+        return np.partition(frame_costs(self.X[frames], q), k - 1)[k - 1], int(frames.size)

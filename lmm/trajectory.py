@@ -1,0 +1,126 @@
+"""From sticks to a desired motion, the simulation object that follows it, and its predicted future.
+
+Conventions: Y is up; a rotation's forward axis is +Z. The camera's azimuth is its rotation about +Y
+(0: the camera looks along +Z). A stick pushed up means "away from the camera" and right means
+"to the camera's right", so for azimuth ``a`` the world direction of stick (x, y) is
+``R_y(a) (-x, 0, y)``.
+
+The simulation object is a point with a facing, moved by two critically damped springs: one on its
+velocity (towards the desired velocity) and one on its rotation (towards the desired rotation). Its
+future is predicted with the same closed-form springs, holding the desired velocity and rotation.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import quat
+from .springs import spring_character_update, spring_rotation_update
+
+UP = np.array([0.0, 1.0, 0.0])
+FORWARD = np.array([0.0, 0.0, 1.0])
+
+
+def yaw_rotation(angle) -> np.ndarray:
+    """Rotation about +Y by ``angle`` radians."""
+    return quat.from_axis_angle(UP, np.asarray(angle, dtype=np.float64))
+
+
+def facing_rotation(direction) -> np.ndarray:
+    """The yaw rotation whose forward (+Z) points along the ground-plane ``direction``."""
+    d = np.asarray(direction, dtype=np.float64)
+    return yaw_rotation(np.arctan2(d[..., 0], d[..., 2]))
+
+
+def stick_with_deadzone(x: float, y: float, deadzone: float) -> np.ndarray:
+    """Radial deadzone: zero inside, rescaled outside so full deflection stays 1. Returns (2,)."""
+    s = np.array([x, y], dtype=np.float64)
+    mag = float(np.hypot(s[0], s[1]))
+    if mag <= deadzone or mag <= 0.0:
+        return np.zeros(2)
+    scaled = min((mag - deadzone) / max(1.0 - deadzone, 1e-6), 1.0)
+    return s * (scaled / mag)
+
+
+def stick_to_world(stick: np.ndarray, camera_azimuth: float) -> np.ndarray:
+    """Camera-relative stick (2,) -> world ground-plane vector (3,) of the same length."""
+    return quat.mul_vec(yaw_rotation(camera_azimuth), np.array([-stick[0], 0.0, stick[1]]))
+
+
+def desired_velocity(stick_world: np.ndarray, simulation_rotation: np.ndarray, walk: bool, tuning) -> np.ndarray:
+    """World velocity (3,) asked for by the stick.
+
+    The stick is expressed in the simulation object's frame and scaled per axis by the forward,
+    sideways and backwards speeds of the walk or run set, so sidestepping and backpedalling are slower.
+    """
+    if walk:
+        fwd, side, back = tuning.walk_forward_speed_m_s, tuning.walk_sideways_speed_m_s, tuning.walk_backwards_speed_m_s
+    else:
+        fwd, side, back = tuning.run_forward_speed_m_s, tuning.run_sideways_speed_m_s, tuning.run_backwards_speed_m_s
+    local = quat.inv_mul_vec(simulation_rotation, stick_world)
+    local = np.array([local[0] * side, 0.0, local[2] * (fwd if local[2] > 0.0 else back)])
+    return quat.mul_vec(simulation_rotation, local)
+
+
+def desired_rotation(stick_world: np.ndarray, right_stick_world: np.ndarray, velocity: np.ndarray,
+                     current_rotation: np.ndarray, strafe: bool, camera_azimuth: float) -> np.ndarray:
+    """The facing asked for.
+
+    Strafing faces the right stick's direction when it is pushed, else the camera's forward direction.
+    Otherwise the character faces where it is asked to go, and keeps its facing when asked to stand.
+    """
+    if strafe:
+        if np.linalg.norm(right_stick_world) > 1e-5:
+            return facing_rotation(right_stick_world)
+        return yaw_rotation(camera_azimuth)
+    if np.linalg.norm(velocity) > 1e-5:
+        return facing_rotation(velocity)
+    return np.array(current_rotation, dtype=np.float64)
+
+
+@dataclass
+class SimulationState:
+    """The simulation object: where the character should be. World space, float64."""
+    position: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    velocity: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    acceleration: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    rotation: np.ndarray = field(default_factory=lambda: np.array([1.0, 0.0, 0.0, 0.0]))
+    angular_velocity: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+    def copy(self) -> "SimulationState":
+        return SimulationState(self.position.copy(), self.velocity.copy(), self.acceleration.copy(),
+                               self.rotation.copy(), self.angular_velocity.copy())
+
+
+def simulation_update(state: SimulationState, velocity_goal, rotation_goal, velocity_halflife: float,
+                      rotation_halflife: float, dt: float) -> SimulationState:
+    """One exact spring step of the simulation object."""
+    pos, vel, acc = spring_character_update(state.position, state.velocity, state.acceleration,
+                                            velocity_goal, velocity_halflife, dt)
+    rot, ang = spring_rotation_update(state.rotation, state.angular_velocity, rotation_goal, rotation_halflife, dt)
+    return SimulationState(pos, vel, acc, quat.normalize(rot), ang)
+
+
+def trajectory_predict(state: SimulationState, velocity_goal, rotation_goal, velocity_halflife: float,
+                       rotation_halflife: float, times) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Positions (T, 3), rotations (T, 4) and velocities (T, 3) of the simulation object ``times`` (T,)
+    seconds ahead, holding the current desired velocity and rotation."""
+    times = np.asarray(times, dtype=np.float64)
+    pos, vel, _ = spring_character_update(state.position, state.velocity, state.acceleration,
+                                          velocity_goal, velocity_halflife, times)
+    rot, _ = spring_rotation_update(state.rotation, state.angular_velocity, rotation_goal, rotation_halflife, times)
+    return pos, quat.normalize(rot), vel
+
+
+def trajectory_offsets(features) -> np.ndarray:
+    """Every future frame offset the feature layout's trajectory channels use (sorted, unique)."""
+    offs = sorted({o for ch in features.layout if ch.kind.startswith("trajectory") for o in ch.offsets})
+    return np.asarray(offs, dtype=np.int64)
+
+
+def trajectory_in_root_space(positions, rotations, root_position, root_rotation):
+    """Trajectory points and facing directions (T, 3) in the space of a root (ground-plane features)."""
+    local_pos = quat.inv_mul_vec(root_rotation, positions - root_position)
+    local_dir = quat.inv_mul_vec(root_rotation, quat.mul_vec(rotations, FORWARD))
+    return local_pos, local_dir
