@@ -18,6 +18,8 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "train": ("train", "train the learned motion matching networks (needs torch)"),
     "eval": ("eval", "quality metrics of the learned motion matching networks"),
     "export-onnx": ("export_onnx", "export the decompressor, stepper and projector as ONNX"),
+    "run": ("run", "drive a controller headless from an input log or built-in scenario (record, metrics)"),
+    "bench": ("bench", "runtime benchmarks (search, frame) as a table and nested JSON"),
 }
 
 

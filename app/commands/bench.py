@@ -1,0 +1,218 @@
+"""``lmm-studio bench``: runtime benchmarks, one function per section, written as nested JSON.
+
+    lmm-studio bench --json out/bench.json
+
+Sections (later issues add theirs to ``SECTIONS``):
+
+``search``  queries taken from real runs of every built-in scenario (at the searches the motion
+            matching controller actually makes, with the default tuning); per query, the brute-force
+            search and the accelerated exact search on the same query and controller state:
+            ``frames`` (database size), ``queries``, ``bruteforce_us`` and ``accelerated_us``
+            (medians per query), ``speedup`` (their ratio), ``agreement`` (fraction of queries with
+            identical best frame and cost), ``topk_agreement`` (identical ordered top-K with costs).
+``frame``   ``mm_us``: median time of one motion matching controller step over the same runs.
+
+Timings are wall-clock medians; every section also reports what it measured (counts, settings).
+"""
+from __future__ import annotations
+
+import json
+import math
+import sys
+import time
+from pathlib import Path
+
+
+def add_arguments(p) -> None:
+    p.add_argument("--json", dest="json_path", metavar="PATH", help="write the results here (nested JSON)")
+    p.add_argument("--queries", type=int, default=2400, help="search queries to collect (default 2400, >= 2000)")
+    p.add_argument("--sections", default="search,frame,memory", help="comma-separated sections to run")
+    p.add_argument("--manifest", help="dataset manifest (default: the shipped LAFAN1 locomotion set)")
+
+
+def collect_queries(db, features, n_queries: int, scenarios=None, tuning=None):
+    """Run the MM controller on every built-in scenario in turn (round robin, 10 s at a time) until
+    ``n_queries`` searches have been made. Returns (queries, step times in us, masks/args per query)."""
+    import numpy as np
+
+    from lmm.inputs import builtin, builtin_names
+    from lmm.mm import MotionMatchingController
+    from lmm.tuning import Tuning
+
+    scenarios = scenarios or builtin_names((1, 2))
+    chunk_s, dt = 10.0, 1.0 / 60.0
+    controllers, logs, ticks = {}, {}, {}
+    queries, step_us = [], []
+    round_ = 0
+    while len(queries) < n_queries:
+        for name in scenarios:
+            if name not in controllers:
+                c = MotionMatchingController(db, features, tuning.copy() if tuning else Tuning())
+                c.search_log = []
+                controllers[name], ticks[name] = c, 0
+                logs[name] = builtin(name, 3600.0)
+            c, log = controllers[name], logs[name]
+            for _ in range(int(chunk_s / dt)):
+                t = ticks[name] * dt
+                t0 = time.perf_counter()
+                c.step(log.at(t), dt)
+                step_us.append((time.perf_counter() - t0) * 1e6)
+                ticks[name] += 1
+            for query, frame, hint in c.search_log:
+                queries.append((query, frame, hint, c))
+            c.search_log.clear()
+        round_ += 1
+    return queries[:n_queries], np.asarray(step_us)
+
+
+def bench_search(db, features, n_queries: int = 2400, collected=None) -> dict:
+    import numpy as np
+
+    from lmm.search import SearchIndex, brute_force_search
+
+    queries, _ = collected or collect_queries(db, features, n_queries)
+    c0 = queries[0][3]
+    tun = c0.tuning
+    args = dict(transition_cost=tun.transition_cost, exclude_window=int(tun.exclude_current_window_frames),
+                top_k=int(tun.top_k), slices=features.slices)
+    mask = c0.candidate_mask()
+    X = c0.features.normalized
+    index = SearchIndex(X)
+    # each search timed on its own pass over all queries (as at run time, not interleaved with the other)
+    brute, fast = [], []
+    t_brute, t_fast = [], []
+    for query, frame, hint, _ in queries:
+        t0 = time.perf_counter()
+        r = brute_force_search(X, query, mask, current=frame, **args)
+        t_brute.append(time.perf_counter() - t0)
+        brute.append(r)
+    for query, frame, hint, _ in queries:
+        t0 = time.perf_counter()
+        r = index.search(query, mask, current=frame, hint=hint, **args)
+        t_fast.append(time.perf_counter() - t0)
+        fast.append(r)
+    same_best = [a.best_frame == b.best_frame and a.best_cost == b.best_cost for a, b in zip(brute, fast)]
+    same_topk = [np.array_equal(a.frames, b.frames) and np.array_equal(a.costs, b.costs)
+                 and np.array_equal(a.channel_costs, b.channel_costs) for a, b in zip(brute, fast)]
+    bru, acc = float(np.median(t_brute) * 1e6), float(np.median(t_fast) * 1e6)
+    return {
+        "frames": int(X.shape[0]),
+        "dims": int(X.shape[1]),
+        "queries": len(queries),
+        "top_k": int(tun.top_k),
+        "bruteforce_us": bru,
+        "accelerated_us": acc,
+        "speedup": bru / acc if acc > 0 else float("nan"),
+        "agreement": float(np.mean(same_best)),
+        "topk_agreement": float(np.mean(same_topk)),
+        "accelerated_p90_us": float(np.percentile(t_fast, 90) * 1e6),
+        "bruteforce_p90_us": float(np.percentile(t_brute, 90) * 1e6),
+        "frames_evaluated_median": float(np.median([r.evaluated for r in fast])),
+    }
+
+
+def bench_frame(db, features, n_queries: int = 2400, collected=None) -> dict:
+    import numpy as np
+
+    _, step_us = collected or collect_queries(db, features, n_queries)
+    return {"mm_us": float(np.median(step_us)), "mm_p90_us": float(np.percentile(step_us, 90)),
+            "mm_steps": int(step_us.size)}
+
+
+# name -> function(db, features, n_queries, collected) returning a dict; later issues append theirs
+SECTIONS = {"search": bench_search, "frame": bench_frame}
+
+
+# -- learned motion matching (issue 4): frame.lmm_us and the paper's Table 3 memory figures ----------
+
+def _lmm_figures(db, features) -> dict:
+    """Benchmark figures of the learned controller with the shipped networks (computed once per run)."""
+    cached = getattr(_lmm_figures, "cache", None)
+    if cached is not None and cached[0] is db:
+        return cached[1]
+    from lmm.evaluation import benchmark_lmm
+    from lmm.weights import WeightsError
+
+    try:
+        figures = benchmark_lmm(db, features)
+    except WeightsError as e:
+        print(f"note: no learned-controller figures ({e})", file=sys.stderr)
+        from lmm.evaluation import mm_runtime_bytes
+        mm = mm_runtime_bytes(db, features)
+        figures = {"memory.mm_bytes": int(sum(mm.values())), "memory.lmm_bytes": None, "frame.lmm_us": None}
+    _lmm_figures.cache = (db, figures)
+    return figures
+
+
+def bench_frame_with_lmm(db, features, n_queries: int = 2400, collected=None) -> dict:
+    """``frame``: the motion matching step (above) plus ``lmm_us``, the median learned-controller step
+    (shipped networks, builtin:random:1, debug nearest-neighbour comparison off), and its parts."""
+    out = bench_frame(db, features, n_queries, collected)
+    fig = _lmm_figures(db, features)
+    out.update({k.split(".", 1)[1]: v for k, v in fig.items() if k.startswith("frame.")})
+    out.update({k.replace("network.", "lmm_network_"): v for k, v in fig.items() if k.startswith("network.")})
+    return out
+
+
+def bench_memory(db, features, n_queries: int = 2400, collected=None) -> dict:
+    """``memory``: ``mm_bytes`` (features + pose database + search structure at run time) and
+    ``lmm_bytes`` (decompressor + stepper + projector), as in the paper's Table 3."""
+    fig = _lmm_figures(db, features)
+    return {k.split(".", 1)[1]: v for k, v in fig.items() if k.startswith("memory.")}
+
+
+SECTIONS["frame"] = bench_frame_with_lmm
+SECTIONS["memory"] = bench_memory
+
+
+def _json_safe(value):
+    if isinstance(value, dict):
+        return {k: _json_safe(v) for k, v in value.items()}
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def format_results(results: dict) -> str:
+    lines = []
+    for section, values in results.items():
+        lines.append(f"[{section}]")
+        width = max((len(k) for k in values), default=0)
+        for k, v in values.items():
+            text = f"{v:.4g}" if isinstance(v, float) else str(v)
+            lines.append(f"  {k.ljust(width)}  {text}")
+    return "\n".join(lines)
+
+
+def main(args) -> int:
+    names = [s.strip() for s in args.sections.split(",") if s.strip()]
+    unknown = [s for s in names if s not in SECTIONS]
+    if unknown:
+        print(f"error: unknown bench section(s) {', '.join(unknown)} (known: {', '.join(SECTIONS)})", file=sys.stderr)
+        return 2
+    if args.queries < 1:
+        print(f"error: --queries must be positive, got {args.queries}", file=sys.stderr)
+        return 2
+
+    from lmm.database import DatabaseError, load_or_build
+    from lmm.features import build_features
+
+    try:
+        db, _ = load_or_build(args.manifest)
+    except DatabaseError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 1
+    features = build_features(db)
+    collected = None
+    if {"search", "frame"} & set(names):
+        print(f"collecting {args.queries} search queries from runs of the built-in scenarios...", file=sys.stderr)
+        collected = collect_queries(db, features, args.queries)
+    results = {}
+    for name in names:
+        results[name] = SECTIONS[name](db, features, args.queries, collected)
+    print(format_results(results))
+    if args.json_path:
+        path = Path(args.json_path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(_json_safe(results), indent=2) + "\n")
+    return 0
