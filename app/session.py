@@ -275,9 +275,10 @@ class Session:
     def replay_finished(self) -> bool:
         return self.input_log is not None and self.replay_time() > self.input_log.duration + self.dt
 
-    def input_for_next_tick(self, live: InputState) -> InputState:
+    def input_for_next_tick(self, live: InputState, ahead: int = 0) -> InputState:
+        """The input of tick ``self.tick + 1 + ahead``: the replayed log's, else ``live``."""
         if self.input_log is not None:
-            return self.input_log.at(self.replay_time())
+            return self.input_log.at(self.replay_time() + ahead * self.dt)
         return live
 
     # -- ticking -------------------------------------------------------------------------------
@@ -350,6 +351,64 @@ class Session:
         rec.input_writer.close()
         out["input"] = rec.paths["input"]
         return out
+
+
+class TickWorker:
+    """Steps the session on a worker thread while the GUI draws.
+
+    dearpygui releases the GIL while it renders a frame, so the controllers of the next tick run in
+    parallel with the drawing of this one. The studio hands over a list of inputs (``submit``) just
+    before it draws, and collects the finished ticks (``wait``) at the start of the next frame; in
+    between it must not touch the session, and everything that changes the session (sliders,
+    recording, replay, reset) runs after ``wait`` and before ``submit``.
+    """
+
+    def __init__(self, session: Session):
+        import queue
+        import threading
+
+        self.session = session
+        self._jobs: queue.Queue = queue.Queue()
+        self._idle = threading.Event()
+        self._idle.set()
+        self._results: list = []
+        self._error: BaseException | None = None
+        self._thread = threading.Thread(target=self._loop, name="studio-ticks", daemon=True)
+        self._thread.start()
+
+    def submit(self, inputs: list[InputState]) -> None:
+        if not inputs:
+            return
+        self._idle.clear()
+        self._jobs.put(list(inputs))
+
+    def wait(self) -> list[tuple[Tick, dict]]:
+        """The ticks finished since the last call, with each one's per-controller milliseconds."""
+        self._idle.wait()
+        if self._error is not None:
+            err, self._error = self._error, None
+            raise err
+        out, self._results = self._results, []
+        return out
+
+    def _loop(self) -> None:
+        while True:
+            inputs = self._jobs.get()
+            if inputs is None:
+                return
+            try:
+                for inp in inputs:
+                    tick = self.session.step(inp)
+                    self._results.append((tick, dict(self.session.step_ms)))
+            except BaseException as e:  # handed to the GUI thread by wait()
+                self._error = e
+            finally:
+                self._idle.set()
+
+    def close(self) -> None:
+        self._idle.wait()
+        self._jobs.put(None)
+        self._thread.join(timeout=5.0)
 
 
 # ------------------------------------------------------------------------------------------------

@@ -31,7 +31,7 @@ from .panels.common import WINDOWS, View, window_alias, window_tag
 from .panels.common import overlapping as overlap_keys
 from .panels.errors import ErrorDialog
 from .panels.stats import FrameTimes
-from .session import Session, load_reference_clip, make_controllers, make_lmm_controller
+from .session import Session, TickWorker, load_reference_clip, make_controllers, make_lmm_controller
 
 FONT_CANDIDATES = (
     "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf",
@@ -100,13 +100,16 @@ class Studio:
         self.exit_code = 0
         self.script_keys: set[str] = set()
         self.script = _Script.load(options.script) if options.script else _Script([])
-        self.dump = {"frames": [], "labels": {}, "layout_switches": [], "recordings": []}
+        self.dump = {"frames": [], "ticks": [], "labels": {}, "layout_switches": [], "recordings": []}
+        self._submitted: dict[int, int] = {}          # tick -> frame whose inputs it was stepped with
+        self._tuning_at_submit: dict[int, dict] = {}
         self.fixed_step = bool(options.fixed_step or options.frames is not None or options.script)
         self._acc = 0.0
         self._last_time = None
         self._working_ini = None
         self.input = None
         self._screenshots: list[Path] = []
+        self.pending_captures: list[str] = []
 
     # ==========================================================================================
     # start-up
@@ -130,6 +133,7 @@ class Studio:
         if not self.opts.lmm:
             self.lmm_problem = "LMM is off (--no-lmm)"
         self.session = Session(db, features, tuning, controllers)
+        self.worker = TickWorker(self.session)
         self.session.start_latent_table(self.opts.weights)
         if self.opts.input:
             self.open_input(self.opts.input)
@@ -605,6 +609,24 @@ class Studio:
         t0 = time.perf_counter()
         frame_dt = 0.0 if self._last_time is None else t0 - self._last_time
         self._last_time = t0
+        # the ticks stepped on the worker while the previous frame was drawn
+        try:
+            finished = self.worker.wait()
+        except Exception as e:  # a controller failed: say so, stop simulating, keep the studio up
+            import traceback
+
+            traceback.print_exc()
+            self.errors.show("Simulation", f"a controller failed and the simulation is paused: "
+                                           f"{type(e).__name__}: {e}")
+            self.pause()
+            finished = []
+        step_ms = dict.fromkeys(self.session.names, 0.0)
+        for tick, ms in finished:
+            for name in step_ms:
+                step_ms[name] += ms.get(name, 0.0)
+        if self.opts.dump_state:
+            self._dump_ticks(finished)
+        # events and actions may change the session now: the worker is idle until submit()
         dpg.run_callbacks(dpg.get_callback_queue())
         self.script.run(self, self.frame_index)
         self._keys(frame_dt)
@@ -612,17 +634,10 @@ class Studio:
         # the camera follows the input layer's azimuth (mouse orbit, Q/E, right stick feed it)
         if self.viewport.camera is not None and self.input is not None:
             self.viewport.camera.yaw_deg = float(np.degrees(self.input.camera_azimuth - np.pi)) % 360.0
-        t1 = time.perf_counter()
         n = self._ticks_due(frame_dt)
-        tuning_seen = None
-        step_ms = dict.fromkeys(self.session.names, 0.0)
-        for _ in range(n):
-            inp = self.session.input_for_next_tick(live)
-            tuning_seen = self.session.tuning.to_dict() if self.opts.dump_state else None
-            self.session.step(inp)
-            for name in step_ms:
-                step_ms[name] += self.session.step_ms.get(name, 0.0)
-        t2 = time.perf_counter()
+        inputs = [self.session.input_for_next_tick(live, ahead=k) for k in range(n)]
+        tuning_seen = self.session.tuning.to_dict() if self.opts.dump_state and n else None
+        t1 = time.perf_counter()
         view = View(tick=self.displayed_tick(), live=self.scrub_tick is None and not self.paused,
                     paused=self.paused, inspected=self.inspected, history=self.session.history,
                     session=self.session, frame=self.frame_index)
@@ -636,16 +651,25 @@ class Studio:
             self._window_backgrounds()
             self.menu.sync_window_checks()   # a window closed with its own x button
         t4 = time.perf_counter()
+        record = self._dump_frame(view, n, tuning_seen) if self.opts.dump_state else None
+        for label in self.pending_captures:
+            self.capture(label)
+        self.pending_captures.clear()
+        # the next ticks are stepped on the worker while dearpygui draws (it releases the GIL);
+        # from here to the next wait() nothing may touch the session
+        self.worker.submit(inputs)
         dpg.render_dearpygui_frame()
         t5 = time.perf_counter()
         vp = self.viewport
-        parts = {"input": (t1 - t0) * 1e3, "viewport": (t3 - t2) * 1e3 - vp.render_ms - vp.readback_ms,
+        parts = {"input": (t1 - t0) * 1e3, "viewport": (t3 - t1) * 1e3 - vp.render_ms - vp.readback_ms,
                  "render": vp.render_ms, "readback": vp.readback_ms, "panels": (t4 - t3) * 1e3,
                  "ui": (t5 - t4) * 1e3}
-        parts.update(step_ms)          # every tick of this frame
+        parts.update(step_ms)          # controller time of the ticks finished for this frame (in parallel)
         self.frame_times.add((t5 - t0) * 1e3, parts)
-        if self.opts.dump_state:
-            self._dump_frame(view, n, tuning_seen, parts)
+        if record is not None:
+            record.update({"ms": {k: round(float(v), 4) for k, v in parts.items()},
+                           "frame_ms": round((t5 - t0) * 1e3, 4), "t": round(time.perf_counter(), 6),
+                           "cpu": round(time.process_time(), 6)})
         self.frame_index += 1
 
     # ==========================================================================================
@@ -726,6 +750,13 @@ class Studio:
 
     def shutdown(self) -> None:
         dpg = self.dpg
+        if getattr(self, "worker", None) is not None:
+            try:
+                finished = self.worker.wait()     # the ticks stepped during the last frame
+                if self.opts.dump_state:
+                    self._dump_ticks(finished)
+            finally:
+                self.worker.close()
         if getattr(self, "session", None) is not None and self.session.recording is not None:
             self.stop_recording()
         if self.opts.save_layout and dpg.is_dearpygui_running():
@@ -744,22 +775,28 @@ class Studio:
     # ==========================================================================================
     # test dump
     # ==========================================================================================
-    def _dump_frame(self, view: View, ticks: int, tuning_seen, parts) -> None:
+    def _dump_ticks(self, finished) -> None:
+        for tick, _ in finished:
+            self.dump["ticks"].append({
+                "tick": tick.tick, "frame_submitted": self._submitted.get(tick.tick),
+                "tuning_seen": self._tuning_at_submit.get(tick.tick),
+                "roots": {n: [float(x) for x in s.pose.global_positions[0]] for n, s in tick.snapshots.items()},
+                "desired_speed": {n: float(np.linalg.norm(s.desired_velocity)) for n, s in tick.snapshots.items()},
+                "input": dict(vars(tick.extra["input"]))})
+
+    def _dump_frame(self, view: View, ticks: int, tuning_seen) -> dict:
         latest = self.session.history.latest()
+        first = self.session.tick + 1            # the ticks submitted this frame (still being stepped)
+        for k in range(ticks):
+            self._submitted[first + k] = self.frame_index
+            self._tuning_at_submit[first + k] = tuning_seen
         rec = {"frame": self.frame_index, "ticks": ticks, "displayed_tick": view.tick_number,
                "newest_tick": self.session.history.newest_tick, "live": view.live,
                "roots": {n: [float(x) for x in s.pose.global_positions[0]] for n, s in latest.snapshots.items()}
                if latest is not None else {},
-               "desired_speed": {n: float(np.linalg.norm(s.desired_velocity)) for n, s in latest.snapshots.items()}
-               if latest is not None and ticks else {},
-               "input": dict(vars(latest.extra["input"])) if latest is not None and ticks else None,
-               "viewport_roots": self.viewport.drawn.get("roots", {}),
-               "ms": {k: round(float(v), 4) for k, v in parts.items()},
-               "frame_ms": round(float(self.frame_times.frames[-1]), 4) if self.frame_times.frames else None,
-               "t": round(time.perf_counter(), 6), "cpu": round(time.process_time(), 6)}
-        if tuning_seen is not None:
-            rec["tuning_seen"] = tuning_seen
+               "viewport_roots": self.viewport.drawn.get("roots", {})}
         self.dump["frames"].append(rec)
+        return rec
 
     def panel_state(self) -> dict:
         out = {key: panel.state() for key, panel in self.panels.items()}
@@ -785,7 +822,7 @@ class Studio:
     def _write_dump(self) -> None:
         s = self.session
         self.dump.update({
-            "frames_run": self.frame_index, "ticks": s.tick, "controllers": s.names,
+            "frames_run": self.frame_index, "tick_count": s.tick, "controllers": s.names,
             "shared_tuning": all(getattr(c, "tuning", None) is s.tuning for c in s.controllers.values()),
             "lmm_problem": self.lmm_problem, "errors": list(self.errors.shown), "layout": self.layout_name,
             "final": self.panel_state(), "frame_times": {"median_ms": self.frame_times.median(),
@@ -867,8 +904,8 @@ class _Script:
             s.handle_file(a["kind"], a["path"])
         elif do == "inspect":
             s.set_inspected(a["controller"])
-        elif do == "capture":
-            s.capture(a["label"])
+        elif do == "capture":   # after this frame's panels updated: what they show for its tick
+            s.pending_captures.append(a["label"])
         elif do == "screenshot":
             s.request_screenshot(a["path"])
         elif do == "sort":

@@ -58,16 +58,18 @@ def circle_run(xvfb_display, studio_cache, lmm_weights, tmp_path_factory):
 
 def test_scripted_input_moves_both_characters(circle_run):
     d = circle_run["dump"]
-    assert d["frames_run"] == 150 and d["ticks"] == 150
+    assert d["frames_run"] == 150 and d["tick_count"] == 150
     expected = ["mm", "lmm"] if circle_run["lmm"] else ["mm"]
     assert d["controllers"] == expected, d.get("lmm_problem")
     assert d["shared_tuning"] is True
-    first, last = d["frames"][0]["roots"], d["frames"][-1]["roots"]
+    first, last = d["ticks"][0]["roots"], d["ticks"][-1]["roots"]
     for name in expected:
         moved = np.linalg.norm(np.subtract(last[name], first[name]))
         assert moved > 1.5, (name, moved)
     # the replayed input is what the controllers got
-    assert d["frames"][30]["input"]["left_y"] != 0.0 or d["frames"][30]["input"]["left_x"] != 0.0
+    ticks = {t["tick"]: t for t in d["ticks"]}
+    assert sorted(ticks) == list(range(1, 151))
+    assert ticks[30]["input"]["left_y"] != 0.0 or ticks[30]["input"]["left_x"] != 0.0
 
 
 def test_screenshot_of_the_whole_window(circle_run):
@@ -80,12 +82,17 @@ def test_screenshot_of_the_whole_window(circle_run):
 
 
 def test_slider_change_reaches_the_runtime_on_the_next_frame(circle_run):
-    frames = circle_run["dump"]["frames"]
-    before, after = frames[59], frames[60]
+    d = circle_run["dump"]
+    ticks = {t["tick"]: t for t in d["ticks"]}
+    # the sliders moved at the start of frame 60; frame 60 hands tick 61 to the controllers, which
+    # frame 61 shows: the very next frame
+    changed = min(t for t, rec in ticks.items() if rec["tuning_seen"]["run_forward_speed_m_s"] == 1.0)
+    assert changed == 61 and ticks[changed]["frame_submitted"] == 60
+    assert d["frames"][61]["displayed_tick"] == 61
+    before, after = ticks[changed - 1], ticks[changed]
     for f in RUN_SPEEDS:
-        assert before["tuning_seen"][f] == pytest.approx(3.5 if f.startswith("run_forward") else
-                                                         before["tuning_seen"][f])
         assert after["tuning_seen"][f] == 1.0
+    assert before["tuning_seen"]["run_forward_speed_m_s"] == 3.5
     assert before["tuning_seen"]["feature_weights"]["hip_velocity"] == 1.0
     assert after["tuning_seen"]["feature_weights"]["hip_velocity"] == 0.0
     # the effect, not just the value: the desired velocity is capped by the new speeds at once
@@ -116,7 +123,7 @@ def test_panels_show_the_live_tick(circle_run):
     end = d["labels"]["end"]
     p = end["panels"]
     tick = end["displayed_tick"]
-    assert tick == d["frames"][148]["newest_tick"]
+    assert tick == d["frames"][149]["displayed_tick"] == 149
     assert p["timeline"]["tick"] == tick and p["viewport"]["tick"] == tick
     assert p["features"]["query"] is not None and len(p["features"]["query"]) == 27
     assert p["candidates"]["rows"] and p["candidates"]["rows"][0]["channels"]
@@ -246,9 +253,10 @@ def test_broken_files_show_an_error_and_the_studio_runs_on(run_studio, tmp_path)
               "bad_weights.npz", "bad_input.csv"):
         assert any(f in m for m in msgs), (f, msgs)
     assert len(msgs) == 6
-    assert d["frames_run"] == 30 and d["ticks"] == 30            # it kept simulating through the errors
-    assert d["frames"][19]["tuning_seen"]["run_forward_speed_m_s"] == 3.5
-    assert d["frames"][20]["tuning_seen"]["run_forward_speed_m_s"] == 2.0   # a good file still loads
+    assert d["frames_run"] == 30 and d["tick_count"] == 30       # it kept simulating through the errors
+    ticks = {t["tick"]: t for t in d["ticks"]}
+    assert ticks[20]["tuning_seen"]["run_forward_speed_m_s"] == 3.5
+    assert ticks[21]["tuning_seen"]["run_forward_speed_m_s"] == 2.0      # a good file still loads
     assert d["layout"] == "default"
 
 
@@ -290,11 +298,11 @@ def test_keyboard_moves_the_character_xdotool(xvfb_display, studio_cache, tmp_pa
             proc.communicate()
     assert proc.returncode == 0, err[-3000:]
     d = json.loads((tmp_path / "dump.json").read_text())
-    pushed = [f for f in d["frames"] if f["input"] and f["input"]["left_y"] > 0.5]
+    pushed = [t for t in d["ticks"] if t["input"]["left_y"] > 0.5]
     assert len(pushed) > 5, "the W key never reached the input"
-    start = d["frames"][0]["roots"]["mm"]
+    start = d["ticks"][0]["roots"]["mm"]
     before = pushed[0]["roots"]["mm"]
-    end = d["frames"][-1]["roots"]["mm"]
+    end = d["ticks"][-1]["roots"]["mm"]
     assert np.linalg.norm(np.subtract(before, start)) < 0.1        # standing until the key went down
     # a fixed 60 Hz tick per frame: how far it gets depends on the frame rate; it must clearly walk off
     assert np.linalg.norm(np.subtract(end, start)) > 0.25
