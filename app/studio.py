@@ -3,12 +3,16 @@ driven by the same input, every internal visible live, every tunable on a slider
 
 The frame loop reads top to bottom as the data flow::
 
-    events/callbacks -> input -> both controllers step -> snapshots into the rewind history
-        -> viewport (3D) from the displayed tick -> panels from the displayed tick -> dearpygui frame
+    collect the ticks stepped last frame -> events/callbacks (sliders write the tuning) -> input
+        -> viewport (3D) from the displayed tick -> panels from the displayed tick
+        -> hand the next tick's input to the controllers -> dearpygui draws the frame
 
-"Displayed tick" is the newest tick when live, or the scrubbed one while rewinding; every panel and
-the 3D view show the same tick. The simulation side (controllers, the shared tuning, history,
-recording) lives in :class:`app.session.Session`; this module owns only the GUI.
+Both controllers step on a worker thread while dearpygui draws (it releases the GIL), so the
+controllers' time overlaps the drawing; a tick handed over in frame N is shown in frame N+1, and a
+slider moved in frame N acts on that tick. "Displayed tick" is the newest tick when live, or the
+scrubbed one while rewinding; every panel and the 3D view show the same tick. The simulation side
+(controllers, the shared tuning, history, recording) lives in :class:`app.session.Session`; this
+module owns only the GUI.
 """
 from __future__ import annotations
 
@@ -119,7 +123,14 @@ class Studio:
         from lmm.features import build_features
         from lmm.tuning import Tuning
 
-        db, _ = load_or_build(self.opts.manifest, cache_dir=self.opts.cache)
+        try:
+            db, _ = load_or_build(self.opts.manifest, cache_dir=self.opts.cache)
+        except Exception as e:  # a broken manifest or BVH file: say so and open the default data
+            if self.opts.manifest is None:
+                raise
+            self.errors.show("Database", f"{e} - opened the default database instead")
+            self.opts.manifest = None
+            db, _ = load_or_build(None, cache_dir=self.opts.cache)
         features = build_features(db)
         tuning = Tuning()
         controllers, problems = make_controllers(db, features, tuning, weights=self.opts.weights,

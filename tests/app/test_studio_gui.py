@@ -314,3 +314,13 @@ def test_no_display_is_a_clear_error_not_a_crash():
     r = subprocess.run([sys.executable, "-m", "app.cli", "--frames", "1"], env=env, capture_output=True,
                        text=True, timeout=60)
     assert r.returncode == 2 and "no display" in r.stderr
+
+
+def test_broken_database_bvh_opens_the_default_database_with_an_error(run_studio, tmp_path):
+    manifest = tmp_path / "broken_manifest.json"
+    manifest.write_text(json.dumps({"name": "broken", "clips": [{"file": str(CORPUS / "truncated_frame.bvh")}]}))
+    r = run_studio("--frames", 10, "--no-lmm", "--manifest", manifest)
+    assert r.rc == 0, r.stderr[-3000:]
+    msgs = [e["message"] for e in r.dump["errors"]]
+    assert len(msgs) == 1 and "truncated_frame.bvh" in msgs[0] and "default database" in msgs[0]
+    assert r.dump["tick_count"] == 10
