@@ -157,15 +157,21 @@ def test_layouts_switch_and_the_users_layout_is_restored(run_studio, tmp_path):
               {"frame": 8, "do": "capture", "label": "compare"},
               {"frame": 9, "do": "layout", "name": "default"},
               {"frame": 13, "do": "capture", "label": "default"},
-              {"frame": 14, "do": "layout", "name": str(ROOT / "layouts" / "compare.ini")}]
-    r = run_studio("--frames", 20, "--layout", "tuning", "--no-lmm", script=script, config=config)
+              {"frame": 14, "do": "layout", "name": str(ROOT / "layouts" / "compare.ini")},
+              # File > Save layout as..., switch away, Layout > Load layout file...
+              {"frame": 18, "do": "open", "kind": "layout_save", "path": str(tmp_path / "mine.ini")},
+              {"frame": 19, "do": "layout", "name": "tuning"},
+              {"frame": 22, "do": "open", "kind": "layout_load", "path": str(tmp_path / "mine.ini")},
+              {"frame": 26, "do": "capture", "label": "mine"}]
+    r = run_studio("--frames", 28, "--layout", "tuning", "--no-lmm", script=script, config=config)
     assert r.rc == 0, r.stderr[-3000:]
     d = r.dump
     assert d["errors"] == []
     for label, name in (("start", "tuning"), ("compare", "compare"), ("default", "default")):
         got = _rects(d["labels"][label]["panels"]["windows"])
         assert got == _expected(name), label
-    assert d["layout"] == "compare"
+    assert _rects(d["labels"]["mine"]["panels"]["windows"]) == _expected("compare")
+    assert d["layout"] == "mine"
     saved = config / "layout.ini"
     assert saved.is_file() and "[LmmStudio][Layout]" in saved.read_text()
     # next start, no --layout: the user's last layout (compare) comes back
