@@ -19,10 +19,8 @@ import math
 
 import numpy as np
 
-from . import quat
 from .springs import decay_spring_damper_exact
 
-UP = np.array([0.0, 1.0, 0.0])
 
 
 # One leg is a handful of 3-vectors: plain Python floats are several times faster than numpy calls here.

@@ -8,34 +8,41 @@ The cost of frame ``i`` for a normalised query ``q`` is ``sum_d (X[i, d] - q[d])
   ``exclude_window`` frames of the continuing one (``|i - current| <= exclude_window``) or in the last
   ``exclude_end`` frames of its range (see :func:`candidate_mask`).
 
-Ranking is by total cost, then continuing-before-others (a tie keeps playing), then frame index, so both
+Ranking is by cost, ties broken by frame index (every other candidate carries the same transition cost);
+the continuing frame goes before the first candidate whose total is not lower (a tie keeps playing). Both
 searches give the same ordered top-K. Per-frame costs are always computed by the same ``einsum`` row
 reduction (its result for a row does not depend on how many rows are passed), so the accelerated search
 reproduces the brute-force costs bit for bit.
 
 The accelerated search (:class:`SearchIndex`) keeps axis-aligned bounding boxes of the features over
-blocks of 64 consecutive frames and, grouped under each, over its blocks of 8 frames (consecutive frames
-are close in every dimension at once, which keeps small temporal boxes tight). Per query it
+blocks of 32 consecutive frames and, under each, over its blocks of 8 frames (consecutive frames are
+close in every dimension at once, which keeps temporal boxes tight; clustered or k-d orderings gave
+looser boxes on this data). Per query it
 
-1. bounds the cost of every large block from below (squared distance from the query to its box);
-2. gets an upper bound ``ub`` on the k-th best cost from a few real frames: the ``hint`` (at run time
-   the previous search's candidates, advanced by the frames played since) or, without one, the best
-   small blocks of the most promising large blocks;
-3. keeps the large blocks with bound <= ub, bounds their small blocks, keeps those with bound <= ub,
-   and computes the exact cost of their frames.
+1. bounds the cost of every large block from below: the squared distance from the query to its box,
+   over the 16 dimensions in which large boxes are thinnest (a bound over fewer dimensions is still a
+   lower bound, and cheaper);
+2. gets an upper bound ``ub`` on the k-th best cost from real frames: the ``hint`` and its neighbours
+   (at run time, the previous search's candidates advanced by the frames played since) or, without
+   one, the best small blocks of the most promising large blocks;
+3. keeps the large blocks with bound <= ub, bounds their small blocks over every dimension, keeps those
+   with bound <= ub, and computes the exact cost of their frames (a few hundred of 54,608).
 
 Every frame in the true top-K costs at most ub, so its blocks survive both cuts: the answer is exactly the
-brute-force one, whatever the hint. Bounds are shrunk by a relative 1e-5, far more than float32 rounding
-of a 27-term sum, so rounding can never make a bound exceed a computed cost.
+brute-force one, whatever the hint. Bounds are compared after shrinking by a relative 1e-5, far more
+than float32 rounding of a 27-term sum, so rounding can never make a bound exceed a computed cost.
+Everything is vectorised numpy; the boxes are stored dimension-major so numpy's inner loops run along
+blocks. The index temporarily marks the exclusion window in its cached candidate mask, so one index
+must not be searched from two threads at once.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 SMALL_BLOCK = 8   # frames per small box
-LARGE_BLOCK = 32  # frames per large box
+LARGE_BLOCK = 32  # frames per large box (a multiple of SMALL_BLOCK)
 _BOUND_SLACK = np.float32(1.0 - 1e-5)
 _HINT_SPREAD = np.arange(-2, 3)  # a hinted frame and its neighbours seed the upper bound
 _PAD = 2                          # the candidate mask's extra False tail (hint neighbours may step outside)
@@ -43,14 +50,26 @@ _PAD = 2                          # the candidate mask's extra False tail (hint 
 
 @dataclass
 class SearchResult:
-    """Top-K candidates, best first. ``frames[0]`` is the answer."""
+    """Top-K candidates, best first. ``frames[0]`` is the answer.
+
+    ``channel_costs`` (K, C) float32, the per-channel breakdown for the debugger, is computed on first
+    access (a headless run never pays for it).
+    """
     frames: np.ndarray          # (K,) int64
     costs: np.ndarray           # (K,) float32 total cost (feature cost + bias)
     bias: np.ndarray            # (K,) float32 transition cost added (0 for the continuing frame)
-    channel_costs: np.ndarray   # (K, C) float32
     continuing_frame: int = -1  # the playing frame, -1 when none
     continuing_cost: float = float("nan")  # its feature cost, NaN when it could not compete
     evaluated: int = 0          # frames whose exact cost was computed
+    _breakdown: tuple | None = field(default=None, repr=False)   # (features_norm, query, slices)
+    _channel_costs: np.ndarray | None = field(default=None, repr=False)
+
+    @property
+    def channel_costs(self) -> np.ndarray:
+        if self._channel_costs is None:
+            features_norm, query, slices = self._breakdown
+            self._channel_costs = channel_costs(features_norm, self.frames, query, slices)
+        return self._channel_costs
 
     @property
     def best_frame(self) -> int:
@@ -103,7 +122,7 @@ def _rank(frames, costs, current, cont_cost, transition_cost, top_k):
     order = np.argsort(costs, kind="stable")[:top_k]
     tc = np.float32(transition_cost)
     frames = frames[order].tolist()
-    total = (costs[order] + tc).tolist()
+    total = (costs[order] + tc).tolist()   # float32 sums, exact as Python floats
     bias = [float(tc)] * len(frames)
     if current >= 0 and cont_cost == cont_cost:  # not NaN
         at = next((i for i, t in enumerate(total) if t >= cont_cost), len(total))
@@ -117,9 +136,9 @@ def _rank(frames, costs, current, cont_cost, transition_cost, top_k):
 
 
 def _result(features_norm, query, slices, frames, total, bias, current, cont_cost, evaluated):
-    return SearchResult(frames=frames, costs=total, bias=bias,
-                        channel_costs=channel_costs(features_norm, frames, query, slices),
-                        continuing_frame=int(current), continuing_cost=float(cont_cost), evaluated=int(evaluated))
+    return SearchResult(frames=frames, costs=total, bias=bias, continuing_frame=int(current),
+                        continuing_cost=float(cont_cost), evaluated=int(evaluated),
+                        _breakdown=(features_norm, query, slices))
 
 
 def _continuing_cost(features_norm, query, mask, current):
@@ -167,7 +186,7 @@ class SearchIndex:
     """
 
     def __init__(self, features_norm: np.ndarray, small_block: int = SMALL_BLOCK, large_block: int = LARGE_BLOCK,
-                 coarse_dims: int = 20, seed_blocks: int = 8):
+                 coarse_dims: int = 16, seed_blocks: int = 8):
         if large_block % small_block:
             raise ValueError("the large block size must be a multiple of the small block size")
         self.small_block, self.large_block = small_block, large_block
@@ -207,6 +226,7 @@ class SearchIndex:
         self.per_large, self.n_large = per, n_large
         self._offsets = np.arange(sb)
         self._per_offsets = np.arange(per)
+        self._tile = max(per, sb)
         self._q1 = np.empty_like(self.l1_lo)
         self._g1 = np.empty_like(self.l1_lo)
         self._ones1 = np.ones(len(dims), dtype=np.float32)
@@ -253,9 +273,11 @@ class SearchIndex:
         gap *= gap
         lb_large = self._ones1 @ gap
 
-        # 2. an upper bound on the k-th best cost, from real frames
+        # 2. an upper bound on the k-th best cost, from real frames (the playing frame's own cost, which
+        #    competes separately, comes with them: same rows, same reduction)
         ub = np.float32(np.inf)
         evaluated = 0
+        cont = float("nan")
         if hint is not None and len(hint):
             seeds = np.add.outer(np.asarray(hint, dtype=np.int64), _HINT_SPREAD).ravel()
             seeds.sort()
@@ -263,33 +285,41 @@ class SearchIndex:
             ok[1:] &= seeds[1:] != seeds[:-1]
             seeds = seeds[ok]
             if seeds.size >= k:
-                ub = np.partition(frame_costs(self.X[seeds], q), k - 1)[k - 1]
+                if current >= 0:
+                    c = frame_costs(self.X[np.append(seeds, current)], q)
+                    cont = float(c[-1]) if mask[current] else cont
+                    c = c[:-1]
+                else:
+                    c = frame_costs(self.X[seeds], q)
+                ub = np.partition(c, k - 1)[k - 1]
                 evaluated += seeds.size
         if not ub < np.inf:
             ub, n = self._seed_bound(lb_large, q, valid, k)
             evaluated += n
+            cont = _continuing_cost(self.X, q, mask, current)
         cut = ub / _BOUND_SLACK  # keep a box when bound * (1 - 1e-5) <= ub
 
         # 3. surviving large blocks -> their small blocks' exact box bounds -> frames' exact costs
+        q_tile = np.tile(q, self._tile)                          # q repeated, for long inner loops
         large = (lb_large <= cut).nonzero()[0]
         small = np.add.outer(large * self.per_large, self._per_offsets).ravel()          # ascending
-        small = small[self._small_bounds(large, q) <= cut]
+        small = small[self._small_bounds(large, q_tile) <= cut]
         d = self.rows[small]                                    # (S, sb, D)
-        d.reshape(len(small), -1).__isub__(np.tile(q, self.small_block))  # long inner loops; same values
+        d.reshape(len(small), -1).__isub__(q_tile[:self.small_block * self.n_dims])      # same values
         costs = np.einsum("ijk,ijk->ij", d, d).ravel()          # the brute force's reduction, bit for bit
         frames = np.add.outer(small * self.small_block, self._offsets).ravel()
         keep = valid[frames]
         evaluated += frames.size
-        cont = _continuing_cost(self.X, q, mask, current)
         f, total, bias = _rank(frames[keep], costs[keep], current, cont, transition_cost, k)
         slices = slices if slices is not None else [slice(0, self.n_dims)]
         return _result(self.X, q, slices, f, total, bias, current, cont, evaluated)
 
-    def _small_bounds(self, large: np.ndarray, q: np.ndarray) -> np.ndarray:
-        """Lower bounds (L * per,) of the small blocks of the given large blocks (before the slack)."""
+    def _small_bounds(self, large: np.ndarray, q_tile: np.ndarray) -> np.ndarray:
+        """Lower bounds (L * per,) of the small blocks of the given large blocks (before the slack);
+        ``q_tile`` is the query repeated at least ``per`` times."""
         lo = self.l2_lo[large]                                  # (L, per * D)
         hi = self.l2_hi[large]
-        q_tile = np.tile(q, self.per_large)                     # (per * D,) matches a row's layout
+        q_tile = q_tile[:self.per_large * self.n_dims]          # matches a row's layout
         np.maximum(lo, q_tile, out=lo)
         np.minimum(lo, hi, out=lo)                              # the query clamped into each box...
         np.subtract(q_tile, lo, out=lo)                         # ...and its offset from it
@@ -303,7 +333,7 @@ class SearchIndex:
         m = s = self.seed_blocks
         while True:
             large = np.argpartition(lb_large, m - 1)[:m] if m < self.n_large else np.arange(self.n_large)
-            lb_small = self._small_bounds(large, q)
+            lb_small = self._small_bounds(large, np.tile(q, self._tile))
             pick = np.argpartition(lb_small, s - 1)[:s] if s < lb_small.size else np.arange(lb_small.size)
             small = large[pick // self.per_large] * self.per_large + pick % self.per_large
             frames = np.add.outer(small * self.small_block, self._offsets).ravel()
