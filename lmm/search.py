@@ -115,7 +115,8 @@ def _rank(frames, costs, current, cont_cost, transition_cost, top_k):
     by frame index. The continuing frame goes before any candidate with the same total (a tie keeps
     playing). Returns (frames int64, total costs float32, bias float32).
     """
-    if costs.size > 2048:
+    if costs.size > top_k:
+        # everything tied with or better than the k-th cost, then a stable sort of those few
         kth = np.partition(costs, top_k - 1)[top_k - 1]
         keep = (costs <= kth).nonzero()[0]
         frames, costs = frames[keep], costs[keep]
@@ -226,7 +227,7 @@ class SearchIndex:
         self.per_large, self.n_large = per, n_large
         self._offsets = np.arange(sb)
         self._per_offsets = np.arange(per)
-        self._tile = max(per, sb)
+        self._tile_index = np.tile(np.arange(d), max(per, sb))   # q[_tile_index]: q repeated
         self._q1 = np.empty_like(self.l1_lo)
         self._g1 = np.empty_like(self.l1_lo)
         self._ones1 = np.ones(len(dims), dtype=np.float32)
@@ -279,18 +280,22 @@ class SearchIndex:
         evaluated = 0
         cont = float("nan")
         if hint is not None and len(hint):
-            seeds = np.add.outer(np.asarray(hint, dtype=np.int64), _HINT_SPREAD).ravel()
+            seeds = (np.asarray(hint, dtype=np.int64)[:, None] + _HINT_SPREAD).ravel()
             seeds.sort()
             ok = valid[seeds]
             ok[1:] &= seeds[1:] != seeds[:-1]
             seeds = seeds[ok]
             if seeds.size >= k:
                 if current >= 0:
-                    c = frame_costs(self.X[np.append(seeds, current)], q)
+                    c = self.X[np.concatenate((seeds, (current,)))]
+                    c -= q
+                    c = np.einsum("ij,ij->i", c, c)
                     cont = float(c[-1]) if mask[current] else cont
                     c = c[:-1]
                 else:
-                    c = frame_costs(self.X[seeds], q)
+                    c = self.X[seeds]
+                    c -= q
+                    c = np.einsum("ij,ij->i", c, c)
                 ub = np.partition(c, k - 1)[k - 1]
                 evaluated += seeds.size
         if not ub < np.inf:
@@ -300,14 +305,14 @@ class SearchIndex:
         cut = ub / _BOUND_SLACK  # keep a box when bound * (1 - 1e-5) <= ub
 
         # 3. surviving large blocks -> their small blocks' exact box bounds -> frames' exact costs
-        q_tile = np.tile(q, self._tile)                          # q repeated, for long inner loops
+        q_tile = q[self._tile_index]                             # q repeated, for long inner loops
         large = (lb_large <= cut).nonzero()[0]
-        small = np.add.outer(large * self.per_large, self._per_offsets).ravel()          # ascending
+        small = (large[:, None] * self.per_large + self._per_offsets).ravel()           # ascending
         small = small[self._small_bounds(large, q_tile) <= cut]
         d = self.rows[small]                                    # (S, sb, D)
         d.reshape(len(small), -1).__isub__(q_tile[:self.small_block * self.n_dims])      # same values
         costs = np.einsum("ijk,ijk->ij", d, d).ravel()          # the brute force's reduction, bit for bit
-        frames = np.add.outer(small * self.small_block, self._offsets).ravel()
+        frames = (small[:, None] * self.small_block + self._offsets).ravel()
         keep = valid[frames]
         evaluated += frames.size
         f, total, bias = _rank(frames[keep], costs[keep], current, cont, transition_cost, k)
@@ -333,10 +338,10 @@ class SearchIndex:
         m = s = self.seed_blocks
         while True:
             large = np.argpartition(lb_large, m - 1)[:m] if m < self.n_large else np.arange(self.n_large)
-            lb_small = self._small_bounds(large, np.tile(q, self._tile))
+            lb_small = self._small_bounds(large, q[self._tile_index])
             pick = np.argpartition(lb_small, s - 1)[:s] if s < lb_small.size else np.arange(lb_small.size)
             small = large[pick // self.per_large] * self.per_large + pick % self.per_large
-            frames = np.add.outer(small * self.small_block, self._offsets).ravel()
+            frames = (small[:, None] * self.small_block + self._offsets).ravel()
             frames = frames[valid[frames]]
             if frames.size >= k or (m >= self.n_large and s >= lb_small.size):
                 break
