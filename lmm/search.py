@@ -111,28 +111,29 @@ def channel_costs(features_norm: np.ndarray, frames: np.ndarray, query: np.ndarr
 def _rank(frames, costs, current, cont_cost, transition_cost, top_k):
     """Top-K of the non-continuing candidates merged with the continuing one, best first.
 
-    ``frames`` must be ascending (both searches produce them so): a stable sort by cost then breaks ties
-    by frame index. The continuing frame goes before any candidate with the same total (a tie keeps
-    playing). Returns (frames int64, total costs float32, bias float32).
+    ``frames`` must be ascending (both searches produce them so): ties in cost go to the lower frame.
+    The continuing frame goes before any candidate with the same total (a tie keeps playing).
+    Returns (frames int64, total costs float32, bias float32).
     """
     if costs.size > top_k:
-        # everything tied with or better than the k-th cost, then a stable sort of those few
+        # everything tied with or better than the k-th cost: a handful of candidates
         kth = np.partition(costs, top_k - 1)[top_k - 1]
         keep = (costs <= kth).nonzero()[0]
         frames, costs = frames[keep], costs[keep]
-    order = np.argsort(costs, kind="stable")[:top_k]
     tc = np.float32(transition_cost)
-    frames = frames[order].tolist()
-    total = (costs[order] + tc).tolist()   # float32 sums, exact as Python floats
+    total = costs + tc                       # float32 sums (monotonic in the cost)
+    ranked = sorted(zip(costs.tolist(), frames.tolist(), total.tolist()))[:top_k]
+    frames = [f for _, f, _ in ranked]
+    totals = [t for _, _, t in ranked]
     bias = [float(tc)] * len(frames)
     if current >= 0 and cont_cost == cont_cost:  # not NaN
-        at = next((i for i, t in enumerate(total) if t >= cont_cost), len(total))
+        at = next((i for i, t in enumerate(totals) if t >= cont_cost), len(totals))
         if at < top_k:
             frames.insert(at, int(current))
-            total.insert(at, cont_cost)
+            totals.insert(at, cont_cost)
             bias.insert(at, 0.0)
-            del frames[top_k:], total[top_k:], bias[top_k:]
-    return (np.array(frames, dtype=np.int64), np.array(total, dtype=np.float32),
+            del frames[top_k:], totals[top_k:], bias[top_k:]
+    return (np.array(frames, dtype=np.int64), np.array(totals, dtype=np.float32),
             np.array(bias, dtype=np.float32))
 
 
