@@ -140,9 +140,9 @@ class StageSettings:
 @dataclass
 class Recipe:
     """The training recipe. Defaults: the fast recipe measured to fit 45 minutes on 2 CPU cores."""
-    decompressor: StageSettings = field(default_factory=lambda: StageSettings(8000, 512, 2e-3))
+    decompressor: StageSettings = field(default_factory=lambda: StageSettings(3000, 512, 2e-3))
     stepper: StageSettings = field(default_factory=lambda: StageSettings(5000, 128, 2e-3))
-    projector: StageSettings = field(default_factory=lambda: StageSettings(4000, 512, 2e-3))
+    projector: StageSettings = field(default_factory=lambda: StageSettings(8000, 512, 2e-3))
     stepper_window: int = 20
     seed: int = 1234
     threads: int = 2
@@ -350,7 +350,8 @@ def make_stepper(data: TrainingData, Z: torch.Tensor, windows: np.ndarray, laten
 
 
 def train_stepper(data: TrainingData, Z: torch.Tensor, s: StageSettings, window: int = 20, seed: int = 1234,
-                  hidden: int = 512, log_every: int = 200, csv_path=None, quiet=False, stream=None, stepper=None):
+                  hidden: int = 512, log_every: int = 200, csv_path=None, quiet=False, stream=None, stepper=None,
+                  log_name: str = "stepper"):
     rng = _seed(seed + 1)
     starts = window_starts_from(data, window)
     if stepper is None:
@@ -360,7 +361,7 @@ def train_stepper(data: TrainingData, Z: torch.Tensor, s: StageSettings, window:
     s_std = stepper.in_std
     d_std = stepper.out_std
     opt, sched = make_optimizer(stepper.parameters(), s)
-    log = LossLog("stepper", s.iterations, log_every, csv_path, stream, quiet)
+    log = LossLog(log_name, s.iterations, log_every, csv_path, stream, quiet)
     offsets = torch.arange(window)
     for it in range(s.iterations):
         f0 = torch.from_numpy(starts[rng.integers(0, len(starts), s.batch)])
@@ -436,7 +437,8 @@ def make_projector(data: TrainingData, Z: torch.Tensor, hidden: int = 512):
 
 
 def train_projector(data: TrainingData, Z: torch.Tensor, s: StageSettings, seed: int = 1234, hidden: int = 512,
-                    log_every: int = 200, csv_path=None, quiet=False, stream=None, projector=None):
+                    log_every: int = 200, csv_path=None, quiet=False, stream=None, projector=None,
+                    log_name: str = "projector"):
     rng = _seed(seed + 2)
     gen = torch.Generator().manual_seed(seed + 2)
     if projector is None:
@@ -449,7 +451,7 @@ def train_projector(data: TrainingData, Z: torch.Tensor, s: StageSettings, seed:
     z_std = torch.from_numpy(robust_std(Z.numpy()))
     pool = data.frames if data.frames is not None else np.arange(X.shape[0])
     opt, sched = make_optimizer(projector.parameters(), s)
-    log = LossLog("projector", s.iterations, log_every, csv_path, stream, quiet)
+    log = LossLog(log_name, s.iterations, log_every, csv_path, stream, quiet)
     for it in range(s.iterations):
         f = torch.from_numpy(pool[rng.integers(0, len(pool), s.batch)])
         q = noisy_queries(X, f, x_std, gen)
@@ -513,10 +515,11 @@ def _load_networks(path, names, db, features) -> tuple[dict, dict]:
 
 
 def train_pipeline(db, features: Features, stages=NETWORKS, recipe: Recipe | None = None, out_dir="lmm-weights",
-                   frames: np.ndarray | None = None, quiet: bool = False, stream=None) -> dict:
+                   frames: np.ndarray | None = None, quiet: bool = False, stream=None, resume: bool = False) -> dict:
     """Train the given stages in order and write ``default.npz`` (decompressor, stepper, projector),
     ``compressor.npz`` and ``training_log.csv`` into ``out_dir``. Stages not trained are taken from
-    the files already in ``out_dir``. Returns a summary (wall times, final losses, paths)."""
+    the files already in ``out_dir``. ``resume``: stepper/projector start from the ones in ``out_dir``
+    (a further schedule on top of a finished run) instead of from scratch. Returns a summary."""
     recipe = recipe or Recipe()
     stream = stream if stream is not None else sys.stderr
     torch.set_num_threads(recipe.threads)
@@ -541,7 +544,7 @@ def train_pipeline(db, features: Features, stages=NETWORKS, recipe: Recipe | Non
             from . import weights as W
             prev = W.load(runtime_path, require=[], db_key=db.key, layout_dicts=features.layout_dicts())
             previous = dict(prev.metadata)
-            keep = [n for n in NETWORKS if n not in stages and n in prev.networks]
+            keep = [n for n in NETWORKS if (n not in stages or (resume and n != "decompressor")) and n in prev.networks]
             loaded, _ = _load_networks(runtime_path, keep, db, features)
             nets.update(loaded)
         except Exception as e:  # noqa: BLE001 - a stale file is simply replaced
@@ -567,6 +570,7 @@ def train_pipeline(db, features: Features, stages=NETWORKS, recipe: Recipe | Non
     if "decompressor" in stages:
         s = recipe.decompressor
         t0 = time.perf_counter()
+        torch.manual_seed(recipe.seed)  # the initial weights, too, follow the seed
         pair = make_autoencoder(data, recipe.latent, recipe.hidden)
         nets["compressor"], nets["decompressor"] = pair
 
@@ -582,15 +586,19 @@ def train_pipeline(db, features: Features, stages=NETWORKS, recipe: Recipe | Non
     if "stepper" in stages:
         t0 = time.perf_counter()
         nets["stepper"], log = train_stepper(data, Z, recipe.stepper, recipe.stepper_window, recipe.seed, recipe.hidden,
-                                             recipe.log_every, csv_path, quiet, stream)
-        wall["stepper"] = round(time.perf_counter() - t0, 1)
+                                             recipe.log_every, csv_path, quiet, stream,
+                                             stepper=nets.get("stepper") if resume else None,
+                                             log_name="stepper_resumed" if resume else "stepper")
+        wall["stepper" + ("_resumed" if resume else "")] = round(time.perf_counter() - t0, 1)
         summary["first_loss"]["stepper"], summary["final_loss"]["stepper"] = log.first_loss, log.last_loss
         save_all("after stepper")
     if "projector" in stages:
         t0 = time.perf_counter()
         nets["projector"], log = train_projector(data, Z, recipe.projector, recipe.seed, recipe.hidden,
-                                                 recipe.log_every, csv_path, quiet, stream)
-        wall["projector"] = round(time.perf_counter() - t0, 1)
+                                                 recipe.log_every, csv_path, quiet, stream,
+                                                 projector=nets.get("projector") if resume else None,
+                                                 log_name="projector_resumed" if resume else "projector")
+        wall["projector" + ("_resumed" if resume else "")] = round(time.perf_counter() - t0, 1)
         summary["first_loss"]["projector"], summary["final_loss"]["projector"] = log.first_loss, log.last_loss
     wall["total_this_run"] = round(time.perf_counter() - t_all, 1)
     save_all("complete" if all(n in nets for n in NETWORKS) else "partial")

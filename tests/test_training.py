@@ -103,6 +103,12 @@ def test_pipeline_writes_loadable_files(dbf, tmp_path):
     summary = T.train_pipeline(db, features, ("projector",), r, tmp_path, frames=SLICE, quiet=True)
     nets2 = LMMNetworks.load(tmp_path / "default.npz", db, features)
     np.testing.assert_array_equal(nets.stepper.weights[0], nets2.stepper.weights[0])
+    # --resume continues the projector from the file (its first loss is below a fresh start's)
+    fresh = summary["first_loss"]["projector"]
+    resumed = T.train_pipeline(db, features, ("projector",), r, tmp_path, frames=SLICE, quiet=True, resume=True)
+    assert resumed["first_loss"]["projector"] < fresh
+    with open(tmp_path / "training_log.csv", newline="") as f:
+        assert {r["network"] for r in csv.DictReader(f)} >= {"projector", "projector_resumed"}
 
 
 def test_train_command(tmp_path, capsys):

@@ -25,6 +25,8 @@ def add_arguments(p) -> None:
     p.add_argument("--threads", type=int, default=2, help="torch threads (default 2)")
     p.add_argument("--frames", type=int, help="train on the first N database frames only (quick checks)")
     p.add_argument("--log-every", type=int, default=200, help="print a loss line every N iterations")
+    p.add_argument("--resume", action="store_true",
+                   help="stepper/projector: continue from the networks in --out with a new schedule")
     p.add_argument("--quiet", action="store_true", help="no progress bar or loss lines")
 
 
@@ -53,7 +55,8 @@ def main(args) -> int:
           file=sys.stderr)
     t0 = time.perf_counter()
     try:
-        summary = train_pipeline(db, features, stages, recipe, args.out, frames=frames, quiet=args.quiet)
+        summary = train_pipeline(db, features, stages, recipe, args.out, frames=frames, quiet=args.quiet,
+                                 resume=args.resume)
     except (WeightsError, FileNotFoundError) as e:
         print(f"error: {e}", file=sys.stderr)
         return 1
