@@ -61,10 +61,10 @@ def decompressor_error(nets, db, features, Z: np.ndarray) -> dict:
             "per_joint_cm": {name: float(v) for name, v in zip(db.names[1:], err.mean(0))}}
 
 
-def noisy_queries(X: np.ndarray, n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-    """As in training: x + std * U(0, 1) * N(0, 1), x a random database frame's features."""
+def noisy_queries(X: np.ndarray, n: int, rng: np.random.Generator, noise: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
+    """As in training: x + noise * std * U(0, 1) * N(0, 1), x a random database frame's features."""
     frames = rng.integers(0, X.shape[0], n)
-    level = rng.random((n, 1))
+    level = rng.random((n, 1)) * noise
     q = X[frames] + X.std(0) * level * rng.standard_normal((n, X.shape[1]))
     return q.astype(np.float32), frames
 
@@ -81,18 +81,39 @@ def nearest(queries: np.ndarray, X: np.ndarray, chunk: int = 512) -> tuple[np.nd
     return idx, cost
 
 
-def projector_metrics(nets, features, n_queries: int = 4096, seed: int = 7) -> dict:
+def training_noise(nets) -> float:
+    """The projector's query noise level from the weights' recipe (1.0 for files from before it was stored)."""
+    return float(nets.metadata.get("recipe", {}).get("projector_noise", 1.0))
+
+
+def projector_metrics(nets, features, n_queries: int = 4096, seed: int = 7, noise: float | None = None) -> dict:
     rng = np.random.default_rng(seed)
     X = nets.to_network_space(features.raw)
-    q, _ = noisy_queries(X, n_queries, rng)
+    noise = training_noise(nets) if noise is None else noise
+    q, _ = noisy_queries(X, n_queries, rng, noise)
     nn_idx, nn_cost = nearest(q, X)
     proj = batched(nets.projector, q)[:, :nets.n_features]
     proj_nn, _ = nearest(proj, X)
     proj_cost = np.sum((q - proj) ** 2, axis=1)
     ratio = proj_cost / np.maximum(nn_cost, 1e-9)
     return {"nn_agreement": float(np.mean(proj_nn == nn_idx)), "cost_ratio_median": float(np.median(ratio)),
+            "query_noise": noise, "nn_within_3_frames": float(np.mean(np.abs(proj_nn - nn_idx) <= 3)),
             "cost_ratio_mean": float(np.mean(ratio)), "n_queries": int(n_queries),
             "feature_error_mean_abs": float(np.mean(np.abs(proj - X[nn_idx])))}
+
+
+def projector_runtime_agreement(nets, features, queries_norm: np.ndarray) -> dict:
+    """nn agreement and cost ratio on real queries (those a controller made at its searches)."""
+    if queries_norm.shape[0] == 0:
+        return {}
+    X = nets.to_network_space(features.raw)
+    q = nets.to_network_space(features.denormalize(queries_norm))
+    nn_idx, nn_cost = nearest(q, X)
+    proj = batched(nets.projector, q)[:, :nets.n_features]
+    proj_nn, _ = nearest(proj, X)
+    ratio = np.sum((q - proj) ** 2, axis=1) / np.maximum(nn_cost, 1e-9)
+    return {"nn_agreement_runtime": float(np.mean(proj_nn == nn_idx)),
+            "cost_ratio_median_runtime": float(np.median(ratio)), "runtime_queries": int(q.shape[0])}
 
 
 def stepper_drift(nets, db, features, Z: np.ndarray, horizon: int = 60, n_starts: int = 2048, seed: int = 11) -> dict:
@@ -129,7 +150,7 @@ def run_controller(controller, inputs, seconds: float, dt: float = 1.0 / 60.0) -
     root_pos = np.zeros((n, 3))
     root_rot = np.zeros((n, 4))
     contacts = np.zeros((n, 2), bool)
-    latents = []
+    latents, queries = [], []
     step_us = np.zeros(n)
     for i in range(n):
         t0 = time.perf_counter()
@@ -141,8 +162,11 @@ def run_controller(controller, inputs, seconds: float, dt: float = 1.0 / 60.0) -
         contacts[i] = pose.contacts
         if snap.latent is not None:
             latents.append(snap.latent)
+        if snap.searched:
+            queries.append(snap.query)
     return {"positions": pos, "root_position": root_pos, "root_rotation": root_rot, "contacts": contacts,
-            "latents": np.array(latents) if latents else None, "step_us": step_us, "dt": dt}
+            "latents": np.array(latents) if latents else None, "step_us": step_us, "dt": dt,
+            "queries": np.array(queries, np.float32).reshape(-1, controller.features.n_dims)}
 
 
 def root_space(run: dict) -> np.ndarray:
@@ -199,6 +223,7 @@ def evaluate(db, features, nets, compressor: MLP, inputs="builtin:random:1", sec
     out["mm_vs_lmm"] = {"mean_joint_distance_cm": float(dist.mean()), "input": inputs, "seconds": seconds,
                         "root_distance_cm": float(np.mean(np.linalg.norm(mm["root_position"] - lmm["root_position"],
                                                                          axis=-1)) * 100.0)}
+    out["projector"].update(projector_runtime_agreement(nets, features, mm["queries"]))
     out["foot_skating"] = {"mm_cm_s": foot_skating_cm_s(mm, toes), "lmm_cm_s": foot_skating_cm_s(lmm, toes)}
     out["lmm_run"] = {"finite": bool(np.all(np.isfinite(lmm["positions"]))),
                       "max_bone_length_error_cm": bone_length_error_m(lmm, db) * 100.0,
