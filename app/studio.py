@@ -81,6 +81,7 @@ class StudioOptions:
     save_layout: bool = True
     write_layouts: str | None = None
     samples: int = -1
+    render_scale: float = 1.0
     cache: str | None = None
 
 
@@ -205,6 +206,7 @@ class Studio:
         self.menu = MenuBar(dpg, self)
         self.viewport = ViewportPanel(dpg, self)
         self.viewport.samples = self.opts.samples
+        self.viewport.render_scale = float(min(max(self.opts.render_scale, 0.25), 1.0))
         self.panels = {
             "viewport": self.viewport,
             "features": FeaturesPanel(dpg, self),

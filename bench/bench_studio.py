@@ -50,6 +50,7 @@ def main() -> int:
     ap.add_argument("--warmup", type=int, default=120, help="frames left out of the statistics")
     ap.add_argument("--weights", help="LMM weights (default: the shipped ones; MM only when missing)")
     ap.add_argument("--samples", type=int, default=-1, help="3D multisampling (-1: auto)")
+    ap.add_argument("--render-scale", type=float, default=1.0, help="3D view resolution scale (default 1)")
     ap.add_argument("--display", help="use this X display instead of starting Xvfb")
     ap.add_argument("--lp-threads", help="set LP_NUM_THREADS for llvmpipe (default: leave as is)")
     ap.add_argument("--json", action="store_true", help="print one JSON object")
@@ -67,7 +68,8 @@ def main() -> int:
         dump = tmp / "dump.json"
         cmd = [sys.executable, "-m", "app.cli", "--frames", str(args.frames), "--input", "builtin:circle",
                "--layout", "default", "--width", "1600", "--height", "900", "--no-gamepads",
-               "--no-save-layout", "--samples", str(args.samples), "--dump-state", str(dump)]
+               "--no-save-layout", "--samples", str(args.samples), "--render-scale", str(args.render_scale),
+               "--dump-state", str(dump)]
         if args.weights:
             cmd += ["--weights", args.weights]
         t0 = time.perf_counter()
@@ -102,6 +104,7 @@ def main() -> int:
         "controllers_ms_median": float(np.median(controllers_ms)),
         "parts_ms_median": {k: float(np.nanmedian(v)) for k, v in ms.items()},
         "viewport_3d": d["final"]["viewport"].get("size"),
+        "render_3d": d["final"]["viewport"].get("render_size"),
         "load_average": os.getloadavg(),
         "cpu_count": os.cpu_count(),
         "process_wall_s": wall,
@@ -122,7 +125,7 @@ def main() -> int:
               "ui": "dearpygui frame (UI raster + swap)"}
     for k, v in out["parts_ms_median"].items():
         print(f"    {labels.get(k, k):38s} {v:7.2f} ms")
-    print(f"  3D view {out['viewport_3d']}, load average {out['load_average'][0]:.2f} on {out['cpu_count']} CPUs")
+    print(f"  3D view {out['viewport_3d']} rendered at {out['render_3d']}, load average {out['load_average'][0]:.2f} on {out['cpu_count']} CPUs")
     if out["lmm_problem"]:
         print(f"  note: {out['lmm_problem']}")
     return 0

@@ -27,6 +27,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-lmm", action="store_true", help="motion matching only")
     parser.add_argument("--samples", type=int, default=-1,
                         help="3D view multisampling, e.g. 0 or 4 (default: 4 on a GPU, 0 on software OpenGL)")
+    parser.add_argument("--render-scale", type=float, default=1.0, metavar="S",
+                        help="render the 3D view at S times its size and stretch it (0.25-1; default 1): "
+                             "cheaper on software OpenGL")
     parser.add_argument("--no-gamepads", action="store_true", help="do not open gamepads (keyboard only)")
     parser.add_argument("--fixed-step", action="store_true",
                         help="one 60 Hz tick per rendered frame (default with --frames/--script: reproducible)")
@@ -65,5 +68,5 @@ def main(args: argparse.Namespace) -> int:
                          lmm=not args.no_lmm, script=args.script, dump_state=args.dump_state,
                          fixed_step=args.fixed_step, gamepads=not args.no_gamepads,
                          save_layout=not args.no_save_layout, write_layouts=args.write_layouts,
-                         samples=args.samples)
+                         samples=args.samples, render_scale=args.render_scale)
     return Studio(opts).run()

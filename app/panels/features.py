@@ -104,13 +104,17 @@ class FeaturesPanel:
             dpg.set_value(tag, [x + shift, v])
         inspected = SHORT.get(view.inspected, view.inspected)
         dpg.configure_item("feat_query", label=f"query ({inspected})")
-        err_m = channel_errors(features, vals["query"], vals["matched"])
-        err_p = channel_errors(features, vals["query"], vals["projected"])
-        total_m = float(np.nansum(err_m)) if vals["matched"] is not None else float("nan")
-        total_p = float(np.nansum(err_p)) if vals["projected"] is not None else float("nan")
-        summary = f"query of {inspected}   |   cost vs MM matched: {total_m:.3f}"
-        if vals["projected"] is not None:
-            summary += f"   |   cost vs LMM projected: {total_p:.3f}"
+        # each controller's own query: the projector answered LMM's query, the search MM's
+        mm = view.snap("mm") if view.tick is not None and "mm" in view.tick.snapshots else None
+        lmm = view.snap("lmm") if view.tick is not None and "lmm" in view.tick.snapshots else None
+        total_m = total_p = float("nan")
+        summary = f"query of {inspected}"
+        if mm is not None and vals["matched"] is not None:
+            total_m = float(np.sum(channel_errors(features, np.asarray(mm.query, np.float64), vals["matched"])))
+            summary += f"   |   MM: |query - matched|^2 = {total_m:.3f}"
+        if lmm is not None and vals["projected"] is not None:
+            total_p = float(np.sum(channel_errors(features, np.asarray(lmm.query, np.float64), vals["projected"])))
+            summary += f"   |   LMM: |query - projected|^2 = {total_p:.3f}"
         self.text.set("feat_summary", summary)
         self.last = {"query": vals["query"], "matched": vals["matched"], "projected": vals["projected"],
                      "cost_matched": total_m, "cost_projected": total_p}

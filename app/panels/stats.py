@@ -129,7 +129,7 @@ class StatsPanel:
             h = view.history
             vp = self.studio.viewport
             self.text.set("stats_process", f"process {fmt_bytes(rss_bytes())}; history {len(h) * self.studio.session.dt:.1f}"
-                                           f" of {h.capacity * self.studio.session.dt:.0f} s; 3D {vp.size[0]}x{vp.size[1]}"
+                                           f" of {h.capacity * self.studio.session.dt:.0f} s; 3D {vp.render_size[0]}x{vp.render_size[1]}"
                                            f" {vp.samples}x MSAA ({vp.gl_renderer[:24]})")
             self.last = {"fps": fps, "frame_ms": ft.median(), "python_ms": python_ms,
                          "parts_ms": {p: ft.median(p) for p in PARTS},

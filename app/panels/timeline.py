@@ -38,7 +38,7 @@ class TimelinePanel:
                 dpg.add_button(label=">", tag="tl_fwd", width=26, callback=lambda: self.studio.step(1))
                 dpg.add_button(label="<<1s", tag="tl_back_s", callback=lambda: self.studio.step(-60))
                 dpg.add_button(label="Live", tag="tl_live", callback=lambda: self.studio.go_live())
-                dpg.add_slider_int(tag="tl_slider", width=-200, min_value=0, max_value=1, default_value=1,
+                dpg.add_slider_int(tag="tl_slider", width=-185, min_value=0, max_value=1, default_value=1,
                                    callback=self._on_slider, format="tick %d")
                 dpg.add_text("", tag="tl_status")
             with dpg.plot(tag="tl_plot", height=-1, width=-1, no_menus=True, no_mouse_pos=True, no_title=True,
@@ -93,9 +93,10 @@ class TimelinePanel:
         dpg.set_axis_limits("tl_x", float(t[0]), 0.0)
         dpg.configure_item("tl_play", label="Play" if view.paused else "Pause")
         held = (newest - oldest + 1) * dt
-        status = ("LIVE" if view.live else "PAUSED" if view.paused else "REWIND") + \
-            f"  {view.tick.time_s if view.tick is not None else 0:7.2f} s ({(view.tick_number - newest) * dt:+.2f} s, " \
-            f"{held:.1f} s held)"
+        mode = "LIVE" if view.live else "PAUSED" if view.paused else "REWIND"
+        t_now = view.tick.time_s if view.tick is not None else 0.0
+        behind = (view.tick_number - newest) * dt
+        status = f"{mode} {t_now:.2f} s" + (f" ({behind:+.2f} s)" if behind else "") + f" | {held:.0f} s held"
         self.text.set("tl_status", status)
         self.last = {"tick": view.tick_number, "newest": newest, "oldest": oldest, "live": view.live,
                      "paused": view.paused}

@@ -193,6 +193,8 @@ class ViewportPanel:
         self._texture_counter = 0
         self._legend_items: list[str] = []
         self.samples = -1          # -1: auto (4x MSAA on a GPU, none on software GL)
+        self.render_scale = 1.0    # 3D image resolution / displayed size
+        self.render_size = (0, 0)
         self.gl_renderer = ""
 
     # -- items ------------------------------------------------------------------------------
@@ -286,13 +288,16 @@ class ViewportPanel:
         if (w, h) == self.size:
             return
         self.size = (w, h)
-        self.renderer.resize(w, h)
+        # the 3D image may be rendered smaller and stretched (--render-scale): its cost is per pixel
+        rw, rh = max(int(round(w * self.render_scale)), 16), max(int(round(h * self.render_scale)), 16)
+        self.render_size = (rw, rh)
+        self.renderer.resize(rw, rh)
         old = self.texture
         self._texture_counter += 1
-        self.tex_array = np.zeros((h, w, 4), dtype=np.float32)
+        self.tex_array = np.zeros((rh, rw, 4), dtype=np.float32)
         self.tex_array[..., 3] = 1.0
         self.texture = f"vp_texture_{self._texture_counter}"
-        dpg.add_raw_texture(w, h, self.tex_array, format=dpg.mvFormat_Float_rgba, tag=self.texture,
+        dpg.add_raw_texture(rw, rh, self.tex_array, format=dpg.mvFormat_Float_rgba, tag=self.texture,
                             parent="studio_textures")
         dpg.configure_item("vp_drawlist", width=w, height=h)
         if dpg.does_item_exist("vp_image"):
@@ -513,6 +518,7 @@ class ViewportPanel:
     def state(self) -> dict:
         out = dict(self.drawn)
         out["size"] = list(self.size)
+        out["render_size"] = list(self.render_size)
         out["side_by_side"] = self.side_by_side
         if self.camera is not None:
             out["camera"] = {"target": [float(x) for x in self.camera.target], "yaw_deg": self.camera.yaw_deg,
