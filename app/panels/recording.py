@@ -60,6 +60,8 @@ class RecordingPanel:
     def update(self, view) -> None:
         dpg = self.dpg
         s = self.studio.session
+        if view.frame % 30 == 0:   # LMM may have been loaded since (File > Load LMM weights)
+            dpg.configure_item("rec_lmm", enabled="lmm" in s.controllers)
         rec = s.recording
         if rec is not None:
             dpg.configure_item("rec_button", label="Stop")

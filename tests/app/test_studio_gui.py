@@ -251,14 +251,16 @@ def test_broken_files_show_an_error_and_the_studio_runs_on(run_studio, tmp_path)
               {"frame": 13, "do": "open", "kind": "weights", "path": str(bad_weights)},
               {"frame": 15, "do": "open", "kind": "input", "path": str(bad_input)},
               {"frame": 20, "do": "open", "kind": "preset_load", "path": str(good_preset)}]
-    r = run_studio("--frames", 30, "--no-lmm", "--input", "builtin:zigzag", script=script)
+    start_layout = tmp_path / "start_layout.ini"
+    start_layout.write_bytes(b"\x00\x01 not a layout")
+    r = run_studio("--frames", 30, "--no-lmm", "--input", "builtin:zigzag", "--layout", start_layout, script=script)
     assert r.rc == 0, r.stderr[-3000:]
     d = r.dump
     msgs = [e["message"] for e in d["errors"]]
-    for f in ("truncated_frame.bvh", "bad_preset.json", "range_preset.json", "bad_layout.ini",
+    for f in ("start_layout.ini", "truncated_frame.bvh", "bad_preset.json", "range_preset.json", "bad_layout.ini",
               "bad_weights.npz", "bad_input.csv"):
         assert any(f in m for m in msgs), (f, msgs)
-    assert len(msgs) == 6
+    assert len(msgs) == 7
     assert d["frames_run"] == 30 and d["tick_count"] == 30       # it kept simulating through the errors
     ticks = {t["tick"]: t for t in d["ticks"]}
     assert ticks[20]["tuning_seen"]["run_forward_speed_m_s"] == 3.5
