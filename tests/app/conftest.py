@@ -17,8 +17,7 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[2]
-CORPUS = ROOT / "tests" / "bvh_corpus"
+from studio_testutil import CORPUS, ROOT  # noqa: F401  (pytest puts this folder on sys.path)
 
 
 @pytest.fixture(scope="session")

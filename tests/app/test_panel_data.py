@@ -21,7 +21,7 @@ from app.session import Session, load_reference_clip, make_controllers, recordin
 from lmm.controller import Candidates, InputState
 from lmm.tuning import Tuning, TuningError
 
-from .conftest import CORPUS
+from studio_testutil import CORPUS
 
 
 @pytest.fixture(scope="module")

@@ -14,7 +14,7 @@ import pytest
 
 from app.panels import layouts
 
-from .conftest import CORPUS, ROOT
+from studio_testutil import CORPUS, ROOT
 
 pytestmark = pytest.mark.gui
 
