@@ -8,6 +8,7 @@ import numpy as np
 from .common import COLORS, TextCache, View, window_tag
 
 COLUMNS = 200
+GAP = 2.0       # rows of space between the two maps
 
 
 def diverging_lut(n: int = 256) -> np.ndarray:
@@ -23,8 +24,9 @@ def diverging_lut(n: int = 256) -> np.ndarray:
 
 def heat_image(values: np.ndarray, scale: float, lut: np.ndarray, columns: int = COLUMNS,
                out: np.ndarray | None = None) -> np.ndarray:
-    """(T, L) series -> (L, columns, 4) RGBA image, one row per dimension (row 0 = dimension 0, at the
-    top), oldest tick left, newest right; ``[-scale, scale]`` spans the colour map; NaN is dark grey."""
+    """(T, L) series -> (L, columns, 4) RGBA image, one row per dimension (image row 0 = dimension 0; a plot
+    image shows it at the bottom), oldest tick left, newest right; ``[-scale, scale]`` spans the colour map;
+    NaN is dark grey."""
     v = np.asarray(values, np.float64)
     T, L = v.shape
     idx = np.clip(np.round(np.linspace(0, T - 1, columns)).astype(np.int64), 0, T - 1)   # newest kept
@@ -81,14 +83,19 @@ class LatentPanel:
                 dpg.add_slider_int(tag="lat_dim", default_value=0, min_value=0, max_value=self.n_latent - 1, width=90,
                                    callback=lambda s, a: setattr(self, "dim", int(a)))
                 dpg.add_text("", tag="lat_status")
-            for key, title in (("lmm", "LMM"), ("mm", "MM")):
-                with dpg.plot(tag=f"lat_plot_{key}", height=66, width=-1, no_menus=True, no_mouse_pos=True,
-                              no_box_select=True, no_title=True):
-                    dpg.add_plot_axis(dpg.mvXAxis, tag=f"lat_x_{key}", no_tick_labels=key == "lmm")
-                    with dpg.plot_axis(dpg.mvYAxis, tag=f"lat_y_{key}", label=title, no_tick_labels=True):
-                        # one textured quad per map: far cheaper to draw than thousands of heat-map cells
-                        dpg.add_image_series(f"lat_tex_{key}", (-self.seconds, 0), (0, self.n_latent),
+            # both maps in one plot (LMM above, MM below), each a single textured quad: far cheaper to
+            # draw than thousands of heat-map cells, and one plot frame instead of two
+            L = self.n_latent
+            with dpg.plot(tag="lat_plot", height=138, width=-1, no_menus=True, no_mouse_pos=True,
+                          no_box_select=True, no_title=True):
+                dpg.add_plot_axis(dpg.mvXAxis, tag="lat_x")
+                with dpg.plot_axis(dpg.mvYAxis, tag="lat_y", no_gridlines=True):
+                    for key in ("lmm", "mm"):
+                        lo, hi = self._rows(key)
+                        dpg.add_image_series(f"lat_tex_{key}", (-self.seconds, lo), (0, hi),
                                              tag=f"lat_heat_{key}", show=False)
+                dpg.set_axis_limits("lat_y", 0.0, 2 * L + GAP)
+                dpg.set_axis_ticks("lat_y", (("MM", L / 2), ("LMM", L + GAP + L / 2)))
             with dpg.plot(tag="lat_curve_plot", height=-1, width=-1, no_menus=True, no_mouse_pos=True):
                 dpg.add_plot_legend(location=dpg.mvPlot_Location_North, horizontal=True, outside=True)
                 dpg.add_plot_axis(dpg.mvXAxis, tag="lat_curve_x", label="seconds")
@@ -97,6 +104,11 @@ class LatentPanel:
                     dpg.add_line_series([0.0], [0.0], tag="lat_curve_mm", label="MM matched latent[0]")
         self.studio.theme_series("lat_curve_lmm", COLORS["lmm"], weight=2.0)
         self.studio.theme_series("lat_curve_mm", COLORS["mm"], weight=2.0)
+
+    def _rows(self, key: str) -> tuple[float, float]:
+        """y range of a map: MM at the bottom, LMM above it (dimension 0 is the bottom row of each)."""
+        L = float(self.n_latent)
+        return (L + GAP, 2 * L + GAP) if key == "lmm" else (0.0, L)
 
     def update(self, view: View) -> None:
         dpg = self.dpg
@@ -124,16 +136,16 @@ class LatentPanel:
             if v is None or v.ndim != 2 or v.shape[1] != self.n_latent:
                 dpg.configure_item(tag, show=False)
                 continue
-            rows = v.shape[1]
             sc = self._scale[key]
             heat_image(v, sc, self.lut, COLUMNS, out=self.images[key])   # in place: the texture shows it
-            dpg.configure_item(tag, show=True, bounds_min=(float(t[0]), 0.0), bounds_max=(0.0, float(rows)))
-            label = f"{key.upper()} ±{sc:.1f}"
-            dpg.set_axis_limits(f"lat_x_{key}", float(t[0]), 0.0)
-            dpg.set_axis_limits(f"lat_y_{key}", 0.0, float(rows))
-            if label != self._label_shown.get(key):
-                self._label_shown[key] = label
-                dpg.configure_item(f"lat_y_{key}", label=label)
+            lo, hi = self._rows(key)
+            dpg.configure_item(tag, show=True, bounds_min=(float(t[0]), lo), bounds_max=(0.0, hi))
+        labels = tuple(f"{k.upper()} ±{self._scale[k]:.1f}" for k in ("mm", "lmm"))
+        if labels != self._label_shown.get("ticks"):
+            self._label_shown["ticks"] = labels
+            L = self.n_latent
+            dpg.set_axis_ticks("lat_y", ((labels[0], L / 2), (labels[1], L + GAP + L / 2)))
+        dpg.set_axis_limits("lat_x", float(t[0]), 0.0)
         dim = self.dim
         for key, tag, label in (("lmm", "lat_curve_lmm", "LMM latent"), ("mm", "lat_curve_mm", "MM matched latent")):
             v = series.get(key)
