@@ -28,22 +28,6 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def start_xvfb():
-    exe = shutil.which("Xvfb")
-    if exe is None:
-        sys.exit("Xvfb is not installed (apt-get install xvfb), or pass --display")
-    r, w = os.pipe()
-    proc = subprocess.Popen([exe, "-displayfd", str(w), "-screen", "0", "1920x1080x24", "-nolisten", "tcp"],
-                            pass_fds=(w,), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    os.close(w)
-    buf = b""
-    deadline = time.monotonic() + 15
-    while not buf.endswith(b"\n") and time.monotonic() < deadline:
-        buf += os.read(r, 16)
-    os.close(r)
-    return proc, f":{buf.decode().strip()}"
-
-
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--frames", type=int, default=600)
@@ -59,7 +43,13 @@ def main() -> int:
     xvfb = None
     display = args.display
     if display is None:
-        xvfb, display = start_xvfb()
+        from viewer.xvfb import Xvfb, XvfbUnavailable
+
+        try:
+            xvfb = Xvfb("1920x1080x24")
+        except XvfbUnavailable as e:
+            sys.exit(f"{e}, or pass --display")
+        display = xvfb.display
     tmp = Path(tempfile.mkdtemp(prefix="bench-studio-"))
     try:
         env = dict(os.environ, DISPLAY=display, LMM_STUDIO_CONFIG=str(tmp / "config"), PYTHONPATH=str(ROOT))
@@ -82,8 +72,7 @@ def main() -> int:
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
         if xvfb is not None:
-            xvfb.terminate()
-            xvfb.wait()
+            xvfb.stop()
 
     frames = d["frames"][args.warmup:]
     ms = {k: np.array([f["ms"].get(k, np.nan) for f in frames], float) for k in frames[0]["ms"]}

@@ -5,8 +5,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import shutil
 import subprocess
 import sys
 import textwrap
@@ -696,26 +694,18 @@ def test_real_glfw_and_hid_without_devices(monkeypatch):
 
 
 def _start_xvfb():
-    exe = shutil.which("Xvfb")
-    if exe is None:
-        pytest.skip("Xvfb is not installed")
-    r, w = os.pipe()
-    proc = subprocess.Popen([exe, "-displayfd", str(w), "-screen", "0", "320x240x24", "-nolisten", "tcp"],
-                            pass_fds=(w,), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    os.close(w)
-    with os.fdopen(r) as f:
-        number = f.readline().strip()
-    if not number:
-        proc.kill()
-        pytest.skip("Xvfb did not start")
-    return proc, number
+    from viewer.xvfb import Xvfb, XvfbUnavailable
+
+    try:
+        return Xvfb("320x240x24")
+    except XvfbUnavailable as e:
+        pytest.skip(str(e))
 
 
 @pytest.mark.gui
 def test_real_glfw_initialises_under_xvfb_and_polls_nothing():
     pytest.importorskip("glfw")
-    proc, number = _start_xvfb()
-    try:
+    with _start_xvfb() as server:
         script = textwrap.dedent("""
             import json, warnings
             warnings.simplefilter("error")
@@ -727,12 +717,8 @@ def test_real_glfw_initialises_under_xvfb_and_polls_nothing():
                               "left_x": s.left_x, "active": m.active_device}))
             m.close()
         """)
-        env = dict(os.environ, DISPLAY=f":{number}", PYTHONPATH=str(REPO))
-        out = subprocess.run([sys.executable, "-c", script], env=env, cwd=REPO, capture_output=True, text=True,
-                             timeout=60)
+        out = subprocess.run([sys.executable, "-c", script], env=server.env(PYTHONPATH=str(REPO)), cwd=REPO,
+                             capture_output=True, text=True, timeout=60)
         assert out.returncode == 0, out.stderr
         res = json.loads(out.stdout.strip().splitlines()[-1])
         assert res == {"glfw": True, "devices": ["keyboard"], "left_x": -1.0, "active": "Keyboard"}
-    finally:
-        proc.kill()
-        proc.wait()

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 import subprocess
 import sys
 import time
@@ -22,34 +21,15 @@ from studio_testutil import CORPUS, ROOT  # noqa: F401  (pytest puts this folder
 
 @pytest.fixture(scope="session")
 def xvfb_display():
-    """``:N`` of a fresh ``Xvfb :N -screen 0 1920x1080x24`` on a free display; skips without Xvfb."""
-    exe = shutil.which("Xvfb")
-    if exe is None:
-        pytest.skip("Xvfb is not installed (apt-get install xvfb)")
-    read_fd, write_fd = os.pipe()
-    # -displayfd: Xvfb picks a free display number itself and writes it to the pipe
-    proc = subprocess.Popen([exe, "-displayfd", str(write_fd), "-screen", "0", "1920x1080x24", "-nolisten", "tcp"],
-                            pass_fds=(write_fd,), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    os.close(write_fd)
-    number = b""
-    deadline = time.monotonic() + 15.0
-    os.set_blocking(read_fd, False)
-    while time.monotonic() < deadline and not number.endswith(b"\n") and proc.poll() is None:
-        try:
-            number += os.read(read_fd, 16)
-        except BlockingIOError:
-            time.sleep(0.05)
-    os.close(read_fd)
-    if not number.strip().isdigit():
-        proc.kill()
-        proc.wait()
-        pytest.skip("Xvfb did not start")
-    yield f":{number.decode().strip()}"
-    proc.terminate()
+    """``:N`` of a fresh ``Xvfb -screen 0 1920x1080x24`` on a free display; skips without Xvfb."""
+    from viewer.xvfb import Xvfb, XvfbUnavailable
+
     try:
-        proc.wait(5)
-    except subprocess.TimeoutExpired:
-        proc.kill()
+        server = Xvfb("1920x1080x24")
+    except XvfbUnavailable as e:
+        pytest.skip(str(e))
+    with server:
+        yield server.display
 
 
 @pytest.fixture(scope="session")
