@@ -72,6 +72,10 @@ class LMMNetworks:
                 raise WeightsError(f"{wf.path}: {name} has a {got}-wide input/output where {want} is expected")
         if db is not None and n_bones != db.n_bones:
             raise WeightsError(f"{wf.path}: trained for {n_bones} bones, the database has {db.n_bones}")
+        if db is not None and int(meta.get("n_frames", db.n_frames)) != db.n_frames:
+            # the key should already differ; this catches a cache rebuilt under an unchanged key
+            raise WeightsError(f"{wf.path}: trained on a database of {meta['n_frames']} frames, the loaded one "
+                               f"has {db.n_frames}; retrain with `lmm-studio train`")
         return cls(nets["decompressor"], nets["stepper"], nets["projector"],
                    np.asarray(meta["feature_mean"], np.float32), np.asarray(meta["feature_inv_scale"], np.float32),
                    n_features, n_latent, n_bones, meta, wf.path)
