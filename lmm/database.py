@@ -48,7 +48,8 @@ class Database:
     fps: float = 60.0
     bone_roles: dict[str, str] = field(default_factory=dict)  # role -> bone name (hips, left_foot, ...)
     mirror_map: np.ndarray | None = None  # (J,) bone index of each bone's mirror counterpart
-    key: str = ""                  # hash of inputs + settings
+    key: str = ""                  # hash of inputs + settings (what trained networks are tied to)
+    build_fingerprint: str = ""    # hash of the build code (cache validity only, see build_code_fingerprint)
     name: str = "dataset"
 
     # -- sizes -----------------------------------------------------------------------------
@@ -124,6 +125,7 @@ class Database:
             "bone_roles": np.array(json.dumps(self.bone_roles)),
             "mirror_map": self.mirror_map if self.mirror_map is not None else np.arange(self.n_bones),
             "key": np.array(self.key), "name": np.array(self.name),
+            "build_fingerprint": np.array(self.build_fingerprint),
         }
 
     def save(self, path) -> None:
@@ -148,7 +150,8 @@ class Database:
                     range_starts=z["range_starts"].astype(np.int64), range_stops=z["range_stops"].astype(np.int64),
                     range_names=[str(s) for s in z["range_names"]], range_mirrored=z["range_mirrored"],
                     fps=float(z["fps"]), bone_roles=json.loads(str(z["bone_roles"])),
-                    mirror_map=z["mirror_map"].astype(np.int64), key=str(z["key"]), name=str(z["name"]))
+                    mirror_map=z["mirror_map"].astype(np.int64), key=str(z["key"]), name=str(z["name"]),
+                    build_fingerprint=str(z["build_fingerprint"]) if "build_fingerprint" in z.files else "")
         except DatabaseError:
             raise
         except Exception as e:  # zipfile.BadZipFile, OSError, KeyError, ValueError...: all mean "not a cache"
@@ -282,6 +285,20 @@ def _file_digest(path: Path) -> str:
     return h.hexdigest()
 
 
+def build_code_fingerprint() -> str:
+    """Hash of the source of every module the build runs.
+
+    A cache file is reused only when this matches, so a change to the build code can never serve a stale
+    cache under an unchanged key (the key itself changes only with DB_FORMAT_VERSION, because networks
+    trained on a database are tied to it: bump the version when a change alters the built data).
+    """
+    h = hashlib.sha256()
+    here = Path(__file__).resolve().parent
+    for name in ("database.py", "filters.py", "quat.py", "bvh.py", "manifest.py"):
+        h.update((here / name).read_bytes())
+    return h.hexdigest()
+
+
 def manifest_key(manifest: Manifest) -> str:
     """Hash of everything the build reads: file contents, settings and the build code's version."""
     h = hashlib.sha256()
@@ -392,7 +409,7 @@ def build(manifest: Manifest, progress=None) -> Database:
         range_starts=np.array(starts, dtype=np.int64), range_stops=np.array(stops, dtype=np.int64),
         range_names=range_names, range_mirrored=np.array(mirrored, dtype=bool),
         fps=float(manifest.target_fps), bone_roles=dict(manifest.bones), mirror_map=mirror_full,
-        key=manifest_key(manifest), name=manifest.name)
+        key=manifest_key(manifest), name=manifest.name, build_fingerprint=build_code_fingerprint())
 
 
 @dataclass
@@ -412,7 +429,7 @@ def load_or_build(manifest_path=None, cache_dir=None, progress=None, rebuild: bo
     if not rebuild and path.is_file():
         try:
             db = Database.load(path)
-            if db.key == key:
+            if db.key == key and db.build_fingerprint == build_code_fingerprint():
                 return db, LoadInfo(path, True, time.perf_counter() - t0)
         except DatabaseError:
             pass  # stale or damaged cache: rebuild below

@@ -289,3 +289,17 @@ def test_broken_bvh_in_manifest_is_reported(tmp_path):
     r = subprocess.run([sys.executable, "-m", "app.cli", "build-db", "--manifest", str(m), "--out",
                         str(tmp_path / "o.npz")], capture_output=True, text=True, timeout=60)
     assert r.returncode == 1 and "broken.bvh" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_cache_from_other_build_code_is_rebuilt(tmp_path, monkeypatch):
+    """A cache written by different build code is not served, even under the same key."""
+    import lmm.database as database
+
+    cache = tmp_path / "cache"
+    m = small_manifest(tmp_path)
+    db1, info1 = load_or_build(m, cache_dir=cache)
+    assert db1.build_fingerprint == database.build_code_fingerprint()
+    assert load_or_build(m, cache_dir=cache)[1].cached
+    monkeypatch.setattr(database, "build_code_fingerprint", lambda: "edited build code")
+    db2, info2 = load_or_build(m, cache_dir=cache)
+    assert not info2.cached and db2.key == db1.key and info2.path == info1.path
