@@ -14,7 +14,6 @@ import json
 import statistics
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -24,15 +23,7 @@ from lmm import DEFAULT_MANIFEST, bvh  # noqa: E402
 from lmm.database import load_or_build  # noqa: E402
 from lmm.features import build_features  # noqa: E402
 from lmm.manifest import load_manifest  # noqa: E402
-
-
-def median_time(fn, repeat):
-    times = []
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return statistics.median(times)
+from bench_bvh import median_time  # noqa: E402  (same folder)
 
 
 def main() -> int:

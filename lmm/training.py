@@ -24,7 +24,6 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from . import quat
 from .features import Features
 from .networks import MLPSpec, NormalizedMLP, default_specs
 from .nn import character_parents, character_space, pose_vector_size, pose_vector_slices, pose_vectors
@@ -302,6 +301,15 @@ def decompressor_losses(y_hat: torch.Tensor, y: torch.Tensor, q: torch.Tensor, z
     }
 
 
+
+def _optimise(loss, terms: dict, opt, sched, log, it: int) -> None:
+    """One optimiser and schedule step, then the loss and its terms into the log."""
+    opt.zero_grad(set_to_none=True)
+    loss.backward()
+    opt.step()
+    sched.step()
+    log.add(it, sched.get_last_lr()[0], {"loss": float(loss.detach()), **{k: float(v.detach()) for k, v in terms.items()}})
+
 def train_decompressor(data: TrainingData, s: StageSettings, seed: int = 1234, latent: int = 32, hidden: int = 512,
                        log_every: int = 200, csv_path=None, quiet: bool = False, stream=None,
                        networks=None, checkpoint=None):
@@ -320,11 +328,7 @@ def train_decompressor(data: TrainingData, s: StageSettings, seed: int = 1234, l
         y_hat = decompressor(torch.cat([data.X[frames], z], dim=1))
         terms = decompressor_losses(y_hat, data.Y[frames], data.Q[frames], z, data, s.batch)
         loss = sum(DECOMPRESSOR_WEIGHTS[k] * v for k, v in terms.items())
-        opt.zero_grad(set_to_none=True)
-        loss.backward()
-        opt.step()
-        sched.step()
-        log.add(it, sched.get_last_lr()[0], {"loss": float(loss.detach()), **{k: float(v.detach()) for k, v in terms.items()}})
+        _optimise(loss, terms, opt, sched, log, it)
         if checkpoint and (it + 1) % (log_every * 10) == 0:
             checkpoint(it + 1)
     log.close()
@@ -378,11 +382,7 @@ def train_stepper(data: TrainingData, Z: torch.Tensor, s: StageSettings, window:
         terms = {"features": err[..., :nx].mean(), "latent": err[..., nx:].mean(),
                  "features_vel": verr[..., :nx].mean(), "latent_vel": verr[..., nx:].mean()}
         loss = sum(STEPPER_WEIGHTS[k] * v for k, v in terms.items())
-        opt.zero_grad(set_to_none=True)
-        loss.backward()
-        opt.step()
-        sched.step()
-        log.add(it, sched.get_last_lr()[0], {"loss": float(loss.detach()), **{k: float(v.detach()) for k, v in terms.items()}})
+        _optimise(loss, terms, opt, sched, log, it)
     log.close()
     return stepper, log
 
@@ -470,11 +470,7 @@ def train_projector(data: TrainingData, Z: torch.Tensor, s: StageSettings, seed:
                  "latent": torch.mean(torch.abs(pred[:, nx:] - target[:, nx:]) / z_std),
                  "distance": torch.mean(torch.abs(p_cost - nn_cost))}
         loss = sum(PROJECTOR_WEIGHTS[k] * v for k, v in terms.items())
-        opt.zero_grad(set_to_none=True)
-        loss.backward()
-        opt.step()
-        sched.step()
-        log.add(it, sched.get_last_lr()[0], {"loss": float(loss.detach()), **{k: float(v.detach()) for k, v in terms.items()}})
+        _optimise(loss, terms, opt, sched, log, it)
     log.close()
     return projector, log
 
