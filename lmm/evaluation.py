@@ -257,6 +257,13 @@ def write_plots(out_dir, artifacts: dict, loss_csv=None) -> list[str]:
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     written = []
+
+    def save(fig, name):
+        fig.tight_layout()
+        fig.savefig(out_dir / name, dpi=110)
+        plt.close(fig)
+        written.append(str(out_dir / name))
+
     if loss_csv and Path(loss_csv).exists():
         losses = read_loss_csv(loss_csv)
         fig, axes = plt.subplots(1, max(len(losses), 1), figsize=(5 * max(len(losses), 1), 3.5), squeeze=False)
@@ -268,10 +275,7 @@ def write_plots(out_dir, artifacts: dict, loss_csv=None) -> list[str]:
             ax.set_title(name)
             ax.set_xlabel("iteration")
             ax.legend(fontsize=5, ncol=2)
-        fig.tight_layout()
-        fig.savefig(out_dir / "training_losses.png", dpi=110)
-        plt.close(fig)
-        written.append(str(out_dir / "training_losses.png"))
+        save(fig, "training_losses.png")
     if artifacts.get("latents") is not None:
         lat = artifacts["latents"]
         t = np.arange(lat.shape[0]) * artifacts["dt"]
@@ -281,10 +285,7 @@ def write_plots(out_dir, artifacts: dict, loss_csv=None) -> list[str]:
         ax.set_xlabel("time (s)")
         ax.set_title("LMM latent (first 8 dims)")
         ax.legend(fontsize=6, ncol=4)
-        fig.tight_layout()
-        fig.savefig(out_dir / "latent_traces.png", dpi=110)
-        plt.close(fig)
-        written.append(str(out_dir / "latent_traces.png"))
+        save(fig, "latent_traces.png")
     if artifacts.get("per_joint_cm"):
         names = list(artifacts["per_joint_cm"])
         vals = [artifacts["per_joint_cm"][n] for n in names]
@@ -294,10 +295,7 @@ def write_plots(out_dir, artifacts: dict, loss_csv=None) -> list[str]:
         ax.set_xticklabels(names, rotation=70, fontsize=7)
         ax.set_ylabel("mean error (cm)")
         ax.set_title("decompressor: character-space joint position error")
-        fig.tight_layout()
-        fig.savefig(out_dir / "per_joint_error.png", dpi=110)
-        plt.close(fig)
-        written.append(str(out_dir / "per_joint_error.png"))
+        save(fig, "per_joint_error.png")
     return written
 
 
