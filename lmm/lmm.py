@@ -58,7 +58,7 @@ class LMMNetworks:
         wf = load_weights(path, require=RUNTIME_NETWORKS, db_key=None if db is None else db.key,
                           layout_dicts=None if features is None else features.layout_dicts())
         meta = wf.metadata
-        nets = {n: MLP.from_arrays(wf.arrays, n, wf.spec(n)["activation"]) for n in RUNTIME_NETWORKS}
+        nets = {n: MLP.from_spec(wf.arrays, n, wf.spec(n)) for n in RUNTIME_NETWORKS}
         n_features = len(meta["feature_mean"])
         n_latent = int(meta["latent"])
         n_bones = int(meta["n_bones"])

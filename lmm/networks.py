@@ -3,7 +3,7 @@
 Every network is a plain MLP wrapped with fixed input/output normalisation buffers, so the
 function a runtime has to reproduce is always
 
-    y = out_mean + out_std * mlp((x - in_mean) / in_std)
+    y = out_mean + out_std * mlp((x - in_mean) / in_std)   (+ x on the first n_in outputs with ``skip``)
 
 and the numpy runtime (:mod:`lmm.nn`) and the ONNX export read the same arrays.
 
@@ -13,8 +13,12 @@ network       layout (defaults)                               activation
 compressor    668 -> 512 -> 512 -> 512 -> 32 (training only)  ELU
 decompressor  59 (27 features + 32 latent) -> 512 -> 338      ReLU
 stepper       59 -> 512 -> 512 -> 59 (time derivative)        ReLU
-projector     27 -> 512 x4 -> 59                              ReLU
+projector     27 -> 512 x4 -> 59, skip (features += query)      ReLU
 ============  =============================================  ==========
+
+The projector's ``skip`` is our one deviation from the paper's layout (measured reason in
+:mod:`lmm.training`): its first 27 outputs are the query plus a learned correction, so the network
+learns how far to move a query onto the database rather than re-creating the query from scratch.
 """
 from __future__ import annotations
 
@@ -33,10 +37,13 @@ class MLPSpec:
     hidden: tuple[int, ...]
     n_out: int
     activation: str = "relu"
+    skip: bool = False   # add the input to the first n_in outputs (needs n_out >= n_in)
 
     def __post_init__(self):
         if self.activation not in ACTIVATIONS:
             raise ValueError(f"unknown activation {self.activation!r} (expected one of {ACTIVATIONS})")
+        if self.skip and self.n_out < self.n_in:
+            raise ValueError(f"a skip connection needs n_out >= n_in (got {self.n_in} -> {self.n_out})")
 
     @property
     def sizes(self) -> list[int]:
@@ -49,18 +56,19 @@ class MLPSpec:
 
     @classmethod
     def from_dict(cls, d: dict) -> "MLPSpec":
-        return cls(int(d["n_in"]), tuple(int(h) for h in d["hidden"]), int(d["n_out"]), str(d.get("activation", "relu")))
+        return cls(int(d["n_in"]), tuple(int(h) for h in d["hidden"]), int(d["n_out"]), str(d.get("activation", "relu")),
+                   bool(d.get("skip", False)))
 
 
 def default_specs(n_features: int = 27, n_latent: int = 32, n_pose: int = 338, n_compressor_in: int = 668,
-                  hidden: int = 512) -> dict[str, MLPSpec]:
-    """The paper's layouts (Table 1) for a given feature / latent / pose size."""
+                  hidden: int = 512, projector_skip: bool = True) -> dict[str, MLPSpec]:
+    """The paper's layouts (Table 1) for a given feature / latent / pose size (projector with a skip)."""
     state = n_features + n_latent
     return {
         "compressor": MLPSpec(n_compressor_in, (hidden, hidden, hidden), n_latent, "elu"),
         "decompressor": MLPSpec(state, (hidden,), n_pose, "relu"),
         "stepper": MLPSpec(state, (hidden, hidden), state, "relu"),
-        "projector": MLPSpec(n_features, (hidden, hidden, hidden, hidden), state, "relu"),
+        "projector": MLPSpec(n_features, (hidden, hidden, hidden, hidden), state, "relu", projector_skip),
     }
 
 
@@ -90,7 +98,10 @@ class NormalizedMLP(nn.Module):
         return self.layers[-1](x)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        return self.out_mean + self.out_std * self.raw((x - self.in_mean) / self.in_std)
+        y = self.out_mean + self.out_std * self.raw((x - self.in_mean) / self.in_std)
+        if self.spec.skip:
+            y = torch.cat([y[..., :self.spec.n_in] + x, y[..., self.spec.n_in:]], dim=-1)
+        return y
 
     def parameter_count(self) -> int:
         return sum(p.numel() for p in self.parameters())

@@ -93,11 +93,12 @@ def character_space(db, frames=slice(None)) -> np.ndarray:
 
 
 class MLP:
-    """One network, float32, ReLU or ELU hidden activations, linear output."""
+    """One network, float32, ReLU or ELU hidden activations, linear output; with ``skip`` the input is
+    added to the first ``n_in`` outputs (the projector: features = query + correction)."""
 
     def __init__(self, weights: list[np.ndarray], biases: list[np.ndarray], activation: str,
                  in_mean: np.ndarray, in_std: np.ndarray, out_mean: np.ndarray, out_std: np.ndarray,
-                 name: str = "mlp"):
+                 name: str = "mlp", skip: bool = False):
         if activation not in ("relu", "elu"):
             raise ValueError(f"{name}: unknown activation {activation!r}")
         self.name = name
@@ -109,16 +110,24 @@ class MLP:
         self.in_inv_std = (1.0 / np.asarray(in_std, np.float32)).astype(np.float32)
         self.out_mean = np.asarray(out_mean, np.float32)
         self.out_std = np.asarray(out_std, np.float32)
+        self.skip = bool(skip)
+        if self.skip and self.n_out < self.n_in:
+            raise ValueError(f"{name}: a skip connection needs n_out >= n_in ({self.n_in} -> {self.n_out})")
         self._buffers: dict[int, list[np.ndarray]] = {}
 
     @classmethod
-    def from_arrays(cls, arrays: dict, prefix: str, activation: str) -> "MLP":
+    def from_arrays(cls, arrays: dict, prefix: str, activation: str, skip: bool = False) -> "MLP":
         n = 0
         while f"{prefix}.W{n}" in arrays:
             n += 1
         return cls([arrays[f"{prefix}.W{i}"] for i in range(n)], [arrays[f"{prefix}.b{i}"] for i in range(n)],
                    activation, arrays[f"{prefix}.in_mean"], arrays[f"{prefix}.in_std"],
-                   arrays[f"{prefix}.out_mean"], arrays[f"{prefix}.out_std"], name=prefix)
+                   arrays[f"{prefix}.out_mean"], arrays[f"{prefix}.out_std"], name=prefix, skip=skip)
+
+    @classmethod
+    def from_spec(cls, arrays: dict, prefix: str, spec: dict) -> "MLP":
+        """From a weights file's arrays and its ``networks[prefix]`` spec (activation, skip)."""
+        return cls.from_arrays(arrays, prefix, spec["activation"], bool(spec.get("skip", False)))
 
     @property
     def n_in(self) -> int:
@@ -168,6 +177,8 @@ class MLP:
             h = nxt
         y = h * self.out_std
         y += self.out_mean
+        if self.skip:
+            y[:, :x2.shape[1]] += x2
         if out is not None:
             out[...] = y[0] if single else y
             return out

@@ -2,7 +2,8 @@
 
 Each network becomes one small graph, input ``x`` (batch, n_in) float32, output ``y`` (batch, n_out):
 ``Sub(in_mean) -> Div(in_std) -> [Gemm -> Relu|Elu] x hidden -> Gemm -> Mul(out_std) -> Add(out_mean)``,
-the same function as :class:`lmm.nn.MLP` and :class:`lmm.networks.NormalizedMLP`. No torch needed.
+the same function as :class:`lmm.nn.MLP` and :class:`lmm.networks.NormalizedMLP`; a network with a skip
+connection (the projector) adds ``MatMul(x, [I 0])`` to ``y``. No torch needed.
 """
 from __future__ import annotations
 
@@ -39,7 +40,13 @@ def mlp_to_onnx(mlp, name: str, metadata: dict | None = None):
         else:
             h = lin
     nodes += [helper.make_node("Mul", [h, f"{name}_out_std"], ["scaled"]),
-              helper.make_node("Add", ["scaled", f"{name}_out_mean"], ["y"])]
+              helper.make_node("Add", ["scaled", f"{name}_out_mean"], ["y_mlp" if mlp.skip else "y"])]
+    if mlp.skip:  # y[:, :n_in] += x, as a matmul with a constant [I 0] so engines need no slicing ops
+        pad = np.zeros((mlp.n_in, mlp.n_out), np.float32)
+        pad[np.arange(mlp.n_in), np.arange(mlp.n_in)] = 1.0
+        inits.append(numpy_helper.from_array(pad, f"{name}_skip"))
+        nodes += [helper.make_node("MatMul", ["x", f"{name}_skip"], ["skipped"]),
+                  helper.make_node("Add", ["y_mlp", "skipped"], ["y"])]
     graph = helper.make_graph(
         nodes, f"lmm_{name}",
         [helper.make_tensor_value_info("x", TensorProto.FLOAT, ["batch", mlp.n_in])],
