@@ -123,7 +123,9 @@ DECOMPRESSOR_WEIGHTS = {
     "latent_l1": 0.1, "latent_l2": 0.1, "latent_vel": 0.01,
 }
 STEPPER_WEIGHTS = {"features": 2.0, "latent": 7.5, "features_vel": 0.2, "latent_vel": 0.5}
-PROJECTOR_WEIGHTS = {"features": 1.0, "latent": 5.0, "distance": 0.3}
+# The projector's weights differ from the reference's (features 1.0, latent 5.0, distance 0.3): a larger
+# features weight and the "cell" term (see train_projector for the measurements behind them).
+PROJECTOR_WEIGHTS = {"features": 10.0, "latent": 5.0, "distance": 0.3, "cell": 100.0}
 
 
 @dataclass
@@ -141,9 +143,11 @@ class Recipe:
     """The training recipe. Defaults: the fast recipe measured to fit 45 minutes on 2 CPU cores."""
     decompressor: StageSettings = field(default_factory=lambda: StageSettings(3000, 512, 2e-3))
     stepper: StageSettings = field(default_factory=lambda: StageSettings(5000, 128, 2e-3))
-    projector: StageSettings = field(default_factory=lambda: StageSettings(8000, 512, 2e-3))
+    projector: StageSettings = field(default_factory=lambda: StageSettings(24000, 512, 2e-3))
     stepper_window: int = 20
     projector_noise: float = 0.5   # query noise level, x std of each feature (see noisy_queries)
+    projector_neighbours: int = 16  # database neighbours per frame in the cell term (see train_projector)
+    projector_margin: float = 0.1   # how far inside its nearest neighbour's cell a projection should land
     seed: int = 1234
     threads: int = 2
     latent: int = 32
@@ -441,28 +445,80 @@ def nearest_neighbours(queries: torch.Tensor, X: torch.Tensor, chunk: int = 1024
     return best_i, exact
 
 
-def make_projector(data: TrainingData, Z: torch.Tensor, hidden: int = 512):
+def frame_neighbours(X: torch.Tensor, k: int, chunk: int = 2048, aug: torch.Tensor | None = None) -> torch.Tensor:
+    """The ``k`` nearest other frames of every frame (N x k indices, nearest first)."""
+    if aug is None:
+        aug = augmented_frames(X)
+    n, d = X.shape
+    k = min(k, n - 1)
+    out = []
+    for a in range(0, n, chunk):
+        dist = X[a:a + chunk] @ aug[:, :d].T + aug[:, d]   # |x|^2 - 2 q.x, enough to rank
+        rows = torch.arange(dist.shape[0])
+        dist[rows, rows + a] = float("inf")                  # not itself
+        out.append(dist.topk(k, dim=1, largest=False).indices)
+    return torch.cat(out)
+
+
+def cell_violation(px: torch.Tensor, target: torch.Tensor, rivals: torch.Tensor, margin: float) -> torch.Tensor:
+    """How far each projection ``px`` (B x D) falls short of lying ``margin`` inside its target frame's
+    Voronoi cell, measured against each rival frame (B x k x D): the signed distance from ``px`` to the
+    plane bisecting target and rival (positive on the target's side) is
+    ``(|px - rival|^2 - |px - target|^2) / (2 |rival - target|)``; returns ``relu(margin - that)`` (B x k).
+
+    This is what exact nearest-neighbour agreement asks for: the projection's nearest frame is the target
+    exactly when it is on the target's side of every such plane. A feature L1 loss alone spends its
+    effort on getting close on average and leaves many projections just across a neighbour's border."""
+    gap = (rivals - target[:, None]).norm(dim=2).clamp_min(1e-6)
+    signed = (((px[:, None] - rivals) ** 2).sum(2) - ((px - target) ** 2).sum(1, keepdim=True)) / (2.0 * gap)
+    return torch.relu(margin - signed)
+
+
+def make_projector(data: TrainingData, Z: torch.Tensor, hidden: int = 512, noise: float = 0.5, skip: bool = True,
+                   seed: int = 1234):
     S = torch.cat([data.X, Z], dim=1).numpy()
     X = data.X.numpy()
-    spec = default_specs(n_features=X.shape[1], n_latent=Z.shape[1], hidden=hidden)["projector"]
+    nx = X.shape[1]
+    spec = default_specs(n_features=nx, n_latent=Z.shape[1], hidden=hidden, projector_skip=skip)["projector"]
     projector = NormalizedMLP(spec)
-    # queries are database features plus noise of up to one std: their std is about 1.15 x the features'
-    projector.set_normalization(in_mean=X.mean(0), in_std=robust_std(X) * 1.15, out_mean=S.mean(0), out_std=robust_std(S))
+    out_mean, out_std = S.mean(0), robust_std(S)
+    if skip:
+        # the feature outputs are a correction added to the query: normalise them by the statistics of
+        # (nearest frame - query) over a sample of training queries
+        gen = torch.Generator().manual_seed(seed + 3)
+        frames = torch.randint(0, X.shape[0], (8192,), generator=gen)
+        q = noisy_queries(data.X, frames, data.X.std(0), gen, noise)
+        idx, _ = nearest_neighbours(q, data.X)
+        corr = (data.X[idx] - q).numpy()
+        out_mean[:nx], out_std[:nx] = 0.0, robust_std(corr)
+    # queries are database features plus noise: their std is somewhat above the features'
+    projector.set_normalization(in_mean=X.mean(0), in_std=robust_std(X) * 1.15, out_mean=out_mean, out_std=out_std)
     return projector
 
 
 def train_projector(data: TrainingData, Z: torch.Tensor, s: StageSettings, seed: int = 1234, hidden: int = 512,
                     log_every: int = 200, csv_path=None, quiet=False, stream=None, projector=None,
-                    log_name: str = "projector", noise: float = 0.5):
+                    log_name: str = "projector", noise: float = 0.5, neighbours: int = 16, margin: float = 0.05):
+    """Noisy queries, their exact nearest frames as targets (features and latent), L1 losses, the
+    reference's distance term, and the cell term (:func:`cell_violation` against the target's
+    ``neighbours`` nearest frames). The projector has a skip connection (features = query + correction).
+
+    Measured at 3000 iterations, batch 512 (exact-NN agreement on the 4096 eval queries / mean abs feature
+    error against the true nearest frame): reference losses 0.45 / 0.140; features weight 5: 0.51 / 0.125;
+    plus the skip: 0.55 / 0.131; plus cell weight 5, margin 0.05: 0.63 / 0.135; cell 50: 0.80 / 0.169;
+    cell 50, margin 0.1: 0.84 / 0.188; that with features 10: 0.79 / 0.141; with cell 100: 0.96 / 0.203.
+    The cell term trades feature accuracy for landing in the right cell; the recipe takes features 10,
+    cell 100, margin 0.1 and more iterations, which improve both."""
     rng = _seed(seed + 2)
     gen = torch.Generator().manual_seed(seed + 2)
     if projector is None:
-        projector = make_projector(data, Z, hidden)
+        projector = make_projector(data, Z, hidden, noise, seed=seed)
     X = data.X
     nx = X.shape[1]
     S = torch.cat([X, Z], dim=1)
     x_std = X.std(0)
     aug = augmented_frames(X)
+    rivals = frame_neighbours(X, neighbours, aug=aug) if PROJECTOR_WEIGHTS["cell"] > 0 and neighbours > 0 else None
     z_std = torch.from_numpy(robust_std(Z.numpy()))
     pool = data.frames if data.frames is not None else np.arange(X.shape[0])
     opt, sched = make_optimizer(projector.parameters(), s)
@@ -478,6 +534,8 @@ def train_projector(data: TrainingData, Z: torch.Tensor, s: StageSettings, seed:
         terms = {"features": torch.mean(torch.abs(px - target[:, :nx])),
                  "latent": torch.mean(torch.abs(pred[:, nx:] - target[:, nx:]) / z_std),
                  "distance": torch.mean(torch.abs(p_cost - nn_cost))}
+        if rivals is not None:
+            terms["cell"] = cell_violation(px, target[:, :nx], X[rivals[nn_i]], margin).mean()
         loss = sum(PROJECTOR_WEIGHTS[k] * v for k, v in terms.items())
         _optimise(loss, terms, opt, sched, log, it)
     log.close()
@@ -609,7 +667,8 @@ def train_pipeline(db, features: Features, stages=NETWORKS, recipe: Recipe | Non
                                                  recipe.log_every, csv_path, quiet, stream,
                                                  projector=nets.get("projector") if resume else None,
                                                  log_name="projector_resumed" if resume else "projector",
-                                                 noise=recipe.projector_noise)
+                                                 noise=recipe.projector_noise, neighbours=recipe.projector_neighbours,
+                                                 margin=recipe.projector_margin)
         wall["projector" + ("_resumed" if resume else "")] = round(time.perf_counter() - t0, 1)
         summary["first_loss"]["projector"], summary["final_loss"]["projector"] = log.first_loss, log.last_loss
     wall["total_this_run"] = round(time.perf_counter() - t_all, 1)
