@@ -8,6 +8,9 @@ decompressor.mean_joint_error_cm       mean character-space joint position error
 projector.nn_agreement                 over noisy queries built as in training, the fraction where the frame
                                        nearest to the projector's features is the query's true nearest
 projector.cost_ratio_median            query cost of the projected features / query cost of the true NN
+                                       (below 1: the projection lies between the query and its nearest frame)
+projector.*_runtime                    the same on the queries MM makes on the MM vs LMM run's input
+projector.{query,projection}_to_nn_median  median distance of the query / of the projection to the true NN
 stepper.drift_60                       mean absolute normalised feature error after a 60-frame rollout
 mm_vs_lmm.mean_joint_distance_cm       MM and LMM fed the same built-in input: mean distance of the joints
                                        in each character's root space
@@ -30,7 +33,7 @@ from .weights import load as load_weights
 def load_compressor(path, db=None, features=None) -> MLP:
     wf = load_weights(path, require=["compressor"], db_key=None if db is None else db.key,
                       layout_dicts=None if features is None else features.layout_dicts())
-    return MLP.from_arrays(wf.arrays, "compressor", wf.spec("compressor")["activation"])
+    return MLP.from_spec(wf.arrays, "compressor", wf.spec("compressor"))
 
 
 def batched(fn, x: np.ndarray, chunk: int = 4096) -> np.ndarray:
@@ -99,7 +102,12 @@ def projector_metrics(nets, features, n_queries: int = 4096, seed: int = 7, nois
     return {"nn_agreement": float(np.mean(proj_nn == nn_idx)), "cost_ratio_median": float(np.median(ratio)),
             "query_noise": noise, "nn_within_3_frames": float(np.mean(np.abs(proj_nn - nn_idx) <= 3)),
             "cost_ratio_mean": float(np.mean(ratio)), "n_queries": int(n_queries),
-            "feature_error_mean_abs": float(np.mean(np.abs(proj - X[nn_idx])))}
+            "feature_error_mean_abs": float(np.mean(np.abs(proj - X[nn_idx]))),
+            "query_to_nn_median": _median_norm(q - X[nn_idx]), "projection_to_nn_median": _median_norm(proj - X[nn_idx])}
+
+
+def _median_norm(v: np.ndarray) -> float:
+    return float(np.median(np.linalg.norm(v, axis=1)))
 
 
 def projector_runtime_agreement(nets, features, queries_norm: np.ndarray) -> dict:
@@ -113,7 +121,10 @@ def projector_runtime_agreement(nets, features, queries_norm: np.ndarray) -> dic
     proj_nn, _ = nearest(proj, X)
     ratio = np.sum((q - proj) ** 2, axis=1) / np.maximum(nn_cost, 1e-9)
     return {"nn_agreement_runtime": float(np.mean(proj_nn == nn_idx)),
-            "cost_ratio_median_runtime": float(np.median(ratio)), "runtime_queries": int(q.shape[0])}
+            "cost_ratio_median_runtime": float(np.median(ratio)), "runtime_queries": int(q.shape[0]),
+            "feature_error_mean_abs_runtime": float(np.mean(np.abs(proj - X[nn_idx]))),
+            "query_to_nn_median_runtime": _median_norm(q - X[nn_idx]),
+            "projection_to_nn_median_runtime": _median_norm(proj - X[nn_idx])}
 
 
 def stepper_drift(nets, db, features, Z: np.ndarray, horizon: int = 60, n_starts: int = 2048, seed: int = 11) -> dict:
