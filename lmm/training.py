@@ -498,10 +498,12 @@ def make_projector(data: TrainingData, Z: torch.Tensor, hidden: int = 512, noise
 
 def train_projector(data: TrainingData, Z: torch.Tensor, s: StageSettings, seed: int = 1234, hidden: int = 512,
                     log_every: int = 200, csv_path=None, quiet=False, stream=None, projector=None,
-                    log_name: str = "projector", noise: float = 0.5, neighbours: int = 16, margin: float = 0.05):
+                    log_name: str = "projector", noise: float = 0.5, neighbours: int = 16, margin: float = 0.1,
+                    weights: dict | None = None, skip: bool = True):
     """Noisy queries, their exact nearest frames as targets (features and latent), L1 losses, the
     reference's distance term, and the cell term (:func:`cell_violation` against the target's
     ``neighbours`` nearest frames). The projector has a skip connection (features = query + correction).
+    ``weights`` overrides :data:`PROJECTOR_WEIGHTS` (``bench/projector_ablation.py`` uses it and ``skip``).
 
     Measured at 3000 iterations, batch 512 (exact-NN agreement on the 4096 eval queries / mean abs feature
     error against the true nearest frame): reference losses 0.45 / 0.140; features weight 5: 0.51 / 0.125;
@@ -512,13 +514,14 @@ def train_projector(data: TrainingData, Z: torch.Tensor, s: StageSettings, seed:
     rng = _seed(seed + 2)
     gen = torch.Generator().manual_seed(seed + 2)
     if projector is None:
-        projector = make_projector(data, Z, hidden, noise, seed=seed)
+        projector = make_projector(data, Z, hidden, noise, skip=skip, seed=seed)
+    weights = {**PROJECTOR_WEIGHTS, **(weights or {})}
     X = data.X
     nx = X.shape[1]
     S = torch.cat([X, Z], dim=1)
     x_std = X.std(0)
     aug = augmented_frames(X)
-    rivals = frame_neighbours(X, neighbours, aug=aug) if PROJECTOR_WEIGHTS["cell"] > 0 and neighbours > 0 else None
+    rivals = frame_neighbours(X, neighbours, aug=aug) if weights["cell"] > 0 and neighbours > 0 else None
     z_std = torch.from_numpy(robust_std(Z.numpy()))
     pool = data.frames if data.frames is not None else np.arange(X.shape[0])
     opt, sched = make_optimizer(projector.parameters(), s)
@@ -536,7 +539,7 @@ def train_projector(data: TrainingData, Z: torch.Tensor, s: StageSettings, seed:
                  "distance": torch.mean(torch.abs(p_cost - nn_cost))}
         if rivals is not None:
             terms["cell"] = cell_violation(px, target[:, :nx], X[rivals[nn_i]], margin).mean()
-        loss = sum(PROJECTOR_WEIGHTS[k] * v for k, v in terms.items())
+        loss = sum(weights[k] * v for k, v in terms.items())
         _optimise(loss, terms, opt, sched, log, it)
     log.close()
     return projector, log
