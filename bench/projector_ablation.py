@@ -69,7 +69,7 @@ def main() -> int:
     mm = run_controller(MotionMatchingController(db, features), open_input("builtin:random:1", 60.0), 60.0)
 
     results = []
-    print(f"{'variant':<20} {'agree':>6} {'within3':>7} {'cost':>6} {'proj-nn':>7} | {'rt agree':>8} {'rt cost':>7} "
+    print(f"{'variant':<20} {'agree':>6} {'within3':>7} {'cost':>6} {'proj-nn':>7} {'latent':>6} | {'rt agree':>8} {'rt cost':>7} "
           f"{'rt proj-nn':>10} | {'train s':>7}")
     for name in names:
         skip, weights, margin = VARIANTS[name]
@@ -79,13 +79,13 @@ def main() -> int:
         wall = time.perf_counter() - t0
         nets = dataclasses.replace(shipped, projector=MLP.from_spec(net.to_arrays("projector"), "projector",
                                                                     net.spec.to_dict()))
-        m = projector_metrics(nets, features)
+        m = projector_metrics(nets, features, Z=Z.numpy())
         m.update(projector_runtime_agreement(nets, features, mm["queries"]))
         row = {"variant": name, "skip": skip, "weights": {**T.PROJECTOR_WEIGHTS, **weights}, "margin": margin,
                "iterations": args.iterations, "train_s": round(wall, 1), **m}
         results.append(row)
         print(f"{name:<20} {m['nn_agreement']:6.3f} {m['nn_within_3_frames']:7.3f} {m['cost_ratio_median']:6.3f} "
-              f"{m['projection_to_nn_median']:7.3f} | {m['nn_agreement_runtime']:8.3f} {m['cost_ratio_median_runtime']:7.3f} "
+              f"{m['projection_to_nn_median']:7.3f} {m['latent_error_mean_abs_std']:6.3f} | {m['nn_agreement_runtime']:8.3f} {m['cost_ratio_median_runtime']:7.3f} "
               f"{m['projection_to_nn_median_runtime']:10.3f} | {wall:7.0f}", flush=True)
     print(f"(query to nearest frame, median: {results[0]['query_to_nn_median']:.3f} eval, "
           f"{results[0]['query_to_nn_median_runtime']:.3f} run time; normalised feature units)")

@@ -11,6 +11,7 @@ projector.cost_ratio_median            query cost of the projected features / qu
                                        (below 1: the projection lies between the query and its nearest frame)
 projector.*_runtime                    the same on the queries MM makes on the MM vs LMM run's input
 projector.{query,projection}_to_nn_median  median distance of the query / of the projection to the true NN
+projector.latent_error_mean_abs_std    projected latent vs the true NN's (compressor) latent, in latent stds
 stepper.drift_60                       mean absolute normalised feature error after a 60-frame rollout
 mm_vs_lmm.mean_joint_distance_cm       MM and LMM fed the same built-in input: mean distance of the joints
                                        in each character's root space
@@ -89,17 +90,25 @@ def training_noise(nets) -> float:
     return float(nets.metadata.get("recipe", {}).get("projector_noise", 1.0))
 
 
-def projector_metrics(nets, features, n_queries: int = 4096, seed: int = 7, noise: float | None = None) -> dict:
+def projector_metrics(nets, features, n_queries: int = 4096, seed: int = 7, noise: float | None = None,
+                      Z: np.ndarray | None = None) -> dict:
+    """Agreement, cost ratio and distances on noisy queries; with the database latents ``Z`` (from the
+    compressor) also the projected latent's error against the true nearest frame's, in latent stds."""
     rng = np.random.default_rng(seed)
     X = nets.to_network_space(features.raw)
     noise = training_noise(nets) if noise is None else noise
     q, _ = noisy_queries(X, n_queries, rng, noise)
     nn_idx, nn_cost = nearest(q, X)
-    proj = batched(nets.projector, q)[:, :nets.n_features]
+    full = batched(nets.projector, q)
+    proj = full[:, :nets.n_features]
     proj_nn, _ = nearest(proj, X)
     proj_cost = np.sum((q - proj) ** 2, axis=1)
     ratio = proj_cost / np.maximum(nn_cost, 1e-9)
-    return {"nn_agreement": float(np.mean(proj_nn == nn_idx)), "cost_ratio_median": float(np.median(ratio)),
+    extra = {}
+    if Z is not None:
+        err = np.abs(full[:, nets.n_features:] - Z[nn_idx]) / np.maximum(Z.std(0), 1e-6)
+        extra["latent_error_mean_abs_std"] = float(err.mean())
+    return extra | {"nn_agreement": float(np.mean(proj_nn == nn_idx)), "cost_ratio_median": float(np.median(ratio)),
             "query_noise": noise, "nn_within_3_frames": float(np.mean(np.abs(proj_nn - nn_idx) <= 3)),
             "cost_ratio_mean": float(np.mean(ratio)), "n_queries": int(n_queries),
             "feature_error_mean_abs": float(np.mean(np.abs(proj - X[nn_idx]))),
@@ -218,7 +227,7 @@ def evaluate(db, features, nets, compressor: MLP, inputs="builtin:random:1", sec
     out["decompressor"] = dec
     log(f"decompressor: mean joint error {dec['mean_joint_error_cm']:.3f} cm ({time.perf_counter() - t0:.1f} s)")
     t0 = time.perf_counter()
-    out["projector"] = projector_metrics(nets, features, n_queries)
+    out["projector"] = projector_metrics(nets, features, n_queries, Z=Z)
     log(f"projector: nn agreement {out['projector']['nn_agreement']:.3f}, cost ratio median "
         f"{out['projector']['cost_ratio_median']:.3f} ({time.perf_counter() - t0:.1f} s)")
     t0 = time.perf_counter()
