@@ -90,50 +90,50 @@ def training_noise(nets) -> float:
     return float(nets.metadata.get("recipe", {}).get("projector_noise", 1.0))
 
 
-def projector_metrics(nets, features, n_queries: int = 4096, seed: int = 7, noise: float | None = None,
-                      Z: np.ndarray | None = None) -> dict:
-    """Agreement, cost ratio and distances on noisy queries; with the database latents ``Z`` (from the
-    compressor) also the projected latent's error against the true nearest frame's, in latent stds."""
-    rng = np.random.default_rng(seed)
-    X = nets.to_network_space(features.raw)
-    noise = training_noise(nets) if noise is None else noise
-    q, _ = noisy_queries(X, n_queries, rng, noise)
+def projection_stats(nets, X: np.ndarray, q: np.ndarray, Z: np.ndarray | None = None) -> dict:
+    """The projector on queries ``q`` (network space) against their exact nearest frames in ``X``:
+    agreement, cost ratio, feature error and the distances of query and projection to the true frame;
+    with the database latents ``Z`` (from the compressor) also the projected latent's error, in latent stds."""
     nn_idx, nn_cost = nearest(q, X)
     full = batched(nets.projector, q)
     proj = full[:, :nets.n_features]
     proj_nn, _ = nearest(proj, X)
-    proj_cost = np.sum((q - proj) ** 2, axis=1)
-    ratio = proj_cost / np.maximum(nn_cost, 1e-9)
-    extra = {}
+    ratio = np.sum((q - proj) ** 2, axis=1) / np.maximum(nn_cost, 1e-9)
+    out = {"nn_agreement": float(np.mean(proj_nn == nn_idx)), "cost_ratio_median": float(np.median(ratio)),
+           "nn_within_3_frames": float(np.mean(np.abs(proj_nn - nn_idx) <= 3)), "cost_ratio_mean": float(np.mean(ratio)),
+           "feature_error_mean_abs": float(np.mean(np.abs(proj - X[nn_idx]))),
+           "query_to_nn_median": _median_norm(q - X[nn_idx]), "projection_to_nn_median": _median_norm(proj - X[nn_idx])}
     if Z is not None:
         err = np.abs(full[:, nets.n_features:] - Z[nn_idx]) / np.maximum(Z.std(0), 1e-6)
-        extra["latent_error_mean_abs_std"] = float(err.mean())
-    return extra | {"nn_agreement": float(np.mean(proj_nn == nn_idx)), "cost_ratio_median": float(np.median(ratio)),
-            "query_noise": noise, "nn_within_3_frames": float(np.mean(np.abs(proj_nn - nn_idx) <= 3)),
-            "cost_ratio_mean": float(np.mean(ratio)), "n_queries": int(n_queries),
-            "feature_error_mean_abs": float(np.mean(np.abs(proj - X[nn_idx]))),
-            "query_to_nn_median": _median_norm(q - X[nn_idx]), "projection_to_nn_median": _median_norm(proj - X[nn_idx])}
+        out["latent_error_mean_abs_std"] = float(err.mean())
+    return out
 
 
 def _median_norm(v: np.ndarray) -> float:
     return float(np.median(np.linalg.norm(v, axis=1)))
 
 
+def projector_metrics(nets, features, n_queries: int = 4096, seed: int = 7, noise: float | None = None,
+                      Z: np.ndarray | None = None) -> dict:
+    """:func:`projection_stats` on ``n_queries`` noisy queries built as in training."""
+    X = nets.to_network_space(features.raw)
+    noise = training_noise(nets) if noise is None else noise
+    q, _ = noisy_queries(X, n_queries, np.random.default_rng(seed), noise)
+    return projection_stats(nets, X, q, Z) | {"query_noise": noise, "n_queries": int(n_queries)}
+
+
+RUNTIME_KEYS = ("nn_agreement", "cost_ratio_median", "feature_error_mean_abs", "query_to_nn_median",
+                "projection_to_nn_median")
+
+
 def projector_runtime_agreement(nets, features, queries_norm: np.ndarray) -> dict:
-    """nn agreement and cost ratio on real queries (those a controller made at its searches)."""
+    """:func:`projection_stats` on real queries (those a controller made at its searches), keys + ``_runtime``."""
     if queries_norm.shape[0] == 0:
         return {}
     X = nets.to_network_space(features.raw)
     q = nets.to_network_space(features.denormalize(queries_norm))
-    nn_idx, nn_cost = nearest(q, X)
-    proj = batched(nets.projector, q)[:, :nets.n_features]
-    proj_nn, _ = nearest(proj, X)
-    ratio = np.sum((q - proj) ** 2, axis=1) / np.maximum(nn_cost, 1e-9)
-    return {"nn_agreement_runtime": float(np.mean(proj_nn == nn_idx)),
-            "cost_ratio_median_runtime": float(np.median(ratio)), "runtime_queries": int(q.shape[0]),
-            "feature_error_mean_abs_runtime": float(np.mean(np.abs(proj - X[nn_idx]))),
-            "query_to_nn_median_runtime": _median_norm(q - X[nn_idx]),
-            "projection_to_nn_median_runtime": _median_norm(proj - X[nn_idx])}
+    stats = projection_stats(nets, X, q)
+    return {f"{k}_runtime": stats[k] for k in RUNTIME_KEYS} | {"runtime_queries": int(q.shape[0])}
 
 
 def stepper_drift(nets, db, features, Z: np.ndarray, horizon: int = 60, n_starts: int = 2048, seed: int = 11) -> dict:

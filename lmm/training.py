@@ -503,14 +503,9 @@ def train_projector(data: TrainingData, Z: torch.Tensor, s: StageSettings, seed:
     """Noisy queries, their exact nearest frames as targets (features and latent), L1 losses, the
     reference's distance term, and the cell term (:func:`cell_violation` against the target's
     ``neighbours`` nearest frames). The projector has a skip connection (features = query + correction).
-    ``weights`` overrides :data:`PROJECTOR_WEIGHTS` (``bench/projector_ablation.py`` uses it and ``skip``).
-
-    Measured at 3000 iterations, batch 512 (exact-NN agreement on the 4096 eval queries / mean abs feature
-    error against the true nearest frame): reference losses 0.45 / 0.140; features weight 5: 0.51 / 0.125;
-    plus the skip: 0.55 / 0.131; plus cell weight 5, margin 0.05: 0.63 / 0.135; cell 50: 0.80 / 0.169;
-    cell 50, margin 0.1: 0.84 / 0.188; that with features 10: 0.79 / 0.141; with cell 100: 0.96 / 0.203.
-    The cell term trades feature accuracy for landing in the right cell; the recipe takes features 10,
-    cell 100, margin 0.1 and more iterations, which improve both."""
+    ``weights`` overrides :data:`PROJECTOR_WEIGHTS`; ``bench/projector_ablation.py`` varies it and ``skip``
+    and measured the choice (table in ``lmm/data/weights/README.md``): the cell term trades feature
+    accuracy for landing in the right cell, and too much of it collapses the projector to the identity."""
     rng = _seed(seed + 2)
     gen = torch.Generator().manual_seed(seed + 2)
     if projector is None:
