@@ -10,7 +10,6 @@ weights.)
 """
 from __future__ import annotations
 
-import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -29,42 +28,6 @@ TICK_RATE_HZ = 60.0
 # ------------------------------------------------------------------------------------------------
 # building the controllers
 # ------------------------------------------------------------------------------------------------
-
-def make_lmm_controller(db, features, tuning: Tuning, weights: str | None = None):
-    """The learned motion matching controller with its networks (the shipped ones unless ``weights``);
-    raises with a readable reason (missing or broken file, other database or feature layout)."""
-    from lmm.lmm import LearnedMotionMatchingController, load_default_networks
-
-    networks = load_default_networks(db, features, path=weights)
-    return LearnedMotionMatchingController(db, features, tuning, networks=networks)
-
-
-def default_weights_missing() -> bool:
-    """True when no weights were shipped/trained yet (not an error worth a dialog)."""
-    try:
-        from lmm import lmm as lmm_module
-    except ImportError:
-        return True
-    path = getattr(lmm_module, "DEFAULT_WEIGHTS", None)
-    return path is not None and not Path(path).exists()
-
-
-def make_controllers(db, features, tuning: Tuning, weights: str | None = None, with_lmm: bool = True):
-    """``({name: controller}, [(problem, serious)])``: MM always; LMM when asked for and loadable
-    (else a problem says why and the studio runs MM only). ``serious`` is False when the default
-    networks simply are not there yet (status line only), True for a broken or mismatched file."""
-    from lmm.mm import MotionMatchingController
-
-    controllers: dict[str, Controller] = {"mm": MotionMatchingController(db, features, tuning)}
-    problems: list[tuple[str, bool]] = []
-    if with_lmm:
-        try:
-            controllers["lmm"] = make_lmm_controller(db, features, tuning, weights)
-        except Exception as e:  # a missing module, a bad weights file, a layout mismatch: all reported
-            quiet = weights is None and default_weights_missing()
-            problems.append((f"Learned motion matching is off: {e}", not quiet))
-    return controllers, problems
-
 
 def controller_memory_bytes(name: str, controller, db, features) -> dict[str, int]:
     """What each method keeps in memory at run time, by part (bytes)."""
@@ -121,10 +84,10 @@ def _array_bytes(obj, depth: int = 0) -> int:
 # ------------------------------------------------------------------------------------------------
 
 class _Recorder:
-    """One controller's BVH file (:class:`lmm.recording.BVHRecorder`: streamed, crash-safe)."""
+    """One controller's BVH file (:class:`lmm.data.recording.BVHRecorder`: streamed, crash-safe)."""
 
     def __init__(self, db, path: Path, fps: float):
-        from lmm.recording import BVHRecorder
+        from lmm.data.recording import BVHRecorder
 
         Path(path).parent.mkdir(parents=True, exist_ok=True)
         self.path = Path(path)
@@ -183,7 +146,7 @@ class Session:
         self.dt = float(dt)
         self.history = History(max(int(round(history_seconds / self.dt)), 1))
         self.tick = 0
-        self.input_log = None          # an lmm.inputs.InputLog being replayed, or None (live input)
+        self.input_log = None          # an lmm.data.inputs.InputLog being replayed, or None (live input)
         self.input_log_start_tick = 0
         self.recording: Recording | None = None
         self.step_ms: dict[str, float] = {}
@@ -217,7 +180,7 @@ class Session:
 
         def work():
             try:
-                from lmm.evaluation import database_latents, load_compressor
+                from lmm.offline.evaluation import database_latents, load_compressor
 
                 compressor = load_compressor(comp, self.db, self.features)
                 self.latent_table = database_latents(compressor, self.db).astype(np.float32)
@@ -318,7 +281,7 @@ class Session:
     # -- recording -----------------------------------------------------------------------------
     def start_recording(self, base, which=("mm", "lmm")) -> dict[str, Path]:
         """Start recording the chosen controllers to BVH (and the input to CSV); returns the paths."""
-        from lmm.inputs import InputCsvWriter
+        from lmm.data.inputs import InputCsvWriter
 
         if self.recording is not None:
             self.stop_recording()
@@ -429,7 +392,7 @@ class ReferenceClip:
 
 def load_reference_clip(path) -> ReferenceClip:
     """A BVH file as global joint positions in metres (centimetre files are detected by size).
-    Raises ``lmm.bvh.BVHError`` / ``OSError`` / ``ValueError`` with a readable message."""
+    Raises ``lmm.data.bvh.BVHError`` / ``OSError`` / ``ValueError`` with a readable message."""
     from lmm import bvh
 
     anim = bvh.load(path)

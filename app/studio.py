@@ -35,7 +35,9 @@ from .panels.common import WINDOWS, View, window_alias, window_tag
 from .panels.common import overlapping as overlap_keys
 from .panels.errors import ErrorDialog
 from .panels.stats import FrameTimes
-from .session import Session, TickWorker, load_reference_clip, make_controllers, make_lmm_controller
+from lmm.factory import make_controller, make_controllers
+
+from .session import Session, TickWorker, load_reference_clip
 
 FONT_CANDIDATES = (
     "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf",
@@ -120,7 +122,7 @@ class Studio:
     # start-up
     # ==========================================================================================
     def load_engine(self) -> None:
-        from lmm.database import load_or_build
+        from lmm.data.database import load_or_build
         from lmm.features import build_features
         from lmm.tuning import Tuning
 
@@ -347,7 +349,7 @@ class Studio:
         handlers[kind](path)
 
     def open_input(self, spec: str) -> bool:
-        from lmm.inputs import InputError, open_input
+        from lmm.data.inputs import InputError, open_input
 
         try:
             log = open_input(spec)
@@ -366,7 +368,7 @@ class Studio:
         self.go_live()
 
     def open_reference(self, path: str) -> bool:
-        from lmm.bvh import BVHError
+        from lmm.data.bvh import BVHError
 
         try:
             clip = load_reference_clip(path)
@@ -400,7 +402,7 @@ class Studio:
     def load_weights(self, path: str) -> bool:
         s = self.session
         try:
-            controller = make_lmm_controller(s.db, s.features, s.tuning, weights=path)
+            controller = make_controller("lmm", s.db, s.features, s.tuning, weights=path)
         except Exception as e:
             self.errors.show("LMM weights", str(e) if str(path) in str(e) else f"{path}: {e}")
             return False

@@ -1,5 +1,5 @@
 #!/usr/bin/env python
-"""Benchmark of lmm.bvh: parse and save times for the LAFAN1 takes.
+"""Benchmark of lmm.data.bvh: parse and save times for the LAFAN1 takes.
 
 For every shipped take (lmm/data/lafan1/*.bvh.gz) and its uncompressed original
 (../shared/data/lafan1/*.bvh, when present) prints the median of N runs of

@@ -51,11 +51,11 @@ def main() -> int:
     import torch
 
     from lmm import training as T
-    from lmm.database import load_or_build
-    from lmm.evaluation import projector_metrics, projector_runtime_agreement, run_controller
+    from lmm.data.database import load_or_build
+    from lmm.offline.evaluation import projector_metrics, projector_runtime_agreement, run_controller
     from lmm.features import build_features
-    from lmm.inputs import open_input
-    from lmm.lmm import DEFAULT_WEIGHTS, LMMNetworks
+    from lmm.data.inputs import open_input
+    from lmm.learned import DEFAULT_WEIGHTS, LMMNetworks
     from lmm.mm import MotionMatchingController
     from lmm.nn import MLP
 

@@ -32,7 +32,7 @@ Optional: ``_source_frame()`` (database frame shown in the debugger, default -1)
 A :class:`SourcePose` is in the database's local form: bone 0 (the simulation/root bone) carries the
 root's velocity and angular velocity *in the root's own frame*; its position/rotation are unused,
 because the base class integrates the character root in world space itself. Every other bone is local
-to its parent, as in :class:`lmm.database.Database`.
+to its parent, as in :class:`lmm.data.database.Database`.
 """
 from __future__ import annotations
 
@@ -43,16 +43,16 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import quat
-from .controller import Candidates, Controller, DebugSnapshot, InputState, Pose
-from .features import build_query
-from .ik import FootLockState, foot_lock_update, local_rotations_from_global, solve_leg
-from .inertialize import Offsets, inertialize_apply, inertialize_decay, inertialize_transition
-from .springs import LN2, EPS
-from .trajectory import (SimulationState, desired_rotation, desired_velocity, simulation_update,
+from lmm import quat
+from lmm.controller import Candidates, Controller, DebugSnapshot, InputState, Pose
+from lmm.features import build_query
+from lmm.ik import FootLockState, foot_lock_update, local_rotations_from_global, solve_leg
+from lmm.inertialize import Offsets, inertialize_apply, inertialize_decay, inertialize_transition
+from lmm.springs import LN2, EPS
+from lmm.trajectory import (SimulationState, desired_rotation, desired_velocity, simulation_update,
                          stick_to_world, stick_with_deadzone, trajectory_in_root_space, trajectory_offsets,
                          trajectory_predict)
-from .tuning import Tuning
+from lmm.tuning import Tuning
 
 
 @dataclass

@@ -25,8 +25,8 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from . import quat
-from .filters import central_difference
+from lmm import quat
+from lmm.filters import central_difference
 
 KINDS = ("bone_position", "bone_velocity", "trajectory_position", "trajectory_direction")
 FORWARD = np.array([0.0, 0.0, 1.0])  # the simulation bone faces +Z in its own space

@@ -19,7 +19,7 @@ import math
 
 import numpy as np
 
-from .springs import decay_spring_damper_exact
+from lmm.springs import decay_spring_damper_exact
 
 
 

@@ -14,8 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import quat
-from .springs import decay_spring_damper_exact, decay_spring_damper_exact_quat
+from lmm import quat
+from lmm.springs import decay_spring_damper_exact, decay_spring_damper_exact_quat
 
 
 @dataclass

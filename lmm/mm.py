@@ -3,10 +3,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from .character import CharacterController, SearchOutcome, SourcePose, database_source_pose, root_local_velocities
-from .controller import Candidates
-from .search import SearchIndex, brute_force_search, candidate_mask
-from .tuning import Tuning
+from lmm.character import CharacterController, SearchOutcome, SourcePose, database_source_pose, root_local_velocities
+from lmm.controller import Candidates
+from lmm.search import SearchIndex, brute_force_search, candidate_mask
+from lmm.tuning import Tuning
 
 
 def default_start_frame(db) -> int:

@@ -2,7 +2,7 @@
 
 A :class:`MLP` evaluates ``y = out_mean + out_std * mlp((x - in_mean) / in_std)`` in float32 with
 preallocated buffers, so a batch-1 step allocates nothing. The weight layout is the one
-:meth:`lmm.networks.NormalizedMLP.to_arrays` writes: ``{name}.W{i}`` (in x out), ``{name}.b{i}``
+:meth:`lmm.offline.networks.NormalizedMLP.to_arrays` writes: ``{name}.W{i}`` (in x out), ``{name}.b{i}``
 and the four normalisation vectors.
 
 This module also knows the decompressor's pose vector (338 dims for 23 bones):
@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import quat
+from lmm import quat
 
 
 def pose_vector_slices(n_bones: int) -> dict[str, slice]:

@@ -7,14 +7,14 @@ from __future__ import annotations
 
 import time
 
-from .metrics import MotionMetrics
+from lmm.metrics import MotionMetrics
 
 
 def run_headless(controller, input_source, seconds: float, dt: float = 1.0 / 60.0, recorder=None, on_step=None,
                  input_writer=None, realtime: bool = False, reset: bool = True) -> dict:
     """Step ``controller`` for ``seconds`` at ``dt`` and return its metrics (see :mod:`lmm.metrics`).
 
-    ``input_source(t) -> InputState`` (an :class:`lmm.inputs.InputLog` works); ``recorder.write(pose)``
+    ``input_source(t) -> InputState`` (an :class:`lmm.data.inputs.InputLog` works); ``recorder.write(pose)``
     and ``input_writer.write(t, input)`` stream the run; ``on_step(pose, snapshot)`` sees every tick.
     ``realtime`` paces the ticks to the wall clock (for interactive recordings and crash tests).
     """

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import quat
+from lmm import quat
 
 LN2 = float(np.log(2.0))
 EPS = 1e-5

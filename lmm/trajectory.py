@@ -15,8 +15,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import quat
-from .springs import spring_character_update, spring_rotation_update
+from lmm import quat
+from lmm.springs import spring_character_update, spring_rotation_update
 
 UP = np.array([0.0, 1.0, 0.0])
 FORWARD = np.array([0.0, 0.0, 1.0])

@@ -23,7 +23,7 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .features import DEFAULT_LAYOUT
+from lmm.features import DEFAULT_LAYOUT
 
 GROUPS = ("simulation", "speeds", "inertialization", "features", "search", "sync", "ik")
 

@@ -1,4 +1,4 @@
-"""Tests for lmm.bvh: the broken-file corpus, mutation fuzzing, agreement with pybvh,
+"""Tests for lmm.data.bvh: the broken-file corpus, mutation fuzzing, agreement with pybvh,
 round trips, streaming helpers."""
 from __future__ import annotations
 

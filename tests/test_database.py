@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 
 from lmm import DEFAULT_MANIFEST, bvh, quat
-from lmm.database import (Database, DatabaseError, build, global_to_local, load_or_build, local_to_global,
+from lmm.data.database import (Database, DatabaseError, build, global_to_local, load_or_build, local_to_global,
                           manifest_key, mirror_local, mirror_map)
 from lmm.filters import median_filter
-from lmm.manifest import ManifestError, load_manifest
+from lmm.data.manifest import ManifestError, load_manifest
 
 DATA = DEFAULT_MANIFEST.parent
 
@@ -293,7 +293,7 @@ def test_broken_bvh_in_manifest_is_reported(tmp_path):
 
 def test_cache_from_other_build_code_is_rebuilt(tmp_path, monkeypatch):
     """A cache written by different build code is not served, even under the same key."""
-    import lmm.database as database
+    import lmm.data.database as database
 
     cache = tmp_path / "cache"
     m = small_manifest(tmp_path)

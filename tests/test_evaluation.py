@@ -6,11 +6,11 @@ import json
 import numpy as np
 import pytest
 
-from lmm.database import load_or_build
-from lmm.evaluation import nearest, projector_metrics
+from lmm.data.database import load_or_build
+from lmm.offline.evaluation import nearest, projector_metrics
 from lmm.features import build_features
-from lmm.lmm import DEFAULT_WEIGHTS, LMMNetworks
-from lmm.weights import WeightsError
+from lmm.learned import DEFAULT_WEIGHTS, LMMNetworks
+from lmm.data.weights import WeightsError
 
 
 @pytest.fixture(scope="module")

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from lmm.controller import InputState
-from lmm.inputs import (BUILTIN_SCENARIOS, InputCsvWriter, InputError, InputLog, builtin, builtin_names,
+from lmm.data.inputs import (BUILTIN_SCENARIOS, InputCsvWriter, InputError, InputLog, builtin, builtin_names,
                         load_input_csv, open_input, save_input_csv)
 
 CORPUS = Path(__file__).parent / "input_corpus"

@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 from lmm.controller import InputState
-from lmm.database import load_or_build
+from lmm.data.database import load_or_build
 from lmm.features import build_features
-from lmm.lmm import DEFAULT_WEIGHTS, LearnedMotionMatchingController, LMMNetworks, xform_xy_to_quat
-from lmm.weights import WeightsError
+from lmm.learned import DEFAULT_WEIGHTS, LearnedMotionMatchingController, LMMNetworks, xform_xy_to_quat
+from lmm.data.weights import WeightsError
 
 
 @pytest.fixture(scope="module")
@@ -36,8 +36,8 @@ def nets(dbf, tmp_path_factory):
 
 def test_numpy_matches_torch(nets):
     torch = pytest.importorskip("torch")
-    from lmm.networks import MLPSpec, NormalizedMLP
-    from lmm.weights import load
+    from lmm.offline.networks import MLPSpec, NormalizedMLP
+    from lmm.data.weights import load
     wf = load(nets.path)
     rng = np.random.default_rng(0)
     for name in ("decompressor", "stepper", "projector"):
@@ -95,9 +95,9 @@ def test_controller_runs_and_fills_the_snapshot(dbf, nets):
 
 def test_no_torch_on_the_runtime_path():
     code = ("import sys\n"
-            "from lmm.database import load_or_build\nfrom lmm.features import build_features\n"
-            "from lmm.lmm import LearnedMotionMatchingController, LMMNetworks\n"
-            "import lmm.evaluation, lmm.nn, lmm.weights\n"
+            "from lmm.data.database import load_or_build\nfrom lmm.features import build_features\n"
+            "from lmm.learned import LearnedMotionMatchingController, LMMNetworks\n"
+            "import lmm.offline.evaluation, lmm.nn, lmm.data.weights\n"
             "assert 'torch' not in sys.modules, 'torch imported'\nprint('ok')\n")
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr
@@ -107,7 +107,7 @@ def test_no_torch_on_the_runtime_path():
 @pytest.mark.slow
 def test_ten_minutes_of_random_input_stay_sane(dbf, nets):
     """10 minutes of builtin:random:1: no NaN, no pose explosion, bone lengths within 1 cm."""
-    from lmm.inputs import open_input
+    from lmm.data.inputs import open_input
     db, features = dbf
     seconds = 600.0
     log = open_input("builtin:random:1", seconds)

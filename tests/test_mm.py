@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from lmm.controller import DebugSnapshot, InputState
-from lmm.inputs import builtin
+from lmm.data.inputs import builtin
 from lmm.mm import MotionMatchingController
 from lmm.runner import run_headless
 from lmm.tuning import Tuning

@@ -4,7 +4,7 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
-from lmm.networks import MLPSpec, NormalizedMLP, default_specs  # noqa: E402
+from lmm.offline.networks import MLPSpec, NormalizedMLP, default_specs  # noqa: E402
 from lmm.nn import MLP  # noqa: E402
 
 

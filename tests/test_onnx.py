@@ -5,9 +5,9 @@ import pytest
 onnx = pytest.importorskip("onnx")
 ort = pytest.importorskip("onnxruntime")
 
-from lmm.lmm import DEFAULT_WEIGHTS, LMMNetworks  # noqa: E402
+from lmm.learned import DEFAULT_WEIGHTS, LMMNetworks  # noqa: E402
 from lmm.nn import MLP  # noqa: E402
-from lmm.onnx_export import export_networks, mlp_to_onnx  # noqa: E402
+from lmm.offline.onnx_export import export_networks, mlp_to_onnx  # noqa: E402
 
 
 def run_onnx(path_or_model, x):

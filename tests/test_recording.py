@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 from lmm import bvh
-from lmm.inputs import builtin
+from lmm.data.inputs import builtin
 from lmm.mm import MotionMatchingController
-from lmm.recording import BVHRecorder
+from lmm.data.recording import BVHRecorder
 from lmm.runner import run_headless
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -95,5 +95,5 @@ def test_killed_recording_keeps_all_but_the_last_second(tmp_path, db):
     assert anim.n_frames >= int((elapsed - 1.0) * 60), (anim.n_frames, elapsed)
     assert np.isfinite(anim.motion).all()
     csv = out.with_name("killed.input.csv")
-    from lmm.inputs import load_input_csv
+    from lmm.data.inputs import load_input_csv
     assert load_input_csv(csv).n_rows >= 1  # the input log is valid too

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from lmm.inputs import builtin, builtin_names
+from lmm.data.inputs import builtin, builtin_names
 from lmm.mm import MotionMatchingController
 from lmm.search import SearchIndex, brute_force_search, candidate_mask
 from lmm.tuning import Tuning

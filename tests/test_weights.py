@@ -152,7 +152,7 @@ def test_save_refuses_inconsistent(tmp_path):
 
 
 def test_shipped_weights_are_valid():
-    from lmm.lmm import DEFAULT_WEIGHTS
+    from lmm.learned import DEFAULT_WEIGHTS
     if not DEFAULT_WEIGHTS.exists():
         pytest.skip("no shipped weights")
     wf = W.load(DEFAULT_WEIGHTS, require=["decompressor", "stepper", "projector"])

@@ -20,11 +20,8 @@ Timings are wall-clock medians; every section also reports what it measured (cou
 """
 from __future__ import annotations
 
-import json
-import math
 import sys
 import time
-from pathlib import Path
 
 
 def add_arguments(p) -> None:
@@ -39,7 +36,7 @@ def collect_queries(db, features, n_queries: int, scenarios=None, tuning=None):
     ``n_queries`` searches have been made. Returns (queries, step times in us, masks/args per query)."""
     import numpy as np
 
-    from lmm.inputs import builtin, builtin_names
+    from lmm.data.inputs import builtin, builtin_names
     from lmm.mm import MotionMatchingController
     from lmm.tuning import Tuning
 
@@ -154,14 +151,14 @@ def _lmm_figures(db, features) -> dict:
     cached = getattr(_lmm_figures, "cache", None)
     if cached is not None and cached[0] is db:
         return cached[1]
-    from lmm.evaluation import benchmark_lmm
-    from lmm.weights import WeightsError
+    from lmm.offline.evaluation import benchmark_lmm
+    from lmm.data.weights import WeightsError
 
     try:
         figures = benchmark_lmm(db, features)
     except WeightsError as e:
         print(f"note: no learned-controller figures ({e})", file=sys.stderr)
-        from lmm.evaluation import mm_runtime_bytes
+        from lmm.offline.evaluation import mm_runtime_bytes
         mm = mm_runtime_bytes(db, features)
         figures = {"memory.mm_bytes": int(sum(mm.values())), "memory.lmm_bytes": None, "frame.lmm_us": None}
     _lmm_figures.cache = (db, figures)
@@ -189,14 +186,6 @@ SECTIONS["frame"] = bench_frame_with_lmm
 SECTIONS["memory"] = bench_memory
 
 
-def _json_safe(value):
-    if isinstance(value, dict):
-        return {k: _json_safe(v) for k, v in value.items()}
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value
-
-
 def format_results(results: dict) -> str:
     lines = []
     for section, values in results.items():
@@ -218,7 +207,7 @@ def main(args) -> int:
         print(f"error: --queries must be positive, got {args.queries}", file=sys.stderr)
         return 2
 
-    from lmm.database import DatabaseError, load_or_build
+    from lmm.data.database import DatabaseError, load_or_build
     from lmm.features import build_features
 
     try:
@@ -236,7 +225,6 @@ def main(args) -> int:
         results[name] = SECTIONS[name](db, features, args.queries, collected)
     print(format_results(results))
     if args.json_path:
-        path = Path(args.json_path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(_json_safe(results), indent=2) + "\n")
+        from lmm.data.jsonio import write_json
+        write_json(args.json_path, results)
     return 0

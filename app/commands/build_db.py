@@ -12,9 +12,9 @@ def add_arguments(p) -> None:
 
 
 def main(args) -> int:
-    from lmm.bvh import BVHError
-    from lmm.database import DatabaseError, load_or_build
-    from lmm.manifest import ManifestError
+    from lmm.data.bvh import BVHError
+    from lmm.data.database import DatabaseError, load_or_build
+    from lmm.data.manifest import ManifestError
     from lmm.progress import Progress
 
     bar = None

@@ -18,11 +18,11 @@ def add_arguments(p) -> None:
 
 
 def main(args) -> int:
-    from lmm.database import load_or_build
-    from lmm.evaluation import evaluate, load_compressor, write_plots
+    from lmm.data.database import load_or_build
+    from lmm.offline.evaluation import evaluate, load_compressor, write_plots
     from lmm.features import build_features
-    from lmm.lmm import DEFAULT_WEIGHTS, LMMNetworks
-    from lmm.weights import WeightsError
+    from lmm.learned import DEFAULT_WEIGHTS, LMMNetworks
+    from lmm.data.weights import WeightsError
 
     db, _ = load_or_build(args.manifest)
     features = build_features(db)

@@ -11,15 +11,15 @@ def add_arguments(p) -> None:
 
 
 def main(args) -> int:
-    from lmm.lmm import DEFAULT_WEIGHTS, LMMNetworks
-    from lmm.weights import WeightsError
+    from lmm.learned import DEFAULT_WEIGHTS, LMMNetworks
+    from lmm.data.weights import WeightsError
 
     try:
         import onnx  # noqa: F401
     except ImportError:
         print("error: export-onnx needs the 'onnx' package (pip install onnx)", file=sys.stderr)
         return 1
-    from lmm.onnx_export import export_networks
+    from lmm.offline.onnx_export import export_networks
 
     try:
         nets = LMMNetworks.load(Path(args.weights) if args.weights else DEFAULT_WEIGHTS)

@@ -4,14 +4,12 @@
         --record out/run.bvh --metrics-json out/metrics.json
 
 Deterministic: the same input gives a byte-identical recording on the same machine. ``--record``
-streams the character to BVH (crash-safe, see :mod:`lmm.recording`) and the input to CSV beside it
+streams the character to BVH (crash-safe, see :mod:`lmm.data.recording`) and the input to CSV beside it
 (``OUT.input.csv``, or ``--record-input``). Bad input (unreadable or broken logs, unknown scenarios,
 bad presets) prints one ``error: ...`` line naming the file, line and column and exits with 2.
 """
 from __future__ import annotations
 
-import json
-import math
 import sys
 from pathlib import Path
 
@@ -38,29 +36,8 @@ def _error(message: str, code: int = 2) -> int:
     return code
 
 
-def _json_safe(value):
-    """NaN/inf become null: strict JSON has no spelling for them."""
-    if isinstance(value, dict):
-        return {k: _json_safe(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_json_safe(v) for v in value]
-    if isinstance(value, float) and not math.isfinite(value):
-        return None
-    return value
-
-
-def make_controller(name: str, db, features, tuning, weights=None):
-    """A controller by name ('mm' or 'lmm')."""
-    if name == "mm":
-        from lmm.mm import MotionMatchingController
-        return MotionMatchingController(db, features, tuning)
-    from lmm import lmm as lmm_module
-    networks = lmm_module.LMMNetworks.load(weights, db, features) if weights else None
-    return lmm_module.LearnedMotionMatchingController(db, features, tuning=tuning, networks=networks)
-
-
 def main(args) -> int:
-    from lmm.inputs import InputError, open_input
+    from lmm.data.inputs import InputError, open_input
     from lmm.tuning import Tuning, TuningError
 
     # everything the user typed is checked before the (slower) database load
@@ -80,11 +57,12 @@ def main(args) -> int:
         return _error(f"{args.tuning}: cannot read the tuning preset ({e.strerror})")
     seconds = args.seconds if args.seconds is not None else max(source.duration, 1.0 / args.fps)
 
-    from lmm.bvh import BVHError
-    from lmm.database import DatabaseError, load_or_build
+    from lmm.data.bvh import BVHError
+    from lmm.data.database import DatabaseError, load_or_build
     from lmm.features import build_features
-    from lmm.manifest import ManifestError
-    from lmm.recording import BVHRecorder
+    from lmm.data.manifest import ManifestError
+    from lmm.data.recording import BVHRecorder
+    from lmm.factory import make_controller
     from lmm.runner import run_headless
 
     try:
@@ -102,14 +80,14 @@ def main(args) -> int:
     recorder = writer = None
     try:
         if args.record:
-            from lmm.inputs import InputCsvWriter
+            from lmm.data.inputs import InputCsvWriter
             out = Path(args.record)
             out.parent.mkdir(parents=True, exist_ok=True)
             input_path = Path(args.record_input) if args.record_input else out.with_name(out.stem + ".input.csv")
             writer = InputCsvWriter(input_path)
             recorder = BVHRecorder(out, db, fps=args.fps)
         elif args.record_input:
-            from lmm.inputs import InputCsvWriter
+            from lmm.data.inputs import InputCsvWriter
             Path(args.record_input).parent.mkdir(parents=True, exist_ok=True)
             writer = InputCsvWriter(args.record_input)
     except OSError as e:
@@ -129,9 +107,8 @@ def main(args) -> int:
         report["recording"] = {"bvh": str(args.record), "frames": recorder.frames_written,
                                "input_csv": str(writer.path)}
     if args.metrics_json:
-        path = Path(args.metrics_json)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps(_json_safe(report), indent=2) + "\n")
+        from lmm.data.jsonio import write_json
+        write_json(args.metrics_json, report)
     if not args.quiet:
         from lmm.metrics import format_metrics
         print(f"{args.controller} on {args.input}: {seconds:g} s, {metrics['ticks']} ticks")

@@ -33,10 +33,10 @@ def add_arguments(p) -> None:
 def main(args) -> int:
     import numpy as np
 
-    from lmm.database import load_or_build
+    from lmm.data.database import load_or_build
     from lmm.features import build_features
-    from lmm.training import NETWORKS, Recipe, train_pipeline
-    from lmm.weights import WeightsError
+    from lmm.offline.training import NETWORKS, Recipe, train_pipeline
+    from lmm.data.weights import WeightsError
 
     db, _ = load_or_build(args.manifest)
     features = build_features(db)

@@ -44,13 +44,13 @@ def lmm_weights(tmp_path_factory):
     here (needs torch), else None (the studio then runs MM only and the LMM checks are skipped)."""
     import numpy as np
 
-    from lmm.database import load_or_build
+    from lmm.data.database import load_or_build
     from lmm.features import build_features
 
     db, _ = load_or_build()
     features = build_features(db)
     try:
-        from lmm.lmm import DEFAULT_WEIGHTS, LMMNetworks
+        from lmm.learned import DEFAULT_WEIGHTS, LMMNetworks
 
         LMMNetworks.load(DEFAULT_WEIGHTS, db, features)
         return str(DEFAULT_WEIGHTS)

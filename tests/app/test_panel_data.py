@@ -26,7 +26,7 @@ from studio_testutil import CORPUS
 
 @pytest.fixture(scope="module")
 def dbf():
-    from lmm.database import load_or_build
+    from lmm.data.database import load_or_build
     from lmm.features import build_features
 
     db, _ = load_or_build()
@@ -256,7 +256,7 @@ def test_recording_paths():
 
 def test_session_steps_records_and_replays(dbf, tmp_path):
     from lmm import bvh
-    from lmm.inputs import load_input_csv
+    from lmm.data.inputs import load_input_csv
 
     db, features = dbf
     tuning = Tuning()
@@ -285,7 +285,7 @@ def test_session_steps_records_and_replays(dbf, tmp_path):
 
 
 def test_reference_clip_loads_and_bad_files_raise(tmp_path):
-    from lmm.bvh import BVHError
+    from lmm.data.bvh import BVHError
 
     clip = load_reference_clip(os.path.join(os.path.dirname(__file__), "..", "..", "lmm", "data", "lafan1",
                                             "obstacles3_subject4.bvh.gz"))
@@ -306,7 +306,7 @@ def test_overlap_and_decimation_helpers():
 
 
 def test_replaying_a_recorded_input_csv_reproduces_the_motion(dbf, tmp_path):
-    from lmm.inputs import load_input_csv, open_input
+    from lmm.data.inputs import load_input_csv, open_input
 
     db, features = dbf
     tuning = Tuning()

@@ -22,7 +22,7 @@ def no_display_env():
 
 def expected_camera(gl_ctx, path, frame, width, height):
     """The camera ``view --screenshot`` uses for ``frame``, rebuilt in-process to project joints."""
-    bvh = pytest.importorskip("lmm.bvh")
+    bvh = pytest.importorskip("lmm.data.bvh")
     from viewer.player import AnimationView
 
     anim = bvh.load(path)
@@ -108,7 +108,7 @@ CORPUS = sorted((ROOT / "tests" / "bvh_corpus").glob("*.bvh*"))
 
 @pytest.mark.parametrize("bad", CORPUS, ids=[p.name for p in CORPUS])
 def test_bad_files_give_one_line_errors(bad, capsys, tmp_path):
-    pytest.importorskip("lmm.bvh")
+    pytest.importorskip("lmm.data.bvh")
     code, err = run_in_process([bad, "--screenshot", tmp_path / "x.png"], capsys)
     assert code == 1
     lines = err.strip().splitlines()
@@ -117,7 +117,7 @@ def test_bad_files_give_one_line_errors(bad, capsys, tmp_path):
 
 
 def test_bad_file_subprocess_has_no_traceback(tmp_path):
-    pytest.importorskip("lmm.bvh")
+    pytest.importorskip("lmm.data.bvh")
     bad = tmp_path / "broken.bvh"
     bad.write_text("HIERARCHY\nROOT Hips\n{\n  OFFSET 0 0\n")
     result = run_view([bad, "--screenshot", tmp_path / "x.png"], env=no_display_env())
@@ -140,7 +140,7 @@ def test_window_without_display_exits_2(capsys, monkeypatch, tmp_path):
 
 
 def test_frame_out_of_range(capsys, tmp_path):
-    pytest.importorskip("lmm.bvh")
+    pytest.importorskip("lmm.data.bvh")
     path = tmp_path / "short.bvh"
     write_bvh(path, CREATURE_NAMES, CREATURE_PARENTS, CREATURE_OFFSETS_M, np.zeros((3, 3)) + [0, 1, 0])
     code, err = run_in_process([path, "--screenshot", tmp_path / "x.png", "--frame", 7], capsys)

@@ -19,7 +19,7 @@ SKELETON_ORANGE = (0.95, 0.55, 0.15)
 
 @pytest.mark.skipif(not TAKES, reason="no shipped LAFAN1 takes")
 def test_window_shows_the_take_around_the_projected_hips(xvfb_env, gl_ctx, out_dir):
-    bvh = pytest.importorskip("lmm.bvh")
+    bvh = pytest.importorskip("lmm.data.bvh")
     from viewer.player import AnimationView
 
     take = min(TAKES, key=lambda p: p.stat().st_size)
@@ -46,7 +46,7 @@ def test_window_shows_the_take_around_the_projected_hips(xvfb_env, gl_ctx, out_d
 
 
 def test_window_bad_file_exits_1_without_traceback(xvfb_env, tmp_path):
-    pytest.importorskip("lmm.bvh")
+    pytest.importorskip("lmm.data.bvh")
     bad = tmp_path / "bad.bvh"
     bad.write_bytes(b"HIERARCHY\nROOT Hips\n{\n  OFFSET 0 0 0\n  CHANNELS 3 Xposition Yposition Wrotation\n")
     result = run_view([bad, "--frames", 1], env=xvfb_env)

@@ -4,7 +4,7 @@ Layout of a file:
 
 * ``{network}.W{i}`` (in x out), ``{network}.b{i}``, ``{network}.in_mean``, ``{network}.in_std``,
   ``{network}.out_mean``, ``{network}.out_std``: float32 arrays per network
-  (see :meth:`lmm.networks.NormalizedMLP.to_arrays`);
+  (see :meth:`lmm.offline.networks.NormalizedMLP.to_arrays`);
 * ``metadata``: UTF-8 JSON as a uint8 array: format version, network sizes and activations, the
   feature layout, the database key, the feature normalisation the networks were trained in, the
   skeleton, latent statistics and the training settings.

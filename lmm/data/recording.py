@@ -21,7 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
-from . import bvh, quat
+from lmm import quat
+from lmm.data import bvh
 
 ROOT_CHANNELS = ("Xposition", "Yposition", "Zposition", "Zrotation", "Yrotation", "Xrotation")
 JOINT_CHANNELS = ("Zrotation", "Yrotation", "Xrotation")
@@ -30,7 +31,7 @@ EULER_ORDER = "zyx"
 
 def recording_skeleton(db, scale: float = 100.0) -> dict:
     """The BVH skeleton of a database (bone 0 dropped, the first real bone as root), as a mapping that
-    :func:`lmm.bvh.header_text` accepts."""
+    :func:`lmm.data.bvh.header_text` accepts."""
     names = list(db.names[1:])
     parents = np.asarray(db.parents[1:], dtype=np.int64) - 1
     parents[parents < 0] = -1

@@ -2,7 +2,7 @@
 
 Each network becomes one small graph, input ``x`` (batch, n_in) float32, output ``y`` (batch, n_out):
 ``Sub(in_mean) -> Div(in_std) -> [Gemm -> Relu|Elu] x hidden -> Gemm -> Mul(out_std) -> Add(out_mean)``,
-the same function as :class:`lmm.nn.MLP` and :class:`lmm.networks.NormalizedMLP`; a network with a skip
+the same function as :class:`lmm.nn.MLP` and :class:`lmm.offline.networks.NormalizedMLP`; a network with a skip
 connection (the projector) adds ``MatMul(x, [I 0])`` to ``y``. No torch needed.
 """
 from __future__ import annotations
@@ -61,7 +61,7 @@ def mlp_to_onnx(mlp, name: str, metadata: dict | None = None):
 
 
 def export_networks(nets, out_dir) -> list[Path]:
-    """Write decompressor.onnx, stepper.onnx and projector.onnx for an :class:`lmm.lmm.LMMNetworks`."""
+    """Write decompressor.onnx, stepper.onnx and projector.onnx for an :class:`lmm.learned.LMMNetworks`."""
     import onnx
 
     out_dir = Path(out_dir)

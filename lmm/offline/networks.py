@@ -17,7 +17,7 @@ projector     27 -> 512 x4 -> 59, skip (features += query)      ReLU
 ============  =============================================  ==========
 
 The projector's ``skip`` is our one deviation from the paper's layout (measured reason in
-:mod:`lmm.training`): its first 27 outputs are the query plus a learned correction, so the network
+:mod:`lmm.offline.training`): its first 27 outputs are the query plus a learned correction, so the network
 learns how far to move a query onto the database rather than re-creating the query from scratch.
 """
 from __future__ import annotations
@@ -108,7 +108,7 @@ class NormalizedMLP(nn.Module):
 
     def to_arrays(self, prefix: str) -> dict:
         """Weights as float32 numpy arrays named ``{prefix}.W{i}`` (in x out), ``{prefix}.b{i}`` and the
-        normalisation vectors; the layout :mod:`lmm.nn` and :mod:`lmm.weights` read."""
+        normalisation vectors; the layout :mod:`lmm.nn` and :mod:`lmm.data.weights` read."""
         out = {}
         for i, layer in enumerate(self.layers):
             out[f"{prefix}.W{i}"] = layer.weight.detach().cpu().numpy().T.copy()

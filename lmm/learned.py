@@ -24,14 +24,14 @@ from pathlib import Path
 
 import numpy as np
 
-from . import quat
-from .character import CharacterController, SearchOutcome, SourcePose
-from .controller import Candidates
-from .mm import default_start_frame
-from .nn import MLP, pose_vector_slices
-from .search import SearchIndex
-from .tuning import Tuning
-from .weights import WeightsError, load as load_weights
+from lmm import quat
+from lmm.character import CharacterController, SearchOutcome, SourcePose
+from lmm.controller import Candidates
+from lmm.mm import default_start_frame
+from lmm.nn import MLP, pose_vector_slices
+from lmm.search import SearchIndex
+from lmm.tuning import Tuning
+from lmm.data.weights import WeightsError, load as load_weights
 
 WEIGHTS_DIR = Path(__file__).resolve().parent / "data" / "weights"
 DEFAULT_WEIGHTS = WEIGHTS_DIR / "default.npz"

@@ -1,6 +1,6 @@
 """The motion database: every frame of every clip range, at 60 Hz, mirrored, with a simulation bone.
 
-Built from a manifest (see :mod:`lmm.manifest`) in the order of the reference pipeline:
+Built from a manifest (see :mod:`lmm.data.manifest`) in the order of the reference pipeline:
 BVH -> local rotations/positions (unit scaled) -> trim to ranges -> cubic resample to the target fps
 -> left/right mirror copy -> prepend the simulation (root) bone -> velocities and angular velocities
 -> foot contacts. Bone 0 is always the simulation bone; its position/velocity are in world space and
@@ -19,9 +19,10 @@ from pathlib import Path
 
 import numpy as np
 
-from . import DEFAULT_MANIFEST, bvh, quat
-from .filters import catmull_rom, central_difference, median_filter, savgol_smooth
-from .manifest import Manifest, ManifestError, load_manifest
+from lmm import DEFAULT_MANIFEST, quat
+from lmm.data import bvh
+from lmm.filters import catmull_rom, central_difference, median_filter, savgol_smooth
+from lmm.data.manifest import Manifest, ManifestError, load_manifest
 
 DB_FORMAT_VERSION = 5  # 5: mirrored clips keep the original bone offsets
 SIMULATION_BONE = "Simulation"
@@ -293,9 +294,10 @@ def build_code_fingerprint() -> str:
     trained on a database are tied to it: bump the version when a change alters the built data).
     """
     h = hashlib.sha256()
-    here = Path(__file__).resolve().parent
-    for name in ("database.py", "filters.py", "quat.py", "bvh.py", "manifest.py"):
-        h.update((here / name).read_bytes())
+    data = Path(__file__).resolve().parent
+    engine = data.parent
+    for path in (data / "database.py", engine / "filters.py", engine / "quat.py", data / "bvh.py", data / "manifest.py"):
+        h.update(path.read_bytes())
     return h.hexdigest()
 
 

@@ -24,10 +24,10 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from .features import Features
-from .networks import MLPSpec, NormalizedMLP, default_specs
-from .nn import character_parents, character_space, pose_vector_size, pose_vector_slices, pose_vectors
-from .progress import Progress
+from lmm.features import Features
+from lmm.offline.networks import MLPSpec, NormalizedMLP, default_specs
+from lmm.nn import character_parents, character_space, pose_vector_size, pose_vector_slices, pose_vectors
+from lmm.progress import Progress
 
 NETWORKS = ("decompressor", "stepper", "projector")
 
@@ -560,7 +560,7 @@ def base_metadata(db, features: Features, latent: int) -> dict:
 
 
 def _save_networks(path, nets: dict, metadata: dict, extra: dict | None = None):
-    from . import weights as W
+    from lmm.data import weights as W
     arrays = {}
     for name, net in nets.items():
         arrays.update(net.to_arrays(name))
@@ -571,7 +571,7 @@ def _save_networks(path, nets: dict, metadata: dict, extra: dict | None = None):
 
 
 def _load_networks(path, names, db, features) -> tuple[dict, dict]:
-    from . import weights as W
+    from lmm.data import weights as W
     wf = W.load(path, require=names, db_key=db.key, layout_dicts=features.layout_dicts())
     nets = {}
     for name in names:
@@ -608,7 +608,7 @@ def train_pipeline(db, features: Features, stages=NETWORKS, recipe: Recipe | Non
         nets.update(loaded)
     if runtime_path.exists():
         try:
-            from . import weights as W
+            from lmm.data import weights as W
             prev = W.load(runtime_path, require=[], db_key=db.key, layout_dicts=features.layout_dicts())
             previous = dict(prev.metadata)
             keep = [n for n in NETWORKS if (n not in stages or (resume and n != "decompressor")) and n in prev.networks]

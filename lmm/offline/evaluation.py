@@ -26,9 +26,9 @@ from pathlib import Path
 
 import numpy as np
 
-from . import quat
-from .nn import MLP, character_parents, character_space, decode_pose_vector, pose_vectors
-from .weights import load as load_weights
+from lmm import quat
+from lmm.nn import MLP, character_parents, character_space, decode_pose_vector, pose_vectors
+from lmm.data.weights import load as load_weights
 
 
 def load_compressor(path, db=None, features=None) -> MLP:
@@ -214,9 +214,9 @@ def bone_length_error_m(run: dict, db) -> float:
 def evaluate(db, features, nets, compressor: MLP, inputs="builtin:random:1", seconds: float = 60.0,
              n_queries: int = 4096, log=print) -> tuple[dict, dict]:
     """All metrics. Returns (metrics, artifacts for the plots)."""
-    from .inputs import open_input
-    from .lmm import LearnedMotionMatchingController
-    from .mm import MotionMatchingController
+    from lmm.data.inputs import open_input
+    from lmm.learned import LearnedMotionMatchingController
+    from lmm.mm import MotionMatchingController
 
     out: dict = {"database": {"name": db.name, "key": db.key, "frames": db.n_frames},
                  "weights": str(nets.path) if nets.path else None}
@@ -325,7 +325,7 @@ def write_plots(out_dir, artifacts: dict, loss_csv=None) -> list[str]:
 
 def mm_runtime_bytes(db, features) -> dict:
     """What motion matching keeps in memory at run time: features, pose database, search structure."""
-    from .search import SearchIndex
+    from lmm.search import SearchIndex
     index = SearchIndex(features.normalized)
     if hasattr(index, "nbytes"):
         search = int(index.nbytes() if callable(index.nbytes) else index.nbytes)
@@ -338,8 +338,8 @@ def mm_runtime_bytes(db, features) -> dict:
 def benchmark_lmm(db, features, nets=None, inputs="builtin:random:1", steps: int = 600, warmup: int = 60) -> dict:
     """``frame.lmm_us`` (median learned-controller step, debug comparison off), the per-network
     costs, and ``memory.mm_bytes`` / ``memory.lmm_bytes``."""
-    from .inputs import open_input
-    from .lmm import LearnedMotionMatchingController, load_default_networks
+    from lmm.data.inputs import open_input
+    from lmm.learned import LearnedMotionMatchingController, load_default_networks
 
     nets = nets if nets is not None else load_default_networks(db, features)
     ctrl = LearnedMotionMatchingController(db, features, networks=nets, compare_with_search=False)

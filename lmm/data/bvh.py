@@ -45,7 +45,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import quat
+from lmm import quat
 
 __all__ = [
     "BVHError", "Animation", "load", "loads", "save", "dumps",

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .controller import InputState
+from lmm.controller import InputState
 
 COLUMNS = ("time", "left_x", "left_y", "right_x", "right_y", "walk", "strafe")
 OPTIONAL_COLUMNS = ("camera_azimuth",)
