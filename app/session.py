@@ -393,7 +393,7 @@ class ReferenceClip:
 def load_reference_clip(path) -> ReferenceClip:
     """A BVH file as global joint positions in metres (centimetre files are detected by size).
     Raises ``lmm.data.bvh.BVHError`` / ``OSError`` / ``ValueError`` with a readable message."""
-    from lmm import bvh
+    from lmm.data import bvh
 
     anim = bvh.load(path)
     pos = anim.global_positions()

@@ -19,7 +19,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from lmm import DEFAULT_MANIFEST, bvh  # noqa: E402
+from lmm import DEFAULT_MANIFEST
+from lmm.data import bvh  # noqa: E402
 from lmm.data.database import load_or_build  # noqa: E402
 from lmm.features import build_features  # noqa: E402
 from lmm.data.manifest import load_manifest  # noqa: E402

@@ -11,7 +11,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from lmm import DEFAULT_MANIFEST, bvh, quat
+from lmm import DEFAULT_MANIFEST, quat
+from lmm.data import bvh
 from lmm.data.database import (Database, DatabaseError, build, global_to_local, load_or_build, local_to_global,
                           manifest_key, mirror_local, mirror_map)
 from lmm.filters import median_filter

@@ -26,7 +26,7 @@ def nets(dbf, tmp_path_factory):
         return LMMNetworks.load(DEFAULT_WEIGHTS, db, features)
     except WeightsError:
         pytest.importorskip("torch")
-        from lmm import training as T
+        from lmm.offline import training as T
         out = tmp_path_factory.mktemp("lmm-weights")
         r = T.Recipe(decompressor=T.StageSettings(20, 32, 2e-3), stepper=T.StageSettings(10, 8, 2e-3),
                      projector=T.StageSettings(10, 32, 2e-3), stepper_window=6, hidden=64, threads=1)

@@ -7,7 +7,7 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
-from lmm import training as T  # noqa: E402
+from lmm.offline import training as T  # noqa: E402
 from lmm.data.database import load_or_build  # noqa: E402
 from lmm.features import build_features  # noqa: E402
 

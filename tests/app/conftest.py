@@ -58,7 +58,7 @@ def lmm_weights(tmp_path_factory):
         pass
     try:
         import torch  # noqa: F401
-        from lmm import training as T
+        from lmm.offline import training as T
     except Exception:
         return None
     out = tmp_path_factory.mktemp("studio-weights")

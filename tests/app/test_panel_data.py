@@ -255,7 +255,7 @@ def test_recording_paths():
 # -- the session, headless ------------------------------------------------------------------------
 
 def test_session_steps_records_and_replays(dbf, tmp_path):
-    from lmm import bvh
+    from lmm.data import bvh
     from lmm.data.inputs import load_input_csv
 
     db, features = dbf
