@@ -36,7 +36,6 @@ import gzip
 import io
 import math
 import os
-import secrets
 import warnings
 import zlib
 from collections.abc import Mapping
@@ -46,6 +45,7 @@ from pathlib import Path
 import numpy as np
 
 from lmm import quat
+from lmm.data.atomic import write_bytes_atomic
 
 __all__ = [
     "BVHError", "Animation", "load", "loads", "save", "dumps",
@@ -802,14 +802,4 @@ def save(path: str | os.PathLike, anim: Animation, precision: int = 6) -> None:
     data = dumps(anim, precision).encode("utf-8")
     if p.name.endswith(".gz"):
         data = gzip.compress(data, compresslevel=6, mtime=0)
-    tmp = p.with_name(f".{p.name}.{os.getpid()}.{secrets.token_hex(4)}.tmp")
-    try:
-        with open(tmp, "xb") as f:
-            f.write(data)
-        os.replace(tmp, p)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
+    write_bytes_atomic(p, data)

@@ -21,6 +21,7 @@ import numpy as np
 
 from lmm import DEFAULT_MANIFEST, quat
 from lmm.data import bvh
+from lmm.data.atomic import atomic_write
 from lmm.filters import catmull_rom, central_difference, median_filter, savgol_smooth
 from lmm.data.manifest import Manifest, ManifestError, load_manifest
 
@@ -130,12 +131,8 @@ class Database:
         }
 
     def save(self, path) -> None:
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(path.name + f".{os.getpid()}.tmp")
-        with open(tmp, "wb") as f:
+        with atomic_write(path) as f:  # a killed build never leaves a half-written cache
             np.savez(f, **self.to_arrays())
-        os.replace(tmp, path)  # atomic: a killed build never leaves a half-written cache
 
     @classmethod
     def load(cls, path) -> "Database":

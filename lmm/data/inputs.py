@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from lmm.controller import InputState
+from lmm.data.atomic import write_text_atomic
 
 COLUMNS = ("time", "left_x", "left_y", "right_x", "right_y", "walk", "strafe")
 OPTIONAL_COLUMNS = ("camera_azimuth",)
@@ -194,9 +195,7 @@ def save_input_csv(path, log: InputLog) -> None:
                            float(log.right_y[i]), bool(log.walk[i]), bool(log.strafe[i]),
                            float(log.camera_azimuth[i]))
         parts.append(format_row(log.times[i], state, with_camera))
-    tmp = Path(str(path) + f".{os.getpid()}.tmp")
-    tmp.write_text("".join(parts))
-    os.replace(tmp, path)
+    write_text_atomic(path, "".join(parts))
 
 
 class InputCsvWriter:

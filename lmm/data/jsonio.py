@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
+
+from lmm.data.atomic import write_text_atomic
 
 
 def json_safe(value):
@@ -37,18 +37,4 @@ def json_safe(value):
 def write_json(path, value, indent: int | None = 2) -> Path:
     """Write ``json_safe(value)`` to ``path`` atomically (a temporary file in the same folder, then a
     rename), creating the folder. A reader never sees a half-written file; ``OSError`` on failure."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    text = json.dumps(json_safe(value), indent=indent) + "\n"
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            f.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
-    return path
+    return write_text_atomic(path, json.dumps(json_safe(value), indent=indent) + "\n")

@@ -16,12 +16,13 @@ a different feature layout.
 from __future__ import annotations
 
 import json
-import os
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
+from lmm.data.atomic import atomic_write
 
 WEIGHTS_FORMAT_VERSION = 1
 PARTS = ("in_mean", "in_std", "out_mean", "out_std")
@@ -80,10 +81,8 @@ def save(path, arrays: dict[str, np.ndarray], metadata: dict) -> Path:
                 raise WeightsError(f"{path}: refusing to save: {key} is missing or not {shape}")
     out = {k: np.ascontiguousarray(v, dtype=np.float32) for k, v in arrays.items()}
     out["metadata"] = np.frombuffer(json.dumps(meta, sort_keys=True).encode("utf-8"), dtype=np.uint8)
-    tmp = path.with_name(path.name + f".{os.getpid()}.tmp")
-    with open(tmp, "wb") as f:
+    with atomic_write(path) as f:
         np.savez(f, **out)
-    os.replace(tmp, path)
     return path
 
 
