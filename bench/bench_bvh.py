@@ -23,7 +23,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from lmm import bvh  # noqa: E402
+from lmm.data import bvh  # noqa: E402
 
 SHIPPED_DIR = ROOT / "lmm" / "data" / "lafan1"
 ORIGINALS_DIR = ROOT.parent / "shared" / "data" / "lafan1"

@@ -50,7 +50,7 @@ def main() -> int:
 
     import torch
 
-    from lmm import training as T
+    from lmm.offline import training as T
     from lmm.data.database import load_or_build
     from lmm.offline.evaluation import projector_metrics, projector_runtime_agreement, run_controller
     from lmm.features import build_features

@@ -15,7 +15,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from lmm import bvh, quat
+from lmm import quat
+from lmm.data import bvh
 
 HERE = Path(__file__).resolve().parent
 CORPUS = HERE / "bvh_corpus"

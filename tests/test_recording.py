@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from lmm import bvh
+from lmm.data import bvh
 from lmm.data.inputs import builtin
 from lmm.mm import MotionMatchingController
 from lmm.data.recording import BVHRecorder

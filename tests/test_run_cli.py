@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from lmm import bvh
+from lmm.data import bvh
 
 ROOT = Path(__file__).resolve().parents[1]
 CORPUS = Path(__file__).parent / "input_corpus"

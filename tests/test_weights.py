@@ -4,7 +4,7 @@ import json
 import numpy as np
 import pytest
 
-from lmm import weights as W
+from lmm.data import weights as W
 
 SPECS = {"decompressor": {"n_in": 59, "hidden": [8], "n_out": 338, "activation": "relu"},
          "stepper": {"n_in": 59, "hidden": [8, 8], "n_out": 59, "activation": "relu"},
