@@ -38,6 +38,7 @@ def collect_queries(db, features, n_queries: int, scenarios=None, tuning=None):
 
     from lmm.data.inputs import builtin, builtin_names
     from lmm.mm import MotionMatchingController
+    from lmm.runner import step_controllers
     from lmm.tuning import Tuning
 
     scenarios = scenarios or builtin_names((1, 2))
@@ -54,10 +55,8 @@ def collect_queries(db, features, n_queries: int, scenarios=None, tuning=None):
                 logs[name] = builtin(name, 3600.0)
             c, log = controllers[name], logs[name]
             for _ in range(int(chunk_s / dt)):
-                t = ticks[name] * dt
-                t0 = time.perf_counter()
-                c.step(log.at(t), dt)
-                step_us.append((time.perf_counter() - t0) * 1e6)
+                _, _, ms = step_controllers({name: c}, log.at(ticks[name] * dt), dt)
+                step_us.append(ms[name] * 1e3)
                 ticks[name] += 1
             for query, frame, hint in c.search_log:
                 queries.append((query, frame, hint, c))
