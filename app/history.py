@@ -29,6 +29,14 @@ def _scalar(fn: Callable) -> Callable:
     return get
 
 
+def _frame(fn: Callable) -> Callable:
+    """A database frame number; -1 (none this tick) becomes NaN, so a plot shows a gap."""
+    def get(s):
+        v = fn(s)
+        return np.nan if v is None or v < 0 else float(v)
+    return get
+
+
 def _vector(fn: Callable) -> Callable:
     return lambda s: fn(s)
 
@@ -49,6 +57,7 @@ SERIES: dict[str, Callable] = {
     "projected_cost": _scalar(lambda s: s.projected_cost),
     "matched_frame": _scalar(lambda s: s.matched_frame),
     "nn_frame": _scalar(lambda s: s.nn_frame),
+    "projected_frame": _frame(lambda s: s.projected_frame),
     "searched": _scalar(lambda s: s.searched),
     "forced_search": _scalar(lambda s: s.forced_search),
     "transitioned": _scalar(lambda s: s.transitioned),
@@ -68,7 +77,7 @@ class Tick:
     tick: int
     time_s: float
     snapshots: dict            # controller name -> DebugSnapshot
-    extra: dict = field(default_factory=dict)  # studio-side per-tick data (e.g. input, timings)
+    extra: dict = field(default_factory=dict)  # studio-side per-tick data (e.g. the input); never plotted
 
 
 class History:
@@ -83,7 +92,6 @@ class History:
         self._times = np.full(self.capacity, np.nan)
         self._series: dict[tuple[str, str], np.ndarray] = {}
         self._dims: dict[tuple[str, str], int] = {}
-        self._extra_keys: set[tuple[str, str]] = set()
         self.count = 0          # ticks appended in total
         self.newest_tick = -1
 
@@ -105,16 +113,6 @@ class History:
         for name, snap in tick.snapshots.items():
             for key, get in SERIES.items():
                 self._store(name, key, slot, get(snap))
-        # studio-side numbers ("key:controller" -> value) become series of that controller
-        seen = set()
-        for key, value in tick.extra.items():
-            if ":" in key and isinstance(value, (int, float, np.integer, np.floating)):
-                field, name = key.split(":", 1)
-                self._store(name, field, slot, float(value))
-                seen.add((name, field))
-        for k in self._extra_keys - seen:   # not reported this tick: NaN, not a stale value
-            self._series[k][slot] = np.nan
-        self._extra_keys |= seen
         self.count += 1
         self.newest_tick = tick.tick
 

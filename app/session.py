@@ -10,96 +10,23 @@ weights.)
 """
 from __future__ import annotations
 
-import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from lmm.controller import Controller, InputState
+from lmm.runner import step_controllers
 from lmm.tuning import Tuning
 
 from .history import History, Tick
 
-CONTROLLER_LABELS = {"mm": "Motion Matching", "lmm": "Learned Motion Matching"}
 TICK_RATE_HZ = 60.0
-
-
-# ------------------------------------------------------------------------------------------------
-# building the controllers
-# ------------------------------------------------------------------------------------------------
-
-def controller_memory_bytes(name: str, controller, db, features) -> dict[str, int]:
-    """What each method keeps in memory at run time, by part (bytes)."""
-    own = getattr(controller, "memory_bytes", None)
-    if callable(own):
-        try:
-            parts = own()
-            if isinstance(parts, dict):
-                return {str(k): int(v) for k, v in parts.items()}
-            return {"total": int(parts)}
-        except Exception:
-            pass
-    if name == "mm":
-        parts = {"pose data (Y)": int(db.pose_bytes()), "features (X)": int(features.normalized.nbytes)}
-        index = getattr(controller, "index", None)
-        if index is not None:
-            extra = sum(int(getattr(v, "nbytes", 0)) for v in vars(index).values() if isinstance(v, np.ndarray)
-                        and v is not getattr(index, "features", None))
-            if extra:
-                parts["search index"] = extra
-        return parts
-    nets = getattr(controller, "nets", None)
-    if nets is not None and callable(getattr(nets, "nbytes", None)):
-        parts = {}
-        for part in ("decompressor", "stepper", "projector"):
-            net = getattr(nets, part, None)
-            if net is not None and callable(getattr(net, "nbytes", None)):
-                parts[part] = int(net.nbytes())
-        return parts or {"networks": int(nets.nbytes())}
-    total = 0
-    for attr in ("networks", "decompressor", "stepper", "projector"):
-        obj = getattr(controller, attr, None)
-        if obj is not None:
-            total += _array_bytes(obj)
-    return {"networks": total} if total else {}
-
-
-def _array_bytes(obj, depth: int = 0) -> int:
-    if isinstance(obj, np.ndarray):
-        return int(obj.nbytes)
-    if depth > 3:
-        return 0
-    if isinstance(obj, dict):
-        return sum(_array_bytes(v, depth + 1) for v in obj.values())
-    if isinstance(obj, (list, tuple)):
-        return sum(_array_bytes(v, depth + 1) for v in obj)
-    if hasattr(obj, "__dict__"):
-        return sum(_array_bytes(v, depth + 1) for v in vars(obj).values())
-    return 0
 
 
 # ------------------------------------------------------------------------------------------------
 # recording
 # ------------------------------------------------------------------------------------------------
-
-class _Recorder:
-    """One controller's BVH file (:class:`lmm.data.recording.BVHRecorder`: streamed, crash-safe)."""
-
-    def __init__(self, db, path: Path, fps: float):
-        from lmm.data.recording import BVHRecorder
-
-        Path(path).parent.mkdir(parents=True, exist_ok=True)
-        self.path = Path(path)
-        self.rec = BVHRecorder(self.path, db, fps=fps)
-
-    def add(self, pose) -> None:
-        self.rec.write(pose)
-
-    def close(self) -> Path:
-        self.rec.close()
-        return self.path
-
 
 def recording_paths(base, which: tuple[str, ...]) -> dict[str, Path]:
     """Files written by one recording: a BVH per controller and the input CSV.
@@ -117,24 +44,56 @@ def recording_paths(base, which: tuple[str, ...]) -> dict[str, Path]:
     return out
 
 
+def free_recording_paths(base, which: tuple[str, ...]) -> dict[str, Path]:
+    """:func:`recording_paths` of ``base``, or, when any of those files exists, of the first numbered
+    base none of whose files exists (``take.bvh`` -> ``take_001.bvh``, ``take_002.bvh``, ...; one
+    number for all files of the recording). A recording never overwrites a file."""
+    paths = recording_paths(base, which)
+    if not any(p.exists() for p in paths.values()):
+        return paths
+    base = Path(base)
+    stem = base.name[:-4] if base.name.lower().endswith(".bvh") else base.name
+    number = 1
+    while True:
+        paths = recording_paths(base.parent / f"{stem}_{number:03d}.bvh", which)
+        if not any(p.exists() for p in paths.values()):
+            return paths
+        number += 1
+
+
+@dataclass
+class RecordingResult:
+    """What :meth:`Session.stop_recording` left on disk."""
+    paths: dict[str, Path]   # controller name (and "input") -> file written; empty when nothing was written
+    frames: int
+    seconds: float
+    message: str             # one line for the studio's status bar
+
+
 @dataclass
 class Recording:
+    """A recording in progress: one streaming BVH per controller and the input CSV, open from the start
+    (so a path that cannot be written fails at once) and removed again if no frame arrives."""
     paths: dict[str, Path]
-    recorders: dict
-    input_writer: object
+    recorders: dict          # controller name -> lmm.data.recording.BVHRecorder
+    input_writer: object     # lmm.data.inputs.InputCsvWriter
     start_tick: int
     frames: int = 0
+
+    def close(self) -> None:
+        for r in self.recorders.values():
+            r.close()
+        if self.input_writer is not None:
+            self.input_writer.close()
+
+    def remove_files(self) -> None:
+        for p in self.paths.values():
+            Path(p).unlink(missing_ok=True)
 
 
 # ------------------------------------------------------------------------------------------------
 # the session
 # ------------------------------------------------------------------------------------------------
-
-@dataclass
-class StepTimes:
-    """Milliseconds spent in the last tick, per controller."""
-    per_controller_ms: dict = field(default_factory=dict)
-
 
 class Session:
     """Steps every controller with the same input each tick and keeps the rewind history."""
@@ -150,21 +109,27 @@ class Session:
         self.input_log_start_tick = 0
         self.recording: Recording | None = None
         self.step_ms: dict[str, float] = {}
-        self._projection_index: dict = {}
-        self.latent_table: np.ndarray | None = None
-        self.latent_table_status = ""
-        self._all_frames = None
+        self.latent_table_status = ""  # "" once MM's latent table is attached, else why not (one line)
+        self._latent_job = 0
 
     # -- the compressor latent of every database frame (for "the latent of the frames MM plays") ----
     def start_latent_table(self, weights_path=None) -> None:
         """Compute the compressor's latent of every database frame in a background thread, when a
-        compressor file lies next to the LMM weights. ``latent_table`` stays None until it is ready
-        (or when there is no compressor); ``latent_table_status`` says which."""
+        compressor file lies next to the LMM weights, and attach it to the MM controller (whose snapshots
+        then carry ``matched_latent``). ``latent_table_status`` says why there is none (yet)."""
         import threading
 
-        lmm_c = self.controllers.get("lmm")
+        from lmm.latents import database_latents, load_compressor
+
+        mm = self.controllers.get("mm")
+        if mm is None:
+            self.latent_table_status = "MM is not running: no MM latents"
+            return
+        mm.set_latent_table(None)      # a table from other networks' compressor is not comparable
+        self._latent_job += 1
+        job = self._latent_job
         path = None
-        nets = getattr(lmm_c, "nets", None)
+        nets = getattr(self.controllers.get("lmm"), "nets", None)
         if weights_path is not None:
             path = Path(weights_path)
         elif nets is not None and getattr(nets, "path", None) is not None:
@@ -180,32 +145,20 @@ class Session:
 
         def work():
             try:
-                from lmm.offline.evaluation import database_latents, load_compressor
-
-                compressor = load_compressor(comp, self.db, self.features)
-                self.latent_table = database_latents(compressor, self.db).astype(np.float32)
-                self.latent_table_status = ""
+                table = database_latents(load_compressor(comp, self.db, self.features), self.db).astype(np.float32)
+                if job == self._latent_job:          # not superseded by a later call
+                    mm.set_latent_table(table)
+                    self.latent_table_status = ""
             except Exception as e:  # shown in the latent panel; nothing else depends on it
-                self.latent_table_status = f"compressor latents unavailable: {e}"
+                if job == self._latent_job:
+                    self.latent_table_status = f"compressor latents unavailable: {e}"
 
         threading.Thread(target=work, name="latent-table", daemon=True).start()
 
-    def matched_latents(self, frames: np.ndarray) -> np.ndarray | None:
-        """Compressor latents (n, L) of database frames (NaN rows for invalid frames), or None."""
-        z = self.latent_table
-        if z is None:
-            return None
-        f = np.asarray(frames, np.float64)
-        ok = np.isfinite(f) & (f >= 0) & (f < len(z))
-        out = np.full((len(f), z.shape[1]), np.nan)
-        out[ok] = z[f[ok].astype(np.int64)]
-        return out
-
     @property
     def memory(self) -> dict[str, dict[str, int]]:
-        """Bytes each method keeps at run time, by part (recomputed: indexes appear after a search)."""
-        return {name: controller_memory_bytes(name, c, self.db, self.features)
-                for name, c in self.controllers.items()}
+        """Bytes each method keeps at run time, by part (asked each time: MM's index appears after a search)."""
+        return {name: c.memory_bytes() for name, c in self.controllers.items()}
 
     @property
     def time_s(self) -> float:
@@ -246,74 +199,67 @@ class Session:
 
     # -- ticking -------------------------------------------------------------------------------
     def step(self, inp: InputState, extra: dict | None = None) -> Tick:
-        snaps = {}
-        for name, c in self.controllers.items():
-            t0 = time.perf_counter()
-            pose, snap = c.step(inp, self.dt)
-            self.step_ms[name] = (time.perf_counter() - t0) * 1e3
-            snaps[name] = snap
+        """One tick of every controller (:func:`lmm.runner.step_controllers`), recorded and kept in the history."""
+        _, snaps, self.step_ms = step_controllers(self.controllers, inp, self.dt)
         tick = Tick(self.tick + 1, (self.tick + 1) * self.dt, snaps, dict(extra or {}))
         tick.extra.setdefault("input", inp)
-        for name, snap in snaps.items():
-            if snap.searched and snap.projected_features is not None:
-                tick.extra[f"projected_frame:{name}"] = self.projected_frame(name, snap.projected_features)
         if self.recording is not None:
             self._record(tick, inp)
         self.history.append(tick)
         self.tick += 1
         return tick
 
-    def projected_frame(self, name: str, projected_features) -> int:
-        """The database frame nearest to a projector output (what the projector 'chose'), exact."""
-        from lmm.search import SearchIndex
-
-        features = getattr(self.controllers[name], "features", self.features)
-        index = self._projection_index.get(name)
-        if index is None:
-            index = self._projection_index[name] = SearchIndex(features.normalized)
-        index.update(features.normalized)
-        if self._all_frames is None or len(self._all_frames) != features.normalized.shape[0]:
-            self._all_frames = np.ones(features.normalized.shape[0], dtype=bool)
-        res = index.search(np.asarray(projected_features, np.float32), mask=self._all_frames, current=-1,
-                           transition_cost=0.0, exclude_window=0, top_k=1, slices=features.slices)
-        return int(res.best_frame)
-
     # -- recording -----------------------------------------------------------------------------
     def start_recording(self, base, which=("mm", "lmm")) -> dict[str, Path]:
-        """Start recording the chosen controllers to BVH (and the input to CSV); returns the paths."""
+        """Start recording the chosen controllers to BVH (and the input to CSV); returns the paths it
+        will write: those of ``base`` (see :func:`recording_paths`), or the next free numbered ones when
+        any of them exists (:func:`free_recording_paths`). Raises ``ValueError`` when none of ``which`` is
+        running and ``OSError`` when a file cannot be created (nothing is left behind then)."""
         from lmm.data.inputs import InputCsvWriter
+        from lmm.data.recording import BVHRecorder
 
         if self.recording is not None:
             self.stop_recording()
         which = tuple(n for n in which if n in self.controllers)
         if not which:
             raise ValueError("nothing to record: none of the chosen controllers is running")
-        paths = recording_paths(base, which)
-        Path(paths["input"]).parent.mkdir(parents=True, exist_ok=True)
-        recorders = {n: _Recorder(self.db, paths[n], 1.0 / self.dt) for n in which}
-        writer = InputCsvWriter(paths["input"], with_camera=True)
-        self.recording = Recording(paths, recorders, writer, self.tick)
-        return paths
+        paths = free_recording_paths(base, which)
+        rec = Recording(paths, {}, None, self.tick)
+        try:
+            Path(paths["input"]).parent.mkdir(parents=True, exist_ok=True)
+            for name in which:
+                rec.recorders[name] = BVHRecorder(paths[name], self.db, fps=1.0 / self.dt)
+            rec.input_writer = InputCsvWriter(paths["input"], with_camera=True)
+        except BaseException:
+            rec.close()
+            for name, path in paths.items():   # only what this call created: the paths were free before
+                if name in rec.recorders or (name == "input" and rec.input_writer is not None):
+                    Path(path).unlink(missing_ok=True)
+            raise
+        self.recording = rec
+        return dict(paths)
 
     def _record(self, tick: Tick, inp: InputState) -> None:
         rec = self.recording
-        writer_time = rec.frames * self.dt
-        rec.input_writer.write(writer_time, inp)
+        rec.input_writer.write(rec.frames * self.dt, inp)
         for name, r in rec.recorders.items():
-            r.add(tick.snapshots[name].pose)
+            r.write(tick.snapshots[name].pose)
         rec.frames += 1
 
-    def stop_recording(self) -> dict[str, Path]:
+    def stop_recording(self) -> RecordingResult:
+        """Finish the recording. With no frame recorded its files are removed again: nothing is written."""
         rec = self.recording
         if rec is None:
-            return {}
+            return RecordingResult({}, 0, 0.0, "not recording")
         self.recording = None
-        out = {}
-        for name, r in rec.recorders.items():
-            out[name] = r.close()
-        rec.input_writer.close()
-        out["input"] = rec.paths["input"]
-        return out
+        rec.close()
+        seconds = rec.frames * self.dt
+        if rec.frames == 0:
+            rec.remove_files()
+            return RecordingResult({}, 0, 0.0, "nothing recorded (0 frames): no file written")
+        names = ", ".join(Path(p).name for p in rec.paths.values())
+        return RecordingResult(dict(rec.paths), rec.frames, seconds,
+                               f"recorded {seconds:.2f} s ({rec.frames} frames) to {names}")
 
 
 class TickWorker:

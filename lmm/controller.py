@@ -95,7 +95,10 @@ class DebugSnapshot:
     nn_frame: int = -1                            # exact nearest neighbour of the same query
     nn_cost: float = float("nan")
     projected_cost: float = float("nan")          # query cost of the projector's features
-    matched_latent: np.ndarray | None = None      # (L,) compressor latent of the matched frame (MM, if networks loaded)
+    projected_frame: int = -1                     # exact nearest database frame to the projector's features
+                                                  # (LMM, on ticks it projected with the debug comparison on)
+    matched_latent: np.ndarray | None = None      # (L,) compressor latent of the played frame (MM, when a
+                                                  # latent table is attached: MotionMatchingController.set_latent_table)
     # cost of the playing pose's features against this tick's query (a per-tick cost timeline; best_cost
     # is the last search's best, carried between searches like ``candidates``)
     current_cost: float = float("nan")
@@ -113,3 +116,8 @@ class Controller(ABC):
     @abstractmethod
     def step(self, inp: InputState, dt: float) -> tuple[Pose, DebugSnapshot]:
         """Advance one tick of ``dt`` seconds with the given input."""
+
+    @abstractmethod
+    def memory_bytes(self) -> dict[str, int]:
+        """What the method keeps in memory at run time, by part (bytes); the studio's stats panel and
+        ``lmm-studio bench``'s memory section both read this. Debug-only state is not counted."""

@@ -9,8 +9,9 @@ Per tick (Holden et al. 2020, section 4):
 * every tick the **stepper** advances the state by ``dt`` and the **decompressor** turns it into a pose.
 
 The networks run in numpy (:mod:`lmm.nn`); torch is never imported here. For the debugger the snapshot
-also carries the latent, the projector's features and what the exact nearest-neighbour search returns
-for the same query (``compare_with_search``; off in benchmarks).
+also carries the latent, the projector's features and, with ``compare_with_search`` (off in benchmarks),
+what the exact nearest-neighbour search returns for the same query (``nn_frame``) and the database frame
+nearest to the projector's features (``projected_frame``: the frame the projector "chose").
 
 The networks work in the feature normalisation they were trained with (stored in the weights file);
 changing feature weights in the tuning changes the queries' exact costs and the nearest-neighbour
@@ -24,7 +25,6 @@ from pathlib import Path
 
 import numpy as np
 
-from lmm import quat
 from lmm.character import CharacterController, SearchOutcome, SourcePose
 from lmm.controller import Candidates
 from lmm.mm import default_start_frame
@@ -163,6 +163,7 @@ class LearnedMotionMatchingController(CharacterController):
         self._nn_cost = float("nan")
         self._projected = None
         self._projected_cost = float("nan")
+        self._projected_frame = -1
         super().__init__(db, features, tuning)
 
     # -- the networks ---------------------------------------------------------------------------
@@ -175,14 +176,21 @@ class LearnedMotionMatchingController(CharacterController):
         self.nets.decompressor(state, out=self._pose_vec)
         return decode_source_pose(self._pose_vec, self.n_bones, self._slices)
 
-    def exact_nearest(self, query_norm: np.ndarray):
-        """The exact nearest neighbour of a query over every frame (no exclusions): (frame, cost, result)."""
+    def exact_nearest(self, query_norm: np.ndarray, top_k: int | None = None):
+        """The exact nearest neighbour of a query over every frame (no exclusions): (frame, cost, result)
+        with the ``top_k`` best (default: the tuning's) ranked in the result."""
         if self._index is None:
             self._index = SearchIndex(self.features.normalized)
         self._index.update(self.features.normalized)
+        k = int(self.tuning.top_k) if top_k is None else int(top_k)
         res = self._index.search(query_norm, mask=self._all_frames, current=-1, transition_cost=0.0,
-                                 exclude_window=0, top_k=int(self.tuning.top_k), slices=self.features.slices)
+                                 exclude_window=0, top_k=k, slices=self.features.slices)
         return res.best_frame, res.best_cost, res
+
+    def memory_bytes(self) -> dict[str, int]:
+        """The three runtime networks (weights, biases, normalisation); the debug comparison's search
+        index is not counted (it is off in a shipped runtime)."""
+        return {name: int(getattr(self.nets, name).nbytes()) for name in RUNTIME_NETWORKS}
 
     # -- hooks ----------------------------------------------------------------------------------
     def _reset_source(self, frame: int | None) -> None:
@@ -194,6 +202,7 @@ class LearnedMotionMatchingController(CharacterController):
         self._nn_cost = 0.0
         self._projected = self.features.normalize(self.nets.from_network_space(self.state[:self.nets.n_features]))
         self._projected_cost = float("nan")
+        self._projected_frame = -1
 
     def _source_features(self) -> np.ndarray:
         return self.nets.from_network_space(self.state[:self.nets.n_features])
@@ -224,6 +233,9 @@ class LearnedMotionMatchingController(CharacterController):
             self._nn_frame, self._nn_cost = int(nn), float(nn_cost)
             candidates = Candidates(frames=res.frames, costs=res.costs, channel_costs=res.channel_costs,
                                     bias=res.bias, channel_names=self.features.names)
+            t0 = time.perf_counter()
+            self._projected_frame = int(self.exact_nearest(proj_norm, top_k=1)[0])
+            timings["projected_frame_search"] = (time.perf_counter() - t0) * 1e6
         target = None
         if projected_cost + float(self.tuning.transition_cost) < current_cost:
             self.state[:] = projected
@@ -241,7 +253,10 @@ class LearnedMotionMatchingController(CharacterController):
 
     def _snapshot_extras(self) -> dict:
         d = self.nets.n_features
+        # the projected frame belongs to the tick that projected: handed to its snapshot once, then cleared
+        projected_frame, self._projected_frame = self._projected_frame, -1
         return {"latent": self.state[d:].copy(),
                 "projected_features": None if self._projected is None else self._projected.copy(),
                 "nn_frame": int(self._nn_frame), "nn_cost": float(self._nn_cost),
-                "projected_cost": float(self._projected_cost)}
+                "projected_cost": float(self._projected_cost),
+                "projected_frame": int(projected_frame)}

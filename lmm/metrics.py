@@ -1,7 +1,8 @@
 """Motion quality and cost metrics, accumulated from per-tick debug snapshots (streaming, O(1) memory).
 
-* foot skating: mean horizontal speed (cm/s) of a foot's contact point (its toe joint; the database's
-  contacts are toe contacts) over the ticks it is in contact, in the pose shown (after IK);
+* foot skating (:class:`FootSkating`, the one definition, also used by ``lmm-studio eval``): mean
+  horizontal speed (cm/s) of a foot's contact point (its toe joint; the database's contacts are toe
+  contacts) over the ticks it is in contact, in the pose shown (after IK);
 * trajectory following error: distance (m) between the character root and the simulation object;
 * transitions per second and searches per second;
 * search time per query (us) and controller step time (us).
@@ -13,6 +14,43 @@ import math
 import numpy as np
 
 
+class FootSkating:
+    """Foot skating, accumulated: the horizontal (x, z) speed in cm/s of each toe joint from one tick to
+    the next, counted for every tick at which that foot is marked in contact (the pose's contact flag,
+    no height test), averaged over the counted foot-ticks. Vertical motion never counts as skating.
+
+    :meth:`add` takes one tick (``(2, 3)`` toes) or many at once (``(n, 2, 3)``), so a streaming run
+    and a finished run's arrays are measured by the same rule.
+    """
+
+    def __init__(self):
+        self.sum = np.zeros(2)                    # cm/s summed over the counted ticks, per foot
+        self.count = np.zeros(2, dtype=np.int64)  # counted ticks, per foot
+        self.max = 0.0
+
+    def add(self, toes_before: np.ndarray, toes_after: np.ndarray, contacts: np.ndarray, dt: float) -> None:
+        """Toe positions (m, ``(..., 2, 3)``) at two consecutive ticks ``dt`` s apart and the contacts
+        (``(..., 2)`` bool) at the later one."""
+        if not dt > 0:
+            return
+        step = np.asarray(toes_after, np.float64) - np.asarray(toes_before, np.float64)
+        speed = np.linalg.norm(step[..., [0, 2]], axis=-1) / dt * 100.0
+        contact = np.asarray(contacts, dtype=bool)
+        self.sum += np.where(contact, speed, 0.0).reshape(-1, 2).sum(axis=0)
+        self.count += contact.reshape(-1, 2).sum(axis=0)
+        if contact.any():
+            self.max = max(self.max, float(speed[contact].max()))
+
+    def mean_cm_s(self) -> float:
+        """Over both feet (NaN when no foot was ever in contact)."""
+        n = int(self.count.sum())
+        return float(self.sum.sum() / n) if n else float("nan")
+
+    def per_foot_cm_s(self) -> list[float]:
+        """Left, right (NaN for a foot never in contact)."""
+        return [float(s / n) if n else float("nan") for s, n in zip(self.sum, self.count)]
+
+
 class MotionMetrics:
     """Feed :meth:`update` one :class:`lmm.controller.DebugSnapshot` per tick, read :meth:`result`."""
 
@@ -22,9 +60,7 @@ class MotionMetrics:
         self.seconds = 0.0
         self._prev_toes = None
         self._prev_time = None
-        self._skate_sum = np.zeros(2)
-        self._skate_n = np.zeros(2, dtype=np.int64)
-        self._skate_max = 0.0
+        self.skating = FootSkating()
         self._err_sum = 0.0
         self._err_max = 0.0
         self._angle_sum = 0.0
@@ -44,12 +80,7 @@ class MotionMetrics:
         if self._prev_toes is not None:
             dt = snap.time_s - self._prev_time
             if dt > 0:
-                speed = np.linalg.norm((toes - self._prev_toes)[:, [0, 2]], axis=-1) / dt * 100.0  # cm/s
-                contact = np.asarray(snap.foot_contacts, dtype=bool)
-                self._skate_sum += np.where(contact, speed, 0.0)
-                self._skate_n += contact
-                if contact.any():
-                    self._skate_max = max(self._skate_max, float(speed[contact].max()))
+                self.skating.add(self._prev_toes, toes, snap.foot_contacts, dt)
                 self.seconds += dt
         self._prev_toes, self._prev_time = toes, snap.time_s
         root = pose.global_positions[0].astype(np.float64)
@@ -74,16 +105,16 @@ class MotionMetrics:
         def mean(v):
             return float(np.mean(v)) if v else float("nan")
 
-        per_foot = [float(s / n) if n else float("nan") for s, n in zip(self._skate_sum, self._skate_n)]
-        n_contact = int(self._skate_n.sum())
+        per_foot = self.skating.per_foot_cm_s()
+        n_contact = int(self.skating.count.sum())
         seconds = self.seconds if self.seconds > 0 else float("nan")
         return {
             "ticks": self.ticks,
             "seconds": float(self.seconds),
-            "foot_skating_cm_s": float(self._skate_sum.sum() / n_contact) if n_contact else float("nan"),
+            "foot_skating_cm_s": self.skating.mean_cm_s(),
             "foot_skating_left_cm_s": per_foot[0],
             "foot_skating_right_cm_s": per_foot[1],
-            "foot_skating_max_cm_s": float(self._skate_max),
+            "foot_skating_max_cm_s": float(self.skating.max),
             "contact_fraction": float(n_contact / (2 * max(self.ticks - 1, 1))),
             "trajectory_error_mean_m": float(self._err_sum / self.ticks) if self.ticks else float("nan"),
             "trajectory_error_max_m": float(self._err_max),

@@ -43,7 +43,28 @@ class MotionMatchingController(CharacterController):
         self._hint = None          # the last search's candidates ...
         self._frames_since = 0     # ... and the frames played since (they seed the next search's bound)
         self.search_log: list | None = None  # set to a list to collect (query, frame, hint) per search
+        self.latent_table: np.ndarray | None = None
         super().__init__(db, features, tuning)
+
+    def set_latent_table(self, table: np.ndarray | None) -> None:
+        """Attach the compressor latent of every database frame, (N, L) (see
+        :func:`lmm.latents.database_latents`), or detach it with None. While one is attached, each
+        snapshot's ``matched_latent`` is the latent of the frame being played. May be called from another
+        thread between two steps (a single attribute store)."""
+        if table is not None:
+            table = np.asarray(table)
+            if table.ndim != 2 or table.shape[0] != self.db.n_frames:
+                raise ValueError(f"a latent table needs one row per database frame ({self.db.n_frames}), "
+                                 f"got shape {table.shape}")
+        self.latent_table = table
+
+    def memory_bytes(self) -> dict[str, int]:
+        """Pose data (Y), normalised features (X) and, once the first search has built it, the search
+        index's own arrays."""
+        parts = {"pose data (Y)": int(self.db.pose_bytes()), "features (X)": int(self.features.normalized.nbytes)}
+        if self.index is not None:
+            parts["search index"] = self.index.nbytes()
+        return parts
 
     # -- hooks ----------------------------------------------------------------------------------
     def _reset_source(self, frame: int | None) -> None:
@@ -121,6 +142,10 @@ class MotionMatchingController(CharacterController):
             last = int(self.db.range_stop_of(self.frame)) - 1
             self.frame = min(self.frame + steps, last)
         return self._pose(self.frame)
+
+    def _snapshot_extras(self) -> dict:
+        table = self.latent_table
+        return {} if table is None else {"matched_latent": np.array(table[self.frame], np.float32)}
 
     def _pose(self, frame: int) -> SourcePose:
         return database_source_pose(self.db, frame, self._root_vel, self._root_ang)

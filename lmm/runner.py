@@ -1,4 +1,8 @@
-"""Headless runs: a controller driven by an input source for a number of seconds, with metrics.
+"""The one tick loop: every controller stepped with the same input, and headless runs built on it.
+
+:func:`step_controllers` is one tick for a set of controllers; ``lmm-studio run`` (:func:`run_headless`),
+the evaluation's MM vs LMM runs (:mod:`lmm.offline.evaluation`) and the studio session
+(:class:`app.session.Session`) all step through it, so a tick means the same everywhere.
 
 Deterministic: the same controller state, input and tick produce the same poses, so a recording made
 from the same input is byte-identical on the same machine (timings are measured but never recorded).
@@ -7,7 +11,23 @@ from __future__ import annotations
 
 import time
 
+from lmm.controller import Controller, DebugSnapshot, InputState, Pose
 from lmm.metrics import MotionMetrics
+
+
+def step_controllers(controllers: dict[str, Controller], inp: InputState, dt: float
+                     ) -> tuple[dict[str, Pose], dict[str, DebugSnapshot], dict[str, float]]:
+    """One tick of ``dt`` seconds: step each controller (in the dict's order) with the same input.
+
+    Returns ``(poses, snapshots, ms)`` keyed like ``controllers``; ``ms`` is each step's wall time in
+    milliseconds. Controllers share nothing but the input, so the order never changes a result.
+    """
+    poses, snaps, ms = {}, {}, {}
+    for name, controller in controllers.items():
+        t0 = time.perf_counter()
+        poses[name], snaps[name] = controller.step(inp, dt)
+        ms[name] = (time.perf_counter() - t0) * 1e3
+    return poses, snaps, ms
 
 
 def run_headless(controller, input_source, seconds: float, dt: float = 1.0 / 60.0, recorder=None, on_step=None,
@@ -22,6 +42,7 @@ def run_headless(controller, input_source, seconds: float, dt: float = 1.0 / 60.
         raise ValueError(f"dt must be positive, got {dt}")
     if reset:
         controller.reset()
+    controllers = {controller.name: controller}
     metrics = MotionMetrics(controller.db)
     n_ticks = int(round(seconds / dt))
     start = time.perf_counter()
@@ -30,7 +51,8 @@ def run_headless(controller, input_source, seconds: float, dt: float = 1.0 / 60.
         inp = input_source(t)
         if input_writer is not None:
             input_writer.write(t, inp)
-        pose, snap = controller.step(inp, dt)
+        poses, snaps, _ = step_controllers(controllers, inp, dt)
+        pose, snap = poses[controller.name], snaps[controller.name]
         if recorder is not None:
             recorder.write(pose)
         metrics.update(snap)

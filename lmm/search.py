@@ -236,6 +236,16 @@ class SearchIndex:
         self._mask_key = None
         return True
 
+    # the arrays :meth:`update` builds (the per-mask cache of :meth:`_valid` is not part of the structure)
+    _STRUCTURE = ("X", "l1_dims", "l1_lo", "l1_hi", "l2_lo", "l2_hi", "rows", "_offsets", "_per_offsets",
+                  "_tile_index", "_q1", "_g1", "_ones1", "_ones")
+
+    def nbytes(self) -> int:
+        """Bytes the index adds to the features it searches: its arrays, except those that are the
+        features themselves or views of them (``X`` and ``rows`` are, when no copy was needed)."""
+        return int(sum(a.nbytes for a in (getattr(self, n) for n in self._STRUCTURE)
+                       if not np.shares_memory(a, self.features_norm)))
+
     def _valid(self, mask: np.ndarray) -> np.ndarray:
         """``mask`` padded with False to whole blocks plus two (so a hint's neighbours -2..n+1 index it
         safely; negative indices wrap onto the padding), cached per mask array."""

@@ -6,8 +6,8 @@ The studio builds its grouped sliders from the field metadata::
         for f in Tuning.fields_in(group):
             f.name, f.type, f.metadata["min"], f.metadata["max"], f.metadata["unit"], f.metadata["doc"]
 
-``min``/``max`` are the slider range and also the accepted range of :meth:`Tuning.from_dict` (and of
-:meth:`Tuning.validate`). Nothing reads a tunable once and keeps it: a value changed between two steps
+``min``/``max`` are the slider range and also the accepted range of :meth:`Tuning.from_dict`,
+:meth:`Tuning.set` (one field, what a slider calls) and :meth:`Tuning.validate`: validation lives here only. Nothing reads a tunable once and keeps it: a value changed between two steps
 acts on the next step.
 
 Defaults follow the reference demo (see ``notes/reference.md``) except where the shipped data asks for
@@ -20,6 +20,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import numbers
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -130,6 +131,23 @@ class Tuning:
                 return f
         raise TuningError(f"unknown tuning field {name!r}")
 
+    def set(self, name: str, value, channel: str | None = None) -> None:
+        """Set one field, checked and converted as a preset value is (an integer field takes ``12.0`` as
+        12); for ``feature_weights`` pass ``channel`` to set one channel's weight. Raises
+        :class:`TuningError` naming the field (``feature_weights.CHANNEL``) and its range, and leaves the
+        tuning unchanged, for an unknown field or channel, a wrong type or a value out of range."""
+        f = self.field_info(name)
+        if channel is None:
+            setattr(self, name, _check(f, value))
+            return
+        if name != "feature_weights":
+            raise TuningError(f"tuning field {name!r} has no channels (got channel {channel!r})")
+        if channel not in self.feature_weights:
+            raise TuningError(f"tuning field 'feature_weights': unknown channel {channel!r} "
+                              f"(channels: {', '.join(self.feature_weights)})")
+        self.feature_weights[channel] = _number(f"{name}.{channel}", value, f.metadata["min"], f.metadata["max"],
+                                                integer=False)
+
     def reset_group(self, group: str) -> None:
         """Put every field of ``group`` back to its default."""
         fresh = Tuning()
@@ -206,10 +224,10 @@ def _check(f: dataclasses.Field, value):
 
 
 def _number(name, value, lo, hi, integer):
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):  # numpy scalars are Real too
         raise TuningError(f"tuning field {name!r}: expected a number, got {value!r}")
     if integer:
-        if isinstance(value, float) and not value.is_integer():
+        if not float(value).is_integer():
             raise TuningError(f"tuning field {name!r}: expected an integer, got {value!r}")
         value = int(value)
     else:

@@ -75,11 +75,17 @@ def test_controller_runs_and_fills_the_snapshot(dbf, nets):
     ctrl = LearnedMotionMatchingController(db, features, networks=nets)
     assert ctrl.name == "lmm"
     searched = transitioned = 0
+    X = ctrl.features.normalized.astype(np.float64)
     for i in range(240):
         inp = InputState(left_x=np.sin(i / 40.0), left_y=1.0 if i < 160 else 0.0)
         pose, snap = ctrl.step(inp, 1.0 / 60.0)
         searched += snap.searched
         transitioned += snap.transitioned
+        if snap.searched:   # the frame the projector "chose": the exact nearest frame to its features
+            costs = np.sum((X - snap.projected_features.astype(np.float64)) ** 2, axis=1)
+            assert costs[snap.projected_frame] == pytest.approx(costs.min(), rel=1e-5, abs=1e-6)
+        else:
+            assert snap.projected_frame == -1
         assert np.all(np.isfinite(pose.global_positions))
         assert snap.latent.shape == (32,)
         assert snap.controller == "lmm"
@@ -91,6 +97,16 @@ def test_controller_runs_and_fills_the_snapshot(dbf, nets):
     assert snap.nn_cost == pytest.approx(float(np.sum((snap.query - features.normalized[snap.nn_frame]) ** 2)),
                                          rel=1e-4, abs=1e-5) or not snap.searched
     assert "advance" in snap.timings_us
+    assert ctrl.memory_bytes() == {"decompressor": nets.decompressor.nbytes(), "stepper": nets.stepper.nbytes(),
+                                   "projector": nets.projector.nbytes()}
+
+
+def test_without_the_debug_comparison_nothing_is_searched(dbf, nets):
+    db, features = dbf
+    ctrl = LearnedMotionMatchingController(db, features, networks=nets, compare_with_search=False)
+    snaps = [ctrl.step(InputState(left_y=1.0), 1.0 / 60.0)[1] for _ in range(30)]
+    assert any(s.searched for s in snaps)
+    assert all(s.projected_frame == -1 and "projected_frame_search" not in s.timings_us for s in snaps)
 
 
 def test_no_torch_on_the_runtime_path():

@@ -41,3 +41,26 @@ def test_vertical_motion_is_not_skating(db):
     for i in range(5):
         m.update(_snap(i / 60, [(0, 0.01 * i, 0), (0, 0, 0)], [True, True]))
     assert m.result()["foot_skating_cm_s"] == pytest.approx(0.0)
+
+
+def test_one_skating_rule_for_streams_and_arrays(db):
+    """lmm-studio run streams ticks through MotionMetrics, eval hands FootSkating whole arrays: same number."""
+    from lmm.metrics import FootSkating
+
+    rng = np.random.default_rng(3)
+    n, dt = 50, 1 / 60
+    toes = np.cumsum(rng.normal(0, 0.01, (n, 2, 3)), axis=0)
+    contacts = rng.random((n, 2)) < 0.6
+    m = MotionMetrics(db)
+    for i in range(n):
+        m.update(_snap(i * dt, toes[i], contacts[i]))
+    arrays = FootSkating()
+    arrays.add(toes[:-1], toes[1:], contacts[1:], dt)   # (the snapshots hold float32 poses: rel 1e-6)
+    assert arrays.mean_cm_s() == pytest.approx(m.result()["foot_skating_cm_s"], rel=1e-6)
+    assert arrays.per_foot_cm_s() == pytest.approx([m.result()["foot_skating_left_cm_s"],
+                                                    m.result()["foot_skating_right_cm_s"]], rel=1e-6)
+    assert arrays.max == pytest.approx(m.result()["foot_skating_max_cm_s"], rel=1e-6)
+    # the rule counts contact only: a raised toe that slides while marked in contact still skates
+    high = FootSkating()
+    high.add(np.array([[0, 1.0, 0], [0, 1.0, 0]]), np.array([[0.01, 1.0, 0], [0, 1.0, 0]]), [True, False], 0.1)
+    assert high.mean_cm_s() == pytest.approx(10.0) and np.isnan(FootSkating().mean_cm_s())

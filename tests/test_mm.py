@@ -20,7 +20,8 @@ def test_snapshot_is_complete(db, features):
     snaps = [c.step(log.at(i * DT), DT)[1] for i in range(120)]
     s = snaps[-1]
     for f in dataclasses.fields(DebugSnapshot):
-        if f.name in ("latent", "projected_features", "matched_latent", "nn_frame", "nn_cost", "projected_cost"):
+        if f.name in ("latent", "projected_features", "matched_latent", "nn_frame", "nn_cost", "projected_cost",
+                      "projected_frame"):
             continue  # learned motion matching extras
         v = getattr(s, f.name)
         assert v is not None, f.name
@@ -201,3 +202,30 @@ def test_ten_minutes_of_random_input(db, features):
     assert m["transitions_per_s"] > 0.5
     print(f"\n10 min random:1: max root-sim {worst[0]:.4f} m, skating {m['foot_skating_cm_s']:.2f} cm/s, "
           f"{m['transitions_per_s']:.2f} transitions/s")
+
+
+def test_matched_latent_comes_from_the_attached_table(db, features):
+    c = MotionMatchingController(db, features)
+    assert c.step(InputState(left_y=1.0), DT)[1].matched_latent is None       # no table: no latent
+    table = np.arange(db.n_frames * 3, dtype=np.float32).reshape(db.n_frames, 3)
+    c.set_latent_table(table)
+    for _ in range(40):
+        _, s = c.step(InputState(left_y=1.0), DT)
+        assert s.matched_latent.tolist() == table[s.matched_frame].tolist()
+    c.set_latent_table(None)
+    assert c.step(InputState(), DT)[1].matched_latent is None
+    with pytest.raises(ValueError, match="one row per database frame"):
+        c.set_latent_table(table[:10])
+
+
+def test_memory_bytes_counts_pose_features_and_index(db, features):
+    from lmm.search import SearchIndex
+
+    c = MotionMatchingController(db, features)
+    before = c.memory_bytes()
+    assert before == {"pose data (Y)": db.pose_bytes(), "features (X)": c.features.normalized.nbytes}
+    c.step(InputState(), DT)      # the first tick searches and builds the index
+    parts = c.memory_bytes()
+    assert parts["search index"] == SearchIndex(c.features.normalized).nbytes() > 0
+    # the index's own arrays only: not the features it searches (the same array, not a copy)
+    assert parts["search index"] < c.features.normalized.nbytes

@@ -111,7 +111,7 @@ def test_window_starts_stay_in_ranges(dbf, data):
 
 def test_pipeline_writes_loadable_files(dbf, tmp_path):
     from lmm.learned import LMMNetworks
-    from lmm.offline.evaluation import load_compressor
+    from lmm.latents import load_compressor
 
     db, features = dbf
     r = T.Recipe(decompressor=tiny(8), stepper=tiny(6, 8), projector=tiny(6, 32), stepper_window=6, hidden=32,

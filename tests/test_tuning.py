@@ -78,3 +78,26 @@ def test_partial_preset_keeps_defaults_and_reset_group():
     assert t.run_forward_speed_m_s == 3.0  # other groups untouched
     with pytest.raises(TuningError):
         t.reset_group("nope")
+
+
+def test_set_validates_one_field_and_names_it():
+    t = Tuning()
+    t.set("run_forward_speed_m_s", 2.25)
+    t.set("top_k", 12.0)                       # an integer slider value may arrive as a float
+    t.set("ik_enabled", False)
+    t.set("feature_weights", 0.5, channel="hip_velocity")
+    assert t.run_forward_speed_m_s == 2.25 and t.top_k == 12 and isinstance(t.top_k, int)
+    assert t.ik_enabled is False and t.feature_weights["hip_velocity"] == 0.5
+    cases = [(("inertialization_halflife_s", 5.0), r"'inertialization_halflife_s'.*outside \[0.0, 0.3\]"),
+             (("top_k", 2.5), "'top_k': expected an integer"),
+             (("ik_enabled", 1), "'ik_enabled': expected true or false"),
+             (("no_such_field", 1.0), "unknown tuning field 'no_such_field'"),
+             (("feature_weights", 9.0, "hip_velocity"), r"'feature_weights.hip_velocity'.*outside \[0.0, 5.0\]"),
+             (("feature_weights", 1.0, "no_channel"), "unknown channel 'no_channel'"),
+             (("top_k", 3, "hip_velocity"), "'top_k' has no channels")]
+    for args, message in cases:
+        before = t.to_dict()
+        with pytest.raises(TuningError, match=message):
+            t.set(*args)
+        assert t.to_dict() == before, args       # a refused value changes nothing
+    t.validate()

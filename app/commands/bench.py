@@ -38,6 +38,7 @@ def collect_queries(db, features, n_queries: int, scenarios=None, tuning=None):
 
     from lmm.data.inputs import builtin, builtin_names
     from lmm.mm import MotionMatchingController
+    from lmm.runner import step_controllers
     from lmm.tuning import Tuning
 
     scenarios = scenarios or builtin_names((1, 2))
@@ -54,10 +55,8 @@ def collect_queries(db, features, n_queries: int, scenarios=None, tuning=None):
                 logs[name] = builtin(name, 3600.0)
             c, log = controllers[name], logs[name]
             for _ in range(int(chunk_s / dt)):
-                t = ticks[name] * dt
-                t0 = time.perf_counter()
-                c.step(log.at(t), dt)
-                step_us.append((time.perf_counter() - t0) * 1e6)
+                _, _, ms = step_controllers({name: c}, log.at(ticks[name] * dt), dt)
+                step_us.append(ms[name] * 1e3)
                 ticks[name] += 1
             for query, frame, hint in c.search_log:
                 queries.append((query, frame, hint, c))
@@ -146,21 +145,91 @@ SECTIONS = {"search": bench_search, "frame": bench_frame}
 
 # -- learned motion matching (issue 4): frame.lmm_us and the paper's Table 3 memory figures ----------
 
+def memory_figures(db, features, controllers: dict) -> dict:
+    """``memory.*``: what each controller's :meth:`lmm.controller.Controller.memory_bytes` reports (the
+    numbers the studio's stats panel shows), MM after one tick so its search index exists."""
+    from lmm.controller import InputState
+
+    mm = controllers["mm"]
+    mm.reset()
+    mm.step(InputState(), 1.0 / 60.0)        # the first tick searches: the index is built
+    parts = mm.memory_bytes()
+    mm_total = int(sum(parts.values()))
+    out = {"memory.mm_bytes": mm_total, "memory.mm_features_bytes": parts["features (X)"],
+           "memory.mm_pose_bytes": parts["pose data (Y)"], "memory.mm_search_bytes": parts["search index"],
+           "memory.lmm_bytes": None}
+    if "lmm" in controllers:
+        lmm_total = int(sum(controllers["lmm"].memory_bytes().values()))
+        out["memory.lmm_bytes"] = lmm_total
+        out["memory.lmm_over_mm"] = float(lmm_total / max(mm_total, 1))
+    return out
+
+
+def benchmark_lmm(db, features, controller, inputs="builtin:random:1", steps: int = 600, warmup: int = 60) -> dict:
+    """``frame.lmm_us`` (median learned-controller step, debug comparison off, through the one tick loop
+    :func:`lmm.runner.step_controllers`), its advance and projector parts, and the networks alone at
+    batch 1 (``network.*_us``, as in the paper's table)."""
+    import numpy as np
+
+    from lmm.data.inputs import open_input
+    from lmm.runner import step_controllers
+
+    nets = controller.nets
+    controller.reset()
+    log = open_input(inputs, (steps + warmup) / 60.0 + 1.0)
+    dt = 1.0 / 60.0
+    step_us, adv_us, proj_us = [], [], []
+    for i in range(steps + warmup):
+        _, snaps, ms = step_controllers({"lmm": controller}, log.at(i * dt), dt)
+        if i >= warmup:
+            snap = snaps["lmm"]
+            step_us.append(ms["lmm"] * 1e3)
+            adv_us.append(snap.timings_us.get("advance", np.nan))
+            if "projector" in snap.timings_us:
+                proj_us.append(snap.timings_us["projector"])
+    state = np.zeros(nets.n_features + nets.n_latent, np.float32)
+    query = np.zeros(nets.n_features, np.float32)
+
+    def median_us(fn, n=300):
+        fn()
+        ts = []
+        for _ in range(n):
+            t0 = time.perf_counter()
+            fn()
+            ts.append((time.perf_counter() - t0) * 1e6)
+        return float(np.median(ts))
+
+    return {
+        "frame.lmm_us": float(np.median(step_us)),
+        "frame.lmm_advance_us": float(np.nanmedian(adv_us)),
+        "frame.lmm_projector_us": float(np.median(proj_us)) if proj_us else float("nan"),
+        "network.decompressor_us": median_us(lambda: nets.decompressor(state)),
+        "network.stepper_us": median_us(lambda: nets.stepper(state)),
+        "network.projector_us": median_us(lambda: nets.projector(query)),
+    }
+
+
 def _lmm_figures(db, features) -> dict:
-    """Benchmark figures of the learned controller with the shipped networks (computed once per run)."""
+    """Benchmark figures of the learned controller with the shipped networks and the memory of both
+    controllers (computed once per run)."""
     cached = getattr(_lmm_figures, "cache", None)
     if cached is not None and cached[0] is db:
         return cached[1]
-    from lmm.offline.evaluation import benchmark_lmm
     from lmm.data.weights import WeightsError
+    from lmm.learned import LearnedMotionMatchingController, load_default_networks
+    from lmm.mm import MotionMatchingController
 
+    controllers = {"mm": MotionMatchingController(db, features)}
     try:
-        figures = benchmark_lmm(db, features)
+        controllers["lmm"] = LearnedMotionMatchingController(db, features, networks=load_default_networks(db, features),
+                                                             compare_with_search=False)
     except WeightsError as e:
         print(f"note: no learned-controller figures ({e})", file=sys.stderr)
-        from lmm.offline.evaluation import mm_runtime_bytes
-        mm = mm_runtime_bytes(db, features)
-        figures = {"memory.mm_bytes": int(sum(mm.values())), "memory.lmm_bytes": None, "frame.lmm_us": None}
+    figures = memory_figures(db, features, controllers)
+    if "lmm" in controllers:
+        figures.update(benchmark_lmm(db, features, controllers["lmm"]))
+    else:
+        figures["frame.lmm_us"] = None
     _lmm_figures.cache = (db, figures)
     return figures
 

@@ -15,7 +15,8 @@ projector.latent_error_mean_abs_std    projected latent vs the true NN's (compre
 stepper.drift_60                       mean absolute normalised feature error after a 60-frame rollout
 mm_vs_lmm.mean_joint_distance_cm       MM and LMM fed the same built-in input: mean distance of the joints
                                        in each character's root space
-foot_skating.{mm,lmm}_cm_s             mean horizontal toe speed while the toe is in contact and grounded
+foot_skating.{mm,lmm}_cm_s             mean horizontal toe speed while the toe is in contact, by the rule of
+                                       :class:`lmm.metrics.FootSkating` (the same as ``lmm-studio run``)
 =====================================  ==================================================================
 """
 from __future__ import annotations
@@ -27,24 +28,8 @@ from pathlib import Path
 import numpy as np
 
 from lmm import quat
-from lmm.nn import MLP, character_parents, character_space, decode_pose_vector, pose_vectors
-from lmm.data.weights import load as load_weights
-
-
-def load_compressor(path, db=None, features=None) -> MLP:
-    wf = load_weights(path, require=["compressor"], db_key=None if db is None else db.key,
-                      layout_dicts=None if features is None else features.layout_dicts())
-    return MLP.from_spec(wf.arrays, "compressor", wf.spec("compressor"))
-
-
-def batched(fn, x: np.ndarray, chunk: int = 4096) -> np.ndarray:
-    return np.concatenate([fn(x[i:i + chunk]) for i in range(0, x.shape[0], chunk)])
-
-
-def database_latents(compressor: MLP, db) -> np.ndarray:
-    """The compressor's latent of every database frame, (N, L) float32."""
-    c_in = np.concatenate([pose_vectors(db), character_space(db)], axis=1)
-    return batched(compressor, c_in)
+from lmm.latents import batched, database_latents, load_compressor  # noqa: F401 (app/commands/eval.py imports it from here)
+from lmm.nn import MLP, character_parents, character_space, decode_pose_vector
 
 
 def character_positions(y: np.ndarray, n_bones: int, parents) -> np.ndarray:
@@ -162,31 +147,40 @@ def stepper_drift(nets, db, features, Z: np.ndarray, horizon: int = 60, n_starts
 # the two controllers side by side
 # ---------------------------------------------------------------------------------------------
 
-def run_controller(controller, inputs, seconds: float, dt: float = 1.0 / 60.0) -> dict:
-    """Step a controller through an input log; world joint positions, root transforms, contacts, latents."""
+def run_controllers(controllers: dict, inputs, seconds: float, dt: float = 1.0 / 60.0) -> dict[str, dict]:
+    """Step controllers side by side through an input log (:func:`lmm.runner.step_controllers`, the one
+    tick loop); per controller: world joint positions, root transforms, contacts, latents, the queries
+    of its searches and its step times."""
+    from lmm.runner import step_controllers
+
     n = int(round(seconds / dt))
-    J = controller.db.n_bones
-    pos = np.zeros((n, J, 3), np.float32)
-    root_pos = np.zeros((n, 3))
-    root_rot = np.zeros((n, 4))
-    contacts = np.zeros((n, 2), bool)
-    latents, queries = [], []
-    step_us = np.zeros(n)
+    runs = {}
+    for name, c in controllers.items():
+        runs[name] = {"positions": np.zeros((n, c.db.n_bones, 3), np.float32), "root_position": np.zeros((n, 3)),
+                      "root_rotation": np.zeros((n, 4)), "contacts": np.zeros((n, 2), bool), "latents": [],
+                      "queries": [], "step_us": np.zeros(n), "dt": dt}
     for i in range(n):
-        t0 = time.perf_counter()
-        pose, snap = controller.step(inputs.at(i * dt), dt)
-        step_us[i] = (time.perf_counter() - t0) * 1e6
-        pos[i] = pose.global_positions
-        root_pos[i] = pose.global_positions[0]
-        root_rot[i] = pose.global_rotations[0]
-        contacts[i] = pose.contacts
-        if snap.latent is not None:
-            latents.append(snap.latent)
-        if snap.searched:
-            queries.append(snap.query)
-    return {"positions": pos, "root_position": root_pos, "root_rotation": root_rot, "contacts": contacts,
-            "latents": np.array(latents) if latents else None, "step_us": step_us, "dt": dt,
-            "queries": np.array(queries, np.float32).reshape(-1, controller.features.n_dims)}
+        poses, snaps, ms = step_controllers(controllers, inputs.at(i * dt), dt)
+        for name, run in runs.items():
+            pose, snap = poses[name], snaps[name]
+            run["step_us"][i] = ms[name] * 1e3
+            run["positions"][i] = pose.global_positions
+            run["root_position"][i] = pose.global_positions[0]
+            run["root_rotation"][i] = pose.global_rotations[0]
+            run["contacts"][i] = pose.contacts
+            if snap.latent is not None:
+                run["latents"].append(snap.latent)
+            if snap.searched:
+                run["queries"].append(snap.query)
+    for name, run in runs.items():
+        run["latents"] = np.array(run["latents"]) if run["latents"] else None
+        run["queries"] = np.array(run["queries"], np.float32).reshape(-1, controllers[name].features.n_dims)
+    return runs
+
+
+def run_controller(controller, inputs, seconds: float, dt: float = 1.0 / 60.0) -> dict:
+    """:func:`run_controllers` for one controller."""
+    return run_controllers({controller.name: controller}, inputs, seconds, dt)[controller.name]
 
 
 def root_space(run: dict) -> np.ndarray:
@@ -194,12 +188,14 @@ def root_space(run: dict) -> np.ndarray:
     return quat.inv_mul_vec(run["root_rotation"][:, None], rel)
 
 
-def foot_skating_cm_s(run: dict, toe_bones, height_m: float = 0.05) -> float:
-    """Mean horizontal toe speed (cm/s) over frames where the toe is marked in contact and near the ground."""
-    pos = run["positions"][:, toe_bones].astype(np.float64)  # (n, 2, 3)
-    vel = np.linalg.norm(np.diff(pos[..., [0, 2]], axis=0), axis=-1) / run["dt"]
-    grounded = run["contacts"][1:] & (pos[1:, :, 1] < height_m)
-    return float(vel[grounded].mean() * 100.0) if grounded.any() else 0.0
+def foot_skating_cm_s(run: dict, toe_bones) -> float:
+    """Foot skating of a run by the one rule, :class:`lmm.metrics.FootSkating` (as ``lmm-studio run``)."""
+    from lmm.metrics import FootSkating
+
+    pos = run["positions"][:, toe_bones]
+    skating = FootSkating()
+    skating.add(pos[:-1], pos[1:], run["contacts"][1:], run["dt"])
+    return skating.mean_cm_s()
 
 
 def bone_length_error_m(run: dict, db) -> float:
@@ -235,9 +231,10 @@ def evaluate(db, features, nets, compressor: MLP, inputs="builtin:random:1", sec
     log(f"stepper: drift_60 {out['stepper']['drift_60']:.4f} ({time.perf_counter() - t0:.1f} s)")
     t0 = time.perf_counter()
     log_in = open_input(inputs, seconds)
-    mm = run_controller(MotionMatchingController(db, features), log_in, seconds)
-    lmm = run_controller(LearnedMotionMatchingController(db, features, networks=nets, compare_with_search=False),
-                         log_in, seconds)
+    runs = run_controllers({"mm": MotionMatchingController(db, features),
+                            "lmm": LearnedMotionMatchingController(db, features, networks=nets,
+                                                                   compare_with_search=False)}, log_in, seconds)
+    mm, lmm = runs["mm"], runs["lmm"]
     dist = np.linalg.norm(root_space(mm) - root_space(lmm), axis=-1) * 100.0
     toes = [db.bone("left_toe"), db.bone("right_toe")]
     out["mm_vs_lmm"] = {"mean_joint_distance_cm": float(dist.mean()), "input": inputs, "seconds": seconds,
@@ -317,67 +314,3 @@ def write_plots(out_dir, artifacts: dict, loss_csv=None) -> list[str]:
         ax.set_title("decompressor: character-space joint position error")
         save(fig, "per_joint_error.png")
     return written
-
-
-# ---------------------------------------------------------------------------------------------
-# benchmark figures (the paper's Table 3): used by `lmm-studio bench`
-# ---------------------------------------------------------------------------------------------
-
-def mm_runtime_bytes(db, features) -> dict:
-    """What motion matching keeps in memory at run time: features, pose database, search structure."""
-    from lmm.search import SearchIndex
-    index = SearchIndex(features.normalized)
-    if hasattr(index, "nbytes"):
-        search = int(index.nbytes() if callable(index.nbytes) else index.nbytes)
-    else:  # every array the index holds, except views of the features themselves
-        search = sum(v.nbytes for v in vars(index).values()
-                     if isinstance(v, np.ndarray) and not np.shares_memory(v, features.normalized))
-    return {"features": int(features.normalized.nbytes), "pose": int(db.pose_bytes()), "search": int(search)}
-
-
-def benchmark_lmm(db, features, nets=None, inputs="builtin:random:1", steps: int = 600, warmup: int = 60) -> dict:
-    """``frame.lmm_us`` (median learned-controller step, debug comparison off), the per-network
-    costs, and ``memory.mm_bytes`` / ``memory.lmm_bytes``."""
-    from lmm.data.inputs import open_input
-    from lmm.learned import LearnedMotionMatchingController, load_default_networks
-
-    nets = nets if nets is not None else load_default_networks(db, features)
-    ctrl = LearnedMotionMatchingController(db, features, networks=nets, compare_with_search=False)
-    log = open_input(inputs, (steps + warmup) / 60.0 + 1.0)
-    dt = 1.0 / 60.0
-    step_us, adv_us, proj_us = [], [], []
-    for i in range(steps + warmup):
-        t0 = time.perf_counter()
-        _, snap = ctrl.step(log.at(i * dt), dt)
-        if i >= warmup:
-            step_us.append((time.perf_counter() - t0) * 1e6)
-            adv_us.append(snap.timings_us.get("advance", np.nan))
-            if "projector" in snap.timings_us:
-                proj_us.append(snap.timings_us["projector"])
-    # the networks alone at batch 1, as in the paper's table
-    state = np.zeros(nets.n_features + nets.n_latent, np.float32)
-    query = np.zeros(nets.n_features, np.float32)
-
-    def median_us(fn, n=300):
-        fn()
-        ts = []
-        for _ in range(n):
-            t0 = time.perf_counter()
-            fn()
-            ts.append((time.perf_counter() - t0) * 1e6)
-        return float(np.median(ts))
-
-    mm = mm_runtime_bytes(db, features)
-    return {
-        "frame.lmm_us": float(np.median(step_us)),
-        "frame.lmm_advance_us": float(np.nanmedian(adv_us)),
-        "frame.lmm_projector_us": float(np.median(proj_us)) if proj_us else float("nan"),
-        "network.decompressor_us": median_us(lambda: nets.decompressor(state)),
-        "network.stepper_us": median_us(lambda: nets.stepper(state)),
-        "network.projector_us": median_us(lambda: nets.projector(query)),
-        "memory.mm_bytes": int(sum(mm.values())),
-        "memory.mm_features_bytes": mm["features"], "memory.mm_pose_bytes": mm["pose"],
-        "memory.mm_search_bytes": mm["search"],
-        "memory.lmm_bytes": int(nets.nbytes()),
-        "memory.lmm_over_mm": float(nets.nbytes() / max(sum(mm.values()), 1)),
-    }

@@ -7,7 +7,7 @@ import pytest
 from app.history import History, Tick, search_agreement
 
 
-def snap(i: int, latent=True, searched=None):
+def snap(i: int, latent=True, searched=None, projected_frame=-1):
     """A stand-in for a DebugSnapshot with the fields the history reads."""
     pose = SimpleNamespace(global_positions=np.array([[i * 0.1, 0.0, -i * 0.2]] + [[0, 1, 0]] * 3, np.float32))
     return SimpleNamespace(
@@ -16,11 +16,14 @@ def snap(i: int, latent=True, searched=None):
         forced_search=False, transitioned=i % 12 == 0, simulation_velocity=np.array([1.0, 0.0, 0.0]),
         desired_velocity=np.array([0.0, 0.0, 2.0]), pose=pose,
         latent=np.full(4, float(i), np.float32) if latent else None, matched_latent=None,
+        projected_frame=projected_frame,
         timings_us={"search": 12.0, "total": 100.0})
 
 
-def tick(i: int, **kw) -> Tick:
-    return Tick(i, i / 60.0, {"mm": snap(i, latent=False), "lmm": snap(i, **kw)})
+def tick(i: int, projected=None, **kw) -> Tick:
+    """Tick ``i``; the LMM snapshot reports ``projected`` as its projected frame (-1: none this tick)."""
+    return Tick(i, i / 60.0, {"mm": snap(i, latent=False),
+                              "lmm": snap(i, projected_frame=-1 if projected is None else projected, **kw)})
 
 
 def test_keeps_the_newest_ticks_and_addresses_them_by_number():
@@ -63,23 +66,23 @@ def test_series_windows_are_oldest_first_with_nan_outside():
     assert h.times(9, 2).tolist() == pytest.approx([8 / 60, 9 / 60])
 
 
-def test_studio_numbers_in_tick_extra_become_series():
+def test_projected_frame_is_a_series_with_gaps_between_projections():
     h = History(5)
     for i in range(1, 5):
-        t = tick(i)
-        if i % 2 == 0:
-            t.extra["projected_frame:lmm"] = 200 + i
-        h.append(t)
+        h.append(tick(i, projected=200 + i if i % 2 == 0 else -1))
     w = h.window("lmm", "projected_frame", 4, 4)
     assert np.isnan(w[0]) and w[1] == 202 and np.isnan(w[2]) and w[3] == 204
+    assert np.isnan(h.window("mm", "projected_frame", 4, 4)).all()
+    t = tick(5)
+    t.extra["projected_frame:lmm"] = 999          # tick.extra is never read as a series
+    h.append(t)
+    assert np.isnan(h.window("lmm", "projected_frame", 5, 1)[0])
 
 
 def test_agreement_rate_counts_searches_within_tolerance():
     h = History(120)
     for i in range(1, 61):
-        t = tick(i)
-        t.extra["projected_frame:lmm"] = 100 + i     # the nn frame is 100 + i + (i % 3)
-        h.append(t)
+        h.append(tick(i, projected=100 + i))     # the nn frame is 100 + i + (i % 3)
     rate0, n = search_agreement(h, "lmm", 60, 60, tolerance_frames=0)
     searches = [i for i in range(1, 61) if i % 6 == 0]
     assert n == len(searches)

@@ -17,8 +17,9 @@ from app.panels.stats import FrameTimes
 from app.panels.timeline import scrub_target
 from app.panels.tuning import apply_widget_value, pretty_label, widget_specs
 from app.panels.viewport import feature_markers, is_software_renderer
-from app.session import Session, load_reference_clip, make_controllers, recording_paths
+from app.session import RecordingResult, Session, load_reference_clip, recording_paths
 from lmm.controller import Candidates, InputState
+from lmm.factory import make_controllers
 from lmm.tuning import Tuning, TuningError
 
 from studio_testutil import CORPUS
@@ -267,7 +268,11 @@ def test_session_steps_records_and_replays(dbf, tmp_path):
     assert set(paths) == {"mm", "input"} and paths["mm"].name == "take.bvh"
     for i in range(90):
         s.step(InputState(left_y=1.0, camera_azimuth=0.0))
-    written = s.stop_recording()
+    result = s.stop_recording()
+    assert isinstance(result, RecordingResult) and result.frames == 90 and result.seconds == pytest.approx(1.5)
+    assert result.message == "recorded 1.50 s (90 frames) to take.bvh, take_input.csv"
+    written = result.paths
+    assert written == paths
     assert s.history.newest_tick == 90 and len(s.history) == 60
     anim = bvh.load(written["mm"])
     assert anim.n_frames == 90 and anim.n_joints == db.n_bones - 1   # the simulation bone is left out
@@ -281,7 +286,82 @@ def test_session_steps_records_and_replays(dbf, tmp_path):
     t = s.step(s.input_for_next_tick(InputState()))
     assert t.extra["input"].left_y == 1.0
     mem = s.memory["mm"]
-    assert mem["pose data (Y)"] == db.pose_bytes()
+    assert mem == controllers["mm"].memory_bytes() and mem["pose data (Y)"] == db.pose_bytes()
+    assert set(mem) == {"pose data (Y)", "features (X)", "search index"}
+
+
+def test_recording_never_overwrites_and_never_leaves_empty_files(dbf, tmp_path):
+    from lmm.data import bvh
+
+    db, features = dbf
+    tuning = Tuning()
+    controllers, _ = make_controllers(db, features, tuning, with_lmm=False)
+    controllers["mm2"] = make_controllers(db, features, tuning, with_lmm=False)[0]["mm"]   # two characters
+    s = Session(db, features, tuning, controllers)
+    # nothing recorded: the files it opened are gone again
+    paths = s.start_recording(tmp_path / "take.bvh", ("mm", "mm2"))
+    assert [p.name for p in paths.values()] == ["take_mm.bvh", "take_mm2.bvh", "take_input.csv"]
+    assert all(p.exists() for p in paths.values())
+    result = s.stop_recording()
+    assert result.paths == {} and result.frames == 0 and result.message == "nothing recorded (0 frames): no file written"
+    assert list(tmp_path.iterdir()) == []
+    # a file of the take exists (only the input CSV): the next free number, one suffix for every file
+    (tmp_path / "take_input.csv").write_text("keep me")
+    (tmp_path / "take_001_mm2.bvh").write_text("keep me too")
+    counts = []
+    for n in (5, 7):
+        paths = s.start_recording(tmp_path / "take.bvh", ("mm", "mm2"))
+        for _ in range(n):
+            s.step(InputState(left_y=1.0))
+        result = s.stop_recording()
+        assert result.paths == paths and result.frames == n
+        counts.append({k: p.name for k, p in paths.items()})
+        for name in ("mm", "mm2"):
+            assert bvh.load(paths[name]).n_frames == n
+    assert counts == [{"mm": "take_002_mm.bvh", "mm2": "take_002_mm2.bvh", "input": "take_002_input.csv"},
+                      {"mm": "take_003_mm.bvh", "mm2": "take_003_mm2.bvh", "input": "take_003_input.csv"}]
+    assert "to take_003_mm.bvh, take_003_mm2.bvh, take_003_input.csv" in result.message
+    assert (tmp_path / "take_input.csv").read_text() == "keep me"
+    assert (tmp_path / "take_001_mm2.bvh").read_text() == "keep me too"
+    assert not (tmp_path / "take_mm.bvh").exists() and not (tmp_path / "take_001_mm.bvh").exists()
+    assert s.stop_recording().paths == {}                      # not recording: nothing to stop
+
+
+def test_session_fills_projected_frame_and_mm_latents(dbf):
+    """The LMM snapshot names the projector's frame, the MM snapshot the latent of its frame once the
+    session has attached the compressor's table (computed in the background)."""
+    import time
+
+    db, features = dbf
+    tuning = Tuning()
+    controllers, problems = make_controllers(db, features, tuning)
+    if "lmm" not in controllers:
+        pytest.skip(f"no LMM networks: {problems}")
+    s = Session(db, features, tuning, controllers)
+    s.start_latent_table()
+    deadline = time.monotonic() + 120
+    while s.latent_table_status.startswith("computing") and time.monotonic() < deadline:
+        time.sleep(0.05)
+    if s.latent_table_status:
+        pytest.skip(s.latent_table_status)
+    from lmm.latents import database_latents, load_compressor
+    table = database_latents(load_compressor(controllers["lmm"].nets.path.with_name("compressor.npz"), db, features),
+                             db)
+    projected = []
+    for _ in range(30):
+        t = s.step(InputState(left_y=1.0))
+        mm, lmm = t.snapshots["mm"], t.snapshots["lmm"]
+        assert np.allclose(mm.matched_latent, table[mm.matched_frame])
+        if lmm.searched:
+            projected.append(lmm.projected_frame)
+            X = controllers["lmm"].features.normalized.astype(np.float64)
+            costs = np.sum((X - lmm.projected_features) ** 2, axis=1)
+            assert costs[lmm.projected_frame] == pytest.approx(costs.min(), rel=1e-5, abs=1e-6)
+    assert projected and s.history.window("lmm", "projected_frame", s.tick, 30)[np.isfinite(
+        s.history.window("lmm", "projected_frame", s.tick, 30))].tolist() == projected
+    assert s.history.window("mm", "matched_latent", s.tick, 1)[0].tolist() == pytest.approx(
+        table[mm.matched_frame].tolist())
+    assert set(s.memory["lmm"]) == {"decompressor", "stepper", "projector"}
 
 
 def test_reference_clip_loads_and_bad_files_raise(tmp_path):
@@ -320,7 +400,7 @@ def test_replaying_a_recorded_input_csv_reproduces_the_motion(dbf, tmp_path):
             s.start_recording(tmp_path / "take.bvh", ("mm",))
         t = s.step(s.input_for_next_tick(InputState()))
         roots.append(t.snapshots["mm"].pose.global_positions[0].copy())
-    written = s.stop_recording()
+    written = s.stop_recording().paths
     s.replay(load_input_csv(written["input"]))
     again = [s.step(s.input_for_next_tick(InputState())).snapshots["mm"].pose.global_positions[0] for _ in range(120)]
     assert np.allclose(np.array(roots), np.array(again), atol=1e-5)
