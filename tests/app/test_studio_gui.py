@@ -12,7 +12,7 @@ import time
 import numpy as np
 import pytest
 
-from app.panels import layouts
+from app import layout_files as layouts
 
 from studio_testutil import CORPUS, ROOT
 
@@ -102,7 +102,7 @@ def test_slider_change_reaches_the_runtime_on_the_next_frame(circle_run):
 
 
 def test_recording_writes_bvh_our_reader_loads(circle_run):
-    from lmm import bvh
+    from lmm.data import bvh
     from lmm.data.inputs import load_input_csv
 
     d = circle_run["dump"]
