@@ -83,7 +83,7 @@ class LatentPanel(Panel):
             # both maps in one plot (LMM above, MM below), each a single textured quad: far cheaper to
             # draw than thousands of heat-map cells, and one plot frame instead of two
             L = self.n_latent
-            with dpg.plot(tag="lat_plot", height=138, width=-1, no_menus=True, no_mouse_pos=True,
+            with dpg.plot(tag="lat_plot", height=116, width=-1, no_menus=True, no_mouse_pos=True,
                           no_box_select=True, no_title=True):
                 dpg.add_plot_axis(dpg.mvXAxis, tag="lat_x")
                 with dpg.plot_axis(dpg.mvYAxis, tag="lat_y", no_gridlines=True):
