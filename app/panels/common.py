@@ -1,14 +1,6 @@
-"""What every panel shares: the window registry (fixed ids, so layout files work), colours, the
-per-frame view the panels read, and small dearpygui helpers.
-
-A panel is a class with ``build()`` (create every item once), ``update(view)`` (only ``set_value``/
-``configure_item`` on existing items, from the displayed snapshot) and ``state()`` (what it shows,
-as plain data, for the test dump). Panels write only to the tuning object (and, through the studio,
-to the session's controls: pause, scrub, record).
-"""
+"""What every panel shares: the window registry (fixed ids, so layout files work), colours, number
+formats and small dearpygui helpers. What a panel is and may touch: :mod:`app.panels.base`."""
 from __future__ import annotations
-
-from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -72,33 +64,6 @@ def short_channel_name(name: str) -> str:
     words = name.replace("trajectory", "traj").replace("position", "pos").replace("velocity", "vel") \
         .replace("direction", "dir").replace("left_", "L ").replace("right_", "R ").replace("_", " ")
     return words
-
-
-@dataclass
-class View:
-    """What the panels show this frame: the displayed tick (live or scrubbed) and context."""
-    tick: object                 # app.history.Tick or None before the first tick
-    live: bool
-    paused: bool
-    inspected: str               # controller the single-controller panels inspect
-    history: object              # app.history.History
-    session: object              # app.session.Session
-    frame: int = 0               # studio frame counter
-    extra: dict = field(default_factory=dict)
-
-    def snap(self, name: str | None = None):
-        """The displayed snapshot of ``name`` (default: the inspected controller), or None."""
-        if self.tick is None:
-            return None
-        snaps = self.tick.snapshots
-        name = name or self.inspected
-        if name in snaps:
-            return snaps[name]
-        return next(iter(snaps.values()), None)
-
-    @property
-    def tick_number(self) -> int:
-        return -1 if self.tick is None else int(self.tick.tick)
 
 
 def fmt_num(v, digits: int = 3) -> str:

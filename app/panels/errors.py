@@ -1,5 +1,6 @@
-"""Errors in a dialog: a bad BVH, weights, preset, input or layout file is reported here (and on
-stderr) and the studio keeps running. Several errors queue up; OK shows the next."""
+"""Messages in a dialog: errors (a bad BVH, weights, preset, input or layout file; reported here and on
+stderr, and the studio keeps running) and information (help). Several queue up; OK shows the next.
+The dialog's title says which: "Error" for errors, the message's own title for information."""
 from __future__ import annotations
 
 import sys
@@ -31,10 +32,18 @@ class ErrorDialog:
         self._present()
 
     def show(self, title: str, message: str) -> None:
-        entry = {"title": str(title), "message": str(message), "time": time.time()}
+        """Report an error (counted in :attr:`shown` and printed on stderr)."""
+        entry = {"title": str(title), "message": str(message), "time": time.time(), "error": True}
         self.shown.append(entry)
-        self.queue.append(entry)
         print(f"lmm-studio: {title}: {message}", file=sys.stderr)
+        self._enqueue(entry)
+
+    def inform(self, title: str, message: str) -> None:
+        """Show information (help, notices) in the same dialog, titled ``title``; not an error."""
+        self._enqueue({"title": str(title), "message": str(message), "time": time.time(), "error": False})
+
+    def _enqueue(self, entry: dict) -> None:
+        self.queue.append(entry)
         if self.built:
             self._present()
 
@@ -44,6 +53,8 @@ class ErrorDialog:
             dpg.configure_item(ERROR_WINDOW, show=False)
             return
         e = self.queue[0]
+        dpg.configure_item(ERROR_WINDOW, label=("Error" if e["error"] else e["title"]))
+        dpg.configure_item("err_title", show=e["error"])
         dpg.set_value("err_title", e["title"])
         dpg.set_value("err_message", e["message"])
         dpg.set_value("err_more", f"{len(self.queue) - 1} more" if len(self.queue) > 1 else "")
@@ -61,6 +72,14 @@ class ErrorDialog:
     @property
     def visible(self) -> bool:
         return bool(self.queue)
+
+    @property
+    def title(self) -> str:
+        """The title the dialog shows now ("" when hidden)."""
+        if not self.queue:
+            return ""
+        e = self.queue[0]
+        return "Error" if e["error"] else e["title"]
 
     def last(self) -> dict | None:
         return self.shown[-1] if self.shown else None

@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .common import COLORS, QUERY_COLOR, SHORT, TextCache, View, short_channel_name, window_tag
+from .base import Panel, View
+from .common import COLORS, QUERY_COLOR, SHORT, short_channel_name
 
 BAR_WIDTH = 0.26
 
@@ -34,8 +35,7 @@ def bar_layout(features) -> dict:
 def bar_values(view: View) -> dict:
     """The series the panel plots: name -> (D,) normalised values or None (pure)."""
     q = view.snap()
-    mm = view.snap("mm") if view.tick is not None and "mm" in view.tick.snapshots else None
-    lmm = view.snap("lmm") if view.tick is not None and "lmm" in view.tick.snapshots else None
+    mm, lmm = view.snap_of("mm"), view.snap_of("lmm")
     return {
         "query": None if q is None else np.asarray(q.query, np.float64),
         "matched": None if mm is None else np.asarray(mm.matched_features, np.float64),
@@ -51,21 +51,15 @@ def channel_errors(features, a, b) -> list[float]:
     return [float(np.sum((a[s] - b[s]) ** 2)) for s in features.slices]
 
 
-class FeaturesPanel:
-    def __init__(self, dpg, studio):
-        self.dpg = dpg
-        self.studio = studio
-        self.tag = window_tag("features")
-        self.text = TextCache(dpg)
-        self.last = {}
-        self._weights = None
+class FeaturesPanel(Panel):
+    key = "features"
+    _weights = None
 
     def build(self, window_kwargs: dict) -> None:
         dpg = self.dpg
-        features = self.studio.session.features
-        self.layout = bar_layout(features)
+        self.layout = bar_layout(self.ctx.engine.features)
         x = self.layout["x"]
-        with dpg.window(tag=self.tag, label="Feature Vectors", **window_kwargs):
+        with self.window(window_kwargs):
             dpg.add_text("", tag="feat_summary")
             with dpg.plot(tag="feat_plot", height=-1, width=-1, no_menus=True, no_mouse_pos=True):
                 dpg.add_plot_legend(location=dpg.mvPlot_Location_North, horizontal=True, outside=True)
@@ -79,15 +73,16 @@ class FeaturesPanel:
                     dpg.add_bar_series(x + BAR_WIDTH, zeros, weight=BAR_WIDTH, label="LMM projected",
                                        tag="feat_projected")
                     dpg.add_inf_line_series(self.layout["separators"], tag="feat_sep")
-        self.studio.theme_series("feat_query", QUERY_COLOR, bar=True)
-        self.studio.theme_series("feat_matched", COLORS["mm"], bar=True)
-        self.studio.theme_series("feat_projected", COLORS["lmm"], bar=True)
-        self.studio.theme_series("feat_sep", (0.45, 0.45, 0.5), weight=1.0)
+        theme = self.ctx.theme
+        theme.series("feat_query", QUERY_COLOR, bar=True)
+        theme.series("feat_matched", COLORS["mm"], bar=True)
+        theme.series("feat_projected", COLORS["lmm"], bar=True)
+        theme.series("feat_sep", (0.45, 0.45, 0.5), weight=1.0)
 
     def update(self, view: View) -> None:
         dpg = self.dpg
-        features = self.studio.session.features
-        weights = tuple(float(self.studio.session.tuning.feature_weights.get(ch.name, w))
+        features = self.ctx.engine.features
+        weights = tuple(float(self.ctx.tuning.feature_weights.get(ch.name, w))
                         for ch, w in zip(features.layout, features.weights))
         if weights != self._weights:  # weights changed: relabel the channels
             self._weights = weights
@@ -105,8 +100,7 @@ class FeaturesPanel:
         inspected = SHORT.get(view.inspected, view.inspected)
         dpg.configure_item("feat_query", label=f"query ({inspected})")
         # each controller's own query: the projector answered LMM's query, the search MM's
-        mm = view.snap("mm") if view.tick is not None and "mm" in view.tick.snapshots else None
-        lmm = view.snap("lmm") if view.tick is not None and "lmm" in view.tick.snapshots else None
+        mm, lmm = view.snap_of("mm"), view.snap_of("lmm")
         total_m = total_p = float("nan")
         summary = f"query of {inspected}"
         if mm is not None and vals["matched"] is not None:

@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .common import COLORS, TextCache, View, window_tag
+from .base import Panel, View
+from .common import COLORS
 
 COLUMNS = 200
 GAP = 2.0       # rows of space between the two maps
@@ -49,32 +50,27 @@ def latent_scale(values: np.ndarray, floor: float = 0.5) -> float:
     return max(float(np.percentile(v, 98)), floor)
 
 
-class LatentPanel:
-    def __init__(self, dpg, studio):
-        self.dpg = dpg
-        self.studio = studio
-        self.tag = window_tag("latent")
-        self.text = TextCache(dpg)
+class LatentPanel(Panel):
+    key = "latent"
+
+    def __init__(self, ctx):
+        super().__init__(ctx)
         self.seconds = 5.0
         self.dim = 0
-        self.n_latent = 32
-        self.last = {}
+        self.n_latent = ctx.engine.latent_dims
         self._scale = {"lmm": 1.0, "mm": 1.0}
         self.lut = diverging_lut()
         self._label_shown = {}
 
     def build(self, window_kwargs: dict) -> None:
         dpg = self.dpg
-        lmm = self.studio.session.controllers.get("lmm")
-        nets = getattr(lmm, "nets", None)
-        self.n_latent = int(getattr(nets, "n_latent", self.n_latent))
         self.images = {}
         for key in ("lmm", "mm"):
             self.images[key] = np.zeros((self.n_latent, COLUMNS, 4), np.float32)
             self.images[key][..., 3] = 1.0
             dpg.add_raw_texture(COLUMNS, self.n_latent, self.images[key], format=dpg.mvFormat_Float_rgba,
-                                tag=f"lat_tex_{key}", parent="studio_textures")
-        with dpg.window(tag=self.tag, label="Latent Traces", **window_kwargs):
+                                tag=f"lat_tex_{key}", parent="texture_registry")
+        with self.window(window_kwargs):
             with dpg.group(horizontal=True):
                 dpg.add_text("window")
                 dpg.add_slider_float(tag="lat_seconds", default_value=self.seconds, min_value=1.0, max_value=20.0,
@@ -82,11 +78,12 @@ class LatentPanel:
                 dpg.add_text("dim")
                 dpg.add_slider_int(tag="lat_dim", default_value=0, min_value=0, max_value=self.n_latent - 1, width=90,
                                    callback=lambda s, a: setattr(self, "dim", int(a)))
-                dpg.add_text("", tag="lat_status")
+            # why a map is empty, on its own line and wrapped: it can be long ("computing ...")
+            dpg.add_text("", tag="lat_status", wrap=0, color=(170, 170, 180))
             # both maps in one plot (LMM above, MM below), each a single textured quad: far cheaper to
             # draw than thousands of heat-map cells, and one plot frame instead of two
             L = self.n_latent
-            with dpg.plot(tag="lat_plot", height=138, width=-1, no_menus=True, no_mouse_pos=True,
+            with dpg.plot(tag="lat_plot", height=116, width=-1, no_menus=True, no_mouse_pos=True,
                           no_box_select=True, no_title=True):
                 dpg.add_plot_axis(dpg.mvXAxis, tag="lat_x")
                 with dpg.plot_axis(dpg.mvYAxis, tag="lat_y", no_gridlines=True):
@@ -102,8 +99,8 @@ class LatentPanel:
                 with dpg.plot_axis(dpg.mvYAxis, tag="lat_curve_y", auto_fit=True):
                     dpg.add_line_series([0.0], [0.0], tag="lat_curve_lmm", label="LMM latent[0]")
                     dpg.add_line_series([0.0], [0.0], tag="lat_curve_mm", label="MM matched latent[0]")
-        self.studio.theme_series("lat_curve_lmm", COLORS["lmm"], weight=2.0)
-        self.studio.theme_series("lat_curve_mm", COLORS["mm"], weight=2.0)
+        self.ctx.theme.series("lat_curve_lmm", COLORS["lmm"], weight=2.0)
+        self.ctx.theme.series("lat_curve_mm", COLORS["mm"], weight=2.0)
 
     def _rows(self, key: str) -> tuple[float, float]:
         """y range of a map: MM at the bottom, LMM above it (dimension 0 is the bottom row of each)."""
@@ -113,20 +110,14 @@ class LatentPanel:
     def update(self, view: View) -> None:
         dpg = self.dpg
         h = view.history
-        dt = self.studio.session.dt
+        dt = self.ctx.engine.dt
         n = max(int(self.seconds / dt), 2)
         end = view.tick_number
         t = (np.arange(n) - (n - 1)) * dt
         series = {}
-        session = self.studio.session
-        if h.has_series("lmm", "latent"):
-            series["lmm"] = h.window("lmm", "latent", end, n)
-        if h.has_series("mm", "matched_latent"):       # the controller reports it itself
-            series["mm"] = h.window("mm", "matched_latent", end, n)
-        elif h.has_series("mm", "matched_frame"):      # else look the frames up in the compressor table
-            z = session.matched_latents(h.window("mm", "matched_frame", end, n))
-            if z is not None:
-                series["mm"] = z
+        for key, field in (("lmm", "latent"), ("mm", "matched_latent")):   # the controllers report them
+            if h.has_series(key, field):
+                series[key] = h.window(key, field, end, n)
         for key, v in series.items():  # each map's colour range follows its recent values smoothly
             if v.ndim == 2 and view.frame % 6 == 0:
                 self._scale[key] = 0.7 * self._scale[key] + 0.3 * latent_scale(v[-60:])
@@ -158,7 +149,8 @@ class LatentPanel:
             dpg.configure_item(tag, label=f"{label}[{dim}]")
         dpg.set_axis_limits("lat_curve_x", float(t[0]), 0.0)
         missing = [k for k in ("lmm", "mm") if k not in series]
-        reasons = {"lmm": "LMM not running", "mm": session.latent_table_status or "no MM latents"}
+        reasons = {"lmm": "LMM: " + (view.problems.get("lmm") or "not running"),
+                   "mm": "MM: " + (view.latent_status or "no matched latents")}
         status = "; ".join(reasons[k] for k in missing)
         self.text.set("lat_status", status)
         self.last = {"end_tick": end, "columns": n,
@@ -166,5 +158,3 @@ class LatentPanel:
                      "mm_latest": series["mm"][-1].tolist() if "mm" in series and series["mm"].ndim == 2 else None,
                      "status": status}
 
-    def state(self) -> dict:
-        return dict(self.last)

@@ -2,8 +2,10 @@
 and a status line (mode, fps, tick, last error)."""
 from __future__ import annotations
 
+from app.layout_files import builtin_names
+
+from .base import PanelContext, View
 from .common import WINDOWS, TextCache, window_tag
-from .layouts import builtin_names
 
 KEYS_HELP = """Keyboard (the 3D view does not need focus; text fields do take the keys):
   W A S D / arrows   move (camera relative)      Shift  walk        Ctrl  strafe
@@ -14,47 +16,60 @@ Mouse on the 3D view: left-drag orbit, right/middle-drag pan, wheel zoom.
 Gamepads (glfw or raw HID): left stick move, right stick aim/camera, LB walk, RB strafe."""
 
 
+def hidden_note(hidden) -> str:
+    """The status line's note on hidden windows (empty when every window shows)."""
+    if not hidden:
+        return ""
+    titles = ", ".join(WINDOWS[k][1] for k in WINDOWS if k in hidden)
+    return f"hidden: {titles} (Windows menu shows them)"
+
+
 class MenuBar:
-    def __init__(self, dpg, studio):
-        self.dpg = dpg
-        self.studio = studio
-        self.text = TextCache(dpg)
+    """Not a window: the viewport's menu bar. Same context as the panels."""
+
+    def __init__(self, ctx: PanelContext):
+        self.ctx = ctx
+        self.dpg = ctx.dpg
+        self.text = TextCache(ctx.dpg)
 
     def build(self) -> None:
         dpg = self.dpg
-        s = self.studio
+        act = self.ctx.actions
         with dpg.viewport_menu_bar(tag="menu_bar"):
             with dpg.menu(label="File"):
-                dpg.add_menu_item(label="Replay input CSV...", callback=lambda: s.open_dialog("input"))
-                dpg.add_menu_item(label="Open reference BVH...", callback=lambda: s.open_dialog("reference"))
+                dpg.add_menu_item(label="Replay input CSV...", callback=lambda: act.open_dialog("input"))
+                dpg.add_menu_item(label="Open reference BVH...", callback=lambda: act.open_dialog("reference"))
                 dpg.add_separator()
-                dpg.add_menu_item(label="Load tuning preset...", callback=lambda: s.open_dialog("preset_load"))
-                dpg.add_menu_item(label="Save tuning preset...", callback=lambda: s.open_dialog("preset_save"))
-                dpg.add_menu_item(label="Load LMM weights...", callback=lambda: s.open_dialog("weights"))
+                dpg.add_menu_item(label="Load tuning preset...", callback=lambda: act.open_dialog("preset_load"))
+                dpg.add_menu_item(label="Save tuning preset...", callback=lambda: act.open_dialog("preset_save"))
+                dpg.add_menu_item(label="Load LMM weights...", callback=lambda: act.open_dialog("weights"))
                 dpg.add_separator()
-                dpg.add_menu_item(label="Reset characters", callback=lambda: s.reset_characters())
-                dpg.add_menu_item(label="Quit", callback=lambda: s.quit())
+                dpg.add_menu_item(label="Reset characters", callback=lambda: act.reset_characters())
+                dpg.add_menu_item(label="Quit", callback=lambda: act.quit())
             with dpg.menu(label="Layout"):
                 for name in builtin_names():
                     dpg.add_menu_item(label=name.capitalize(), callback=self._on_layout, user_data=name,
                                       tag=f"menu_layout_{name}")
                 dpg.add_separator()
-                dpg.add_menu_item(label="Load layout file...", callback=lambda: s.open_dialog("layout_load"))
-                dpg.add_menu_item(label="Save layout as...", callback=lambda: s.open_dialog("layout_save"))
+                dpg.add_menu_item(label="Load layout file...", callback=lambda: act.open_dialog("layout_load"))
+                dpg.add_menu_item(label="Save layout as...", callback=lambda: act.open_dialog("layout_save"))
             with dpg.menu(label="Windows"):
                 for key, (tag, title) in WINDOWS.items():
                     dpg.add_menu_item(label=title, check=True, default_value=True, tag=f"menu_show_{key}",
                                       callback=self._on_show, user_data=key)
             with dpg.menu(label="Help"):
-                dpg.add_menu_item(label="Keys and mouse", callback=lambda: s.errors_info("Keys and mouse", KEYS_HELP))
+                dpg.add_menu_item(label="Keys and mouse", callback=self.show_keys_help)
             dpg.add_spacer(width=30)
             dpg.add_text("", tag="menu_status", color=(170, 200, 170))
 
+    def show_keys_help(self, *args) -> None:
+        self.ctx.actions.show_info("Keys and mouse", KEYS_HELP)
+
     def _on_layout(self, sender, value, name):
-        self.studio.switch_layout(name)
+        self.ctx.actions.switch_layout(name)
 
     def _on_show(self, sender, value, key):
-        self.studio.show_window(key, bool(value))
+        self.ctx.actions.show_window(key, bool(value))
 
     def sync_window_checks(self) -> None:
         dpg = self.dpg
@@ -63,15 +78,19 @@ class MenuBar:
             if dpg.get_value(f"menu_show_{key}") != shown:
                 dpg.set_value(f"menu_show_{key}", shown)
 
-    def update(self, view) -> None:
-        s = self.studio
-        names = " + ".join(n.upper() for n in s.session.names)
-        mode = "LIVE" if view.live else ("PAUSED" if view.paused else "REWIND")
-        inp = s.session.input_log.name if s.session.input_log is not None else "keyboard/gamepad"
-        status = f"{names}   |   {mode}   |   tick {view.tick_number}   |   input: {inp}   |   " \
-                 f"layout: {s.layout_name}   |   {s.frame_times.fps():.0f} fps"
-        if s.session.recording is not None:
-            status += "   |   REC"
-        if s.lmm_problem:
-            status += "   |   LMM off (see Nearest Neighbour panel)"
-        self.text.set("menu_status", status)
+    def update(self, view: View) -> None:
+        names = " + ".join(n.upper() for n in self.ctx.engine.controller_names())
+        fps = view.frame_times.fps() if view.frame_times is not None else float("nan")
+        parts = [names, view.mode, f"tick {view.tick_number}", f"input: {view.input_name or 'keyboard/gamepad'}",
+                 f"layout: {view.layout}", f"{fps:.0f} fps"]
+        if view.recording is not None:
+            parts.append("REC")
+        if view.problems.get("lmm"):
+            parts.append("LMM off (see Nearest Neighbour panel)")
+        note = hidden_note(view.hidden_windows)
+        if note:
+            parts.append(note)
+        self.text.set("menu_status", "   |   ".join(parts))
+
+    def state(self) -> dict:
+        return {"status": self.text.get("menu_status", "")}

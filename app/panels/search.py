@@ -15,8 +15,8 @@ import numpy as np
 
 from app.history import search_agreement
 
-from .common import (COLORS, GOOD, SHORT, TextCache, View, cost_color, decimate, fmt_num, short_channel_name,
-                     window_tag)
+from .base import Panel, View
+from .common import COLORS, GOOD, SHORT, cost_color, decimate, fmt_num, short_channel_name
 
 MAX_ROWS = 64
 
@@ -66,17 +66,23 @@ def sort_rows(rows: list[dict], key: str, descending: bool = False) -> list[dict
     return out
 
 
-def column_fractions(rows: list[dict], key: str) -> list[float]:
-    """Each row's value of a cost column mapped to [0, 1] (min -> 0, max -> 1), for colouring."""
+def column_fractions(rows: list[dict], key: str, digits: int = 3) -> list[float]:
+    """Each row's value of a cost column placed in the column's min..max as [0, 1], for colouring.
+
+    Values are compared as shown (rounded to ``digits``): values that read the same get the same
+    colour, and a column whose values all read the same is all 0 (green); a missing value is 1.
+    """
     vals = np.array([r[key] if not key.startswith("ch") else r["channels"][int(key[2:])] for r in rows], float)
     if vals.size == 0:
         return []
-    finite = vals[np.isfinite(vals)]
+    shown = np.round(vals, digits)
+    finite = shown[np.isfinite(shown)]
     if finite.size == 0:
         return [0.5] * len(rows)
     lo, hi = float(finite.min()), float(finite.max())
-    span = hi - lo
-    return [0.0 if span <= 1e-12 else float((v - lo) / span) if np.isfinite(v) else 1.0 for v in vals]
+    if hi - lo < 0.5 * 10.0 ** -digits:
+        return [0.0 if np.isfinite(v) else 1.0 for v in shown]
+    return [float((v - lo) / (hi - lo)) if np.isfinite(v) else 1.0 for v in shown]
 
 
 def rolling_agreement(searched, nn, got, window: int, tolerance: int = 0) -> np.ndarray:
@@ -94,21 +100,15 @@ def rolling_agreement(searched, nn, got, window: int, tolerance: int = 0) -> np.
         return np.where(n > 0, a / np.maximum(n, 1), np.nan)
 
 
-class SearchPanel:
+class SearchPanel(Panel):
     """Nearest neighbour vs projector, with the cost timeline."""
-
-    def __init__(self, dpg, studio):
-        self.dpg = dpg
-        self.studio = studio
-        self.tag = window_tag("search")
-        self.text = TextCache(dpg)
-        self.seconds = 10.0
-        self.tolerance = 6
-        self.last = {}
+    key = "search"
+    seconds = 10.0
+    tolerance = 6
 
     def build(self, window_kwargs: dict) -> None:
         dpg = self.dpg
-        with dpg.window(tag=self.tag, label="Nearest Neighbour vs Projector", **window_kwargs):
+        with self.window(window_kwargs):
             dpg.add_text("", tag="nn_status")
             with dpg.table(header_row=True, borders_innerH=True, borders_outerH=True, borders_innerV=True,
                            row_background=True, policy=dpg.mvTable_SizingStretchProp, tag="nn_table"):
@@ -148,23 +148,22 @@ class SearchPanel:
                 dpg.add_text("window")
                 dpg.add_slider_float(tag="nn_seconds", default_value=self.seconds, min_value=2.0, max_value=20.0,
                                      width=90, format="%.0f s", callback=lambda s, a: setattr(self, "seconds", a))
-        self.studio.theme_series("cost_mm", COLORS["mm"], weight=2.0)
-        self.studio.theme_series("cost_nn", (0.95, 0.95, 0.95), weight=1.5)
-        self.studio.theme_series("cost_proj", COLORS["lmm"], weight=2.0)
-        self.studio.theme_series("cost_transitions", COLORS["mm"], marker=True)
-        self.studio.theme_series("cost_agree", GOOD, weight=1.5)
+        theme = self.ctx.theme
+        theme.series("cost_mm", COLORS["mm"], weight=2.0)
+        theme.series("cost_nn", (0.95, 0.95, 0.95), weight=1.5)
+        theme.series("cost_proj", COLORS["lmm"], weight=2.0)
+        theme.series("cost_transitions", COLORS["mm"], marker=True)
+        theme.series("cost_agree", GOOD, weight=1.5)
 
     def update(self, view: View) -> None:
         dpg = self.dpg
-        session = self.studio.session
-        db = session.db
+        db = self.ctx.engine.db
         h = view.history
-        dt = session.dt
+        dt = self.ctx.engine.dt
         n = max(int(self.seconds / dt), 2)
         end = view.tick_number
         t = (np.arange(n) - (n - 1)) * dt
-        lmm = view.snap("lmm") if view.tick is not None and "lmm" in view.tick.snapshots else None
-        mm = view.snap("mm") if view.tick is not None and "mm" in view.tick.snapshots else None
+        lmm, mm = view.snap_of("lmm"), view.snap_of("mm")
         shown = {}
         if lmm is not None:
             nn_frame = int(lmm.nn_frame)
@@ -175,7 +174,7 @@ class SearchPanel:
             shown["proj"] = (proj_frame, float(lmm.projected_cost))
             dist = float("nan")
             if lmm.projected_features is not None and 0 <= nn_frame < db.n_frames:
-                features = getattr(session.controllers.get("lmm"), "features", None) or session.features
+                features = self.ctx.engine.features_of("lmm")
                 dist = float(np.linalg.norm(np.asarray(lmm.projected_features) - features.normalized[nn_frame]))
             rate, k = search_agreement(h, "lmm", end, n, self.tolerance)
             agree = "-" if k == 0 else f"{100 * rate:.0f}% of {k} searches"
@@ -183,7 +182,7 @@ class SearchPanel:
         else:
             dist, rate, k = float("nan"), float("nan"), 0
             agree = "-"
-            reason = self.studio.lmm_problem or "LMM is not running"
+            reason = view.problems.get("lmm") or "LMM is not running"
             self.text.set("nn_status", reason)
         if mm is not None:
             shown["mm"] = (int(mm.matched_frame), float(mm.best_cost))
@@ -226,14 +225,12 @@ class SearchPanel:
         return {k: (None if isinstance(v, float) and not np.isfinite(v) else v) for k, v in self.last.items()}
 
 
-class CandidatesPanel:
+class CandidatesPanel(Panel):
     """Ranked candidates of the inspected controller's last search."""
+    key = "candidates"
 
-    def __init__(self, dpg, studio):
-        self.dpg = dpg
-        self.studio = studio
-        self.tag = window_tag("candidates")
-        self.text = TextCache(dpg)
+    def __init__(self, ctx):
+        super().__init__(ctx)
         self.sort_key = "total"
         self.descending = False
         self._shown_for = None
@@ -242,10 +239,10 @@ class CandidatesPanel:
 
     def build(self, window_kwargs: dict) -> None:
         dpg = self.dpg
-        names = self.studio.session.features.names
+        names = self.ctx.engine.channel_names
         self.columns = ["rank", "frame", "clip", "t", "total", "bias"] + [f"ch{i}" for i in range(len(names))]
         labels = ["#", "frame", "clip", "t (s)", "total", "bias"] + [short_channel_name(n) for n in names]
-        with dpg.window(tag=self.tag, label="Search Candidates", **window_kwargs):
+        with self.window(window_kwargs):
             dpg.add_text("", tag="cand_status")
             with dpg.table(tag="cand_table", header_row=True, sortable=True, callback=self._on_sort,
                            borders_innerV=True, borders_outerH=True, borders_outerV=True, resizable=True,
@@ -290,7 +287,7 @@ class CandidatesPanel:
         if key == self._shown_for:
             return
         self._shown_for = key
-        rows = sort_rows(candidate_rows(cands, self.studio.session.db), self.sort_key, self.descending)
+        rows = sort_rows(candidate_rows(cands, self.ctx.engine.db), self.sort_key, self.descending)
         self.rows = rows
         fractions = {k: column_fractions(rows, k) for k in self.columns if k == "total" or k.startswith("ch")}
         for r in range(MAX_ROWS):

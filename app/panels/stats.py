@@ -4,42 +4,16 @@ motion matching and learned motion matching keep."""
 from __future__ import annotations
 
 import os
-from collections import deque
 
 import numpy as np
 
-from .common import COLORS, SHORT, TextCache, fmt_bytes, window_tag
+from .base import Panel, View
+from .common import COLORS, SHORT, fmt_bytes
 
 PARTS = ("input", "mm", "lmm", "viewport", "render", "readback", "panels", "ui")
 PART_LABELS = {"input": "input", "mm": "MM step", "lmm": "LMM step", "viewport": "3D scene",
                "render": "3D render", "readback": "3D readback", "panels": "panels",
                "ui": "UI (dearpygui)"}
-
-
-class FrameTimes:
-    """Rolling per-part frame times in milliseconds (pure, for tests and the benchmark)."""
-
-    def __init__(self, n: int = 240):
-        self.n = n
-        self.parts: dict[str, deque] = {}
-        self.frames: deque = deque(maxlen=n)
-
-    def add(self, frame_ms: float, parts: dict) -> None:
-        self.frames.append(float(frame_ms))
-        for k, v in parts.items():
-            self.parts.setdefault(k, deque(maxlen=self.n)).append(float(v))
-
-    def median(self, part: str | None = None) -> float:
-        d = self.frames if part is None else self.parts.get(part)
-        return float(np.median(d)) if d else float("nan")
-
-    def fps(self) -> float:
-        m = self.median()
-        return 1000.0 / m if m and np.isfinite(m) and m > 0 else float("nan")
-
-    def series(self, part: str | None = None) -> np.ndarray:
-        d = self.frames if part is None else self.parts.get(part, ())
-        return np.asarray(d, np.float64)
 
 
 def rss_bytes() -> int:
@@ -51,18 +25,13 @@ def rss_bytes() -> int:
         return 0
 
 
-class StatsPanel:
-    def __init__(self, dpg, studio):
-        self.dpg = dpg
-        self.studio = studio
-        self.tag = window_tag("stats")
-        self.text = TextCache(dpg)
-        self._last_text_frame = -100
-        self.last = {}
+class StatsPanel(Panel):
+    key = "stats"
+    _last_text_frame = -100
 
     def build(self, window_kwargs: dict) -> None:
         dpg = self.dpg
-        with dpg.window(tag=self.tag, label="Stats", **window_kwargs):
+        with self.window(window_kwargs):
             dpg.add_text("", tag="stats_fps", color=(140, 230, 140))
             dpg.add_text("", tag="stats_memory")
             with dpg.table(header_row=False, borders_innerV=True, policy=dpg.mvTable_SizingStretchProp,
@@ -87,26 +56,28 @@ class StatsPanel:
                     dpg.add_line_series(z, z, tag="stats_frame", label="frame")
                     dpg.add_line_series(z, z, tag="stats_mm", label="MM")
                     dpg.add_line_series(z, z, tag="stats_lmm", label="LMM")
-        self.studio.theme_series("stats_frame", (0.85, 0.85, 0.85), weight=1.5)
-        self.studio.theme_series("stats_mm", COLORS["mm"], weight=1.5)
-        self.studio.theme_series("stats_lmm", COLORS["lmm"], weight=1.5)
+        self.ctx.theme.series("stats_frame", (0.85, 0.85, 0.85), weight=1.5)
+        self.ctx.theme.series("stats_mm", COLORS["mm"], weight=1.5)
+        self.ctx.theme.series("stats_lmm", COLORS["lmm"], weight=1.5)
 
-    def update(self, view) -> None:
+    def update(self, view: View) -> None:
         dpg = self.dpg
-        ft = self.studio.frame_times
+        ft = view.frame_times
+        if ft is None:
+            return
         # numbers change every frame but nobody reads them that fast: refresh the text 4 times a second
         if view.frame - self._last_text_frame >= 15:
             self._last_text_frame = view.frame
             fps = ft.fps()
             python_ms = sum(ft.median(p) for p in ("input", "viewport", "panels") if np.isfinite(ft.median(p)))
-            self.text.set("stats_fps", f"{fps:5.1f} fps   frame {ft.median():.1f} ms   studio Python "
+            self.text.set("stats_fps", f"{fps:5.1f} fps   frame {ft.median():.1f} ms   Python "
                                        f"{python_ms:.1f} ms")
             for part in PARTS:
                 ms = ft.median(part)
                 self.text.set(f"stats_ms_{part}", "-" if not np.isfinite(ms) else f"{ms:6.2f} ms")
             details = []
             if view.tick is not None:
-                for name in self.studio.session.names:
+                for name in self.ctx.engine.controller_names():
                     s = view.snap(name)
                     if s is not None and s.timings_us:
                         keys = [k for k in s.timings_us if k not in ("total",)]
@@ -114,7 +85,7 @@ class StatsPanel:
                             f"{k} {s.timings_us[k]:.0f}" for k in keys[:4]) + " us")
             self.text.set("stats_detail", "\n".join(details))
             lines = []
-            memory = self.studio.session.memory
+            memory = self.ctx.engine.memory()
             for name, parts in memory.items():
                 total = sum(parts.values())
                 inner = ", ".join(f"{k} {fmt_bytes(v)}" for k, v in parts.items())
@@ -126,11 +97,9 @@ class StatsPanel:
                         f"({totals['mm'] / max(totals['lmm'], 1):.1f}x)"
             self.text.set("stats_memory", head if totals.get("lmm") else "memory  " + lines[0])
             self.text.set("stats_memory_detail", "\n".join(lines))
-            h = view.history
-            vp = self.studio.viewport
-            self.text.set("stats_process", f"process {fmt_bytes(rss_bytes())}; history {len(h) * self.studio.session.dt:.1f}"
-                                           f" of {h.capacity * self.studio.session.dt:.0f} s; 3D {vp.render_size[0]}x{vp.render_size[1]}"
-                                           f" {vp.samples}x MSAA ({vp.gl_renderer[:24]})")
+            h, dt = view.history, self.ctx.engine.dt
+            self.text.set("stats_process", f"process {fmt_bytes(rss_bytes())}; history {len(h) * dt:.1f}"
+                                           f" of {h.capacity * dt:.0f} s; {view.render_info}")
             self.last = {"fps": fps, "frame_ms": ft.median(), "python_ms": python_ms,
                          "parts_ms": {p: ft.median(p) for p in PARTS},
                          "memory": {n: dict(p) for n, p in memory.items()}}
@@ -145,6 +114,3 @@ class StatsPanel:
             dpg.set_axis_limits("stats_x", 0.0, float(ft.n))
             top = float(np.percentile(y, 95)) * 1.3 if len(y) > 5 else 50.0
             dpg.set_axis_limits("stats_y", 0.0, max(top, 20.0))
-
-    def state(self) -> dict:
-        return {k: v for k, v in self.last.items()}

@@ -9,7 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .common import COLORS, TextCache, View, decimate, window_tag
+from .base import Panel, View
+from .common import COLORS, decimate
 
 
 def scrub_target(history, current: int, delta: int) -> int:
@@ -19,25 +20,22 @@ def scrub_target(history, current: int, delta: int) -> int:
     return history.clamp(int(current) + int(delta))
 
 
-class TimelinePanel:
-    def __init__(self, dpg, studio):
-        self.dpg = dpg
-        self.studio = studio
-        self.tag = window_tag("timeline")
-        self.text = TextCache(dpg)
-        self._line_value = 0.0
-        self._slider_range = None
-        self.last = {}
+class TimelinePanel(Panel):
+    key = "timeline"
+    _line_value = 0.0
+    _slider_range = None
 
     def build(self, window_kwargs: dict) -> None:
         dpg = self.dpg
-        with dpg.window(tag=self.tag, label="Timeline", no_scrollbar=True, **window_kwargs):
+        act = self.ctx.actions
+        second = int(round(1.0 / self.ctx.engine.dt))
+        with self.window(window_kwargs, no_scrollbar=True):
             with dpg.group(horizontal=True):
-                dpg.add_button(label="Pause", tag="tl_play", width=60, callback=lambda: self.studio.toggle_pause())
-                dpg.add_button(label="<", tag="tl_back", width=26, callback=lambda: self.studio.step(-1))
-                dpg.add_button(label=">", tag="tl_fwd", width=26, callback=lambda: self.studio.step(1))
-                dpg.add_button(label="<<1s", tag="tl_back_s", callback=lambda: self.studio.step(-60))
-                dpg.add_button(label="Live", tag="tl_live", callback=lambda: self.studio.go_live())
+                dpg.add_button(label="Pause", tag="tl_play", width=60, callback=lambda: act.toggle_pause())
+                dpg.add_button(label="<", tag="tl_back", width=26, callback=lambda: act.step(-1))
+                dpg.add_button(label=">", tag="tl_fwd", width=26, callback=lambda: act.step(1))
+                dpg.add_button(label="<<1s", tag="tl_back_s", callback=lambda: act.step(-second))
+                dpg.add_button(label="Live", tag="tl_live", callback=lambda: act.go_live())
                 dpg.add_slider_int(tag="tl_slider", width=-185, min_value=0, max_value=1, default_value=1,
                                    callback=self._on_slider, format="tick %d")
                 dpg.add_text("", tag="tl_status")
@@ -49,19 +47,20 @@ class TimelinePanel:
                     dpg.add_line_series(z, z, tag="tl_desired", label="desired speed")
                     for name in COLORS:
                         dpg.add_line_series(z, z, tag=f"tl_speed_{name}", label=f"{name.upper()} speed",
-                                            show=name in self.studio.session.controllers)
+                                            show=name in self.ctx.engine.controller_names())
                 dpg.add_drag_line(tag="tl_drag", default_value=0.0, color=(255, 220, 90, 255), thickness=2.0)
-        self.studio.theme_series("tl_desired", (0.75, 0.75, 0.75), weight=1.0)
+        self.ctx.theme.series("tl_desired", (0.75, 0.75, 0.75), weight=1.0)
         for name in COLORS:
-            self.studio.theme_series(f"tl_speed_{name}", COLORS[name], weight=1.5)
+            self.ctx.theme.series(f"tl_speed_{name}", COLORS[name], weight=1.5)
 
     def _on_slider(self, sender, value):
-        self.studio.scrub_to(int(value))
+        self.ctx.actions.scrub_to(int(value))
 
     def update(self, view: View) -> None:
         dpg = self.dpg
         h = view.history
-        dt = self.studio.session.dt
+        dt = self.ctx.engine.dt
+        names = self.ctx.engine.controller_names()
         newest = h.newest_tick
         if newest < 0:
             return
@@ -75,7 +74,7 @@ class TimelinePanel:
         line = float(dpg.get_value("tl_drag"))
         want = (view.tick_number - newest) * dt
         if abs(line - self._line_value) > 1e-6 and dpg.is_item_hovered("tl_plot"):
-            self.studio.scrub_to(int(round(newest + line / dt)))
+            self.ctx.actions.scrub_to(int(round(newest + line / dt)))
             want = line
         dpg.set_value("tl_drag", want)
         self._line_value = want
@@ -83,23 +82,20 @@ class TimelinePanel:
         t = (np.arange(n) - (n - 1)) * dt
         first = max(0, n - (newest - oldest + 1))
         for name in COLORS:
-            running = name in self.studio.session.controllers
+            running = name in names
             dpg.configure_item(f"tl_speed_{name}", show=running)
             if running:
                 y = h.window(name, "speed", newest, n)
                 dpg.set_value(f"tl_speed_{name}", list(decimate(t[first:], y[first:], 400)))
-        name0 = self.studio.session.names[0]
+        name0 = names[0]
         dpg.set_value("tl_desired", list(decimate(t[first:], h.window(name0, "desired_speed", newest, n)[first:], 400)))
         dpg.set_axis_limits("tl_x", float(t[0]), 0.0)
         dpg.configure_item("tl_play", label="Play" if view.paused else "Pause")
         held = (newest - oldest + 1) * dt
-        mode = "LIVE" if view.live else "PAUSED" if view.paused else "REWIND"
+        mode = view.mode
         t_now = view.tick.time_s if view.tick is not None else 0.0
         behind = (view.tick_number - newest) * dt
         status = f"{mode} {t_now:.2f} s" + (f" ({behind:+.2f} s)" if behind else "") + f" | {held:.0f} s held"
         self.text.set("tl_status", status)
         self.last = {"tick": view.tick_number, "newest": newest, "oldest": oldest, "live": view.live,
                      "paused": view.paused}
-
-    def state(self) -> dict:
-        return dict(self.last)

@@ -1,14 +1,15 @@
 """Tuning: one widget per field of :class:`lmm.tuning.Tuning`, generated from the field metadata
 (group, range, unit, doc), grouped, with reset-to-default per group and presets saved to / loaded from
-JSON files. A widget's callback writes the tuning object, which both controllers read on their next
-step."""
+JSON files. A widget's callback writes the tuning object through :meth:`lmm.tuning.Tuning.set`, which
+validates (the model, not the panel, knows the ranges); both controllers read it on their next step."""
 from __future__ import annotations
 
 import dataclasses
 
 from lmm.tuning import Tuning, TuningError
 
-from .common import TextCache, short_channel_name, window_tag
+from .base import Panel
+from .common import short_channel_name
 
 GROUP_TITLES = {
     "simulation": "Simulation springs & stick",
@@ -69,45 +70,22 @@ def widget_tag(spec: dict) -> str:
     return f"tun_{spec['field']}" + (f"__{spec['channel']}" if spec.get("channel") else "")
 
 
-def apply_widget_value(tuning: Tuning, field: str, channel, value) -> None:
-    """What a widget's callback does to the tuning object (checked against the field's range)."""
-    f = Tuning.field_info(field)
-    kind = field_kind(f)
-    lo, hi = f.metadata["min"], f.metadata["max"]
-    if kind == "dict":
-        v = float(value)
-        if not lo <= v <= hi:
-            raise TuningError(f"{field}.{channel}: {v} is outside [{lo}, {hi}]")
-        getattr(tuning, field)[channel] = v
-        return
-    if kind == "bool":
-        setattr(tuning, field, bool(value))
-        return
-    v = int(round(value)) if kind == "int" else float(value)
-    if not lo <= v <= hi:
-        raise TuningError(f"{field}: {v} is outside [{lo}, {hi}]")
-    setattr(tuning, field, v)
+class TuningPanel(Panel):
+    key = "tuning"
 
-
-class TuningPanel:
-    def __init__(self, dpg, studio):
-        self.dpg = dpg
-        self.studio = studio
-        self.tag = window_tag("tuning")
-        self.text = TextCache(dpg)
+    def __init__(self, ctx):
+        super().__init__(ctx)
+        self.tuning: Tuning = ctx.tuning
         self.specs = widget_specs()
         self.changes = 0
 
-    @property
-    def tuning(self) -> Tuning:
-        return self.studio.session.tuning
-
     def build(self, window_kwargs: dict) -> None:
         dpg = self.dpg
-        with dpg.window(tag=self.tag, label="Tuning", **window_kwargs):
+        act = self.ctx.actions
+        with self.window(window_kwargs):
             with dpg.group(horizontal=True):
-                dpg.add_button(label="Load preset...", callback=lambda: self.studio.open_dialog("preset_load"))
-                dpg.add_button(label="Save preset...", callback=lambda: self.studio.open_dialog("preset_save"))
+                dpg.add_button(label="Load preset...", callback=lambda: act.open_dialog("preset_load"))
+                dpg.add_button(label="Save preset...", callback=lambda: act.open_dialog("preset_save"))
                 dpg.add_button(label="Reset all", callback=self.reset_all)
             dpg.add_text("acts on the next frame of both characters", color=(150, 150, 160))
             current_group = None
@@ -150,10 +128,10 @@ class TuningPanel:
     def _on_change(self, sender, value, user_data):
         field, channel = user_data
         try:
-            apply_widget_value(self.tuning, field, channel, value)
+            self.tuning.set(field, value, channel=channel)
             self.changes += 1
         except TuningError as e:
-            self.studio.errors.show("Tuning", str(e))
+            self.ctx.actions.show_error("Tuning", str(e))
             self.sync()
 
     def _on_reset_group(self, sender, value, group):
@@ -182,12 +160,6 @@ class TuningPanel:
         for f in dataclasses.fields(Tuning):
             setattr(self.tuning, f.name, getattr(t, f.name))
         self.sync()
-
-    def save_preset(self, path) -> None:
-        self.tuning.save(path)
-
-    def update(self, view) -> None:
-        pass
 
     def state(self) -> dict:
         return {"changes": self.changes, "widgets": len(self.specs)}

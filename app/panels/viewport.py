@@ -3,175 +3,64 @@ matched frames, foot contacts and feature markers, drawn by :mod:`viewer` into i
 in dearpygui's GL context and shown as a raw texture.
 
 Mouse on the image: left-drag orbits, right/middle-drag pans, wheel zooms. The camera follows the
-characters unless "Follow" is off. "Side by side" draws the LMM character (and everything of it)
+characters unless "Follow" is off. The camera's azimuth has one owner, the input layer (sticks and
+keys move the characters relative to it): a drag asks it to turn (``actions.orbit_camera``) and the
+camera takes ``view.camera_azimuth`` each frame; pitch, distance and target are the viewport's own. "Side by side" draws the LMM character (and everything of it)
 shifted to the right of the MM one; both simulate from the same start with the same input.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from lmm import quat
-
-from .common import COLORS, SHORT, View, darker, lighter, window_tag
+from .base import Panel, PanelContext, View
+from .common import COLORS, SHORT
+from .viewport_scene import LEGEND, CharacterDrawing, MarkerBatch, draw_character
 
 FORWARD = np.array([0.0, 0.0, 1.0])
 SIDE_OFFSET_M = 1.6
 TRAIL_SECONDS = 4.0
+LABEL_CHAR_PX, LABEL_HEIGHT_PX = 8.5, 17.0      # a character label's size per character at font size 16
 
+def yaw_deg_from_azimuth(azimuth: float) -> float:
+    """The orbit camera's yaw for an input-layer azimuth (radians; 0 looks along +Z)."""
+    return float(np.degrees(azimuth - np.pi)) % 360.0
 
-def world_from_root(root_pos, root_rot, local_xyz):
-    """Root-space points (N, 3) to world."""
-    return np.asarray(root_pos, np.float64) + np.asarray(local_xyz, np.float64) @ quat.to_matrix(
-        np.asarray(root_rot, np.float64)).T
+def separate_labels(anchors: dict, sizes: dict, gap: float = 2.0) -> dict:
+    """Screen positions for text labels so that none overlaps another (pure, for tests).
 
-
-def feature_markers(features, normalized, root_pos, root_rot, bone_positions: dict) -> dict:
-    """World-space markers of a normalised feature vector, by channel kind.
-
-    Returns ``{"points": (N,3), "arrows": (origins (M,3), vectors (M,3)), "traj": (T,3),
-    "traj_dirs": (T,3)}``: bone positions as points, bone velocities as arrows starting at the
-    bone (``bone_positions[channel.bone]`` when known, else at the feature's own position) scaled to
-    0.1 s of motion, and trajectory points/directions on the ground.
+    ``anchors``: name -> (x, y) top-left where a label wants to be; ``sizes``: name -> (w, h). Labels
+    are placed top to bottom; one that would overlap a placed label moves down below it.
     """
-    raw = features.denormalize(np.asarray(normalized, np.float32)).astype(np.float64)
-    rot_t = quat.to_matrix(np.asarray(root_rot, np.float64)).T     # row vectors: v @ R^T == R v
-    root = np.asarray(root_pos, np.float64)
-    points, origins, vectors, traj, dirs = [], [], [], [], []
-    positions_by_bone = {}
-    for ch, s in zip(features.layout, features.slices):
-        if ch.kind == "bone_position":
-            p = root + raw[s] @ rot_t
-            points.append(p)
-            positions_by_bone[ch.bone] = p
-    for ch, s in zip(features.layout, features.slices):
-        v = raw[s]
-        if ch.kind == "bone_velocity":
-            start = bone_positions.get(ch.bone, positions_by_bone.get(ch.bone))
-            if start is not None:
-                origins.append(start)
-                vectors.append((v @ rot_t) * 0.1)
-        elif ch.kind.startswith("trajectory"):
-            xz = v.reshape(-1, 2)
-            ground = np.zeros((len(xz), 3))
-            ground[:, 0], ground[:, 2] = xz[:, 0], xz[:, 1]
-            if ch.kind == "trajectory_position":
-                traj.append(root + ground @ rot_t)
-            else:
-                dirs.append(ground @ rot_t)
-    z3 = np.zeros((0, 3))
-    return {"points": np.array(points) if points else z3,
-            "arrows": (np.array(origins) if origins else z3, np.array(vectors) if vectors else z3),
-            "traj": np.concatenate(traj) if traj else z3, "traj_dirs": np.concatenate(dirs) if dirs else z3}
-
+    placed: dict = {}
+    for name in sorted(anchors, key=lambda n: (anchors[n][1], anchors[n][0])):
+        x, y = (float(v) for v in anchors[name])
+        w, h = sizes[name]
+        moved = True
+        while moved:
+            moved = False
+            for other, (ox, oy) in placed.items():
+                ow, oh = sizes[other]
+                if x < ox + ow and ox < x + w and y < oy + oh + gap and oy < y + h + gap:
+                    y = oy + oh + gap
+                    moved = True
+        placed[name] = (x, y)
+    return placed
 
 def is_software_renderer(name: str) -> bool:
     """True for Mesa's CPU rasterisers (llvmpipe, softpipe, swrast) and similar."""
     n = name.lower()
     return any(k in n for k in ("llvmpipe", "softpipe", "swrast", "software", "swiftshader"))
 
-
-class MarkerBatch:
-    """Every marker of every character, gathered per frame and drawn with one sphere, one arrow and
-    one line renderable (few draw calls matter on software GL, where each costs about a millisecond)."""
-
-    def __init__(self, viewer, ctx):
-        self.spheres = viewer.Spheres(ctx, radius=0.04)
-        self.arrows = viewer.Arrows(ctx, shaft_radius=0.011, head_radius=0.032, head_length=0.07)
-        self.lines = viewer.Lines(ctx, width_px=2.5)
-        self.clear()
-
-    def renderables(self):
-        return [self.lines, self.spheres, self.arrows]
-
-    def clear(self) -> None:
-        self._centers, self._radii, self._sphere_colors = [], [], []
-        self._origins, self._vectors, self._arrow_colors = [], [], []
-        self._segments, self._segment_colors = [], []
-
-    def add_spheres(self, centers, radius: float, color) -> None:
-        c = np.asarray(centers, np.float64).reshape(-1, 3)
-        if len(c):
-            self._centers.append(c)
-            self._radii.append(np.full(len(c), radius))
-            self._sphere_colors.append(np.broadcast_to(np.asarray(color, np.float64)[:3], (len(c), 3)))
-
-    def add_arrows(self, origins, vectors, color) -> None:
-        o = np.asarray(origins, np.float64).reshape(-1, 3)
-        v = np.asarray(vectors, np.float64).reshape(-1, 3)
-        n = min(len(o), len(v))
-        if n:
-            self._origins.append(o[:n])
-            self._vectors.append(v[:n])
-            self._arrow_colors.append(np.broadcast_to(np.asarray(color, np.float64)[:3], (n, 3)))
-
-    def add_polyline(self, points, color) -> None:
-        p = np.asarray(points, np.float64).reshape(-1, 3)
-        if len(p) >= 2:
-            seg = np.empty((2 * (len(p) - 1), 3))
-            seg[0::2] = p[:-1]
-            seg[1::2] = p[1:]
-            self._segments.append(seg)
-            self._segment_colors.append(np.broadcast_to(np.asarray(color, np.float64)[:3], (len(seg), 3)))
-
-    def flush(self) -> None:
-        z3 = np.zeros((0, 3))
-        if self._centers:
-            self.spheres.update(np.concatenate(self._centers), np.concatenate(self._radii),
-                                np.concatenate(self._sphere_colors))
-        else:
-            self.spheres.update(z3)
-        if self._origins:
-            self.arrows.update(np.concatenate(self._origins), np.concatenate(self._vectors),
-                               np.concatenate(self._arrow_colors))
-        else:
-            self.arrows.update(z3, z3)
-        if self._segments:
-            self.lines.update(np.concatenate(self._segments), mode="segments",
-                              colors=np.concatenate(self._segment_colors))
-        else:
-            self.lines.update(z3, mode="segments")
-
-
-class CharacterDrawing:
-    """A character's skeleton and ghost; its markers go into the shared :class:`MarkerBatch`."""
-
-    def __init__(self, viewer, ctx, parents, color):
-        self.color = color
-        self.skeleton = viewer.Skeleton(ctx, parents, color=color, joint_radius=0.028, bone_radius=0.02)
-        self.ghost = viewer.Skeleton(ctx, parents, color=lighter(color, 0.55), alpha=0.32,
-                                     joint_radius=0.024, bone_radius=0.017)
-        self.traj_color = lighter(color, 0.35)
-        self.trail_color = darker(color, 0.3)
-
-    def all(self):
-        return [self.skeleton, self.ghost]
-
-    def hide(self) -> None:
-        self.skeleton.visible = False
-        self.ghost.visible = False
-
-
-SIM_COLOR = (0.95, 0.88, 0.3)
-MATCHED_COLOR = (0.9, 0.9, 0.92)
-FEATURE_COLOR = (0.85, 0.4, 0.95)
-CONTACT_COLOR = (0.3, 0.95, 0.4)
-LOCKED_COLOR = (0.2, 0.9, 0.95)
-LEGEND = (("simulation object", SIM_COLOR), ("desired trajectory", (0.85, 0.85, 0.85)),
-          ("matched frame's trajectory", MATCHED_COLOR), ("foot contact", CONTACT_COLOR),
-          ("locked", LOCKED_COLOR), ("pose features", FEATURE_COLOR), ("ghost = matched pose", (0.75, 0.75, 0.8)))
-
-
-class ViewportPanel:
+class ViewportPanel(Panel):
     """The 3D view. GL objects are created in ``init_gl`` after dearpygui's first frame."""
+    key = "viewport"
 
     TOGGLES = (("ghost", "Ghost", True), ("trajectory", "Trajectory", True), ("matched", "Matched traj.", True),
                ("contacts", "Contacts", True), ("features", "Features", True), ("trail", "Trail", True))
 
-    def __init__(self, dpg, studio):
-        self.dpg = dpg
-        self.studio = studio
-        self.tag = window_tag("viewport")
-        self.ctx = None
+    def __init__(self, ctx: PanelContext, samples: int = -1, render_scale: float = 1.0):
+        super().__init__(ctx)
+        self.gl = None
         self.renderer = None
         self.scene = None
         self.camera = None
@@ -192,20 +81,20 @@ class ViewportPanel:
         self.gl_error = None
         self._texture_counter = 0
         self._legend_items: list[str] = []
-        self.samples = -1          # -1: auto (4x MSAA on a GPU, none on software GL)
-        self.render_scale = 1.0    # 3D image resolution / displayed size
+        self._inspected_shown = "mm"
+        self.samples = samples             # -1: auto (4x MSAA on a GPU, none on software GL)
+        self.render_scale = render_scale   # 3D image resolution / displayed size
         self.render_size = (0, 0)
         self.gl_renderer = ""
 
     # -- items ------------------------------------------------------------------------------
     def build(self, parent_window_kwargs: dict) -> None:
         dpg = self.dpg
-        with dpg.window(tag=self.tag, label="3D Viewport", no_scrollbar=True, **parent_window_kwargs):
+        with self.window(parent_window_kwargs, no_scrollbar=True):
             with dpg.group(horizontal=True):
                 dpg.add_text("Inspect:")
                 dpg.add_radio_button([SHORT[n] for n in COLORS], tag="vp_inspect", horizontal=True,
-                                     default_value=SHORT.get(self.studio.inspected, self.studio.inspected),
-                                     callback=self._on_inspect)
+                                     default_value=SHORT[self._inspected_shown], callback=self._on_inspect)
                 dpg.add_checkbox(label="Side by side", tag="vp_side", default_value=self.side_by_side,
                                  callback=lambda s, a: setattr(self, "side_by_side", bool(a)))
                 dpg.add_checkbox(label="Follow", tag="vp_follow", default_value=self.follow,
@@ -222,50 +111,57 @@ class ViewportPanel:
     def _on_inspect(self, sender, value):
         for name in COLORS:
             if SHORT[name] == value:
-                self.studio.set_inspected(name)
-        self.dpg.set_value("vp_inspect", SHORT.get(self.studio.inspected, "MM"))
+                self.ctx.actions.set_inspected(name)
 
     def _on_toggle(self, sender, value, key):
         self.show[key] = bool(value)
+
+    def toggle_follow(self) -> None:
+        self.follow = not self.follow
+        self.dpg.set_value("vp_follow", self.follow)
+
+    def render_info(self) -> str:
+        return (f"3D {self.render_size[0]}x{self.render_size[1]} {max(self.samples, 0)}x MSAA "
+                f"({self.gl_renderer[:24]})")
 
     # -- GL -----------------------------------------------------------------------------------
     def init_gl(self) -> None:
         import viewer
 
         try:
-            self.ctx = viewer.attach_current_context()
+            self.gl = viewer.attach_current_context()
         except Exception as e:
             self.gl_error = f"3D view unavailable: {e}"
             raise
         self.viewer = viewer
         self.scene = viewer.Scene(background=(0.13, 0.14, 0.17))
-        self.ground = viewer.Ground(self.ctx, size_m=60.0, tile_m=1.0)
+        self.ground = viewer.Ground(self.gl, size_m=60.0, tile_m=1.0)
         self.scene.add(self.ground)
-        parents = self.studio.session.db.parents
-        for name in self.studio.session.names:
-            d = CharacterDrawing(viewer, self.ctx, parents, COLORS.get(name, (0.8, 0.8, 0.8)))
+        parents = self.ctx.engine.db.parents
+        for name in self.ctx.engine.controller_names():
+            d = CharacterDrawing(viewer, self.gl, parents, COLORS.get(name, (0.8, 0.8, 0.8)))
             self.drawings[name] = d
             self.scene.add(*d.all())
-        self.batch = MarkerBatch(viewer, self.ctx)
+        self.batch = MarkerBatch(viewer, self.gl)
         self.scene.add(*self.batch.renderables())
         self.reference_skeleton = None
         self.camera = viewer.OrbitCamera(target=np.array([0.8, 0.8, 0.0]), distance=4.6, yaw_deg=35.0,
                                          pitch_deg=16.0)
-        self.gl_renderer = str(self.ctx.info.get("GL_RENDERER", ""))
+        self.gl_renderer = str(self.gl.info.get("GL_RENDERER", ""))
         if self.samples < 0:  # auto: multisampling costs several times the whole scene on software GL
             self.samples = 0 if is_software_renderer(self.gl_renderer) else 4
-        self.renderer = viewer.Renderer(self.ctx, 64, 64, samples=self.samples)
+        self.renderer = viewer.Renderer(self.gl, 64, 64, samples=self.samples)
 
     def add_controller(self, name: str) -> None:
         """A controller appeared (e.g. LMM weights loaded at run time)."""
-        if self.ctx is None or name in self.drawings:
+        if self.gl is None or name in self.drawings:
             return
-        d = CharacterDrawing(self.viewer, self.ctx, self.studio.session.db.parents, COLORS.get(name, (0.8, 0.8, 0.8)))
+        d = CharacterDrawing(self.viewer, self.gl, self.ctx.engine.db.parents, COLORS.get(name, (0.8, 0.8, 0.8)))
         self.drawings[name] = d
         self.scene.add(*d.all())
 
     def set_reference(self, clip) -> None:
-        if self.ctx is None:
+        if self.gl is None:
             self.reference = clip
             return
         if self.reference_skeleton is not None:
@@ -274,7 +170,7 @@ class ViewportPanel:
             self.reference_skeleton = None
         self.reference = clip
         if clip is not None:
-            self.reference_skeleton = self.viewer.Skeleton(self.ctx, clip.parents, color=(0.7, 0.72, 0.75),
+            self.reference_skeleton = self.viewer.Skeleton(self.gl, clip.parents, color=(0.7, 0.72, 0.75),
                                                            joint_radius=0.024, bone_radius=0.016)
             self.scene.add(self.reference_skeleton)
 
@@ -298,7 +194,7 @@ class ViewportPanel:
         self.tex_array[..., 3] = 1.0
         self.texture = f"vp_texture_{self._texture_counter}"
         dpg.add_raw_texture(rw, rh, self.tex_array, format=dpg.mvFormat_Float_rgba, tag=self.texture,
-                            parent="studio_textures")
+                            parent="texture_registry")
         dpg.configure_item("vp_drawlist", width=w, height=h)
         if dpg.does_item_exist("vp_image"):
             dpg.configure_item("vp_image", texture_tag=self.texture, pmax=(w, h))
@@ -349,10 +245,9 @@ class ViewportPanel:
                 dx, dy = mouse[0] - self.last_mouse[0], mouse[1] - self.last_mouse[1]
                 self.last_mouse = mouse
                 if dx or dy:
-                    manager = self.studio.input
-                    if self.drag == "left" and manager is not None:
-                        # the input layer owns the azimuth (sticks are camera relative): feed it the turn
-                        manager.add_camera_orbit(float(np.radians(-dx * 0.4)))
+                    if self.drag == "left":
+                        # the input layer owns the azimuth (sticks are camera relative): ask it to turn
+                        self.ctx.actions.orbit_camera(float(np.radians(-dx * 0.4)))
                         self.camera.orbit(0.0, dy)
                     else:
                         self.viewer.apply_drag(self.camera, self.drag, dx, dy, max(self.size[1], 1))
@@ -362,16 +257,6 @@ class ViewportPanel:
         if self.wheel:
             self.viewer.apply_scroll(self.camera, self.wheel)
             self.wheel = 0.0
-
-    def turn_camera(self, degrees: float) -> None:
-        if self.camera is not None:
-            self.camera.yaw_deg = (self.camera.yaw_deg + degrees) % 360.0
-
-    def camera_azimuth(self) -> float:
-        """The camera's azimuth in the input convention (0: looking along +Z)."""
-        if self.camera is None:
-            return 0.0
-        return float(np.radians(self.camera.yaw_deg) + np.pi)
 
     # -- per frame ----------------------------------------------------------------------------
     def offset_of(self, name: str) -> np.ndarray:
@@ -387,8 +272,11 @@ class ViewportPanel:
         import time
 
         self._ensure_size()
+        if view.inspected != self._inspected_shown:
+            self._inspected_shown = view.inspected
+            self.dpg.set_value("vp_inspect", SHORT.get(view.inspected, view.inspected))
         self._mouse()
-        session = self.studio.session
+        self.camera.yaw_deg = yaw_deg_from_azimuth(view.camera_azimuth)
         tick = view.tick
         roots = []
         self.drawn = {"tick": view.tick_number, "roots": {}, "offsets": {}}
@@ -417,74 +305,19 @@ class ViewportPanel:
         t1 = time.perf_counter()
         self.renderer.read(dtype=np.float32, out=self.tex_array, flip=False)
         t2 = time.perf_counter()
-        self.ctx.detect_framebuffer(0).use()
+        self.gl.detect_framebuffer(0).use()
         self.render_ms = (t1 - t0) * 1e3
         self.readback_ms = (t2 - t1) * 1e3
 
     def _update_character(self, d: CharacterDrawing, name: str, snap, off, view: View) -> None:
-        b = self.batch
-        pose = snap.pose
-        g = np.asarray(pose.global_positions, np.float64)
-        d.skeleton.visible = True
-        d.skeleton.update(g + off)
-        d.ghost.visible = self.show["ghost"]
-        if self.show["ghost"]:
-            d.ghost.update(np.asarray(snap.matched_pose_positions, np.float64) + off)
-        lift = np.array([0.0, 0.02, 0.0])
-        # simulation object and its predicted trajectory
-        if self.show["trajectory"]:
-            sim = np.asarray(snap.simulation_position, np.float64) + off + lift
-            traj = np.asarray(snap.trajectory_positions, np.float64) + off + lift
-            b.add_polyline(np.vstack([sim[None], traj]), d.traj_color)
-            b.add_spheres(traj, 0.045, d.traj_color)
-            dirs = quat.to_matrix(np.asarray(snap.trajectory_rotations, np.float64))[..., :, 2] * 0.35  # +Z axis
-            b.add_arrows(traj, dirs, d.traj_color)
-            b.add_spheres(sim, 0.06, SIM_COLOR)
-            sim_dir = quat.to_matrix(np.asarray(snap.simulation_rotation, np.float64))[:, 2] * 0.5
-            b.add_arrows(np.array([sim, sim]), np.array([sim_dir, np.asarray(snap.desired_velocity) * 0.25]),
-                         SIM_COLOR)
-        features = self._features_of(name)
-        root_pos, root_rot = g[0], np.asarray(pose.global_rotations[0], np.float64)
-        # where the matched frame's own future goes (its features, placed at the character)
-        if self.show["matched"] and features is not None:
-            m = feature_markers(features, snap.matched_features, root_pos, root_rot, {})
-            up = off + np.array([0.0, 0.035, 0.0])
-            b.add_spheres(m["traj"] + up, 0.028, MATCHED_COLOR)
-            n = min(len(m["traj"]), len(m["traj_dirs"]))
-            b.add_arrows(m["traj"][:n] + up, m["traj_dirs"][:n] * 0.28, MATCHED_COLOR)
-        # the pose features of the playing frame: foot positions and foot/hip velocities
-        if self.show["features"] and features is not None:
-            db = self.studio.session.db
-            bones = {}
-            for ch in features.layout:
-                if ch.bone:
-                    try:
-                        bones[ch.bone] = g[db.bone(ch.bone)]
-                    except KeyError:
-                        pass
-            m = feature_markers(features, snap.current_features, root_pos, root_rot, bones)
-            b.add_spheres(m["points"] + off, 0.035, FEATURE_COLOR)
-            o, v = m["arrows"]
-            b.add_arrows(o + off, v, FEATURE_COLOR)
-        if self.show["contacts"]:
-            db = self.studio.session.db
-            toes = g[[db.bone("left_toe"), db.bone("right_toe")]]
-            contacts = np.asarray(snap.foot_contacts, bool)
-            locked = np.asarray(snap.foot_locked, bool)
-            for i in range(2):
-                if contacts[i]:
-                    b.add_spheres(toes[i] + off, 0.05, LOCKED_COLOR if locked[i] else CONTACT_COLOR)
+        trail = None
         if self.show["trail"]:
-            n = int(TRAIL_SECONDS / self.studio.session.dt)
+            n = int(TRAIL_SECONDS / self.ctx.engine.dt)
             trail = view.history.window(name, "root_position", view.tick_number, n)
-            if trail.ndim == 2:
-                trail = trail[np.isfinite(trail).all(axis=1)]
-                if len(trail) >= 2:
-                    b.add_polyline(trail[::3] + off + np.array([0.0, 0.01, 0.0]), d.trail_color)
+        draw_character(d, self.batch, snap, off, self.show, self._features_of(name), self.ctx.engine.db, trail)
 
     def _features_of(self, name: str):
-        c = self.studio.session.controllers.get(name)
-        return getattr(c, "features", None) or self.studio.session.features
+        return self.ctx.engine.features_of(name)
 
     def _labels(self, view: View, roots) -> None:
         dpg = self.dpg
@@ -492,6 +325,7 @@ class ViewportPanel:
         vp = self.camera.view_projection(w / max(h, 1))
         from viewer.camera import project_points
 
+        anchors, sizes, texts = {}, {}, {}
         for name in COLORS:
             tag = f"vp_label_{name}"
             if not dpg.does_item_exist(tag):
@@ -504,15 +338,21 @@ class ViewportPanel:
             p = np.asarray(snap.pose.global_positions[head], np.float64) + self.offset_of(name) + [0, 0.25, 0]
             px, _, front = project_points(p[None], vp, w, h)
             if front[0] and 0 <= px[0, 0] < w and 0 <= px[0, 1] < h:
-                label = SHORT.get(name, name) + (" (inspected)" if name == view.inspected and len(self.drawings) > 1 else "")
-                dpg.configure_item(tag, show=True, pos=(float(px[0, 0]) - 12, float(px[0, 1]) - 18), text=label)
+                texts[name] = SHORT.get(name, name) + (" (inspected)" if name == view.inspected
+                                                       and len(self.drawings) > 1 else "")
+                anchors[name] = (float(px[0, 0]) - 12, float(px[0, 1]) - 18)
+                sizes[name] = (LABEL_CHAR_PX * len(texts[name]), LABEL_HEIGHT_PX)
             else:
                 dpg.configure_item(tag, show=False)
-        state = "LIVE" if view.live else ("PAUSED" if view.paused else "REWIND")
+        placed = separate_labels(anchors, sizes)
+        for name, pos in placed.items():
+            dpg.configure_item(f"vp_label_{name}", show=True, pos=pos, text=texts[name])
+        self.drawn["labels"] = {n: [float(pos[0]), float(pos[1]), *map(float, sizes[n])] for n, pos in placed.items()}
+        state = view.mode
         t = view.tick.time_s if view.tick is not None else 0.0
         text = f"{state}  tick {view.tick_number}  t={t:6.2f} s"
         if not view.live:
-            text += f"   ({(view.tick_number - view.history.newest_tick) * self.studio.session.dt:+.2f} s)"
+            text += f"   ({(view.tick_number - view.history.newest_tick) * self.ctx.engine.dt:+.2f} s)"
         dpg.configure_item("vp_overlay", text=text)
 
     def state(self) -> dict:

@@ -8,15 +8,19 @@ import numpy as np
 import pytest
 
 from app.history import History, Tick
-from app.panels import layouts
-from app.panels.common import View, cost_color, decimate, fmt_bytes, overlapping, short_channel_name
+from app import layout_files as layouts
+from app.frame_times import per_tick_ms
+from app.panels.base import View
+from app.panels.common import cost_color, decimate, fmt_bytes, overlapping, short_channel_name
+from app.panels.menu import hidden_note
 from app.panels.features import bar_layout, bar_values, channel_errors
 from app.panels.latent import diverging_lut, heat_image, latent_scale
 from app.panels.search import candidate_rows, column_fractions, frame_label, rolling_agreement, sort_rows
-from app.panels.stats import FrameTimes
+from app.frame_times import FrameTimes
 from app.panels.timeline import scrub_target
-from app.panels.tuning import apply_widget_value, pretty_label, widget_specs
-from app.panels.viewport import feature_markers, is_software_renderer
+from app.panels.tuning import pretty_label, widget_specs
+from app.panels.viewport import is_software_renderer, separate_labels
+from app.panels.viewport_scene import feature_markers
 from app.session import RecordingResult, Session, load_reference_clip, recording_paths
 from lmm.controller import Candidates, InputState
 from lmm.factory import make_controllers
@@ -53,7 +57,7 @@ def test_bar_layout_groups_dimensions_by_channel(dbf):
 def _view(snaps: dict, inspected="mm"):
     h = History(10)
     t = Tick(1, 1 / 60, snaps)
-    return View(tick=t, live=True, paused=False, inspected=inspected, history=h, session=None)
+    return View(tick=t, history=h, live=True, paused=False, inspected=inspected)
 
 
 def test_bar_values_take_query_matched_and_projected():
@@ -154,15 +158,16 @@ def test_every_tunable_has_a_widget():
 
 
 def test_widget_values_reach_the_tuning_object():
+    # what a widget's callback does: Tuning.set, which validates (needs H1's Tuning.set)
     t = Tuning()
-    apply_widget_value(t, "run_forward_speed_m_s", None, 2.25)
-    apply_widget_value(t, "top_k", None, 12.0)
-    apply_widget_value(t, "ik_enabled", None, False)
-    apply_widget_value(t, "feature_weights", "hip_velocity", 0.0)
+    t.set("run_forward_speed_m_s", 2.25)
+    t.set("top_k", 12)
+    t.set("ik_enabled", False)
+    t.set("feature_weights", 0.0, channel="hip_velocity")
     assert t.run_forward_speed_m_s == 2.25 and t.top_k == 12 and isinstance(t.top_k, int)
     assert t.ik_enabled is False and t.feature_weights["hip_velocity"] == 0.0
-    with pytest.raises(TuningError):
-        apply_widget_value(t, "inertialization_halflife_s", None, 5.0)
+    with pytest.raises(TuningError, match="inertialization_halflife_s"):
+        t.set("inertialization_halflife_s", 5.0)
     t.validate()
     assert pretty_label("simulation_velocity_halflife_s") == "velocity halflife"
     assert short_channel_name("left_foot_velocity") == "L foot vel"
@@ -405,3 +410,53 @@ def test_replaying_a_recorded_input_csv_reproduces_the_motion(dbf, tmp_path):
     again = [s.step(s.input_for_next_tick(InputState())).snapshots["mm"].pose.global_positions[0] for _ in range(120)]
     assert np.allclose(np.array(roots), np.array(again), atol=1e-5)
     assert np.linalg.norm(roots[-1] - roots[0]) > 1.0
+
+
+# -- new-user fixes -------------------------------------------------------------------------------
+
+def _rows(totals):
+    return [{"total": float(v), "channels": [float(v)]} for v in totals]
+
+
+def test_equal_costs_get_equal_colours():
+    # values that read the same (3 decimals) are the same colour; all equal: all green
+    same = _rows([1.25, 1.25 + 1e-7, 1.25 + 2e-7, 1.25])
+    assert column_fractions(same, "total") == [0.0] * 4
+    assert len({cost_color(f) for f in column_fractions(same, "total")}) == 1
+    assert cost_color(0.0)[1] > cost_color(0.0)[0]                       # green
+    spread = _rows([1.0, 2.0, 2.0, 3.0])
+    f = column_fractions(spread, "total")
+    assert f == [0.0, 0.5, 0.5, 1.0] and cost_color(f[1]) == cost_color(f[2])
+    assert column_fractions(_rows([1.0, float("nan")]), "ch0") == [0.0, 1.0]
+
+
+def test_character_labels_do_not_overlap():
+    anchors = {"mm": (100.0, 50.0), "lmm": (110.0, 52.0), "far": (400.0, 50.0)}
+    sizes = {"mm": (120.0, 17.0), "lmm": (30.0, 17.0), "far": (30.0, 17.0)}
+    placed = separate_labels(anchors, sizes)
+    assert placed["mm"] == (100.0, 50.0) and placed["far"] == (400.0, 50.0)    # not moved when free
+
+    def overlap(a, b):
+        (ax, ay), (bx, by) = placed[a], placed[b]
+        (aw, ah), (bw, bh) = sizes[a], sizes[b]
+        return ax < bx + bw and bx < ax + aw and ay < by + bh and by < ay + ah
+
+    assert not overlap("mm", "lmm") and placed["lmm"][1] >= 50.0 + 17.0
+    same = separate_labels({"a": (0, 0), "b": (0, 0), "c": (0, 0)}, {k: (50, 10) for k in "abc"})
+    assert sorted(p[1] for p in same.values()) == [0.0, 12.0, 24.0]
+
+
+def test_controller_time_is_per_tick_and_absent_without_ticks():
+    assert per_tick_ms([], ["mm"]) == {}                              # no tick finished: no zero added
+    finished = [(None, {"mm": 2.0, "lmm": 1.0}), (None, {"mm": 4.0, "lmm": 3.0})]
+    assert per_tick_ms(finished, ["mm", "lmm"]) == {"mm": 3.0, "lmm": 2.0}
+    ft = FrameTimes()
+    for i in range(10):   # a frame rate above the tick rate: half the frames finish no tick
+        ft.add(5.0, per_tick_ms(finished if i % 2 else [], ["mm"]))
+    assert ft.median("mm") == 3.0
+
+
+def test_hidden_windows_note_names_them_and_the_menu():
+    assert hidden_note(()) == ""
+    note = hidden_note(("stats", "tuning"))
+    assert "Tuning" in note and "Stats" in note and "Windows menu" in note

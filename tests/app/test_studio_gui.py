@@ -12,7 +12,7 @@ import time
 import numpy as np
 import pytest
 
-from app.panels import layouts
+from app import layout_files as layouts
 
 from studio_testutil import CORPUS, ROOT
 

@@ -21,11 +21,11 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .common import WINDOWS
+from .panels.common import WINDOWS
 
 REFERENCE_SIZE = (1600, 900)
 MENU_HEIGHT = 22
-LAYOUT_DIR = Path(__file__).resolve().parents[2] / "layouts"
+LAYOUT_DIR = Path(__file__).resolve().parents[1] / "layouts"
 
 # name -> window key -> (x, y, width, height) at 1600x900, or None for hidden
 BUILTIN: dict[str, dict[str, tuple[int, int, int, int] | None]] = {

@@ -1,0 +1,115 @@
+"""What the user (menus, panels, test scripts) can do to the simulation: replay input, open a
+reference clip, load presets and weights, reset, inspect a controller, record.
+
+:class:`SessionActions` is a part of :class:`app.studio.Studio`; it uses the studio's ``session``,
+``playback``, ``errors``, ``viewport``, ``panels`` and ``dump``. Each action reports a bad file in the
+error dialog and returns False instead of raising.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+from lmm.factory import make_controller
+
+from .session import load_reference_clip
+
+
+class SessionActions:
+    inspected = "mm"
+    lmm_problem: str | None = None
+    last_recording = ""            # what the last finished recording wrote, or why it wrote nothing
+
+    def open_input(self, spec: str) -> bool:
+        from lmm.data.inputs import InputError, open_input
+
+        try:
+            log = open_input(spec)
+        except (InputError, OSError, ValueError) as e:
+            self.errors.show("Input", str(e))
+            return False
+        self.session.replay(log)
+        self.playback.go_live()
+        return True
+
+    def live_input(self) -> None:
+        self.session.stop_replay()
+
+    def reset_characters(self) -> None:
+        self.session.reset()
+        self.playback.go_live()
+
+    def open_reference(self, path: str) -> bool:
+        from lmm.data.bvh import BVHError
+
+        try:
+            clip = load_reference_clip(path)
+        except (BVHError, OSError, EOFError, ValueError) as e:
+            self.errors.show("Reference BVH", str(e) if str(path) in str(e) else f"{path}: {e}")
+            return False
+        except Exception as e:
+            self.errors.show("Reference BVH", f"{path}: cannot load: {type(e).__name__}: {e}")
+            return False
+        self.viewport.set_reference(clip)
+        return True
+
+    def load_preset(self, path: str) -> bool:
+        from lmm.tuning import TuningError
+
+        try:
+            self.panels["tuning"].load_preset(path)
+        except (TuningError, OSError, ValueError) as e:
+            self.errors.show("Tuning preset", str(e) if str(path) in str(e) else f"{path}: {e}")
+            return False
+        return True
+
+    def save_preset(self, path: str) -> bool:
+        try:
+            self.session.tuning.save(path)
+        except OSError as e:
+            self.errors.show("Tuning preset", f"{path}: cannot write ({e.strerror})")
+            return False
+        return True
+
+    def load_weights(self, path: str) -> bool:
+        s = self.session
+        try:
+            controller = make_controller("lmm", s.db, s.features, s.tuning, weights=path)
+        except Exception as e:
+            self.errors.show("LMM weights", str(e) if str(path) in str(e) else f"{path}: {e}")
+            return False
+        s.controllers["lmm"] = controller
+        self.lmm_problem = None
+        s.start_latent_table(path)
+        self.viewport.add_controller("lmm")
+        self.reset_characters()
+        return True
+
+    def set_inspected(self, name: str) -> None:
+        if name in self.session.controllers:
+            self.inspected = name
+
+    def start_recording(self, path: str, which) -> bool:
+        """Record the chosen controllers (never over an earlier take: the session numbers the files)."""
+        try:
+            paths = self.session.start_recording(path, tuple(which))
+        except (OSError, ValueError) as e:
+            self.errors.show("Recording", f"{path}: {e}")
+            return False
+        self.last_recording = "recording to " + ", ".join(p.name for p in paths.values())
+        if self.dump is not None:
+            self.dump.data["recordings"].append({"started": self.frame_index,
+                                                 "paths": {k: str(v) for k, v in paths.items()}})
+        return True
+
+    def stop_recording(self) -> None:
+        try:
+            result = self.session.stop_recording()
+        except Exception as e:
+            self.errors.show("Recording", f"cannot finish the recording: {e}")
+            return
+        self.last_recording = result.message
+        if self.dump is not None and self.dump.data["recordings"]:
+            self.dump.data["recordings"][-1].update(
+                written={k: str(v) for k, v in result.paths.items()}, stopped=self.frame_index,
+                frames=result.frames, message=result.message,
+                exists={k: Path(v).exists() for k, v in result.paths.items()})

@@ -1,0 +1,65 @@
+"""Start-up of the studio's engine side: the options, the database, the controllers and the session
+(no GUI)."""
+from __future__ import annotations
+
+import sys
+from dataclasses import dataclass
+from typing import Callable
+
+from lmm.factory import make_controllers
+
+from .session import Session
+
+
+@dataclass
+class StudioOptions:
+    manifest: str | None = None
+    weights: str | None = None
+    layout: str | None = None
+    input: str | None = None
+    frames: int | None = None
+    screenshot: str | None = None
+    width: int = 1600
+    height: int = 900
+    lmm: bool = True
+    script: str | None = None
+    dump_state: str | None = None
+    fixed_step: bool = False
+    gamepads: bool = True
+    save_layout: bool = True
+    write_layouts: str | None = None
+    samples: int = -1
+    render_scale: float = 1.0
+    cache: str | None = None
+
+
+def load_session(opts: StudioOptions, report_error: Callable[[str, str], None]) -> tuple[Session, str | None]:
+    """The session for ``opts`` and why LMM is not running (None when it is). A broken manifest opens
+    the default database; a problem with the LMM weights is reported and the studio runs MM only."""
+    from lmm.data.database import load_or_build
+    from lmm.features import build_features
+    from lmm.tuning import Tuning
+
+    try:
+        db, _ = load_or_build(opts.manifest, cache_dir=opts.cache)
+    except Exception as e:  # a broken manifest or BVH file: say so and open the default data
+        if opts.manifest is None:
+            raise
+        report_error("Database", f"{e} - opened the default database instead")
+        opts.manifest = None
+        db, _ = load_or_build(None, cache_dir=opts.cache)
+    features = build_features(db)
+    tuning = Tuning()
+    controllers, problems = make_controllers(db, features, tuning, weights=opts.weights, with_lmm=opts.lmm)
+    lmm_problem = None
+    for p, serious in problems:
+        lmm_problem = p
+        if serious:
+            report_error("Learned motion matching", p)
+        else:
+            print(f"lmm-studio: {p}", file=sys.stderr)
+    if not opts.lmm:
+        lmm_problem = "LMM is off (--no-lmm)"
+    session = Session(db, features, tuning, controllers)
+    session.start_latent_table(opts.weights)
+    return session, lmm_problem

@@ -1,0 +1,133 @@
+"""Window layouts while the studio runs: choosing the one to start with, applying one (moving, sizing,
+showing and hiding the panels' windows), switching and saving. The file format is
+:mod:`app.layout_files`."""
+from __future__ import annotations
+
+import shutil
+import tempfile
+from pathlib import Path
+from typing import Callable
+
+from . import layout_files
+from .layout_files import Layout, LayoutError
+from .panels.common import WINDOWS, window_tag
+
+FALLBACK_RECT = {"pos": (40, 60), "size": (400, 300)}
+
+
+class LayoutManager:
+    def __init__(self, dpg, report_error: Callable[[str, str], None], default_size: tuple[int, int]):
+        self.dpg = dpg
+        self.report_error = report_error
+        self.default_size = default_size
+        self.layout: Layout | None = None
+        self.switches: list[dict] = []          # {"frame", "layout"} for the test dump
+        self._working_ini: Path | None = None
+
+    @property
+    def name(self) -> str:
+        return self.layout.name if self.layout is not None else "default"
+
+    # -- start-up ------------------------------------------------------------------------------
+    def choose(self, requested: str | None) -> str:
+        """Pick the start layout (``requested``, else the user's last one, else the default) and return
+        the ini file to hand dearpygui: a private copy, since dearpygui may write it back while running."""
+        candidates = []
+        if requested:
+            candidates.append(("--layout", requested))
+        elif layout_files.user_layout_path().is_file():
+            candidates.append(("user", str(layout_files.user_layout_path())))
+        candidates.append(("default", "default"))
+        self.layout = None
+        for origin, spec in candidates:
+            try:
+                self.layout = layout_files.load(spec)
+                if origin == "user":
+                    self.layout.name = "user"
+                break
+            except LayoutError as e:
+                self.report_error("Layout", f"{e} - using the default layout instead")
+        if self.layout is None:
+            self.layout = layout_files.from_builtin("default")
+        work = Path(tempfile.mkdtemp(prefix="lmm-studio-")) / "session.ini"
+        text = ""
+        if self.layout.path is not None:
+            text = layout_files.strip_extra_section(Path(self.layout.path).read_text(encoding="utf-8",
+                                                                                      errors="replace"))
+        work.write_text(text, encoding="utf-8")
+        self._working_ini = work
+        return str(work)
+
+    def window_kwargs(self, key: str) -> dict:
+        """Where a panel's window starts (before the ini file, if any, places it)."""
+        code = layout_files.from_builtin("default")
+        rect = self.layout.windows.get(key) or code.windows.get(key) or FALLBACK_RECT
+        w, h = rect["size"] or FALLBACK_RECT["size"]
+        return dict(pos=rect["pos"] or FALLBACK_RECT["pos"], width=w, height=h,
+                    show=key not in self.layout.hidden, no_collapse=False)
+
+    def settle(self) -> None:
+        """After the first frame: scale the start layout to the window unless dearpygui restored it."""
+        if self.layout.path is None or tuple(self.layout.reference_size) != self._viewport_size():
+            self.apply(self.layout, at_start=True)
+
+    def close(self) -> None:
+        if self._working_ini is not None:
+            shutil.rmtree(self._working_ini.parent, ignore_errors=True)
+
+    # -- while running -------------------------------------------------------------------------
+    def _viewport_size(self) -> tuple[int, int]:
+        dpg = self.dpg
+        return (dpg.get_viewport_client_width() or self.default_size[0],
+                dpg.get_viewport_client_height() or self.default_size[1])
+
+    def switch(self, name_or_path: str, frame: int = -1) -> bool:
+        try:
+            layout = layout_files.load(name_or_path)
+        except LayoutError as e:
+            self.report_error("Layout", str(e))
+            return False
+        self.apply(layout)
+        self.switches.append({"frame": frame, "layout": layout.name})
+        return True
+
+    def apply(self, layout: Layout, at_start: bool = False) -> None:
+        dpg = self.dpg
+        viewport = self._viewport_size()
+        for key in WINDOWS:
+            tag = window_tag(key)
+            rect = layout.windows.get(key)
+            dpg.configure_item(tag, show=key not in layout.hidden and rect is not None)
+            if rect is not None and rect.get("docked") and at_start:
+                continue  # docked at start: dearpygui restored the dock node from the file already
+            if rect is not None and rect.get("pos") is not None and rect.get("size") is not None:
+                pos, size = layout_files.scaled(rect["pos"], rect["size"], layout.reference_size, viewport)
+                dpg.set_item_pos(tag, pos)
+                dpg.configure_item(tag, width=size[0], height=size[1])
+        self.layout = layout
+
+    def save(self, path: str) -> bool:
+        dpg = self.dpg
+        try:
+            Path(path).parent.mkdir(parents=True, exist_ok=True)
+            dpg.save_init_file(str(path))
+            text = layout_files.strip_extra_section(Path(path).read_text(encoding="utf-8"))
+            text += layout_files.extra_section(self.hidden(), self._viewport_size())
+            Path(path).write_text(text, encoding="utf-8")
+        except OSError as e:
+            self.report_error("Layout", f"{path}: cannot write ({e.strerror or e})")
+            return False
+        return True
+
+    def show_window(self, key: str, show: bool) -> None:
+        self.dpg.configure_item(window_tag(key), show=bool(show))
+
+    def hidden(self) -> list[str]:
+        """Keys of the windows not shown now."""
+        return [k for k in WINDOWS if not self.dpg.is_item_shown(window_tag(k))]
+
+    def window_state(self) -> dict:
+        dpg = self.dpg
+        return {key: {"pos": list(dpg.get_item_pos(window_tag(key))),
+                      "size": [dpg.get_item_width(window_tag(key)), dpg.get_item_height(window_tag(key))],
+                      "shown": bool(dpg.is_item_shown(window_tag(key)))} for key in WINDOWS}

@@ -1,0 +1,151 @@
+"""What a panel is and what it may touch.
+
+A panel gets a :class:`PanelContext` once (the tuning it may write, the named :class:`Actions` it may
+call, the theme, and read-only :class:`EngineFacts`) and a typed :class:`View` of the displayed tick
+every frame. It never sees the studio, the session or another panel.
+
+A panel subclasses :class:`Panel` and implements ``build(window_kwargs)`` (create every item once, in
+``self.window(window_kwargs)``), ``update(view)`` (only ``set_value``/``configure_item`` on its own items)
+and, when it has something to report, fills ``self.last`` (what it shows, as plain data, for the test
+dump that ``state()`` returns).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, Callable
+
+from app.frame_times import FrameTimes
+from app.history import History, Tick
+from lmm.tuning import Tuning
+
+from .common import WINDOWS, TextCache, window_tag
+
+if TYPE_CHECKING:
+    from app.theme import Theme
+
+
+@dataclass(frozen=True)
+class Actions:
+    """Everything a panel may ask the studio to do, by name."""
+    pause: Callable[[], None]
+    resume: Callable[[], None]
+    toggle_pause: Callable[[], None]
+    step: Callable[[int], None]                         # n ticks (negative: back)
+    scrub_to: Callable[[int], None]                     # show that tick (pauses)
+    go_live: Callable[[], None]
+    start_recording: Callable[[str, tuple], bool]       # base path, controllers
+    stop_recording: Callable[[], None]
+    open_dialog: Callable[[str], None]                  # a file dialog kind (see app.dialogs.DIALOGS)
+    open_input: Callable[[str], bool]                   # replay a CSV or builtin:NAME
+    live_input: Callable[[], None]
+    reset_characters: Callable[[], None]
+    set_inspected: Callable[[str], None]                # controller the single-controller panels show
+    show_window: Callable[[str, bool], None]
+    switch_layout: Callable[[str], bool]                # built-in name or .ini path
+    orbit_camera: Callable[[float], None]               # turn the camera azimuth by radians
+    show_error: Callable[[str, str], None]              # title, message
+    show_info: Callable[[str, str], None]               # title, message (not an error)
+    quit: Callable[[], None]
+
+
+@dataclass(frozen=True)
+class EngineFacts:
+    """Read-only facts about the engine that panels label and lay out with."""
+    db: Any                                             # lmm.data.database.Database: frame labels, skeleton
+    features: Any                                       # lmm.features.Features of the database
+    dt: float                                           # seconds per tick
+    latent_dims: int                                    # LMM latent size (32 without networks)
+    controller_names: Callable[[], list[str]]           # running controllers (LMM may appear later)
+    features_of: Callable[[str], Any]                   # the features a controller searches
+    memory: Callable[[], dict]                          # controller -> part -> bytes kept at run time
+
+    @property
+    def channel_names(self) -> list[str]:
+        return list(self.features.names)
+
+
+@dataclass
+class PanelContext:
+    dpg: Any                                            # dearpygui.dearpygui
+    tuning: Tuning                                      # the one object panels write
+    actions: Actions
+    theme: "Theme"
+    engine: EngineFacts
+
+
+@dataclass(frozen=True)
+class RecordingStatus:
+    seconds: float
+    files: tuple[str, ...]                              # file names being written
+
+
+@dataclass
+class View:
+    """What the panels show this frame: the displayed tick (live or scrubbed) and its context."""
+    tick: Tick | None                                   # None before the first tick
+    history: History
+    live: bool
+    paused: bool
+    inspected: str                                      # controller the single-controller panels inspect
+    frame: int = 0                                      # studio frame counter
+    problems: dict[str, str] = field(default_factory=dict)   # controller -> why it is off ("" or absent: ok)
+    latent_status: str = ""                             # why MM's matched latents are missing ("" when shown)
+    frame_times: FrameTimes | None = None
+    render_info: str = ""                               # the 3D view's size, MSAA and GL renderer
+    camera_azimuth: float = 0.0                         # radians, input convention (0: looking along +Z)
+    recording: RecordingStatus | None = None
+    last_recording: str = ""                            # what the last finished recording wrote (or why not)
+    input_name: str = ""                                # replayed log's name ("" for live input)
+    replay_line: str = ""                               # replay progress
+    devices: tuple[str, ...] = ()                       # connected gamepads
+    reference: str = ""                                 # reference BVH shown beside the characters
+    layout: str = ""
+    hidden_windows: tuple[str, ...] = ()                # window keys the layout hides
+
+    @property
+    def mode(self) -> str:
+        return "LIVE" if self.live else ("PAUSED" if self.paused else "REWIND")
+
+    @property
+    def tick_number(self) -> int:
+        return -1 if self.tick is None else int(self.tick.tick)
+
+    def snap(self, name: str | None = None):
+        """The displayed snapshot of ``name`` (default: the inspected controller, else any), or None."""
+        if self.tick is None:
+            return None
+        snaps = self.tick.snapshots
+        name = name or self.inspected
+        if name in snaps:
+            return snaps[name]
+        return next(iter(snaps.values()), None)
+
+    def snap_of(self, name: str):
+        """The displayed snapshot of exactly ``name``, or None when that controller is not running."""
+        return None if self.tick is None else self.tick.snapshots.get(name)
+
+
+class Panel:
+    """A dockable window of the studio. Subclasses set ``key`` (see :data:`app.panels.common.WINDOWS`)."""
+    key = ""
+
+    def __init__(self, ctx: PanelContext):
+        self.ctx = ctx
+        self.dpg = ctx.dpg
+        self.tag = window_tag(self.key)
+        self.title = WINDOWS[self.key][1]
+        self.text = TextCache(ctx.dpg)
+        self.last: dict = {}
+
+    def window(self, window_kwargs: dict, **options):
+        """The panel's window (a context manager), with its fixed id so layout files find it."""
+        return self.dpg.window(tag=self.tag, label=self.title, **options, **window_kwargs)
+
+    def build(self, window_kwargs: dict) -> None:
+        raise NotImplementedError
+
+    def update(self, view: View) -> None:
+        pass
+
+    def state(self) -> dict:
+        return dict(self.last)

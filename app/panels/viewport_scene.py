@@ -1,0 +1,197 @@
+"""What the 3D view draws of a character, as viewer renderables: skeleton and ghost, and every marker
+(trajectories, features, contacts, trails) batched into one sphere, one arrow and one line renderable."""
+from __future__ import annotations
+
+import numpy as np
+
+from lmm import quat
+
+from .common import darker, lighter
+
+
+def feature_markers(features, normalized, root_pos, root_rot, bone_positions: dict) -> dict:
+    """World-space markers of a normalised feature vector, by channel kind.
+
+    Returns ``{"points": (N,3), "arrows": (origins (M,3), vectors (M,3)), "traj": (T,3),
+    "traj_dirs": (T,3)}``: bone positions as points, bone velocities as arrows starting at the
+    bone (``bone_positions[channel.bone]`` when known, else at the feature's own position) scaled to
+    0.1 s of motion, and trajectory points/directions on the ground.
+    """
+    raw = features.denormalize(np.asarray(normalized, np.float32)).astype(np.float64)
+    rot_t = quat.to_matrix(np.asarray(root_rot, np.float64)).T     # row vectors: v @ R^T == R v
+    root = np.asarray(root_pos, np.float64)
+    points, origins, vectors, traj, dirs = [], [], [], [], []
+    positions_by_bone = {}
+    for ch, s in zip(features.layout, features.slices):
+        if ch.kind == "bone_position":
+            p = root + raw[s] @ rot_t
+            points.append(p)
+            positions_by_bone[ch.bone] = p
+    for ch, s in zip(features.layout, features.slices):
+        v = raw[s]
+        if ch.kind == "bone_velocity":
+            start = bone_positions.get(ch.bone, positions_by_bone.get(ch.bone))
+            if start is not None:
+                origins.append(start)
+                vectors.append((v @ rot_t) * 0.1)
+        elif ch.kind.startswith("trajectory"):
+            xz = v.reshape(-1, 2)
+            ground = np.zeros((len(xz), 3))
+            ground[:, 0], ground[:, 2] = xz[:, 0], xz[:, 1]
+            if ch.kind == "trajectory_position":
+                traj.append(root + ground @ rot_t)
+            else:
+                dirs.append(ground @ rot_t)
+    z3 = np.zeros((0, 3))
+    return {"points": np.array(points) if points else z3,
+            "arrows": (np.array(origins) if origins else z3, np.array(vectors) if vectors else z3),
+            "traj": np.concatenate(traj) if traj else z3, "traj_dirs": np.concatenate(dirs) if dirs else z3}
+
+
+class MarkerBatch:
+    """Every marker of every character, gathered per frame and drawn with one sphere, one arrow and
+    one line renderable (few draw calls matter on software GL, where each costs about a millisecond)."""
+
+    def __init__(self, viewer, ctx):
+        self.spheres = viewer.Spheres(ctx, radius=0.04)
+        self.arrows = viewer.Arrows(ctx, shaft_radius=0.011, head_radius=0.032, head_length=0.07)
+        self.lines = viewer.Lines(ctx, width_px=2.5)
+        self.clear()
+
+    def renderables(self):
+        return [self.lines, self.spheres, self.arrows]
+
+    def clear(self) -> None:
+        self._centers, self._radii, self._sphere_colors = [], [], []
+        self._origins, self._vectors, self._arrow_colors = [], [], []
+        self._segments, self._segment_colors = [], []
+
+    def add_spheres(self, centers, radius: float, color) -> None:
+        c = np.asarray(centers, np.float64).reshape(-1, 3)
+        if len(c):
+            self._centers.append(c)
+            self._radii.append(np.full(len(c), radius))
+            self._sphere_colors.append(np.broadcast_to(np.asarray(color, np.float64)[:3], (len(c), 3)))
+
+    def add_arrows(self, origins, vectors, color) -> None:
+        o = np.asarray(origins, np.float64).reshape(-1, 3)
+        v = np.asarray(vectors, np.float64).reshape(-1, 3)
+        n = min(len(o), len(v))
+        if n:
+            self._origins.append(o[:n])
+            self._vectors.append(v[:n])
+            self._arrow_colors.append(np.broadcast_to(np.asarray(color, np.float64)[:3], (n, 3)))
+
+    def add_polyline(self, points, color) -> None:
+        p = np.asarray(points, np.float64).reshape(-1, 3)
+        if len(p) >= 2:
+            seg = np.empty((2 * (len(p) - 1), 3))
+            seg[0::2] = p[:-1]
+            seg[1::2] = p[1:]
+            self._segments.append(seg)
+            self._segment_colors.append(np.broadcast_to(np.asarray(color, np.float64)[:3], (len(seg), 3)))
+
+    def flush(self) -> None:
+        z3 = np.zeros((0, 3))
+        if self._centers:
+            self.spheres.update(np.concatenate(self._centers), np.concatenate(self._radii),
+                                np.concatenate(self._sphere_colors))
+        else:
+            self.spheres.update(z3)
+        if self._origins:
+            self.arrows.update(np.concatenate(self._origins), np.concatenate(self._vectors),
+                               np.concatenate(self._arrow_colors))
+        else:
+            self.arrows.update(z3, z3)
+        if self._segments:
+            self.lines.update(np.concatenate(self._segments), mode="segments",
+                              colors=np.concatenate(self._segment_colors))
+        else:
+            self.lines.update(z3, mode="segments")
+
+
+class CharacterDrawing:
+    """A character's skeleton and ghost; its markers go into the shared :class:`MarkerBatch`."""
+
+    def __init__(self, viewer, ctx, parents, color):
+        self.color = color
+        self.skeleton = viewer.Skeleton(ctx, parents, color=color, joint_radius=0.028, bone_radius=0.02)
+        self.ghost = viewer.Skeleton(ctx, parents, color=lighter(color, 0.55), alpha=0.32,
+                                     joint_radius=0.024, bone_radius=0.017)
+        self.traj_color = lighter(color, 0.35)
+        self.trail_color = darker(color, 0.3)
+
+    def all(self):
+        return [self.skeleton, self.ghost]
+
+    def hide(self) -> None:
+        self.skeleton.visible = False
+        self.ghost.visible = False
+
+
+SIM_COLOR = (0.95, 0.88, 0.3)
+MATCHED_COLOR = (0.9, 0.9, 0.92)
+FEATURE_COLOR = (0.85, 0.4, 0.95)
+CONTACT_COLOR = (0.3, 0.95, 0.4)
+LOCKED_COLOR = (0.2, 0.9, 0.95)
+LEGEND = (("simulation object", SIM_COLOR), ("desired trajectory", (0.85, 0.85, 0.85)),
+          ("matched frame's trajectory", MATCHED_COLOR), ("foot contact", CONTACT_COLOR),
+          ("locked", LOCKED_COLOR), ("pose features", FEATURE_COLOR), ("ghost = matched pose", (0.75, 0.75, 0.8)))
+
+
+def draw_character(d: CharacterDrawing, b: MarkerBatch, snap, off, show: dict, features, db, trail) -> None:
+    """Update a character's skeleton and ghost and add its markers to the batch (``show``: toggle -> on;
+    ``trail``: its recent root positions, or None)."""
+    pose = snap.pose
+    g = np.asarray(pose.global_positions, np.float64)
+    d.skeleton.visible = True
+    d.skeleton.update(g + off)
+    d.ghost.visible = show["ghost"]
+    if show["ghost"]:
+        d.ghost.update(np.asarray(snap.matched_pose_positions, np.float64) + off)
+    lift = np.array([0.0, 0.02, 0.0])
+    # simulation object and its predicted trajectory
+    if show["trajectory"]:
+        sim = np.asarray(snap.simulation_position, np.float64) + off + lift
+        traj = np.asarray(snap.trajectory_positions, np.float64) + off + lift
+        b.add_polyline(np.vstack([sim[None], traj]), d.traj_color)
+        b.add_spheres(traj, 0.045, d.traj_color)
+        dirs = quat.to_matrix(np.asarray(snap.trajectory_rotations, np.float64))[..., :, 2] * 0.35  # +Z axis
+        b.add_arrows(traj, dirs, d.traj_color)
+        b.add_spheres(sim, 0.06, SIM_COLOR)
+        sim_dir = quat.to_matrix(np.asarray(snap.simulation_rotation, np.float64))[:, 2] * 0.5
+        b.add_arrows(np.array([sim, sim]), np.array([sim_dir, np.asarray(snap.desired_velocity) * 0.25]),
+                     SIM_COLOR)
+    root_pos, root_rot = g[0], np.asarray(pose.global_rotations[0], np.float64)
+    # where the matched frame's own future goes (its features, placed at the character)
+    if show["matched"] and features is not None:
+        m = feature_markers(features, snap.matched_features, root_pos, root_rot, {})
+        up = off + np.array([0.0, 0.035, 0.0])
+        b.add_spheres(m["traj"] + up, 0.028, MATCHED_COLOR)
+        n = min(len(m["traj"]), len(m["traj_dirs"]))
+        b.add_arrows(m["traj"][:n] + up, m["traj_dirs"][:n] * 0.28, MATCHED_COLOR)
+    # the pose features of the playing frame: foot positions and foot/hip velocities
+    if show["features"] and features is not None:
+        bones = {}
+        for ch in features.layout:
+            if ch.bone:
+                try:
+                    bones[ch.bone] = g[db.bone(ch.bone)]
+                except KeyError:
+                    pass
+        m = feature_markers(features, snap.current_features, root_pos, root_rot, bones)
+        b.add_spheres(m["points"] + off, 0.035, FEATURE_COLOR)
+        o, v = m["arrows"]
+        b.add_arrows(o + off, v, FEATURE_COLOR)
+    if show["contacts"]:
+        toes = g[[db.bone("left_toe"), db.bone("right_toe")]]
+        contacts = np.asarray(snap.foot_contacts, bool)
+        locked = np.asarray(snap.foot_locked, bool)
+        for i in range(2):
+            if contacts[i]:
+                b.add_spheres(toes[i] + off, 0.05, LOCKED_COLOR if locked[i] else CONTACT_COLOR)
+    if trail is not None:
+        if trail.ndim == 2:
+            trail = trail[np.isfinite(trail).all(axis=1)]
+            if len(trail) >= 2:
+                b.add_polyline(trail[::3] + off + np.array([0.0, 0.01, 0.0]), d.trail_color)

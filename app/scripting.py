@@ -1,0 +1,165 @@
+"""Test hooks: a script of timed actions the studio runs (``--script``), and the JSON state dump it
+writes at exit (``--dump-state``). The GUI tests drive the real studio with these."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from lmm.data.jsonio import write_json
+
+if TYPE_CHECKING:
+    from .studio import Studio
+
+
+def _roots(tick) -> dict:
+    return {} if tick is None else {n: [float(x) for x in s.pose.global_positions[0]]
+                                    for n, s in tick.snapshots.items()}
+
+
+class Script:
+    """Timed actions: ``[{"frame": 30, "do": "set_tuning", "field": ..., "value": ...}, ...]``.
+
+    Actions: ``set_tuning`` (field, value[, channel]) sets the slider and fires its callback;
+    ``key_down`` / ``key_up`` (key); ``record_start`` (path[, which]) / ``record_stop``; ``layout``
+    (name or path); ``pause`` / ``resume`` / ``live`` / ``scrub`` (tick, or back: n ticks) / ``step`` (n);
+    ``open`` (kind: a file dialog kind, path); ``inspect`` (controller); ``capture`` (label);
+    ``screenshot`` (path); ``sort`` (key[, descending]); ``help`` (Help > Keys and mouse); ``quit``;
+    ``quit_when_exists`` (path: quit on the first frame that file exists); ``write_rects`` (path, items:
+    write the screen rectangles of those items as JSON, for tests that click them with xdotool).
+    """
+
+    def __init__(self, actions: list[dict]):
+        self.actions = sorted(actions, key=lambda a: int(a.get("frame", 0)))
+        self.i = 0
+        self.quit_files: list[Path] = []
+        self.keys: set[str] = set()           # keys the script holds down
+        self.captures: list[str] = []         # labels to capture after this frame's panels updated
+
+    @classmethod
+    def load(cls, path) -> "Script":
+        data = json.loads(Path(path).read_text())
+        return cls(data["actions"] if isinstance(data, dict) else data)
+
+    def run(self, studio: "Studio", frame: int) -> None:
+        if any(p.exists() for p in self.quit_files):
+            studio.quit()
+        while self.i < len(self.actions) and int(self.actions[self.i].get("frame", 0)) <= frame:
+            a = self.actions[self.i]
+            self.i += 1
+            self._do(studio, a)
+
+    def _do(self, s: "Studio", a: dict) -> None:
+        do = a["do"]
+        p = s.playback
+        simple = {"record_stop": s.stop_recording, "pause": p.pause, "resume": p.resume, "live": p.go_live,
+                  "quit": s.quit, "help": s.menu.show_keys_help}
+        if do in simple:
+            simple[do]()
+        elif do == "set_tuning":
+            s.panels["tuning"].set_field(a["field"], a["value"], a.get("channel"))
+        elif do == "key_down":
+            self.keys.add(a["key"])
+        elif do == "key_up":
+            self.keys.discard(a["key"])
+        elif do == "record_start":
+            s.start_recording(a["path"], tuple(a.get("which", ("mm", "lmm"))))
+        elif do == "layout":
+            s.switch_layout(a["name"])
+        elif do == "scrub":
+            p.scrub_to(a["tick"] if "tick" in a else s.session.history.newest_tick - int(a["back"]))
+        elif do == "step":
+            p.step(int(a.get("n", 1)))
+        elif do == "open":
+            s.dialogs.handle(a["kind"], a["path"])
+        elif do == "inspect":
+            s.set_inspected(a["controller"])
+        elif do == "capture":
+            self.captures.append(a["label"])
+        elif do == "screenshot":
+            s.request_screenshot(a["path"])
+        elif do == "sort":
+            s.panels["candidates"].set_sort(a["key"], bool(a.get("descending", False)))
+        elif do == "quit_when_exists":  # external tests (real key presses) end the run by creating a file
+            self.quit_files.append(Path(a["path"]))
+        elif do == "write_rects":
+            dpg = s.dpg
+            rects = {item: list(dpg.get_item_rect_min(item)) + list(dpg.get_item_rect_max(item))
+                     for item in a["items"]}
+            write_json(a["path"], rects)
+        else:
+            raise ValueError(f"unknown script action {do!r}")
+
+
+class Screenshots:
+    """PNG files of the whole window (``--screenshot``, the ``screenshot`` script action)."""
+
+    def __init__(self, dpg):
+        self.dpg = dpg
+        self.requested: list[Path] = []
+
+    def request(self, path) -> Path:
+        """Ask dearpygui to save the whole window during the next frame it renders."""
+        out = Path(path)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        if out.exists():
+            out.unlink()
+        self.dpg.output_frame_buffer(file=str(out))
+        self.requested.append(out)
+        return out
+
+    def finish(self, report_error) -> int:
+        """Render (without simulating) until every requested file is on disk; 1 when one never came."""
+        pending = [p for p in self.requested if not p.exists()]
+        tries = 0
+        while pending and tries < 5:
+            self.dpg.render_dearpygui_frame()
+            tries += 1
+            pending = [p for p in pending if not p.exists()]
+        for p in pending:
+            report_error("Screenshot", f"{p}: dearpygui did not write the screenshot")
+        return 1 if pending else 0
+
+
+class StateDump:
+    """What the studio did, frame by frame, for the tests: written as JSON at exit."""
+
+    def __init__(self, path):
+        self.path = Path(path)
+        self.data = {"frames": [], "ticks": [], "labels": {}, "recordings": []}
+        self._submitted: dict[int, int] = {}          # tick -> frame whose inputs it was stepped with
+        self._tuning_at_submit: dict[int, dict] = {}
+
+    def ticks(self, finished) -> None:
+        """The ticks the worker finished (with the frame and tuning they were submitted with)."""
+        for tick, _ in finished:
+            self.data["ticks"].append({
+                "tick": tick.tick, "frame_submitted": self._submitted.get(tick.tick),
+                "tuning_seen": self._tuning_at_submit.get(tick.tick), "roots": _roots(tick),
+                "desired_speed": {n: float(np.linalg.norm(s.desired_velocity)) for n, s in tick.snapshots.items()},
+                "input": dict(vars(tick.extra["input"]))})
+
+    def frame(self, frame: int, view, session, submitted: int, tuning_seen, viewport_roots) -> dict:
+        first = session.tick + 1            # the ticks submitted this frame (still to be stepped)
+        for k in range(submitted):
+            self._submitted[first + k] = frame
+            self._tuning_at_submit[first + k] = tuning_seen
+        rec = {"frame": frame, "ticks": submitted, "displayed_tick": view.tick_number,
+               "newest_tick": session.history.newest_tick, "live": view.live, "paused": view.paused,
+               "roots": _roots(session.history.latest()), "viewport_roots": viewport_roots}
+        self.data["frames"].append(rec)
+        return rec
+
+    def capture(self, label: str, frame: int, tick, panels: dict) -> None:
+        """What every panel shows now, under ``label``."""
+        self.data["labels"][label] = {
+            "frame": frame, "displayed_tick": -1 if tick is None else tick.tick, "snapshot_roots": _roots(tick),
+            "snapshot_query": {} if tick is None else {n: np.asarray(s.query).tolist()
+                                                       for n, s in tick.snapshots.items()},
+            "panels": panels}
+
+    def write(self, **final) -> None:
+        self.data.update(final)
+        write_json(self.path, self.data, indent=None)
