@@ -10,12 +10,13 @@ PY="${PYTHON:-python3}"
 TORCH_VERSION="2.13.0"
 TORCH_CPU_INDEX="https://download.pytorch.org/whl/cpu"
 
-# The pinned torch, CPU build. A bare `pip install torch` from PyPI is the CUDA build on Linux (several GB of
-# nvidia-* wheels), so torch is installed on its own before the project:
-#  1. from wheels pip already has on local disk (its configured find-links; --no-index: no network, no wait),
-#     then its small dependencies from pip's configured indexes;
-#  2. otherwise from the PyTorch CPU index, with PyPI as an extra index for the dependencies
-#     (pip prefers 2.13.0+cpu over PyPI's 2.13.0, a local version label sorts higher).
+# The pinned torch, CPU build. A bare `pip install torch` from PyPI is the CUDA build on Linux (about 4 GB of
+# nvidia-* and cuda-* wheels), so the torch wheel is installed alone, before the project, from exactly one place:
+#  1. a wheel pip already has on local disk (its configured find-links; --no-index: no network, no wait);
+#  2. otherwise the PyTorch CPU index, and only that index: with PyPI beside it, an unreachable CPU index
+#     makes pip fall back to PyPI's CUDA build without a word.
+# Then torch's small dependencies (sympy, networkx, jinja2, ...) come from pip's usual indexes; the installed
+# torch already satisfies the pin, so pip never swaps it for another build.
 # LMM_TORCH_INDEX=URL skips step 1 and uses URL instead of the CPU index (a mirror, or a CUDA index on purpose).
 install_torch() {
   local pip=("$VENV/bin/python" -m pip)
@@ -24,12 +25,16 @@ install_torch() {
   fi
   if [ -z "${LMM_TORCH_INDEX:-}" ] && "${pip[@]}" install -q --no-index --no-deps "torch==$TORCH_VERSION" >/dev/null 2>&1; then
     echo "[setup] torch $TORCH_VERSION from a local wheel (pip's find-links)" >&2
-    "${pip[@]}" install -q "torch==$TORCH_VERSION" >&2
   else
     local index="${LMM_TORCH_INDEX:-$TORCH_CPU_INDEX}"
-    echo "[setup] torch $TORCH_VERSION from $index (+ PyPI for its dependencies)" >&2
-    "${pip[@]}" install -q "torch==$TORCH_VERSION" --index-url "$index" --extra-index-url https://pypi.org/simple >&2
+    echo "[setup] torch $TORCH_VERSION from $index" >&2
+    if ! "${pip[@]}" install -q --no-deps "torch==$TORCH_VERSION" --index-url "$index" >&2; then
+      echo "[setup] error: could not install torch==$TORCH_VERSION from $index; set LMM_TORCH_INDEX to an index" \
+           "that has it (a mirror of $TORCH_CPU_INDEX) or put the wheel in a pip find-links folder" >&2
+      exit 1
+    fi
   fi
+  "${pip[@]}" install -q "torch==$TORCH_VERSION" >&2  # its dependencies
   # say which build it is: a CUDA build lists nvidia-* requirements, the CPU build none
   "$VENV/bin/python" - >&2 <<'EOF'
 import importlib.metadata as m
