@@ -18,6 +18,9 @@ def add_arguments(p) -> None:
 
 
 def main(args) -> int:
+    from app.commands.extras import require
+    if (args.json_path or args.plots) and not require("eval", "matplotlib", purpose=" for its plots"):
+        return 2
     from lmm.data.database import load_or_build
     from lmm.offline.evaluation import evaluate, load_compressor, write_plots
     from lmm.features import build_features

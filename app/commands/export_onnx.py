@@ -11,14 +11,12 @@ def add_arguments(p) -> None:
 
 
 def main(args) -> int:
+    from app.commands.extras import require
+    if not require("export-onnx", "onnx"):
+        return 2
     from lmm.learned import DEFAULT_WEIGHTS, LMMNetworks
     from lmm.data.weights import WeightsError
 
-    try:
-        import onnx  # noqa: F401
-    except ImportError:
-        print("error: export-onnx needs the 'onnx' package (pip install onnx)", file=sys.stderr)
-        return 1
     from lmm.offline.onnx_export import export_networks
 
     try:

@@ -31,6 +31,9 @@ def add_arguments(p) -> None:
 
 
 def main(args) -> int:
+    from app.commands.extras import require
+    if not require("train", "torch"):  # before the database: a missing extra fails at once
+        return 2
     import numpy as np
 
     from lmm.data.database import load_or_build
