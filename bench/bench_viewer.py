@@ -30,7 +30,7 @@ def load_motion(n_frames: int):
     """(parents, positions (F, 22, 3) in metres): a shipped LAFAN1 take, or a synthetic stand-in."""
     takes = sorted((ROOT / "lmm" / "data" / "lafan1").glob("*.bvh.gz"))
     try:
-        from lmm import bvh
+        from lmm.data import bvh
 
         anim = bvh.load(min(takes, key=lambda p: p.stat().st_size))
         return anim.parents, anim.global_positions()[1000:1000 + n_frames] / 100.0, "LAFAN1"

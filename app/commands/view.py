@@ -41,7 +41,7 @@ def _has_display() -> bool:
 
 def _load(path: str):
     """(name, parents, positions (F,J,3), frame_time) or an error message."""
-    from lmm import bvh
+    from lmm.data import bvh
 
     try:
         anim = bvh.load(path)
