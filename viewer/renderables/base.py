@@ -11,6 +11,8 @@ from dataclasses import dataclass
 import moderngl
 import numpy as np
 
+from .capsule_mesh import CAPSULE_FS, CAPSULE_VS, SHADOW_FS, capsule_mesh
+
 # ---------------------------------------------------------------------------------------------
 # shaders
 
@@ -139,7 +141,7 @@ void main() { f_color = v_color; }
 class Light:
     """A directional light (``direction`` points towards the light) plus ambient and specular."""
 
-    direction: tuple = (0.45, 1.0, 0.65)
+    direction: tuple = (0.8, 1.2, 0.25)
     ambient: float = 0.4
     diffuse: float = 0.55
     specular: float = 0.15
@@ -158,6 +160,8 @@ class FrameState:
     width: int
     height: int
     background: tuple
+    light: Light | None = None
+    ground_height: float | None = None   # the plane shadows fall on; None: no ground, no shadows
 
     @property
     def view_proj(self) -> np.ndarray:
@@ -271,6 +275,10 @@ class Resources:
             self.meshes[name] = (ctx.buffer(verts.tobytes()), ctx.buffer(tris.tobytes()))
         corners = np.array([[0, -1], [0, 1], [1, -1], [1, 1]], dtype=np.float32)
         self.line_corners = ctx.buffer(corners.tobytes())
+        self.capsule_program = ctx.program(vertex_shader=CAPSULE_VS, fragment_shader=CAPSULE_FS)
+        self.shadow_program = ctx.program(vertex_shader=CAPSULE_VS, fragment_shader=SHADOW_FS)
+        verts, tris = capsule_mesh()
+        self.capsule_mesh = (ctx.buffer(verts.tobytes()), ctx.buffer(tris.tobytes()))
 
     @classmethod
     def of(cls, ctx: moderngl.Context) -> "Resources":
@@ -290,6 +298,16 @@ class Resources:
              (instances, "3f 3f 1f 4f/i", "i_a", "i_b", "i_radius", "i_color")],
             index_buffer=ibo, index_element_size=4)
 
+    def capsule_vao(self, instances: moderngl.Buffer, shadow: bool = False) -> moderngl.VertexArray:
+        """Rounded cones from ``instances`` (a, b, ra, rb, rgba), lit or as their ground shadow."""
+        vbo, ibo = self.capsule_mesh
+        program = self.shadow_program if shadow else self.capsule_program
+        return self.ctx.vertex_array(
+            program,
+            [(vbo, "2f 1f 1f", "in_ring", "in_lat", "in_end"),
+             (instances, "3f 3f 1f 1f 4f/i", "i_a", "i_b", "i_ra", "i_rb", "i_color")],
+            index_buffer=ibo, index_element_size=4)
+
     def line_vao(self, instances: moderngl.Buffer) -> moderngl.VertexArray:
         return self.ctx.vertex_array(
             self.line_program,
@@ -306,6 +324,16 @@ class Resources:
         mp["u_ambient"].value = light.ambient
         mp["u_diffuse"].value = light.diffuse
         mp["u_specular"].value = light.specular
+        for prog in (self.capsule_program, self.shadow_program):
+            prog["u_view"].write(mat_bytes(frame.view))
+            prog["u_proj"].write(mat_bytes(frame.proj))
+            prog["u_shadow"].value = 1.0 if prog is self.shadow_program else 0.0
+        cp = self.capsule_program
+        cp["u_light_dir"].value = mp["u_light_dir"].value
+        cp["u_eye"].value = mp["u_eye"].value
+        cp["u_ambient"].value = light.ambient
+        cp["u_diffuse"].value = light.diffuse
+        cp["u_specular"].value = light.specular
         lp = self.line_program
         lp["u_view"].write(mat_bytes(frame.view))
         lp["u_proj"].write(mat_bytes(frame.proj))
@@ -361,13 +389,25 @@ def as_rgba(color, n: int | None = None, alpha: float = 1.0) -> np.ndarray:
 
 class Renderable:
     """Base of everything a Scene draws. Subclasses fill their buffers in ``update(...)`` and
-    issue their draws in ``draw(frame)``; ``transparent`` ones are drawn after opaque ones."""
+    issue their draws in ``draw(frame)``; ``transparent`` ones are drawn after opaque ones.
+
+    A renderable that ``casts_shadow`` also has ``draw_shadow(frame)`` (its shadow geometry with
+    the shadow program, see ``draw_shadows``); one that has a ``receiver_height`` (the ground) is
+    the plane shadows fall on."""
 
     visible: bool = True
+    receiver_height: float | None = None
 
     @property
     def transparent(self) -> bool:
         return False
+
+    @property
+    def casts_shadow(self) -> bool:
+        return False
+
+    def draw_shadow(self, frame: FrameState) -> None:  # pragma: no cover - interface
+        pass
 
     def draw(self, frame: FrameState) -> None:  # pragma: no cover - interface
         raise NotImplementedError
@@ -403,3 +443,45 @@ def draw_transparent(frame: FrameState, draws) -> None:
     for draw in draws:
         draw()
     ctx.depth_func = "<"
+
+
+def draw_shadows(frame: FrameState, casters, strength: float = 0.45) -> None:
+    """Planar shadows of ``casters`` on the ground plane ``frame.ground_height``, from the key
+    light, darkening the ground at most once however many parts overlap: pass 1 writes
+    ``1 - darkness`` into the destination alpha with MIN blending (colour untouched), pass 2
+    multiplies the colour by that alpha and sets it back to 1. Depth is tested (characters hide
+    their shadows) but not written, so lines and transparent things drawn later are unaffected."""
+    if not casters or frame.ground_height is None or frame.light is None:
+        return
+    ctx, fbo = frame.ctx, frame.fbo
+    res = Resources.of(ctx)
+    prog = res.shadow_program
+    direction = np.asarray(frame.light.direction, dtype=np.float64)
+    direction = direction / np.linalg.norm(direction)
+    if direction[1] < 0.2:   # a grazing light would stretch shadows to the horizon
+        direction[1] = 0.2
+        direction /= np.linalg.norm(direction)
+    prog["u_shadow_dir"].value = tuple(direction)
+    prog["u_ground"].value = float(frame.ground_height)
+    prog["u_depth_pull"].value = 1e-3
+    prog["u_strength"].value = float(strength)
+    ctx.disable(moderngl.CULL_FACE)
+    fbo.depth_mask = False
+    for resolve in (False, True):
+        prog["u_resolve"].value = 1.0 if resolve else 0.0
+        if resolve:
+            fbo.color_mask = (True, True, True, True)
+            ctx.blend_equation = moderngl.FUNC_ADD
+            ctx.blend_func = (moderngl.ZERO, moderngl.DST_ALPHA, moderngl.ONE, moderngl.ZERO)
+        else:
+            fbo.color_mask = (False, False, False, True)
+            ctx.blend_equation = moderngl.MIN
+        fbo.use()  # moderngl applies a framebuffer's masks when it is bound
+        for caster in casters:
+            caster.draw_shadow(frame)
+    fbo.depth_mask = True
+    fbo.color_mask = (True, True, True, True)
+    fbo.use()
+    ctx.blend_equation = moderngl.FUNC_ADD
+    ctx.blend_func = (moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA, moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA)
+    ctx.enable(moderngl.CULL_FACE)

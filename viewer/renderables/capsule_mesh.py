@@ -1,0 +1,159 @@
+"""Rounded cones ("capsules" whose two ends may differ in radius), drawn instanced, and their
+planar ground shadow. GLSL sources and the unit mesh; the GL objects live in ``base.Resources``.
+
+Each instance is a segment a -> b with a radius at each end. The mesh is two caps of latitude
+rings plus the side between their rims: the vertex shader places cap vertices on the sphere at
+``a`` (radius ``ra``) or ``b`` (radius ``rb``) and turns the rims so the side is tangent to both
+spheres, which gives one smooth surface for any pair of radii. ``a == b`` with ``ra == rb`` is a
+sphere, so joints, heads and bones share one draw call.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+CAPSULE_INSTANCE_FLOATS = 12   # a(3) b(3) ra(1) rb(1) color(4)
+
+CAPSULE_VS = """
+#version 330
+uniform mat4 u_view;
+uniform mat4 u_proj;
+uniform float u_shadow;         // 1: flatten onto the ground plane along the light (shadow pass)
+uniform vec3 u_shadow_dir;      // towards the light, normalised, y > 0
+uniform float u_ground;         // ground height
+uniform float u_depth_pull;     // shadow pass: fraction of view distance pulled towards the eye
+in vec2 in_ring;                // (cos, sin) of the angle around the axis
+in float in_lat;                // 0 at the cap's pole .. 1 at its rim
+in float in_end;                // 0: cap at a, 1: cap at b
+in vec3 i_a;
+in vec3 i_b;
+in float i_ra;
+in float i_rb;
+in vec4 i_color;
+out vec3 v_normal;
+out vec3 v_world;
+out vec4 v_color;
+out float v_height;
+void main() {
+    vec3 d = i_b - i_a;
+    float len = length(d);
+    vec3 axis = len > 1e-9 ? d / len : vec3(0.0, 1.0, 0.0);
+    vec3 helper = abs(axis.y) < 0.99 ? vec3(0.0, 1.0, 0.0) : vec3(1.0, 0.0, 0.0);
+    vec3 u = normalize(cross(axis, helper));
+    vec3 v = cross(u, axis);
+    // the side leans by alpha so it touches both spheres: sin(alpha) = (ra - rb) / len
+    float s = len > 1e-9 ? clamp((i_ra - i_rb) / len, -0.97, 0.97) : 0.0;
+    float alpha = asin(s);
+    const float HALF_PI = 1.5707963;
+    float lat = in_end < 0.5 ? mix(-HALF_PI, alpha, in_lat) : mix(HALF_PI, alpha, in_lat);
+    vec3 n = cos(lat) * (in_ring.x * u + in_ring.y * v) + sin(lat) * axis;
+    vec3 world = in_end < 0.5 ? i_a + i_ra * n : i_b + i_rb * n;
+    v_normal = n;
+    v_color = i_color;
+    v_height = world.y - u_ground;
+    if (u_shadow > 0.5) {
+        world -= u_shadow_dir * (max(v_height, 0.0) / u_shadow_dir.y);
+        vec4 view_pos = u_view * vec4(world, 1.0);
+        view_pos.xyz *= 1.0 - u_depth_pull;   // wins against the ground, loses against lines on it
+        v_world = world;
+        gl_Position = u_proj * view_pos;
+        return;
+    }
+    v_world = world;
+    gl_Position = u_proj * (u_view * vec4(world, 1.0));
+}
+"""
+
+# Soft studio lighting: half-Lambert key light, a sky/ground hemisphere ambient, a little Blinn
+# specular and a cool rim that separates the silhouette from the dark background.
+CAPSULE_FS = """
+#version 330
+uniform vec3 u_light_dir;   // towards the light, world space
+uniform vec3 u_eye;
+uniform float u_ambient;
+uniform float u_diffuse;
+uniform float u_specular;
+in vec3 v_normal;
+in vec3 v_world;
+in vec4 v_color;
+in float v_height;
+out vec4 f_color;
+void main() {
+    vec3 n = normalize(v_normal);
+    vec3 l = normalize(u_light_dir);
+    vec3 to_eye = normalize(u_eye - v_world);
+    float key = clamp((dot(n, l) + 0.25) / 1.25, 0.0, 1.0);     // slightly wrapped Lambert
+    float sky = 0.5 + 0.5 * n.y;
+    vec3 ambient = mix(vec3(0.42, 0.38, 0.36), vec3(0.9, 0.95, 1.05), sky);
+    float spec = pow(max(dot(n, normalize(l + to_eye)), 0.0), 48.0) * u_specular * 2.0;
+    float rim = pow(1.0 - max(dot(n, to_eye), 0.0), 4.0) * 0.25 * sky;
+    vec3 rgb = v_color.rgb * (u_ambient * 0.9 * ambient + u_diffuse * 1.15 * key) + vec3(spec)
+             + rim * vec3(0.7, 0.8, 1.0);
+    f_color = vec4(rgb, v_color.a);
+}
+"""
+
+# Shadow passes (see Renderer): the first writes 1 - darkness into destination alpha with MIN
+# blending (overlapping parts darken once), the second multiplies the colour by it and puts the
+# alpha back to 1. Parts high above the ground cast a lighter shadow.
+SHADOW_FS = """
+#version 330
+uniform float u_resolve;
+uniform float u_strength;
+uniform float u_fade_height;
+in vec3 v_normal;
+in vec3 v_world;
+in vec4 v_color;
+in float v_height;
+out vec4 f_color;
+void main() {
+    float fade = 1.0 - 0.35 * clamp(v_height / u_fade_height, 0.0, 1.0);
+    float dark = u_strength * v_color.a * fade;
+    f_color = u_resolve > 0.5 ? vec4(0.0, 0.0, 0.0, 1.0) : vec4(0.0, 0.0, 0.0, 1.0 - dark);
+}
+"""
+
+
+def capsule_mesh(segments: int = 20, cap_rings: int = 6):
+    """Vertices (ring cos, ring sin, lat, end) float32 and uint32 triangles of the unit rounded
+    cone, counter-clockwise seen from outside."""
+    phi = np.linspace(0.0, 2.0 * np.pi, segments, endpoint=False)
+    ring = np.c_[np.cos(phi), np.sin(phi)]
+    lat = np.linspace(0.0, 1.0, cap_rings + 1)   # pole .. rim
+    rows = []
+    for end in (0.0, 1.0):
+        for t in lat:
+            rows.append(np.c_[ring, np.full(segments, t), np.full(segments, end)])
+    verts = np.concatenate(rows).astype(np.float32)
+    k = np.arange(segments)
+    k1 = (k + 1) % segments
+    tris = []
+    n_rows = 2 * (cap_rings + 1)
+    # rows in order: cap a pole..rim, cap b pole..rim; connect a's rows, a's rim to b's rim, b's rows
+    order = list(range(cap_rings + 1)) + list(range(2 * cap_rings + 1, cap_rings, -1))
+    for r0, r1 in zip(order[:-1], order[1:]):
+        base0, base1 = r0 * segments, r1 * segments
+        tris.append(np.c_[base0 + k, base0 + k1, base1 + k])
+        tris.append(np.c_[base0 + k1, base1 + k1, base1 + k])
+    tris = np.concatenate(tris)
+    assert n_rows * segments == len(verts)
+    return verts, _orient(verts, tris).astype(np.uint32)
+
+
+def _reference_positions(verts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Positions and normals of the mesh for a = 0, b = +Y, ra = rb = 0.3 (same math as the shader)."""
+    lat = np.where(verts[:, 3] < 0.5, -np.pi / 2 * (1 - verts[:, 2]), np.pi / 2 * (1 - verts[:, 2]))
+    n = np.c_[np.cos(lat) * verts[:, 0], np.sin(lat), np.cos(lat) * verts[:, 1]]
+    centre = np.c_[np.zeros(len(verts)), verts[:, 3], np.zeros(len(verts))]
+    return centre + 0.3 * n, n
+
+
+def _orient(verts: np.ndarray, tris: np.ndarray) -> np.ndarray:
+    p, n = _reference_positions(verts)
+    a, b, c = p[tris[:, 0]], p[tris[:, 1]], p[tris[:, 2]]
+    face = np.cross(b - a, c - a)
+    flip = (face * (n[tris[:, 0]] + n[tris[:, 1]] + n[tris[:, 2]])).sum(axis=1) < 0
+    tris = tris.copy()
+    tris[flip] = tris[flip][:, ::-1]
+    # degenerate triangles at the poles have no orientation and cover no pixels: drop them
+    keep = np.linalg.norm(face, axis=1) > 1e-12
+    return tris[keep]
