@@ -11,7 +11,8 @@ from dataclasses import dataclass
 import moderngl
 import numpy as np
 
-from .capsule_mesh import CAPSULE_FS, CAPSULE_VS, SHADOW_FS, capsule_mesh
+from .capsule_mesh import (CAPSULE_FS, CAPSULE_VS, SHADOW_DEPTH_PULL, SHADOW_FS, SHADOW_RESOLVE_FS,
+                           SHADOW_RESOLVE_VS, capsule_mesh)
 
 # ---------------------------------------------------------------------------------------------
 # shaders
@@ -279,6 +280,15 @@ class Resources:
         self.shadow_program = ctx.program(vertex_shader=CAPSULE_VS, fragment_shader=SHADOW_FS)
         verts, tris = capsule_mesh()
         self.capsule_mesh = (ctx.buffer(verts.tobytes()), ctx.buffer(tris.tobytes()))
+        # shadows only need the outline: a coarse mesh keeps them cheap on software GL, where
+        # their cost is mostly per triangle
+        verts, tris = capsule_mesh(segments=12, cap_rings=3)
+        self.shadow_mesh = (ctx.buffer(verts.tobytes()), ctx.buffer(tris.tobytes()))
+        self.shadow_resolve_program = ctx.program(vertex_shader=SHADOW_RESOLVE_VS,
+                                                  fragment_shader=SHADOW_RESOLVE_FS)
+        self._resolve_corners = ctx.buffer(np.array([[0, 0], [1, 0], [0, 1], [1, 1]], np.float32).tobytes())
+        self.shadow_resolve_vao = ctx.vertex_array(self.shadow_resolve_program,
+                                                   [(self._resolve_corners, "2f", "in_corner")])
 
     @classmethod
     def of(cls, ctx: moderngl.Context) -> "Resources":
@@ -300,7 +310,7 @@ class Resources:
 
     def capsule_vao(self, instances: moderngl.Buffer, shadow: bool = False) -> moderngl.VertexArray:
         """Rounded cones from ``instances`` (a, b, ra, rb, rgba), lit or as their ground shadow."""
-        vbo, ibo = self.capsule_mesh
+        vbo, ibo = self.shadow_mesh if shadow else self.capsule_mesh
         program = self.shadow_program if shadow else self.capsule_program
         return self.ctx.vertex_array(
             program,
@@ -324,6 +334,10 @@ class Resources:
         mp["u_ambient"].value = light.ambient
         mp["u_diffuse"].value = light.diffuse
         mp["u_specular"].value = light.specular
+        rp = self.shadow_resolve_program
+        rp["u_view"].write(mat_bytes(frame.view))
+        rp["u_proj"].write(mat_bytes(frame.proj))
+        rp["u_depth_pull"].value = SHADOW_DEPTH_PULL
         for prog in (self.capsule_program, self.shadow_program):
             prog["u_view"].write(mat_bytes(frame.view))
             prog["u_proj"].write(mat_bytes(frame.proj))
@@ -409,6 +423,10 @@ class Renderable:
     def draw_shadow(self, frame: FrameState) -> None:  # pragma: no cover - interface
         pass
 
+    def shadow_bounds(self, direction: np.ndarray, ground: float):  # pragma: no cover - interface
+        """(x0, z0, x1, z1) on the ground containing this renderable's shadow, or None."""
+        return None
+
     def draw(self, frame: FrameState) -> None:  # pragma: no cover - interface
         raise NotImplementedError
 
@@ -445,43 +463,62 @@ def draw_transparent(frame: FrameState, draws) -> None:
     ctx.depth_func = "<"
 
 
+def shadow_direction(light: Light) -> np.ndarray:
+    """Unit vector towards the key light, raised to at least ~11 degrees above the horizon so a
+    grazing light does not stretch shadows to the horizon."""
+    direction = np.asarray(light.direction, dtype=np.float64)
+    direction = direction / np.linalg.norm(direction)
+    if direction[1] < 0.2:
+        direction[1] = 0.2
+        direction /= np.linalg.norm(direction)
+    return direction
+
+
 def draw_shadows(frame: FrameState, casters, strength: float = 0.45) -> None:
     """Planar shadows of ``casters`` on the ground plane ``frame.ground_height``, from the key
-    light, darkening the ground at most once however many parts overlap: pass 1 writes
-    ``1 - darkness`` into the destination alpha with MIN blending (colour untouched), pass 2
-    multiplies the colour by that alpha and sets it back to 1. Depth is tested (characters hide
-    their shadows) but not written, so lines and transparent things drawn later are unaffected."""
+    light, darkening the ground at most once however many parts overlap.
+
+    Pass 1 draws the casters' light-facing triangles flattened onto the ground and writes
+    ``1 - darkness`` into the destination alpha only, with MIN blending; depth is tested (bodies
+    hide their shadows) but not written. Pass 2 draws one ground rectangle over the union of the
+    casters' ``shadow_bounds`` that multiplies the colour by the destination alpha and sets it
+    back to 1 (so each pixel is darkened once, and the image stays opaque). Lines and anything
+    transparent are drawn afterwards, over the shadow, and keep their colour."""
     if not casters or frame.ground_height is None or frame.light is None:
         return
     ctx, fbo = frame.ctx, frame.fbo
     res = Resources.of(ctx)
+    direction = shadow_direction(frame.light)
+    ground = float(frame.ground_height)
+    bounds = [b for b in (c.shadow_bounds(direction, ground) for c in casters) if b is not None]
+    if not bounds:
+        return
+    bounds = np.asarray(bounds, dtype=np.float64)
+    rect = (bounds[:, 0].min(), bounds[:, 1].min(), bounds[:, 2].max(), bounds[:, 3].max())
     prog = res.shadow_program
-    direction = np.asarray(frame.light.direction, dtype=np.float64)
-    direction = direction / np.linalg.norm(direction)
-    if direction[1] < 0.2:   # a grazing light would stretch shadows to the horizon
-        direction[1] = 0.2
-        direction /= np.linalg.norm(direction)
     prog["u_shadow_dir"].value = tuple(direction)
-    prog["u_ground"].value = float(frame.ground_height)
-    prog["u_depth_pull"].value = 1e-3
+    prog["u_ground"].value = ground
+    prog["u_depth_pull"].value = SHADOW_DEPTH_PULL
     prog["u_strength"].value = float(strength)
-    ctx.disable(moderngl.CULL_FACE)
+    # pass 1: seen from a camera above the ground, exactly the light-facing triangles of a closed
+    # mesh keep their winding once flattened, so back-face culling halves the overdraw
     fbo.depth_mask = False
-    for resolve in (False, True):
-        prog["u_resolve"].value = 1.0 if resolve else 0.0
-        if resolve:
-            fbo.color_mask = (True, True, True, True)
-            ctx.blend_equation = moderngl.FUNC_ADD
-            ctx.blend_func = (moderngl.ZERO, moderngl.DST_ALPHA, moderngl.ONE, moderngl.ZERO)
-        else:
-            fbo.color_mask = (False, False, False, True)
-            ctx.blend_equation = moderngl.MIN
-        fbo.use()  # moderngl applies a framebuffer's masks when it is bound
-        for caster in casters:
-            caster.draw_shadow(frame)
-    fbo.depth_mask = True
+    fbo.color_mask = (False, False, False, True)
+    fbo.use()  # moderngl applies a framebuffer's masks when it is bound
+    ctx.blend_equation = moderngl.MIN
+    for caster in casters:
+        caster.draw_shadow(frame)
+    # pass 2: resolve over the rectangle, whatever the depth there
     fbo.color_mask = (True, True, True, True)
     fbo.use()
     ctx.blend_equation = moderngl.FUNC_ADD
+    ctx.blend_func = (moderngl.ZERO, moderngl.DST_ALPHA, moderngl.ONE, moderngl.ZERO)
+    ctx.disable(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
+    rp = res.shadow_resolve_program
+    rp["u_rect"].value = tuple(float(x) for x in rect)
+    rp["u_ground"].value = ground
+    res.shadow_resolve_vao.render(moderngl.TRIANGLE_STRIP)
+    ctx.enable(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
+    fbo.depth_mask = True
+    fbo.use()
     ctx.blend_func = (moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA, moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA)
-    ctx.enable(moderngl.CULL_FACE)

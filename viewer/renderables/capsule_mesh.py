@@ -37,7 +37,10 @@ void main() {
     vec3 d = i_b - i_a;
     float len = length(d);
     vec3 axis = len > 1e-9 ? d / len : vec3(0.0, 1.0, 0.0);
-    vec3 helper = abs(axis.y) < 0.99 ? vec3(0.0, 1.0, 0.0) : vec3(1.0, 0.0, 0.0);
+    // one fixed helper (a direction few bones point along) turns the rings of nearly parallel
+    // bones alike, so their facets line up where they meet instead of poking through each other
+    const vec3 HELPER = vec3(0.36, 0.48, 0.8);
+    vec3 helper = abs(dot(axis, HELPER)) < 0.999 ? HELPER : vec3(1.0, 0.0, 0.0);
     vec3 u = normalize(cross(axis, helper));
     vec3 v = cross(u, axis);
     // the side leans by alpha so it touches both spheres: sin(alpha) = (ra - rb) / len
@@ -92,12 +95,36 @@ void main() {
 }
 """
 
-# Shadow passes (see Renderer): the first writes 1 - darkness into destination alpha with MIN
+SHADOW_DEPTH_PULL = 1e-3   # shadows: in front of the ground, behind lines on it (2e-3)
+
+# Shadow resolve (pass 2 of base.draw_shadows): a ground rectangle over the shadows' bounds.
+SHADOW_RESOLVE_VS = """
+#version 330
+uniform mat4 u_view;
+uniform mat4 u_proj;
+uniform vec4 u_rect;          // x0, z0, x1, z1 on the ground
+uniform float u_ground;
+uniform float u_depth_pull;
+in vec2 in_corner;
+void main() {
+    vec3 world = vec3(mix(u_rect.x, u_rect.z, in_corner.x), u_ground, mix(u_rect.y, u_rect.w, in_corner.y));
+    vec4 view_pos = u_view * vec4(world, 1.0);
+    view_pos.xyz *= 1.0 - u_depth_pull;
+    gl_Position = u_proj * view_pos;
+}
+"""
+
+SHADOW_RESOLVE_FS = """
+#version 330
+out vec4 f_color;
+void main() { f_color = vec4(0.0, 0.0, 0.0, 1.0); }
+"""
+
+# Shadow passes (see base.draw_shadows): the first writes 1 - darkness into destination alpha with MIN
 # blending (overlapping parts darken once), the second multiplies the colour by it and puts the
 # alpha back to 1. Parts high above the ground cast a lighter shadow.
 SHADOW_FS = """
 #version 330
-uniform float u_resolve;
 uniform float u_strength;
 uniform float u_fade_height;
 in vec3 v_normal;
@@ -108,12 +135,12 @@ out vec4 f_color;
 void main() {
     float fade = 1.0 - 0.35 * clamp(v_height / u_fade_height, 0.0, 1.0);
     float dark = u_strength * v_color.a * fade;
-    f_color = u_resolve > 0.5 ? vec4(0.0, 0.0, 0.0, 1.0) : vec4(0.0, 0.0, 0.0, 1.0 - dark);
+    f_color = vec4(0.0, 0.0, 0.0, 1.0 - dark);
 }
 """
 
 
-def capsule_mesh(segments: int = 20, cap_rings: int = 6):
+def capsule_mesh(segments: int = 16, cap_rings: int = 4):
     """Vertices (ring cos, ring sin, lat, end) float32 and uint32 triangles of the unit rounded
     cone, counter-clockwise seen from outside."""
     phi = np.linspace(0.0, 2.0 * np.pi, segments, endpoint=False)

@@ -10,7 +10,7 @@ from .base import (MESH_INSTANCE_FLOATS, FrameState, InstanceBuffer, Renderable,
 from .capsule_mesh import CAPSULE_INSTANCE_FLOATS
 
 STYLES = ("capsules", "sticks")
-SEAM = 0.004   # relative radius step between caps that share a joint
+SEAM = 0.05   # relative radius step between caps sharing a joint: more than the mesh's facet depth (~4 %)
 
 
 def radii_for_height(height: float) -> dict:
@@ -72,12 +72,15 @@ class Skeleton(Renderable):
         children = children[shown[children] & shown[self.parents[children]]]
         self._children = children
         self._bone_parents = self.parents[children]
+        # caps meeting at a joint get distinct radii (see SEAM): the k-th bone leaving a joint
+        # starts at (1 - k SEAM) r, the bone arriving there ends at (1 - n SEAM) r (n bones leave)
         rank = np.zeros(len(children))
-        seen: dict = {}
+        leaving = np.zeros(n)
         for k, p in enumerate(self._bone_parents):
-            rank[k] = seen.get(p, 0)
-            seen[p] = rank[k] + 1
+            rank[k] = leaving[p]
+            leaving[p] += 1
         self._sibling_rank = rank
+        self._end_rank = np.maximum(leaving[children], 1.0)
         self._heads = body.head_joints(self.parents, self.names)
         res = Resources.of(ctx)
         self._joints = InstanceBuffer(ctx, MESH_INSTANCE_FLOATS, max(n, 1))
@@ -88,6 +91,7 @@ class Skeleton(Renderable):
         self._capsule_vao = res.capsule_vao(self._capsules.buffer)
         self._shadow_vao = res.capsule_vao(self._capsules.buffer, shadow=True)
         self._positions = None
+        self._capsule_data = None  # what the capsule buffer holds (shadow bounds are computed from it)
         self._lengths = None
         self._body = None          # (joint radii, bone end radii, leaf extensions, end factors, height)
         self._body_key = None
@@ -200,6 +204,7 @@ class Skeleton(Renderable):
         c[nb:, 6:8] = self.joint_radius
         c[:, 8:12] = rgba
         self._capsules.upload(c)
+        self._capsule_data = c
 
     def _upload_capsules(self, p, rgba) -> None:
         radii, bone_end, ext, end, _ = self._body_sizes()
@@ -227,10 +232,10 @@ class Skeleton(Renderable):
         c = self._capsules.staging(nb + nl + nh + nj)
         c[:nb, 0:3] = p[parents]
         c[:nb, 3:6] = p[kids]
-        # no two caps on one joint may be the same sphere (they would z-fight in stripes): a
-        # bone ends a hair thinner than the next one starts, siblings start a hair apart
+        # no two caps on one joint may be the same sphere: their facets would poke through each
+        # other in jagged stripes
         c[:nb, 6] = radii[parents] * (1.0 - SEAM * self._sibling_rank[keep])
-        c[:nb, 7] = bone_end[kids] * (1.0 - 4.0 * SEAM)
+        c[:nb, 7] = bone_end[kids] * (1.0 - SEAM * self._end_rank[keep])
         s = slice(nb, nb + nl)
         c[s, 0:3] = p[leaves]
         c[s, 3:6] = p[leaves] + d * ext[leaves, None]
@@ -249,6 +254,7 @@ class Skeleton(Renderable):
         c[s, 7] = radii[lonely]
         c[:, 8:12] = rgba
         self._capsules.upload(c)
+        self._capsule_data = c
 
     # -- drawing ----------------------------------------------------------------------------------
     def draw(self, frame: FrameState) -> None:
@@ -277,6 +283,19 @@ class Skeleton(Renderable):
         if self._capsules.count:
             self._shadow_vao.program["u_fade_height"].value = float(max(self._body_sizes()[4], 1e-9))
             self._shadow_vao.render(moderngl.TRIANGLES, instances=self._capsules.count)
+
+    def shadow_bounds(self, direction: np.ndarray, ground: float):
+        """(x0, z0, x1, z1): the capsules flattened onto the ground along ``direction``."""
+        if self._uploaded_style != self._style():
+            self._upload()
+        c = self._capsule_data
+        if c is None or len(c) == 0:
+            return None
+        ends = np.r_[c[:, 0:3], c[:, 3:6]].astype(np.float64)
+        flat = ends - direction * (np.maximum(ends[:, 1:2] - ground, 0.0) / direction[1])
+        margin = float(c[:, 6:8].max()) * (1.0 + 1.0 / direction[1])
+        lo, hi = flat[:, [0, 2]].min(axis=0) - margin, flat[:, [0, 2]].max(axis=0) + margin
+        return lo[0], lo[1], hi[0], hi[1]
 
     def release(self) -> None:
         for obj in (self._joint_vao, self._bone_vao, self._capsule_vao, self._shadow_vao,
