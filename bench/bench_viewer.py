@@ -117,7 +117,8 @@ def bench(ctx, width, height, samples, frames, positions, parents, names=None, s
     ms = lambda xs: round(float(np.median(xs)) * 1000.0, 3)  # noqa: E731
     return {"width": width, "height": height, "samples": renderer.samples, "frames": frames,
             "style": style, "shadow": shadow,
-            "update_ms": ms(t_update), "draw_ms": ms(t_draw), "draw_cpu_ms": ms(cpu_draw), "read_uint8_ms": ms(t_read_u8),
+            "update_ms": ms(t_update), "draw_ms": ms(t_draw), "draw_cpu_ms": ms(cpu_draw),
+            "read_uint8_ms": ms(t_read_u8),
             "read_float32_unflipped_ms": ms(t_read_f32),
             "draw_p90_ms": round(float(np.percentile(t_draw, 90)) * 1000.0, 3)}
 

@@ -85,6 +85,12 @@ def test_simulation_bone_and_head_sphere(gl_ctx):
     skel.update(positions)
     radii = skel.joint_radii()
     assert radii[0] == 0 and (radii[1:] > 0).all()
+    # the hidden bone does not count for the size: the same body as without the Simulation joint
+    plain = Skeleton(gl_ctx, TPOSE_PARENTS, names=TPOSE_NAMES)
+    plain.update(TPOSE_POSITIONS)
+    assert skel.body_height() == pytest.approx(plain.body_height())
+    assert np.allclose(radii[1:], plain.joint_radii())
+    plain.release()
     caps = np.frombuffer(skel._capsules.buffer.read(), np.float32)[:skel._capsules.count * 12].reshape(-1, 12)
     ends = np.r_[caps[:, 0:3], caps[:, 3:6]]
     assert not np.isclose(ends, [0.0, 0.0, 0.0], atol=1e-6).all(axis=1).any()   # nothing at the sim bone

@@ -250,6 +250,10 @@ def test_bad_input_is_rejected(gl_ctx):
     skel = Skeleton(gl_ctx, TPOSE_PARENTS)
     with pytest.raises(ValueError, match="16 joints"):
         skel.update(np.zeros((3, 3)))
+    with pytest.raises(ValueError, match="3 joint names for 16 joints"):
+        Skeleton(gl_ctx, TPOSE_PARENTS, names=["a", "b", "c"])
+    with pytest.raises(ValueError, match="style"):
+        Skeleton(gl_ctx, TPOSE_PARENTS, style="wireframe")
     line = Lines(gl_ctx)
     with pytest.raises(ValueError, match="even"):
         line.update(np.zeros((3, 3)), mode="segments")

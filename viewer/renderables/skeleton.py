@@ -40,7 +40,8 @@ class Skeleton(Renderable):
 
     Every attribute (``color``, ``alpha``, ``style``, ``shadow``, ``thickness``, ``height``,
     ``radii``, ``joint_radius``, ``bone_radius``) can be changed at any time; it applies on the
-    next draw. One instanced draw call per skeleton in capsules style (plus two for its shadow).
+    next draw. Capsules style costs one instanced draw call per skeleton, its shadow one more
+    (plus one per scene for all shadows together).
     """
 
     def __init__(self, ctx: moderngl.Context, parents, color=(0.95, 0.55, 0.15), alpha: float = 1.0,
@@ -131,8 +132,9 @@ class Skeleton(Renderable):
         if len(p) != self.n_joints:
             raise ValueError(f"Skeleton has {self.n_joints} joints, got positions for {len(p)}")
         self._positions = p
-        if self._lengths is None:
-            self._lengths = body.bone_lengths(self.parents, p)
+        if self._lengths is None:   # bones touching a hidden joint do not count for the body's size
+            shown_bone = self._shown & self._shown[np.maximum(self.parents, 0)]
+            self._lengths = body.bone_lengths(self.parents, p) * shown_bone
         self._upload()
 
     # -- body proportions -------------------------------------------------------------------------
@@ -140,6 +142,8 @@ class Skeleton(Renderable):
         """The height the capsule sizes are fractions of: ``height``, or estimated from the bones."""
         if self.height is not None:
             return self.height
+        if self._lengths is None:   # no pose yet
+            return 1.0
         return body.estimate_height(self.parents, self._lengths)
 
     def joint_radii(self) -> np.ndarray:
