@@ -92,6 +92,16 @@ def _depths(parents) -> np.ndarray:
     return depth
 
 
+def subtree_sizes(parents) -> np.ndarray:
+    """(J,) number of joints in each joint's subtree, itself included."""
+    parents = np.asarray(parents, dtype=np.int64)
+    size = np.ones(len(parents))
+    for j in _post_order(parents):
+        if parents[j] >= 0:
+            size[parents[j]] += size[j]
+    return size
+
+
 def estimate_height(parents, lengths) -> float:
     """A character's height from its bone lengths alone (any pose): the longest path between two
     joints through the tree, which for a human runs from a hand to a foot."""

@@ -10,7 +10,8 @@ from .base import (MESH_INSTANCE_FLOATS, FrameState, InstanceBuffer, Renderable,
 from .capsule_mesh import CAPSULE_INSTANCE_FLOATS
 
 STYLES = ("capsules", "sticks")
-SEAM = 0.05   # relative radius step between caps sharing a joint: more than the mesh's facet depth (~4 %)
+SEAM = 0.05     # relative radius step between caps sharing a joint: more than the mesh's facet depth (~4 %)
+BRANCH = 0.1    # branches (arms off the chest, legs off the pelvis) start this much thinner
 
 
 def radii_for_height(height: float) -> dict:
@@ -73,15 +74,16 @@ class Skeleton(Renderable):
         children = children[shown[children] & shown[self.parents[children]]]
         self._children = children
         self._bone_parents = self.parents[children]
-        # caps meeting at a joint get distinct radii (see SEAM): the k-th bone leaving a joint
-        # starts at (1 - k SEAM) r, the bone arriving there ends at (1 - n SEAM) r (n bones leave)
-        rank = np.zeros(len(children))
-        leaving = np.zeros(n)
-        for k, p in enumerate(self._bone_parents):
-            rank[k] = leaving[p]
-            leaving[p] += 1
-        self._sibling_rank = rank
-        self._end_rank = np.maximum(leaving[children], 1.0)
+        # caps meeting at a joint get distinct radii (see SEAM): the bone that continues the trunk
+        # through a joint (the child carrying most joints) starts at its radius r, the bone arriving
+        # ends at (1 - SEAM) r, branches start thinner, each one SEAM apart, inside the others
+        self._start_scale = np.ones(len(children))
+        subtree = body.subtree_sizes(self.parents)
+        for p in np.unique(self._bone_parents):
+            bones = np.nonzero(self._bone_parents == p)[0]
+            order = bones[np.argsort(-subtree[children[bones]], kind="stable")]
+            for rank, k in enumerate(order[1:]):
+                self._start_scale[k] = 1.0 - BRANCH - SEAM * (rank + 1)
         self._heads = body.head_joints(self.parents, self.names)
         res = Resources.of(ctx)
         self._joints = InstanceBuffer(ctx, MESH_INSTANCE_FLOATS, max(n, 1))
@@ -238,8 +240,8 @@ class Skeleton(Renderable):
         c[:nb, 3:6] = p[kids]
         # no two caps on one joint may be the same sphere: their facets would poke through each
         # other in jagged stripes
-        c[:nb, 6] = radii[parents] * (1.0 - SEAM * self._sibling_rank[keep])
-        c[:nb, 7] = bone_end[kids] * (1.0 - SEAM * self._end_rank[keep])
+        c[:nb, 6] = radii[parents] * self._start_scale[keep]
+        c[:nb, 7] = bone_end[kids] * (1.0 - SEAM)
         s = slice(nb, nb + nl)
         c[s, 0:3] = p[leaves]
         c[s, 3:6] = p[leaves] + d * ext[leaves, None]
