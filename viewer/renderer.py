@@ -5,17 +5,11 @@ import moderngl
 import numpy as np
 
 from .camera import OrbitCamera
-from .renderables.base import FrameState, Resources, draw_shadows
+from .renderables.base import (SOFTWARE_RENDERERS, FrameState, Resources, draw_shadows,
+                               is_software_renderer)
 from .scene import Scene
 
-
-SOFTWARE_RENDERERS = ("llvmpipe", "softpipe", "swrast", "swiftshader", "software")
-
-
-def is_software_renderer(ctx: moderngl.Context) -> bool:
-    """Whether the context rasterizes on the CPU (Mesa llvmpipe and friends)."""
-    name = str(ctx.info.get("GL_RENDERER", "")).lower()
-    return any(s in name for s in SOFTWARE_RENDERERS)
+__all__ = ["Renderer", "SOFTWARE_RENDERERS", "is_software_renderer"]
 
 
 class Renderer:

@@ -8,6 +8,7 @@ from PIL import Image
 
 from viewer import Ground, Lines, OrbitCamera, Renderer, Scene, Skeleton
 from viewer.renderables import body
+from viewer.renderables.base import Resources
 from viewer_testutil import TPOSE_PARENTS, TPOSE_POSITIONS, colour_mask, near_any, write_bvh
 
 W, H = 480, 360
@@ -114,14 +115,25 @@ def render_one(gl_ctx, renderer, pose=POSE, ground=True, cam=None, **kwargs):
     return img, cam
 
 
-def test_capsules_cover_more_than_sticks_and_style_switches(gl_ctx, renderer, out_dir):
+@pytest.fixture(params=[False, True], ids=["mesh", "exact"])
+def exact(gl_ctx, request):
+    """Capsules drawn as their mesh, then ray-cast per pixel (whatever this machine's default)."""
+    res = Resources.of(gl_ctx)
+    default = res.exact_capsules
+    res.exact_capsules = request.param
+    yield request.param
+    res.exact_capsules = default
+
+
+def test_capsules_cover_more_than_sticks_and_style_switches(gl_ctx, renderer, out_dir, exact):
     scene = Scene()
     scene.add(Ground(gl_ctx))
     skel = scene.add(Skeleton(gl_ctx, TPOSE_PARENTS, color=ORANGE, names=TPOSE_NAMES, shadow=False))
+    assert skel.exact == exact
     skel.update(POSE)
     cam = camera_on(POSE)
     capsules = renderer.render(scene, cam)
-    Image.fromarray(capsules).save(out_dir / "body_capsules.png")
+    Image.fromarray(capsules).save(out_dir / f"body_capsules_{'exact' if exact else 'mesh'}.png")
     skel.style = "sticks"                      # applies on the next draw, no new update needed
     sticks = renderer.render(scene, cam)
     Image.fromarray(sticks).save(out_dir / "body_sticks.png")
@@ -207,7 +219,7 @@ def test_shadow_needs_a_ground_and_leaves_lines_alone(gl_ctx, renderer, out_dir)
     assert trail_change <= 0.2 * ground_change + 2     # ...shows only through the trail's 20 % transparency
 
 
-def test_ghost_capsules_blend_and_cast_a_fainter_shadow(gl_ctx, renderer, out_dir):
+def test_ghost_capsules_blend_and_cast_a_fainter_shadow(gl_ctx, renderer, out_dir, exact):
     cam = camera_on(np.r_[POSE, [shadow_point(Scene(), p) for p in POSE]], pitch=40.0)
 
     def render(alpha, visible=True, shadow=False):
@@ -233,7 +245,7 @@ def test_ghost_capsules_blend_and_cast_a_fainter_shadow(gl_ctx, renderer, out_di
     assert solid_shadow < ghost_shadow < 0.95 * ground
 
 
-def test_any_skeleton_from_a_bvh_draws(gl_ctx, renderer, tmp_path, out_dir):
+def test_any_skeleton_from_a_bvh_draws(gl_ctx, renderer, tmp_path, out_dir, exact):
     bvh = pytest.importorskip("lmm.data.bvh")
     names = ["pelvis", "back", "skull", "wing_l", "claw_l", "wing_r", "claw_r", "thigh_l", "shin_l", "thigh_r",
              "shin_r", "tail1", "tail2"]

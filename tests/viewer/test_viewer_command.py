@@ -148,15 +148,16 @@ def test_frame_out_of_range(capsys, tmp_path):
 
 
 @pytest.mark.skipif(not TAKES, reason="no shipped LAFAN1 takes")
-def test_screenshot_styles_and_shadow(out_dir, capsys):
+def test_screenshot_styles_and_shadow(out_dir):
     pytest.importorskip("lmm.data.bvh")
     take = min(TAKES, key=lambda p: p.stat().st_size)
     images = {}
     for flags in ([], ["--style", "sticks"], ["--no-shadow"]):
         png = out_dir / f"view_style{'_'.join(flags).replace('--', '_')}.png"
-        code, err = run_in_process([take, "--screenshot", png, "--frame", 200, "--width", 480, "--height", 270,
-                                    *flags], capsys)
-        assert code == 0, err
+        # a subprocess: an in-process screenshot would leave its own GL context current
+        result = run_view([take, "--screenshot", png, "--frame", 200, "--width", 480, "--height", 270, *flags],
+                          env=no_display_env())
+        assert result.returncode == 0, result.stderr
         images[" ".join(flags)] = np.array(Image.open(png)).astype(int)
     body = {k: colour_mask(v.astype(np.uint8), SKELETON_ORANGE).sum() for k, v in images.items()}
     assert body[""] > 2 * body["--style sticks"] > 0            # capsules are a body, sticks are thin

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import moderngl
 import numpy as np
 
-from .capsule_mesh import (CAPSULE_FS, CAPSULE_VS, SHADOW_DEPTH_PULL, SHADOW_FS, SHADOW_RESOLVE_FS,
+from .capsule_mesh import (CAPSULE_EXACT_FS, CAPSULE_FS, CAPSULE_INFLATE, CAPSULE_VS, SHADOW_DEPTH_PULL, SHADOW_FS, SHADOW_RESOLVE_FS,
                            SHADOW_RESOLVE_VS, capsule_mesh)
 
 # ---------------------------------------------------------------------------------------------
@@ -263,11 +263,26 @@ MESH_INSTANCE_FLOATS = 11   # a(3) b(3) radius(1) color(4)
 LINE_INSTANCE_FLOATS = 14   # p0(3) p1(3) c0(4) c1(4)
 
 
+SOFTWARE_RENDERERS = ("llvmpipe", "softpipe", "swrast", "swiftshader", "software")
+
+
+def is_software_renderer(ctx: moderngl.Context) -> bool:
+    """Whether the context rasterizes on the CPU (Mesa llvmpipe and friends)."""
+    name = str(ctx.info.get("GL_RENDERER", "")).lower()
+    return any(s in name for s in SOFTWARE_RENDERERS)
+
+
 class Resources:
-    """Programs and unit meshes of one context; get it with ``Resources.of(ctx)``."""
+    """Programs and unit meshes of one context; get it with ``Resources.of(ctx)``.
+
+    ``exact_capsules``: draw capsule bodies ray-cast per pixel (exact surfaces, smooth seams) or
+    as the plain mesh (slightly faceted, where bones meet at a shallow angle the facets show).
+    Defaults to exact on a GPU and the mesh on software GL, where exact costs ~1.5x the frame;
+    set it before creating skeletons to choose."""
 
     def __init__(self, ctx: moderngl.Context):
         self.ctx = ctx
+        self.exact_capsules = not is_software_renderer(ctx)
         self.mesh_program = ctx.program(vertex_shader=MESH_VS, fragment_shader=MESH_FS)
         self.line_program = ctx.program(vertex_shader=LINE_VS, fragment_shader=LINE_FS)
         self.meshes = {}
@@ -277,6 +292,7 @@ class Resources:
         corners = np.array([[0, -1], [0, 1], [1, -1], [1, 1]], dtype=np.float32)
         self.line_corners = ctx.buffer(corners.tobytes())
         self.capsule_program = ctx.program(vertex_shader=CAPSULE_VS, fragment_shader=CAPSULE_FS)
+        self.capsule_exact_program = ctx.program(vertex_shader=CAPSULE_VS, fragment_shader=CAPSULE_EXACT_FS)
         self.shadow_program = ctx.program(vertex_shader=CAPSULE_VS, fragment_shader=SHADOW_FS)
         verts, tris = capsule_mesh()
         self.capsule_mesh = (ctx.buffer(verts.tobytes()), ctx.buffer(tris.tobytes()))
@@ -308,10 +324,13 @@ class Resources:
              (instances, "3f 3f 1f 4f/i", "i_a", "i_b", "i_radius", "i_color")],
             index_buffer=ibo, index_element_size=4)
 
-    def capsule_vao(self, instances: moderngl.Buffer, shadow: bool = False) -> moderngl.VertexArray:
-        """Rounded cones from ``instances`` (a, b, ra, rb, rgba), lit or as their ground shadow."""
+    def capsule_vao(self, instances: moderngl.Buffer, shadow: bool = False,
+                    exact: bool | None = None) -> moderngl.VertexArray:
+        """Rounded cones from ``instances`` (a, b, ra, rb, rgba): lit (``exact`` or the mesh,
+        None: ``exact_capsules``) or as their ground shadow."""
+        exact = self.exact_capsules if exact is None else exact
         vbo, ibo = self.shadow_mesh if shadow else self.capsule_mesh
-        program = self.shadow_program if shadow else self.capsule_program
+        program = self.shadow_program if shadow else self.capsule_exact_program if exact else self.capsule_program
         return self.ctx.vertex_array(
             program,
             [(vbo, "2f 1f 1f", "in_ring", "in_lat", "in_end"),
@@ -338,16 +357,17 @@ class Resources:
         rp["u_view"].write(mat_bytes(frame.view))
         rp["u_proj"].write(mat_bytes(frame.proj))
         rp["u_depth_pull"].value = SHADOW_DEPTH_PULL
-        for prog in (self.capsule_program, self.shadow_program):
+        for prog in (self.capsule_program, self.capsule_exact_program, self.shadow_program):
             prog["u_view"].write(mat_bytes(frame.view))
             prog["u_proj"].write(mat_bytes(frame.proj))
             prog["u_shadow"].value = 1.0 if prog is self.shadow_program else 0.0
-        cp = self.capsule_program
-        cp["u_light_dir"].value = mp["u_light_dir"].value
-        cp["u_eye"].value = mp["u_eye"].value
-        cp["u_ambient"].value = light.ambient
-        cp["u_diffuse"].value = light.diffuse
-        cp["u_specular"].value = light.specular
+            prog["u_inflate"].value = CAPSULE_INFLATE if prog is self.capsule_exact_program else 1.0
+        for cp in (self.capsule_program, self.capsule_exact_program):
+            cp["u_light_dir"].value = mp["u_light_dir"].value
+            cp["u_eye"].value = mp["u_eye"].value
+            cp["u_ambient"].value = light.ambient
+            cp["u_diffuse"].value = light.diffuse
+            cp["u_specular"].value = light.specular
         lp = self.line_program
         lp["u_view"].write(mat_bytes(frame.view))
         lp["u_proj"].write(mat_bytes(frame.proj))

@@ -10,7 +10,8 @@ from .base import (MESH_INSTANCE_FLOATS, FrameState, InstanceBuffer, Renderable,
 from .capsule_mesh import CAPSULE_INSTANCE_FLOATS
 
 STYLES = ("capsules", "sticks")
-SEAM = 0.05     # relative radius step between caps sharing a joint: more than the mesh's facet depth (~4 %)
+SEAM = 0.05         # relative radius step between caps sharing a joint: more than the mesh's facets (~4 %)
+SEAM_EXACT = 0.015  # the same for ray-cast capsules (equal spheres would still z-fight)
 BRANCH = 0.1    # branches (arms off the chest, legs off the pelvis) start this much thinner
 
 
@@ -38,6 +39,8 @@ class Skeleton(Renderable):
     - ``alpha < 1`` draws a ghost: a single-layer blend of its front surface; its shadow is
       ``alpha`` times as dark.
     - A joint named ``Simulation`` (the database's ground projection of the root) is not drawn.
+    - ``exact`` (fixed when created, from ``Resources.of(ctx).exact_capsules``): capsules ray-cast
+      per pixel (a GPU's default) or drawn as their mesh (software GL's default).
 
     Every attribute (``color``, ``alpha``, ``style``, ``shadow``, ``thickness``, ``height``,
     ``radii``, ``joint_radius``, ``bone_radius``) can be changed at any time; it applies on the
@@ -74,6 +77,10 @@ class Skeleton(Renderable):
         children = children[shown[children] & shown[self.parents[children]]]
         self._children = children
         self._bone_parents = self.parents[children]
+        res = Resources.of(ctx)
+        self.exact = res.exact_capsules
+        # exact surfaces only need caps a hair apart; the mesh needs more than its facet depth
+        self._seam = SEAM_EXACT if self.exact else SEAM
         # caps meeting at a joint get distinct radii (see SEAM): the bone that continues the trunk
         # through a joint (the child carrying most joints) starts at its radius r, the bone arriving
         # ends at (1 - SEAM) r, branches start thinner, each one SEAM apart, inside the others
@@ -83,15 +90,14 @@ class Skeleton(Renderable):
             bones = np.nonzero(self._bone_parents == p)[0]
             order = bones[np.argsort(-subtree[children[bones]], kind="stable")]
             for rank, k in enumerate(order[1:]):
-                self._start_scale[k] = 1.0 - BRANCH - SEAM * (rank + 1)
+                self._start_scale[k] = 1.0 - BRANCH - self._seam * (rank + 1)
         self._heads = body.head_joints(self.parents, self.names)
-        res = Resources.of(ctx)
         self._joints = InstanceBuffer(ctx, MESH_INSTANCE_FLOATS, max(n, 1))
         self._bones = InstanceBuffer(ctx, MESH_INSTANCE_FLOATS, max(len(children), 1))
         self._capsules = InstanceBuffer(ctx, CAPSULE_INSTANCE_FLOATS, max(2 * n, 1))
         self._joint_vao = res.mesh_vao("sphere", self._joints.buffer)
         self._bone_vao = res.mesh_vao("cylinder", self._bones.buffer)
-        self._capsule_vao = res.capsule_vao(self._capsules.buffer)
+        self._capsule_vao = res.capsule_vao(self._capsules.buffer, exact=self.exact)
         self._shadow_vao = res.capsule_vao(self._capsules.buffer, shadow=True)
         self._positions = None
         self._capsule_data = None  # what the capsule buffer holds (shadow bounds are computed from it)
@@ -241,7 +247,7 @@ class Skeleton(Renderable):
         # no two caps on one joint may be the same sphere: their facets would poke through each
         # other in jagged stripes
         c[:nb, 6] = radii[parents] * self._start_scale[keep]
-        c[:nb, 7] = bone_end[kids] * (1.0 - SEAM)
+        c[:nb, 7] = bone_end[kids] * (1.0 - self._seam)
         s = slice(nb, nb + nl)
         c[s, 0:3] = p[leaves]
         c[s, 3:6] = p[leaves] + d * ext[leaves, None]
