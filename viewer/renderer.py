@@ -5,17 +5,11 @@ import moderngl
 import numpy as np
 
 from .camera import OrbitCamera
-from .renderables.base import FrameState, Resources
+from .renderables.base import (SOFTWARE_RENDERERS, FrameState, Resources, draw_shadows,
+                               is_software_renderer)
 from .scene import Scene
 
-
-SOFTWARE_RENDERERS = ("llvmpipe", "softpipe", "swrast", "swiftshader", "software")
-
-
-def is_software_renderer(ctx: moderngl.Context) -> bool:
-    """Whether the context rasterizes on the CPU (Mesa llvmpipe and friends)."""
-    name = str(ctx.info.get("GL_RENDERER", "")).lower()
-    return any(s in name for s in SOFTWARE_RENDERERS)
+__all__ = ["Renderer", "SOFTWARE_RENDERERS", "is_software_renderer"]
 
 
 class Renderer:
@@ -95,9 +89,16 @@ class Renderer:
         ctx.cull_face = "back"
         frame = FrameState(ctx=ctx, fbo=draw_fbo, view=camera.view_matrix(),
                            proj=camera.projection_matrix(self.aspect), eye=camera.eye,
-                           target=camera.target, width=self.width, height=self.height, background=bg)
+                           target=camera.target, width=self.width, height=self.height, background=bg,
+                           light=scene.light, ground_height=scene.ground_height())
         Resources.of(ctx).begin_frame(frame, scene.light)
-        for r in scene.draw_order():
+        order = scene.draw_order()
+        opaque = [r for r in order if not r.transparent]
+        for r in opaque:
+            r.draw(frame)
+        # shadows go on the opaque ground before anything transparent blends over it
+        draw_shadows(frame, [r for r in order if r.casts_shadow], strength=scene.shadow_strength)
+        for r in order[len(opaque):]:
             r.draw(frame)
         ctx.disable(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
         if self._msaa is not None:

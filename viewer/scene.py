@@ -5,12 +5,15 @@ from .renderables.base import Light, Renderable
 
 
 class Scene:
-    """Holds renderables in draw order. Opaque ones are drawn first (in order), then transparent
-    ones (in order), so ghosts blend over everything else."""
+    """Holds renderables in draw order. Opaque ones are drawn first (in order), then the shadows
+    of those that cast one on the ground, then transparent ones (in order), so ghosts blend over
+    everything else. ``shadow_strength`` (0..1) is how much a shadow darkens the ground."""
 
-    def __init__(self, background=(0.17, 0.18, 0.21), light: Light | None = None):
+    def __init__(self, background=(0.17, 0.18, 0.21), light: Light | None = None,
+                 shadow_strength: float = 0.55):
         self.background = tuple(background)
         self.light = light or Light()
+        self.shadow_strength = float(shadow_strength)
         self.renderables: list[Renderable] = []
 
     def add(self, *renderables: Renderable):
@@ -24,6 +27,13 @@ class Scene:
     def draw_order(self) -> list[Renderable]:
         visible = [r for r in self.renderables if r.visible]
         return [r for r in visible if not r.transparent] + [r for r in visible if r.transparent]
+
+    def ground_height(self) -> float | None:
+        """Height of the first visible ground (where shadows fall), or None without one."""
+        for r in self.renderables:
+            if r.visible and r.receiver_height is not None:
+                return float(r.receiver_height)
+        return None
 
     def release(self) -> None:
         for r in self.renderables:

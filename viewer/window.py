@@ -1,7 +1,8 @@
 """A glfw window playing an animation: the standalone BVH player.
 
 Keys: space pause, left/right step a frame (shift: 10), [ ] slower/faster, F follow the root,
-R reframe, Home restart, Esc/Q quit. Mouse: left-drag orbit, right/middle-drag pan, wheel zoom.
+R reframe, C capsules/sticks, S shadow on/off, Home restart, Esc/Q quit. Mouse: left-drag orbit,
+right/middle-drag pan, wheel zoom.
 """
 from __future__ import annotations
 
@@ -28,7 +29,8 @@ class PlayerWindow:
     """Owns the glfw window, the moderngl context on it, the renderer and the playback state."""
 
     def __init__(self, parents, positions, frame_time: float, title: str = "lmm-studio view",
-                 width: int = 1280, height: int = 720, samples: int | None = None, start_frame: int = 0):
+                 width: int = 1280, height: int = 720, samples: int | None = None, start_frame: int = 0,
+                 names=None, style: str = "capsules", shadow: bool = True):
         try:
             ok = glfw.init()
         except Exception as e:  # pyGLFW may raise instead of returning False
@@ -49,7 +51,8 @@ class PlayerWindow:
         fb_w, fb_h = glfw.get_framebuffer_size(self.window)
         self.renderer = Renderer(self.ctx, fb_w, fb_h, samples=samples)
         self.screen = self.ctx.detect_framebuffer(0)
-        self.view = AnimationView(self.ctx, parents, positions, aspect=fb_w / fb_h)
+        self.view = AnimationView(self.ctx, parents, positions, aspect=fb_w / fb_h, names=names, style=style,
+                                  shadow=shadow)
         self.playback = Playback(len(self.view.positions), float(frame_time))
         self.playback.seek(start_frame)
         self.view.reset_camera(self.playback.frame)
@@ -84,6 +87,10 @@ class PlayerWindow:
             view.follow = not view.follow
         elif key == glfw.KEY_R and action == glfw.PRESS:
             view.reset_camera(pb.frame)
+        elif key == glfw.KEY_C and action == glfw.PRESS:
+            view.skeleton.style = "sticks" if view.skeleton.style == "capsules" else "capsules"
+        elif key == glfw.KEY_S and action == glfw.PRESS:
+            view.skeleton.shadow = not view.skeleton.shadow
         elif key == glfw.KEY_HOME:
             pb.seek(0)
         elif key in (glfw.KEY_ESCAPE, glfw.KEY_Q):

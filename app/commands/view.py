@@ -1,7 +1,8 @@
 """``lmm-studio view FILE.bvh``: play a BVH file in a 3D window, or save one frame headless.
 
 Keys in the window: space pause, left/right step (shift: 10 frames), [ ] speed, F follow,
-R reframe, Home restart, Esc/Q quit; mouse: left-drag orbit, right/middle-drag pan, wheel zoom.
+R reframe, C capsules/sticks, S shadow on/off, Home restart, Esc/Q quit; mouse: left-drag orbit,
+right/middle-drag pan, wheel zoom.
 """
 from __future__ import annotations
 
@@ -22,6 +23,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="multisampling samples (0 disables; default 4 on a GPU, 0 on a software renderer)")
     parser.add_argument("--paused", action="store_true", help="start paused")
     parser.add_argument("--no-follow", action="store_true", help="start with the camera not following the root")
+    parser.add_argument("--style", choices=("capsules", "sticks"), default="capsules",
+                        help="draw the character as a body of shaded capsules (default) or as thin sticks")
+    parser.add_argument("--no-shadow", action="store_true", help="no shadow on the ground")
     # for tests and scripted captures of the real window
     parser.add_argument("--frames", type=int, default=None, metavar="N",
                         help="close the window after N frames (for tests)")
@@ -40,7 +44,7 @@ def _has_display() -> bool:
 
 
 def _load(path: str):
-    """(name, parents, positions (F,J,3), frame_time) or an error message."""
+    """(name, parents, joint names, positions (F,J,3), frame_time) or an error message."""
     from lmm.data import bvh
 
     try:
@@ -56,10 +60,15 @@ def _load(path: str):
     if anim.n_frames < 1 or positions.ndim != 3 or positions.shape[1] < 1:
         return f"{path}: no frames to show"
     name = Path(path).name
-    return name, anim.parents, positions, float(anim.frame_time)
+    return name, anim.parents, list(anim.names), positions, float(anim.frame_time)
 
 
-def _screenshot(args, parents, positions) -> int:
+def _look(args, names) -> dict:
+    """How the character is drawn: joint names (for body proportions), style, shadow."""
+    return {"names": names, "style": args.style, "shadow": not args.no_shadow}
+
+
+def _screenshot(args, parents, names, positions) -> int:
     import numpy as np
     from PIL import Image
 
@@ -72,7 +81,8 @@ def _screenshot(args, parents, positions) -> int:
     except ContextError as e:
         _error(str(e))
         return 1
-    view = AnimationView(ctx, parents, positions, aspect=args.width / args.height, follow=not args.no_follow)
+    view = AnimationView(ctx, parents, positions, aspect=args.width / args.height, follow=not args.no_follow,
+                         **_look(args, names))
     view.reset_camera(args.frame)
     view.set_frame(args.frame)
     renderer = Renderer(ctx, args.width, args.height, samples=args.samples)
@@ -97,21 +107,21 @@ def main(args: argparse.Namespace) -> int:
     if isinstance(loaded, str):
         _error(loaded)
         return 1
-    name, parents, positions, frame_time = loaded
+    name, parents, names, positions, frame_time = loaded
     n = len(positions)
     if not -n <= args.frame < n:
         _error(f"--frame {args.frame} is out of range: {args.file} has {n} frames")
         return 2
     args.frame %= n
     if args.screenshot:
-        return _screenshot(args, parents, positions)
+        return _screenshot(args, parents, names, positions)
 
     from viewer.window import PlayerWindow, WindowError
 
     try:
         window = PlayerWindow(parents, positions, frame_time, title=f"lmm-studio view {name}",
                               width=args.width, height=args.height, samples=args.samples,
-                              start_frame=args.frame)
+                              start_frame=args.frame, **_look(args, names))
     except WindowError as e:
         _error(str(e))
         return 2

@@ -145,3 +145,28 @@ def test_frame_out_of_range(capsys, tmp_path):
     write_bvh(path, CREATURE_NAMES, CREATURE_PARENTS, CREATURE_OFFSETS_M, np.zeros((3, 3)) + [0, 1, 0])
     code, err = run_in_process([path, "--screenshot", tmp_path / "x.png", "--frame", 7], capsys)
     assert code == 2 and "3 frames" in err
+
+
+@pytest.mark.skipif(not TAKES, reason="no shipped LAFAN1 takes")
+def test_screenshot_styles_and_shadow(out_dir):
+    pytest.importorskip("lmm.data.bvh")
+    take = min(TAKES, key=lambda p: p.stat().st_size)
+    images = {}
+    for flags in ([], ["--style", "sticks"], ["--no-shadow"]):
+        png = out_dir / f"view_style{'_'.join(flags).replace('--', '_')}.png"
+        # a subprocess: an in-process screenshot would leave its own GL context current
+        result = run_view([take, "--screenshot", png, "--frame", 200, "--width", 480, "--height", 270, *flags],
+                          env=no_display_env())
+        assert result.returncode == 0, result.stderr
+        images[" ".join(flags)] = np.array(Image.open(png)).astype(int)
+    body = {k: colour_mask(v.astype(np.uint8), SKELETON_ORANGE).sum() for k, v in images.items()}
+    assert body[""] > 2 * body["--style sticks"] > 0            # capsules are a body, sticks are thin
+    assert abs(body[""] - body["--no-shadow"]) < 0.005 * body[""]   # the shadow only touches the ground...
+    darker = images[""].sum(axis=-1) < images["--no-shadow"].sum(axis=-1) - 30
+    assert darker.sum() > 200                                  # ...and it is there by default
+
+
+def test_unknown_style_is_a_usage_error(tmp_path):
+    result = run_view([tmp_path / "x.bvh", "--style", "blobs", "--screenshot", tmp_path / "x.png"],
+                      env=no_display_env())
+    assert result.returncode == 2 and "--style" in result.stderr and "Traceback" not in result.stderr

@@ -47,7 +47,8 @@ def test_known_pose_lands_on_skeleton_coloured_pixels(gl_ctx, renderer, out_dir)
     pose = TPOSE_POSITIONS + OFFSET
     scene = Scene()
     scene.add(Ground(gl_ctx))
-    skel = scene.add(Skeleton(gl_ctx, TPOSE_PARENTS, color=ORANGE, joint_radius=0.03, bone_radius=0.02))
+    skel = scene.add(Skeleton(gl_ctx, TPOSE_PARENTS, color=ORANGE, joint_radius=0.03, bone_radius=0.02,
+                              style="sticks"))
     skel.update(pose)
     cam = camera_on(pose)
     img = renderer.render(scene, cam)
@@ -165,9 +166,10 @@ def test_ghost_skeleton_blends_over_the_scene(gl_ctx, renderer, out_dir):
     ghost_pose = pose + [0.0, 0.0, 0.6]
     scene = Scene()
     scene.add(Ground(gl_ctx))
-    solid = scene.add(Skeleton(gl_ctx, TPOSE_PARENTS, color=ORANGE))
+    # no shadows here: the ghost's own (fainter) shadow would change the background it blends over
+    solid = scene.add(Skeleton(gl_ctx, TPOSE_PARENTS, color=ORANGE, shadow=False))
     solid.update(pose)
-    ghost = scene.add(Skeleton(gl_ctx, TPOSE_PARENTS, color=BLUE, alpha=0.5))
+    ghost = scene.add(Skeleton(gl_ctx, TPOSE_PARENTS, color=BLUE, alpha=0.5, shadow=False))
     ghost.update(ghost_pose)
     cam = camera_on(np.r_[pose, ghost_pose])
     blended = renderer.render(scene, cam).astype(float)
@@ -248,6 +250,10 @@ def test_bad_input_is_rejected(gl_ctx):
     skel = Skeleton(gl_ctx, TPOSE_PARENTS)
     with pytest.raises(ValueError, match="16 joints"):
         skel.update(np.zeros((3, 3)))
+    with pytest.raises(ValueError, match="3 joint names for 16 joints"):
+        Skeleton(gl_ctx, TPOSE_PARENTS, names=["a", "b", "c"])
+    with pytest.raises(ValueError, match="style"):
+        Skeleton(gl_ctx, TPOSE_PARENTS, style="wireframe")
     line = Lines(gl_ctx)
     with pytest.raises(ValueError, match="even"):
         line.update(np.zeros((3, 3)), mode="segments")

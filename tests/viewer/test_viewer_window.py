@@ -71,7 +71,8 @@ def test_window_keys_and_mouse(xvfb_env):
     state = json.loads(result.stdout.strip().splitlines()[-1])
     assert state == {"paused_after_space": True, "frame_after_two_rights": 2, "frame_after_shift_left": 42,
                      "faster": True, "slower": True, "follow_toggled": True, "zoomed_in": True,
-                     "orbited": True, "panned": True, "resized": True, "closing": True, "run_rc": 0}
+                     "orbited": True, "panned": True, "resized": True, "closing": True, "run_rc": 0,
+                     "style_toggled": ["capsules", "sticks"], "shadow_toggled": True}
 
 
 def test_rendering_inside_dearpygui_context(xvfb_env, out_dir):

@@ -11,6 +11,9 @@ from dataclasses import dataclass
 import moderngl
 import numpy as np
 
+from .capsule_mesh import (CAPSULE_EXACT_FS, CAPSULE_FS, CAPSULE_INFLATE, CAPSULE_VS, SHADOW_DEPTH_PULL, SHADOW_FS, SHADOW_RESOLVE_FS,
+                           SHADOW_RESOLVE_VS, capsule_mesh)
+
 # ---------------------------------------------------------------------------------------------
 # shaders
 
@@ -139,7 +142,7 @@ void main() { f_color = v_color; }
 class Light:
     """A directional light (``direction`` points towards the light) plus ambient and specular."""
 
-    direction: tuple = (0.45, 1.0, 0.65)
+    direction: tuple = (0.8, 1.2, 0.25)
     ambient: float = 0.4
     diffuse: float = 0.55
     specular: float = 0.15
@@ -158,6 +161,8 @@ class FrameState:
     width: int
     height: int
     background: tuple
+    light: Light | None = None
+    ground_height: float | None = None   # the plane shadows fall on; None: no ground, no shadows
 
     @property
     def view_proj(self) -> np.ndarray:
@@ -258,11 +263,26 @@ MESH_INSTANCE_FLOATS = 11   # a(3) b(3) radius(1) color(4)
 LINE_INSTANCE_FLOATS = 14   # p0(3) p1(3) c0(4) c1(4)
 
 
+SOFTWARE_RENDERERS = ("llvmpipe", "softpipe", "swrast", "swiftshader", "software")
+
+
+def is_software_renderer(ctx: moderngl.Context) -> bool:
+    """Whether the context rasterizes on the CPU (Mesa llvmpipe and friends)."""
+    name = str(ctx.info.get("GL_RENDERER", "")).lower()
+    return any(s in name for s in SOFTWARE_RENDERERS)
+
+
 class Resources:
-    """Programs and unit meshes of one context; get it with ``Resources.of(ctx)``."""
+    """Programs and unit meshes of one context; get it with ``Resources.of(ctx)``.
+
+    ``exact_capsules``: draw capsule bodies ray-cast per pixel (exact surfaces, smooth seams) or
+    as the plain mesh (slightly faceted, where bones meet at a shallow angle the facets show).
+    Defaults to exact on a GPU and the mesh on software GL, where exact costs ~1.5x the frame;
+    set it before creating skeletons to choose."""
 
     def __init__(self, ctx: moderngl.Context):
         self.ctx = ctx
+        self.exact_capsules = not is_software_renderer(ctx)
         self.mesh_program = ctx.program(vertex_shader=MESH_VS, fragment_shader=MESH_FS)
         self.line_program = ctx.program(vertex_shader=LINE_VS, fragment_shader=LINE_FS)
         self.meshes = {}
@@ -271,6 +291,20 @@ class Resources:
             self.meshes[name] = (ctx.buffer(verts.tobytes()), ctx.buffer(tris.tobytes()))
         corners = np.array([[0, -1], [0, 1], [1, -1], [1, 1]], dtype=np.float32)
         self.line_corners = ctx.buffer(corners.tobytes())
+        self.capsule_program = ctx.program(vertex_shader=CAPSULE_VS, fragment_shader=CAPSULE_FS)
+        self.capsule_exact_program = ctx.program(vertex_shader=CAPSULE_VS, fragment_shader=CAPSULE_EXACT_FS)
+        self.shadow_program = ctx.program(vertex_shader=CAPSULE_VS, fragment_shader=SHADOW_FS)
+        verts, tris = capsule_mesh()
+        self.capsule_mesh = (ctx.buffer(verts.tobytes()), ctx.buffer(tris.tobytes()))
+        # shadows only need the outline: a coarse mesh keeps them cheap on software GL, where
+        # their cost is mostly per triangle
+        verts, tris = capsule_mesh(segments=12, cap_rings=3)
+        self.shadow_mesh = (ctx.buffer(verts.tobytes()), ctx.buffer(tris.tobytes()))
+        self.shadow_resolve_program = ctx.program(vertex_shader=SHADOW_RESOLVE_VS,
+                                                  fragment_shader=SHADOW_RESOLVE_FS)
+        self._resolve_corners = ctx.buffer(np.array([[0, 0], [1, 0], [0, 1], [1, 1]], np.float32).tobytes())
+        self.shadow_resolve_vao = ctx.vertex_array(self.shadow_resolve_program,
+                                                   [(self._resolve_corners, "2f", "in_corner")])
 
     @classmethod
     def of(cls, ctx: moderngl.Context) -> "Resources":
@@ -290,6 +324,19 @@ class Resources:
              (instances, "3f 3f 1f 4f/i", "i_a", "i_b", "i_radius", "i_color")],
             index_buffer=ibo, index_element_size=4)
 
+    def capsule_vao(self, instances: moderngl.Buffer, shadow: bool = False,
+                    exact: bool | None = None) -> moderngl.VertexArray:
+        """Rounded cones from ``instances`` (a, b, ra, rb, rgba): lit (``exact`` or the mesh,
+        None: ``exact_capsules``) or as their ground shadow."""
+        exact = self.exact_capsules if exact is None else exact
+        vbo, ibo = self.shadow_mesh if shadow else self.capsule_mesh
+        program = self.shadow_program if shadow else self.capsule_exact_program if exact else self.capsule_program
+        return self.ctx.vertex_array(
+            program,
+            [(vbo, "2f 1f 1f", "in_ring", "in_lat", "in_end"),
+             (instances, "3f 3f 1f 1f 4f/i", "i_a", "i_b", "i_ra", "i_rb", "i_color")],
+            index_buffer=ibo, index_element_size=4)
+
     def line_vao(self, instances: moderngl.Buffer) -> moderngl.VertexArray:
         return self.ctx.vertex_array(
             self.line_program,
@@ -306,6 +353,21 @@ class Resources:
         mp["u_ambient"].value = light.ambient
         mp["u_diffuse"].value = light.diffuse
         mp["u_specular"].value = light.specular
+        rp = self.shadow_resolve_program
+        rp["u_view"].write(mat_bytes(frame.view))
+        rp["u_proj"].write(mat_bytes(frame.proj))
+        rp["u_depth_pull"].value = SHADOW_DEPTH_PULL
+        for prog in (self.capsule_program, self.capsule_exact_program, self.shadow_program):
+            prog["u_view"].write(mat_bytes(frame.view))
+            prog["u_proj"].write(mat_bytes(frame.proj))
+            prog["u_shadow"].value = 1.0 if prog is self.shadow_program else 0.0
+            prog["u_inflate"].value = CAPSULE_INFLATE if prog is self.capsule_exact_program else 1.0
+        for cp in (self.capsule_program, self.capsule_exact_program):
+            cp["u_light_dir"].value = mp["u_light_dir"].value
+            cp["u_eye"].value = mp["u_eye"].value
+            cp["u_ambient"].value = light.ambient
+            cp["u_diffuse"].value = light.diffuse
+            cp["u_specular"].value = light.specular
         lp = self.line_program
         lp["u_view"].write(mat_bytes(frame.view))
         lp["u_proj"].write(mat_bytes(frame.proj))
@@ -361,13 +423,29 @@ def as_rgba(color, n: int | None = None, alpha: float = 1.0) -> np.ndarray:
 
 class Renderable:
     """Base of everything a Scene draws. Subclasses fill their buffers in ``update(...)`` and
-    issue their draws in ``draw(frame)``; ``transparent`` ones are drawn after opaque ones."""
+    issue their draws in ``draw(frame)``; ``transparent`` ones are drawn after opaque ones.
+
+    A renderable that ``casts_shadow`` also has ``draw_shadow(frame)`` (its shadow geometry with
+    the shadow program, see ``draw_shadows``); one that has a ``receiver_height`` (the ground) is
+    the plane shadows fall on."""
 
     visible: bool = True
+    receiver_height: float | None = None
 
     @property
     def transparent(self) -> bool:
         return False
+
+    @property
+    def casts_shadow(self) -> bool:
+        return False
+
+    def draw_shadow(self, frame: FrameState) -> None:  # pragma: no cover - interface
+        pass
+
+    def shadow_bounds(self, direction: np.ndarray, ground: float):  # pragma: no cover - interface
+        """(x0, z0, x1, z1) on the ground containing this renderable's shadow, or None."""
+        return None
 
     def draw(self, frame: FrameState) -> None:  # pragma: no cover - interface
         raise NotImplementedError
@@ -403,3 +481,64 @@ def draw_transparent(frame: FrameState, draws) -> None:
     for draw in draws:
         draw()
     ctx.depth_func = "<"
+
+
+def shadow_direction(light: Light) -> np.ndarray:
+    """Unit vector towards the key light, raised to at least ~11 degrees above the horizon so a
+    grazing light does not stretch shadows to the horizon."""
+    direction = np.asarray(light.direction, dtype=np.float64)
+    direction = direction / np.linalg.norm(direction)
+    if direction[1] < 0.2:
+        direction[1] = 0.2
+        direction /= np.linalg.norm(direction)
+    return direction
+
+
+def draw_shadows(frame: FrameState, casters, strength: float = 0.45) -> None:
+    """Planar shadows of ``casters`` on the ground plane ``frame.ground_height``, from the key
+    light, darkening the ground at most once however many parts overlap.
+
+    Pass 1 draws the casters' light-facing triangles flattened onto the ground and writes
+    ``1 - darkness`` into the destination alpha only, with MIN blending; depth is tested (bodies
+    hide their shadows) but not written. Pass 2 draws one ground rectangle over the union of the
+    casters' ``shadow_bounds`` that multiplies the colour by the destination alpha and sets it
+    back to 1 (so each pixel is darkened once, and the image stays opaque). Lines and anything
+    transparent are drawn afterwards, over the shadow, and keep their colour."""
+    if not casters or frame.ground_height is None or frame.light is None:
+        return
+    ctx, fbo = frame.ctx, frame.fbo
+    res = Resources.of(ctx)
+    direction = shadow_direction(frame.light)
+    ground = float(frame.ground_height)
+    bounds = [b for b in (c.shadow_bounds(direction, ground) for c in casters) if b is not None]
+    if not bounds:
+        return
+    bounds = np.asarray(bounds, dtype=np.float64)
+    rect = (bounds[:, 0].min(), bounds[:, 1].min(), bounds[:, 2].max(), bounds[:, 3].max())
+    prog = res.shadow_program
+    prog["u_shadow_dir"].value = tuple(direction)
+    prog["u_ground"].value = ground
+    prog["u_depth_pull"].value = SHADOW_DEPTH_PULL
+    prog["u_strength"].value = float(strength)
+    # pass 1: seen from a camera above the ground, exactly the light-facing triangles of a closed
+    # mesh keep their winding once flattened, so back-face culling halves the overdraw
+    fbo.depth_mask = False
+    fbo.color_mask = (False, False, False, True)
+    fbo.use()  # moderngl applies a framebuffer's masks when it is bound
+    ctx.blend_equation = moderngl.MIN
+    for caster in casters:
+        caster.draw_shadow(frame)
+    # pass 2: resolve over the rectangle, whatever the depth there
+    fbo.color_mask = (True, True, True, True)
+    fbo.use()
+    ctx.blend_equation = moderngl.FUNC_ADD
+    ctx.blend_func = (moderngl.ZERO, moderngl.DST_ALPHA, moderngl.ONE, moderngl.ZERO)
+    ctx.disable(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
+    rp = res.shadow_resolve_program
+    rp["u_rect"].value = tuple(float(x) for x in rect)
+    rp["u_ground"].value = ground
+    res.shadow_resolve_vao.render(moderngl.TRIANGLE_STRIP)
+    ctx.enable(moderngl.DEPTH_TEST | moderngl.CULL_FACE)
+    fbo.depth_mask = True
+    fbo.use()
+    ctx.blend_func = (moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA, moderngl.ONE, moderngl.ONE_MINUS_SRC_ALPHA)

@@ -76,6 +76,11 @@ class Ground(Renderable):
         self.show_axes = show_axes
         self.set_axis_length(tile_m if axis_length_m is None else axis_length_m)
 
+    @property
+    def receiver_height(self) -> float:
+        """Shadows fall on the ground."""
+        return self.height
+
     def set_axis_length(self, length: float) -> None:
         lift = self.height + 1e-3 * length
         o = np.array([0.0, lift, 0.0])

@@ -1,44 +1,109 @@
-"""A skeleton drawn as lit bones (cylinders from parent to child) and joint spheres."""
+"""A skeleton drawn as a shaded body of capsules (default) or as sticks, with a ground shadow."""
 from __future__ import annotations
 
 import moderngl
 import numpy as np
 
+from . import body
 from .base import (MESH_INSTANCE_FLOATS, FrameState, InstanceBuffer, Renderable, Resources,
                    as_rgba, draw_mesh_instances, draw_transparent)
+from .capsule_mesh import CAPSULE_INSTANCE_FLOATS
+
+STYLES = ("capsules", "sticks")
+SEAM = 0.05         # relative radius step between caps sharing a joint: more than the mesh's facets (~4 %)
+SEAM_EXACT = 0.015  # the same for ray-cast capsules (equal spheres would still z-fight)
+BRANCH = 0.1    # branches (arms off the chest, legs off the pelvis) start this much thinner
 
 
 def radii_for_height(height: float) -> dict:
-    """Joint and bone radii proportional to a character's height, in the same units, so a skeleton
-    in metres, centimetres or inches looks the same: ``Skeleton(ctx, parents, **radii_for_height(h))``."""
-    return {"joint_radius": 0.016 * height, "bone_radius": 0.011 * height}
+    """Sizes proportional to a character's height, in the same units, so a skeleton in metres,
+    centimetres or inches looks the same: ``Skeleton(ctx, parents, **radii_for_height(h))``.
+    ``height`` scales the capsules; the radii are those of the sticks style."""
+    return {"joint_radius": 0.016 * height, "bone_radius": 0.011 * height, "height": float(height)}
 
 
 class Skeleton(Renderable):
-    """``Skeleton(ctx, parents, color, alpha, joint_radius, bone_radius)``; ``update(positions)``
-    with global joint positions (J, 3). ``alpha < 1`` draws a ghost (single-layer blend).
+    """``Skeleton(ctx, parents, color, alpha, joint_radius, bone_radius, names=None,
+    style="capsules", shadow=True, height=None, thickness=1.0)``; ``update(positions)`` with
+    global joint positions (J, 3).
 
-    ``color``, ``alpha`` and the radii can be changed at any time; they apply on the next draw.
+    - ``style="capsules"``: a body of rounded cones, one per bone, between joint spheres whose
+      radii follow the joint ``names`` (hips, spine, thigh, forearm...) or, for names it does not
+      know or without names, the joint's place in the tree; leaf joints are extended (hands,
+      toes) and a leaf ``Head`` is a sphere. Sizes are fractions of ``height`` (the character's
+      height in scene units), estimated from the bone lengths of the first pose when None;
+      ``thickness`` scales every radius. ``radii`` (J,) can be set to override the joint radii.
+    - ``style="sticks"``: thin cylinders of ``bone_radius`` and joint spheres of ``joint_radius``.
+    - ``shadow``: cast a planar shadow from the scene's key light on the scene's ground (drawn by
+      the Renderer, darkening the ground once however many bones overlap).
+    - ``alpha < 1`` draws a ghost: a single-layer blend of its front surface; its shadow is
+      ``alpha`` times as dark.
+    - A joint named ``Simulation`` (the database's ground projection of the root) is not drawn.
+    - ``exact`` (fixed when created, from ``Resources.of(ctx).exact_capsules``): capsules ray-cast
+      per pixel (a GPU's default) or drawn as their mesh (software GL's default).
+
+    Every attribute (``color``, ``alpha``, ``style``, ``shadow``, ``thickness``, ``height``,
+    ``radii``, ``joint_radius``, ``bone_radius``) can be changed at any time; it applies on the
+    next draw. Capsules style costs one instanced draw call per skeleton, its shadow one more
+    (plus one per scene for all shadows together).
     """
 
     def __init__(self, ctx: moderngl.Context, parents, color=(0.95, 0.55, 0.15), alpha: float = 1.0,
-                 joint_radius: float = 0.028, bone_radius: float = 0.019):
+                 joint_radius: float = 0.028, bone_radius: float = 0.019, names=None,
+                 style: str = "capsules", shadow: bool = True, height: float | None = None,
+                 thickness: float = 1.0):
         self.ctx = ctx
         self.parents = np.asarray(parents, dtype=np.int64).ravel()
+        if names is not None and len(names) != len(self.parents):
+            raise ValueError(f"{len(names)} joint names for {len(self.parents)} joints")
+        self.names = None if names is None else [str(n) for n in names]
         self.color = tuple(float(c) for c in color[:3])
         self.alpha = float(alpha)
         self.joint_radius = float(joint_radius)
         self.bone_radius = float(bone_radius)
+        self._style_name = "capsules"
+        self.style = style
+        self.shadow = bool(shadow)
+        self.height = None if height is None else float(height)
+        self.thickness = float(thickness)
+        self.radii = None
         self.visible = True
-        self._children = np.nonzero(self.parents >= 0)[0]
-        self._bone_parents = self.parents[self._children]
-        res = Resources.of(ctx)
         n = len(self.parents)
+        shown = np.ones(n, dtype=bool)
+        if self.names is not None:
+            shown = np.array([n.lower() != body.SIMULATION_NAME for n in self.names])
+        self._shown = shown
+        children = np.nonzero(self.parents >= 0)[0]
+        children = children[shown[children] & shown[self.parents[children]]]
+        self._children = children
+        self._bone_parents = self.parents[children]
+        res = Resources.of(ctx)
+        self.exact = res.exact_capsules
+        # exact surfaces only need caps a hair apart; the mesh needs more than its facet depth
+        self._seam = SEAM_EXACT if self.exact else SEAM
+        # caps meeting at a joint get distinct radii (see SEAM): the bone that continues the trunk
+        # through a joint (the child carrying most joints) starts at its radius r, the bone arriving
+        # ends at (1 - SEAM) r, branches start thinner, each one SEAM apart, inside the others
+        self._start_scale = np.ones(len(children))
+        subtree = body.subtree_sizes(self.parents)
+        for p in np.unique(self._bone_parents):
+            bones = np.nonzero(self._bone_parents == p)[0]
+            order = bones[np.argsort(-subtree[children[bones]], kind="stable")]
+            for rank, k in enumerate(order[1:]):
+                self._start_scale[k] = 1.0 - BRANCH - self._seam * (rank + 1)
+        self._heads = body.head_joints(self.parents, self.names)
         self._joints = InstanceBuffer(ctx, MESH_INSTANCE_FLOATS, max(n, 1))
-        self._bones = InstanceBuffer(ctx, MESH_INSTANCE_FLOATS, max(len(self._children), 1))
+        self._bones = InstanceBuffer(ctx, MESH_INSTANCE_FLOATS, max(len(children), 1))
+        self._capsules = InstanceBuffer(ctx, CAPSULE_INSTANCE_FLOATS, max(2 * n, 1))
         self._joint_vao = res.mesh_vao("sphere", self._joints.buffer)
         self._bone_vao = res.mesh_vao("cylinder", self._bones.buffer)
+        self._capsule_vao = res.capsule_vao(self._capsules.buffer, exact=self.exact)
+        self._shadow_vao = res.capsule_vao(self._capsules.buffer, shadow=True)
         self._positions = None
+        self._capsule_data = None  # what the capsule buffer holds (shadow bounds are computed from it)
+        self._lengths = None
+        self._body = None          # (joint radii, bone end radii, leaf extensions, end factors, height)
+        self._body_key = None
         self._uploaded_style = None
 
     @property
@@ -49,8 +114,25 @@ class Skeleton(Renderable):
     def transparent(self) -> bool:
         return self.alpha < 1.0
 
+    @property
+    def casts_shadow(self) -> bool:
+        return self.shadow and self._positions is not None and self._capsules.count > 0
+
+    @property
+    def style(self) -> str:
+        """``"capsules"`` or ``"sticks"``; applies on the next draw."""
+        return self._style_name
+
+    @style.setter
+    def style(self, value: str) -> None:
+        if value not in STYLES:
+            raise ValueError(f"unknown skeleton style {value!r}: use one of {', '.join(STYLES)}")
+        self._style_name = value
+
     def _style(self):
-        return (self.color, self.alpha, self.joint_radius, self.bone_radius)
+        radii = None if self.radii is None else np.asarray(self.radii, dtype=np.float64).tobytes()
+        return (self.style, self.color, self.alpha, self.joint_radius, self.bone_radius, self.thickness,
+                self.height, radii)
 
     def update(self, global_positions) -> None:
         """Set the pose: global joint positions (J, 3) in scene units."""
@@ -58,14 +140,58 @@ class Skeleton(Renderable):
         if len(p) != self.n_joints:
             raise ValueError(f"Skeleton has {self.n_joints} joints, got positions for {len(p)}")
         self._positions = p
+        if self._lengths is None:   # bones touching a hidden joint do not count for the body's size
+            shown_bone = self._shown & self._shown[np.maximum(self.parents, 0)]
+            self._lengths = body.bone_lengths(self.parents, p) * shown_bone
         self._upload()
 
+    # -- body proportions -------------------------------------------------------------------------
+    def body_height(self) -> float:
+        """The height the capsule sizes are fractions of: ``height``, or estimated from the bones."""
+        if self.height is not None:
+            return self.height
+        if self._lengths is None:   # no pose yet
+            return 1.0
+        return body.estimate_height(self.parents, self._lengths)
+
+    def joint_radii(self) -> np.ndarray:
+        """(J,) radius of each joint sphere in capsules style (after ``thickness``)."""
+        return self._body_sizes()[0]
+
+    def _body_sizes(self):
+        key = (self.height, self.thickness, None if self.radii is None else
+               np.asarray(self.radii, dtype=np.float64).tobytes())
+        if self._body is None or self._body_key != key:
+            h = self.body_height()
+            if self.radii is not None:
+                radii = np.broadcast_to(np.asarray(self.radii, dtype=np.float64), (self.n_joints,)).copy()
+            else:
+                radii = body.joint_radii(self.parents, self.names, self._lengths, h)
+            radii = radii * self.thickness * self._shown
+            ext, end = body.leaf_extensions(self.parents, self.names, self._lengths, h)
+            bone_end = radii.copy()
+            for j in self._heads:   # the neck keeps its own radius up to the head sphere
+                bone_end[j] = min(radii[j], radii[self.parents[j]])
+            self._body = (radii, bone_end, ext, end, h)
+            self._body_key = key
+        return self._body
+
+    # -- instances --------------------------------------------------------------------------------
     def _upload(self) -> None:
         p = self._positions
         rgba = as_rgba(self.color, alpha=self.alpha)
-        j = self._joints.staging(len(p))
-        j[:, 0:3] = p
-        j[:, 3:6] = p
+        if self.style == "sticks":
+            self._upload_sticks(p, rgba)
+            self._upload_capsules_of_sticks(p, rgba)
+        else:
+            self._upload_capsules(p, rgba)
+        self._uploaded_style = self._style()
+
+    def _upload_sticks(self, p, rgba) -> None:
+        shown = np.nonzero(self._shown)[0]
+        j = self._joints.staging(len(shown))
+        j[:, 0:3] = p[shown]
+        j[:, 3:6] = p[shown]
         j[:, 6] = self.joint_radius
         j[:, 7:11] = rgba
         self._joints.upload(j)
@@ -76,21 +202,114 @@ class Skeleton(Renderable):
         b[:, 7:10] = rgba[:3] * 0.85   # bones a little darker than joints, same hue
         b[:, 10] = rgba[3]
         self._bones.upload(b)
-        self._uploaded_style = self._style()
 
+    def _upload_capsules_of_sticks(self, p, rgba) -> None:
+        """The sticks as capsules: only their shadow is drawn from these."""
+        shown = np.nonzero(self._shown)[0]
+        nb, nj = len(self._children), len(shown)
+        c = self._capsules.staging(nb + nj)
+        c[:nb, 0:3] = p[self._bone_parents]
+        c[:nb, 3:6] = p[self._children]
+        c[:nb, 6:8] = self.bone_radius
+        c[nb:, 0:3] = p[shown]
+        c[nb:, 3:6] = p[shown]
+        c[nb:, 6:8] = self.joint_radius
+        c[:, 8:12] = rgba
+        self._capsules.upload(c)
+        self._capsule_data = c
+
+    def _upload_capsules(self, p, rgba) -> None:
+        radii, bone_end, ext, end, _ = self._body_sizes()
+        parents, kids = self._bone_parents, self._children
+        keep = (radii[parents] > 0) & (radii[kids] > 0)
+        parents, kids = parents[keep], kids[keep]
+        # leaf extensions continue the parent bone past the leaf
+        leaves = np.nonzero(ext > 0)[0]
+        leaves = leaves[self._shown[leaves] & (radii[leaves] > 0)]
+        d = p[leaves] - p[self.parents[leaves]]
+        norm = np.linalg.norm(d, axis=1, keepdims=True)
+        d = np.where(norm > 1e-9, d / np.maximum(norm, 1e-12), [0.0, 1.0, 0.0])
+        # heads: a sphere centred past the head joint, along the neck
+        heads = self._heads[radii[self._heads] > 0]
+        hd = p[heads] - p[self.parents[heads]]
+        hn = np.linalg.norm(hd, axis=1, keepdims=True)
+        hd = np.where(hn > 1e-9, hd / np.maximum(hn, 1e-12), [0.0, 1.0, 0.0])
+        # joints no bone reaches (a lone root, a skeleton of one joint) are spheres of their own
+        lonely = np.ones(self.n_joints, dtype=bool)
+        lonely[parents] = False
+        lonely[kids] = False
+        lonely &= radii > 0
+        lonely = np.nonzero(lonely)[0]
+        nb, nl, nh, nj = len(kids), len(leaves), len(heads), len(lonely)
+        c = self._capsules.staging(nb + nl + nh + nj)
+        c[:nb, 0:3] = p[parents]
+        c[:nb, 3:6] = p[kids]
+        # no two caps on one joint may be the same sphere: their facets would poke through each
+        # other in jagged stripes
+        c[:nb, 6] = radii[parents] * self._start_scale[keep]
+        c[:nb, 7] = bone_end[kids] * (1.0 - self._seam)
+        s = slice(nb, nb + nl)
+        c[s, 0:3] = p[leaves]
+        c[s, 3:6] = p[leaves] + d * ext[leaves, None]
+        c[s, 6] = radii[leaves]
+        c[s, 7] = radii[leaves] * end[leaves]
+        s = slice(nb + nl, nb + nl + nh)
+        centre = p[heads] + hd * (body.HEAD_CENTER_OFFSET * radii[heads])[:, None]
+        c[s, 0:3] = centre
+        c[s, 3:6] = centre
+        c[s, 6] = radii[heads]
+        c[s, 7] = radii[heads]
+        s = slice(nb + nl + nh, None)
+        c[s, 0:3] = p[lonely]
+        c[s, 3:6] = p[lonely]
+        c[s, 6] = radii[lonely]
+        c[s, 7] = radii[lonely]
+        c[:, 8:12] = rgba
+        self._capsules.upload(c)
+        self._capsule_data = c
+
+    # -- drawing ----------------------------------------------------------------------------------
     def draw(self, frame: FrameState) -> None:
         if self._positions is None:
             return
         if self._uploaded_style != self._style():
             self._upload()
-        draws = [lambda: draw_mesh_instances(frame, self._bone_vao, self._bones.count),
-                 lambda: draw_mesh_instances(frame, self._joint_vao, self._joints.count)]
+        if self.style == "sticks":
+            draws = [lambda: draw_mesh_instances(frame, self._bone_vao, self._bones.count),
+                     lambda: draw_mesh_instances(frame, self._joint_vao, self._joints.count)]
+        else:
+            draws = [lambda: self._draw_capsules()]
         if self.transparent:
             draw_transparent(frame, draws)
         else:
             for d in draws:
                 d()
 
+    def _draw_capsules(self) -> None:
+        if self._capsules.count:
+            self._capsule_vao.render(moderngl.TRIANGLES, instances=self._capsules.count)
+
+    def draw_shadow(self, frame: FrameState) -> None:
+        if self._uploaded_style != self._style():
+            self._upload()
+        if self._capsules.count:
+            self._shadow_vao.program["u_fade_height"].value = float(max(self._body_sizes()[4], 1e-9))
+            self._shadow_vao.render(moderngl.TRIANGLES, instances=self._capsules.count)
+
+    def shadow_bounds(self, direction: np.ndarray, ground: float):
+        """(x0, z0, x1, z1): the capsules flattened onto the ground along ``direction``."""
+        if self._uploaded_style != self._style():
+            self._upload()
+        c = self._capsule_data
+        if c is None or len(c) == 0:
+            return None
+        ends = np.r_[c[:, 0:3], c[:, 3:6]].astype(np.float64)
+        flat = ends - direction * (np.maximum(ends[:, 1:2] - ground, 0.0) / direction[1])
+        margin = float(c[:, 6:8].max()) * (1.0 + 1.0 / direction[1])
+        lo, hi = flat[:, [0, 2]].min(axis=0) - margin, flat[:, [0, 2]].max(axis=0) + margin
+        return lo[0], lo[1], hi[0], hi[1]
+
     def release(self) -> None:
-        for obj in (self._joint_vao, self._bone_vao, self._joints, self._bones):
+        for obj in (self._joint_vao, self._bone_vao, self._capsule_vao, self._shadow_vao,
+                    self._joints, self._bones, self._capsules):
             obj.release()

@@ -34,6 +34,12 @@ state["slower"] = win.playback.speed < speed
 follow = win.view.follow
 press(glfw.KEY_F)
 state["follow_toggled"] = win.view.follow != follow
+style = win.view.skeleton.style
+press(glfw.KEY_C)
+state["style_toggled"] = [style, win.view.skeleton.style]
+shadow = win.view.skeleton.shadow
+press(glfw.KEY_S)
+state["shadow_toggled"] = win.view.skeleton.shadow != shadow
 distance = win.view.camera.distance
 win._on_scroll(win.window, 0, 2)
 state["zoomed_in"] = win.view.camera.distance < distance
