@@ -4,7 +4,8 @@
 
 For each take it drops every frame near a finding of :mod:`lmm.data.checks` (calibration pose, airborne,
 outliers, contact sliding) and near frames where a hand is raised above its shoulder, the hips are low
-(crouching, crawling, lying) or neither toe is on the ground; the rest splits into ranges of at least
+(crouching, crawling, lying), neither toe is on the ground or the arms are straight out (the
+T-pose rule of check-data, moving or not); the rest splits into ranges of at least
 3 s, tagged by what they hold for at least 1 s (walk < 1.8 m/s <= jog < 2.8 m/s <= run; strafe: moving
 more than 50 degrees off the facing; turn: faster than 90 deg/s; stop: standing within the range).
 Upright stretches standing (hips under 0.2 m/s, trunk within 15 degrees of vertical) for at least 1.5 s become extra ``idle`` ranges. Ranges marked in EXCLUDE were
@@ -49,6 +50,8 @@ def bad_frames(path, name):
               | (pos[:, j("RightHand"), 1] > pos[:, j("RightArm"), 1] + 0.10))
     hips = pos[:, j("Hips"), 1] - s.ground_m
     for a, b in runs(raised, 3) + runs(hips < 0.75 * np.median(hips), 3) + runs(s.toe_height_m.min(axis=1) > 0.10, 9):
+        drop(a, b)
+    for a, b in runs(s.tpose):  # arms straight out, even in motion: what a user reads as a T-pose
         drop(a, b)
     for a, b in EXCLUDE.get(name, []):
         bad[a:b] = True

@@ -404,14 +404,14 @@ def motion_report(global_positions: np.ndarray, names: list[str], fps: float, bo
 
     ``airborne_fraction`` (frames with both toes more than ``AIRBORNE_HEIGHT_M`` above the floor),
     ``airborne_longest_s``, ``tpose_frames`` (hands at shoulder height and far apart) and
-    ``ground_toe_fast_fraction`` (toe frames within 2 cm of their lowest level that move faster than
-    30 cm/s). ``ground_m``: the floor (0 for recordings; None: the take's own ground level).
+    ``ground_toe_fast_fraction`` (toe frames within 2 cm of their lowest level, a low percentile, that
+    move faster than 30 cm/s). ``ground_m``: the floor (0 for recordings; None: the take's own ground level).
     """
     s = take_signals(global_positions, None, names, fps, bones, ground_m=ground_m)
     F = s.toe_height_m.shape[0]
     air = s.toe_height_m.min(axis=1) > AIRBORNE_HEIGHT_M
     air_runs = runs(air)
-    lowest = s.toe_height_m.min(axis=0, initial=np.inf) if F else np.zeros(2)
+    lowest = np.percentile(s.toe_height_m, GROUND_PERCENTILE, axis=0) if F else np.zeros(2)  # robust to a glitch
     at_ground = s.toe_height_m < lowest + 0.02
     fast = at_ground & (s.toe_speed_m_s > 0.3)
     return {
