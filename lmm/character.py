@@ -211,6 +211,7 @@ class CharacterController(Controller):
         self.desired_velocity = np.zeros(3)
         self.root_position = position.copy()
         self.root_rotation = rotation.copy()
+        self.stick_released_s = 0.0  # time since the left stick was last outside its deadzone
         self._reset_source(frame)
         pose = self._current_source_pose()
         self.source = pose
@@ -253,6 +254,7 @@ class CharacterController(Controller):
 
         # input -> desired velocity and rotation (camera relative, deadzone)
         left = stick_to_world(stick_with_deadzone(inp.left_x, inp.left_y, tun.stick_deadzone), inp.camera_azimuth)
+        self.stick_released_s = self.stick_released_s + dt if not np.any(left) else 0.0
         right = stick_to_world(stick_with_deadzone(inp.right_x, inp.right_y, tun.stick_deadzone), inp.camera_azimuth)
         des_vel = desired_velocity(left, self.sim.rotation, inp.walk, tun)
         des_rot = desired_rotation(left, right, des_vel, self.desired_rotation, inp.strafe, inp.camera_azimuth)

@@ -5,8 +5,8 @@ import numpy as np
 
 from lmm.character import CharacterController, SearchOutcome, SourcePose, database_source_pose, root_local_velocities
 from lmm.controller import Candidates
-from lmm.search import SearchIndex, brute_force_search, candidate_mask
-from lmm.tuning import Tuning
+from lmm.search import SearchIndex, biased_search, brute_force_search, candidate_mask
+from lmm.tuning import IDLE_TAG, Tuning, TuningError
 
 
 def default_start_frame(db) -> int:
@@ -44,7 +44,11 @@ class MotionMatchingController(CharacterController):
         self._frames_since = 0     # ... and the frames played since (they seed the next search's bound)
         self.search_log: list | None = None  # set to a list to collect (query, frame, hint) per search
         self.latent_table: np.ndarray | None = None
+        self.tag_error: str | None = None  # a tag filter or bias that could not apply (the search used all frames)
+        self._tag_groups: tuple | None = None  # (key, [(bias, mask)]) cached for the tuning it was made for
         super().__init__(db, features, tuning)
+        for tag in getattr(db, "tag_names", []):
+            self.tuning.tag_bias.setdefault(tag, 0.0)
 
     def set_latent_table(self, table: np.ndarray | None) -> None:
         """Attach the compressor latent of every database frame, (N, L) (see
@@ -97,6 +101,44 @@ class MotionMatchingController(CharacterController):
             self._masks = {end: mask}
         return mask
 
+    def idle_set_active(self) -> bool:
+        """The stick has been released long enough for the search to keep to the idle set."""
+        tun = self.tuning
+        return bool(tun.idle_set_enabled) and self.stick_released_s >= tun.idle_delay_s - 1e-9
+
+    def tag_groups(self) -> list[tuple[float, np.ndarray]]:
+        """The candidate mask split into (tag bias, mask) groups under the current tuning: restricted to the
+        idle set while it is active, one group per distinct sum of tag biases. A tag filter matching no frame
+        or a bias on a tag the database lacks sets ``tag_error`` (a TuningError's one line) and is ignored."""
+        tun = self.tuning
+        mask = self.candidate_mask()
+        idle = self.idle_set_active()
+        tags = list(getattr(self.db, "tag_names", []))
+        bias = tuple(float(tun.tag_bias.get(t, 0.0)) for t in tags)
+        unknown = tuple(sorted(t for t, b in tun.tag_bias.items() if b != 0.0 and t not in tags))
+        key = (id(mask), idle, bias, unknown)
+        if self._tag_groups is not None and self._tag_groups[0] == key:
+            return self._tag_groups[1]
+        errors = []
+        if idle:
+            idle_mask = mask & self.db.tag_mask(IDLE_TAG)
+            if idle_mask.any():
+                mask = idle_mask
+            else:
+                errors.append(TuningError(f"tuning field 'idle_set_enabled': no candidate frame of database "
+                                          f"{self.db.name!r} is tagged {IDLE_TAG!r}; searching every frame"))
+        if unknown:
+            errors.append(TuningError(f"tuning field 'tag_bias.{unknown[0]}': database {self.db.name!r} has no "
+                                      f"range tagged {unknown[0]!r} (tags: {', '.join(tags) or 'none'})"))
+        self.tag_error = str(errors[0]) if errors else None
+        if any(bias):
+            frame_bias = (self.db.frame_tags.astype(np.float32) @ np.asarray(bias, dtype=np.float32))
+            groups = [(float(b), mask & (frame_bias == b)) for b in np.unique(frame_bias[mask])]
+        else:
+            groups = [(0.0, mask)]
+        self._tag_groups = (key, groups)
+        return groups
+
     def search_hint(self) -> np.ndarray | None:
         """Where the last search's candidates are now: a good first guess for the next search."""
         return None if self._hint is None else self._hint + self._frames_since
@@ -108,12 +150,16 @@ class MotionMatchingController(CharacterController):
             self.index = SearchIndex(self.features.normalized)
         self.index.update(self.features.normalized)
         accelerated = tun.accelerated_search if accelerated is None else accelerated
-        args = dict(mask=self.candidate_mask(), current=int(self.frame), transition_cost=tun.transition_cost,
+        args = dict(current=int(self.frame), transition_cost=tun.transition_cost,
                     exclude_window=int(tun.exclude_current_window_frames), top_k=int(tun.top_k),
                     slices=self.features.slices)
+        groups = self.tag_groups()
         if accelerated:
-            return self.index.search(query_norm, hint=self.search_hint() if hint is None else hint, **args)
-        return brute_force_search(self.features.normalized, query_norm, **args)
+            hint = self.search_hint() if hint is None else hint
+            return biased_search(lambda **kw: self.index.search(query_norm, hint=hint, **kw), groups[0][1], None,
+                                 group_masks=groups, **args)
+        return biased_search(lambda **kw: brute_force_search(self.features.normalized, query_norm, **kw),
+                             groups[0][1], None, group_masks=groups, **args)
 
     def _search(self, query_norm: np.ndarray, forced: bool) -> SearchOutcome:
         if self.search_log is not None:

@@ -360,3 +360,41 @@ class SearchIndex:
         if frames.size < k:
             return np.float32(np.inf), 0
         return np.partition(frame_costs(self.X[frames], q), k - 1)[k - 1], int(frames.size)
+
+
+def biased_search(search, mask: np.ndarray, frame_bias: np.ndarray | None, current: int = -1,
+                  transition_cost: float = 0.0, top_k: int = 1, group_masks=None, **kwargs) -> SearchResult:
+    """``search(mask=..., current=..., transition_cost=..., top_k=..., **kwargs)`` (either search above) with
+    a per-frame cost ``frame_bias`` (N,) float32 added to every candidate, the continuing frame included.
+
+    Exact: the candidates split into groups of equal bias (a few: one per combination of biased tags);
+    each group is searched on its own and the results are merged by total cost (ties: the continuing
+    frame first, then the lower frame). ``group_masks``: the (bias, mask) groups when cached by the caller.
+    A candidate is always a frame of ``mask``.
+    """
+    if group_masks is None:
+        if frame_bias is None:
+            group_masks = [(0.0, mask)]
+        else:
+            group_masks = [(float(b), mask & (frame_bias == b)) for b in np.unique(frame_bias[mask])]
+    if len(group_masks) == 1 and group_masks[0][0] == 0.0:
+        return search(mask=group_masks[0][1], current=current, transition_cost=transition_cost, top_k=top_k,
+                      **kwargs)
+    k = max(int(top_k), 1)
+    rows, first, cont, evaluated = [], None, float("nan"), 0
+    for b, m in group_masks:
+        r = search(mask=m, current=current, transition_cost=transition_cost, top_k=k, **kwargs)
+        first = first or r
+        evaluated += r.evaluated
+        if r.continuing_cost == r.continuing_cost:
+            cont = r.continuing_cost
+        for f, c, bias in zip(r.frames.tolist(), r.costs.tolist(), r.bias.tolist()):
+            is_cont = f == current  # the playing frame is never an ordinary candidate (exclusion window)
+            rows.append((float(np.float32(c) + np.float32(b)), 0 if is_cont else 1, f, float(np.float32(bias) + np.float32(b))))
+    rows.sort()
+    rows = rows[:k]
+    frames = np.array([r[2] for r in rows], dtype=np.int64)
+    total = np.array([r[0] for r in rows], dtype=np.float32)
+    bias = np.array([r[3] for r in rows], dtype=np.float32)
+    features_norm, query, slices = first._breakdown
+    return _result(features_norm, query, slices, frames, total, bias, current, cont, evaluated)

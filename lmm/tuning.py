@@ -41,6 +41,15 @@ def _default_feature_weights() -> dict[str, float]:
     return {ch.name: float(ch.weight) for ch in DEFAULT_LAYOUT}
 
 
+# the tags of the shipped data; a controller adds any other tag of its database with bias 0
+DEFAULT_TAGS = ("idle", "walk", "jog", "run", "strafe", "turn", "stop")
+IDLE_TAG = "idle"  # the tag of the idle set (see Tuning.idle_set_enabled)
+
+
+def _default_tag_bias() -> dict[str, float]:
+    return {t: 0.0 for t in DEFAULT_TAGS}
+
+
 @dataclass
 class Tuning:
     # -- simulation object: springs and stick --------------------------------------------------------
@@ -81,6 +90,15 @@ class Tuning:
     top_k: int = _f(8, "search", 1, 64, "", "Number of ranked candidates kept for the debugger.")
     accelerated_search: bool = _f(
         True, "search", False, True, "", "Use the exact accelerated search (else brute force; same answer).")
+    tag_bias: dict = field(default_factory=_default_tag_bias, metadata={
+        "group": "search", "min": -5.0, "max": 5.0, "unit": "cost",
+        "doc": "Cost added to every candidate whose range has the tag (tag -> cost; negative prefers it, "
+               "a frame with several tags gets the sum)."})
+    idle_set_enabled: bool = _f(
+        True, "search", False, True, "", "When the stick has been released for idle_delay_s, search only frames "
+        "tagged 'idle' (as UE's chooser and MxM's idle sets); no such frame: an error and every frame.")
+    idle_delay_s: float = _f(
+        0.75, "search", 0.0, 5.0, "s", "Time without stick input before the search is restricted to the idle set.")
     # -- keeping character and simulation together -----------------------------------------------------
     adjustment_enabled: bool = _f(
         True, "sync", False, True, "", "Pull the character root towards the simulation object every step.")
@@ -153,8 +171,8 @@ class Tuning:
         fresh = Tuning()
         for f in self.fields_in(group):
             value = getattr(fresh, f.name)
-            if f.name == "feature_weights":  # keep channels of a custom layout, reset the known ones
-                merged = dict(self.feature_weights)
+            if f.name in ("feature_weights", "tag_bias"):  # keep custom channels/tags, reset the known ones
+                merged = {k: 0.0 if f.name == "tag_bias" else w for k, w in getattr(self, f.name).items()}
                 merged.update(value)
                 value = merged
             setattr(self, f.name, value)
@@ -213,11 +231,11 @@ def _check(f: dataclasses.Field, value):
         return value
     if kind == "dict":
         if not isinstance(value, dict):
-            raise TuningError(f"tuning field {f.name!r}: expected an object of channel -> weight, got {value!r}")
+            raise TuningError(f"tuning field {f.name!r}: expected an object of name -> number, got {value!r}")
         out = {}
         for k, w in value.items():
             if not isinstance(k, str):
-                raise TuningError(f"tuning field {f.name!r}: channel names must be strings, got {k!r}")
+                raise TuningError(f"tuning field {f.name!r}: names must be strings, got {k!r}")
             out[k] = _number(f"{f.name}.{k}", w, lo, hi, integer=False)
         return out
     return _number(f.name, value, lo, hi, integer=(kind == "int"))

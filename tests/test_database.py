@@ -304,3 +304,24 @@ def test_cache_from_other_build_code_is_rebuilt(tmp_path, monkeypatch):
     monkeypatch.setattr(database, "build_code_fingerprint", lambda: "edited build code")
     db2, info2 = load_or_build(m, cache_dir=cache)
     assert not info2.cached and db2.key == db1.key and info2.path == info1.path
+
+
+def test_tags_give_per_frame_masks_kept_in_the_cache_and_outside_the_key(tmp_path):
+    def manifest(tags):
+        return small_manifest(tmp_path, clips=[{
+            "file": str(DATA / "lafan1" / "obstacles3_subject4.bvh.gz"), "tags": ["s4"],
+            "ranges": [{"range": [100, 400], "tags": tags}, [500, 620]]}])
+
+    cache = tmp_path / "cache"
+    db, info = load_or_build(manifest(["walk"]), cache_dir=cache)
+    assert not info.cached and db.tag_names == ["s4", "walk"]
+    assert db.range_tags == [("s4", "walk"), ("s4", "walk"), ("s4",), ("s4",)]   # mirrored copies too
+    walk = db.tag_mask("walk")
+    assert walk.sum() == db.range_stops[1] and not walk[db.range_starts[2]:].any()
+    assert db.tag_mask(["s4"]).all() and not db.tag_mask("nothing").any()
+    assert db.tags_of(int(db.range_starts[2])) == ("s4",)
+    again, info = load_or_build(manifest(["walk"]), cache_dir=cache)
+    assert info.cached and np.array_equal(again.frame_tags, db.frame_tags) and again.tag_names == db.tag_names
+    retagged, info = load_or_build(manifest(["run", "turn"]), cache_dir=cache)
+    assert info.cached and retagged.key == db.key      # tags change no frame: same key, networks stay valid
+    assert retagged.tag_names == ["run", "s4", "turn"] and retagged.tag_mask("run").sum() == walk.sum()

@@ -9,6 +9,7 @@ def add_arguments(p) -> None:
     p.add_argument("--out", help="write the database .npz here instead of the cache folder")
     p.add_argument("--rebuild", action="store_true", help="ignore the cache and build again")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--no-checks", action="store_true", help="skip the data checks (see check-data)")
 
 
 def main(args) -> int:
@@ -43,4 +44,22 @@ def main(args) -> int:
     print(f"seconds   {db.seconds:.1f}")
     print(f"bones     {db.n_bones}")
     print(f"bytes     {db.pose_bytes()} ({db.pose_bytes() / 2**20:.1f} MiB pose data)")
+    if not args.no_checks:
+        _warn_findings(args.manifest)
     return 0
+
+
+def _warn_findings(manifest_path) -> None:
+    """The data checks' findings inside ranges the database uses, one warning line each."""
+    from lmm import DEFAULT_MANIFEST
+    from lmm.data.checks import CheckError, check_manifest
+    from lmm.data.manifest import ManifestError, load_manifest
+
+    try:
+        findings, _ = check_manifest(load_manifest(manifest_path or DEFAULT_MANIFEST))
+    except (ManifestError, CheckError) as e:
+        print(f"warning: data checks skipped: {e}", file=sys.stderr)
+        return
+    for f in findings:
+        if f.in_used_range:
+            print(f"warning: {f.line()}", file=sys.stderr)

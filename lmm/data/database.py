@@ -53,6 +53,9 @@ class Database:
     key: str = ""                  # hash of inputs + settings (what trained networks are tied to)
     build_fingerprint: str = ""    # hash of the build code (cache validity only, see build_code_fingerprint)
     name: str = "dataset"
+    range_tags: list[tuple[str, ...]] = field(default_factory=list)  # (R,) the manifest's tags of each range
+    tag_names: list[str] = field(default_factory=list)               # (T,) sorted
+    frame_tags: np.ndarray | None = None  # (N, T) bool: frame_tags[i, t] when frame i's range has tag_names[t]
 
     # -- sizes -----------------------------------------------------------------------------
     @property
@@ -87,6 +90,32 @@ class Database:
             return self.names.index(name)
         except ValueError:
             raise KeyError(f"no bone named {name_or_role!r} in the database") from None
+
+    # -- tags ------------------------------------------------------------------------------
+    def tag_mask(self, tags) -> np.ndarray:
+        """(N,) bool: frames whose range has any of ``tags`` (a name or a list; unknown names match nothing)."""
+        tags = [tags] if isinstance(tags, str) else list(tags)
+        cols = [self.tag_names.index(t) for t in tags if t in self.tag_names]
+        if not cols or self.frame_tags is None:
+            return np.zeros(self.n_frames, dtype=bool)
+        return self.frame_tags[:, cols].any(axis=1)
+
+    def tags_of(self, frame: int) -> tuple[str, ...]:
+        """The tags of the range that holds ``frame`` (empty when none or out of range)."""
+        if not 0 <= frame < self.n_frames or not self.range_tags:
+            return ()
+        return tuple(self.range_tags[int(self.range_index(frame))])
+
+    def set_tags(self, range_tags) -> None:
+        """Per-range tags (R lists, in range order) -> ``range_tags``, ``tag_names`` and ``frame_tags``."""
+        range_tags = [tuple(t) for t in range_tags]
+        if len(range_tags) != self.n_ranges:
+            raise DatabaseError(f"{len(range_tags)} tag lists for {self.n_ranges} ranges")
+        self.range_tags = range_tags
+        self.tag_names = sorted({t for tags in range_tags for t in tags})
+        per_range = np.array([[t in tags for t in self.tag_names] for tags in range_tags], dtype=bool)
+        per_range = per_range.reshape(self.n_ranges, len(self.tag_names))
+        self.frame_tags = np.repeat(per_range, self.range_stops - self.range_starts, axis=0)
 
     # -- frame bookkeeping -----------------------------------------------------------------
     def range_index(self, frames) -> np.ndarray:
@@ -128,6 +157,10 @@ class Database:
             "mirror_map": self.mirror_map if self.mirror_map is not None else np.arange(self.n_bones),
             "key": np.array(self.key), "name": np.array(self.name),
             "build_fingerprint": np.array(self.build_fingerprint),
+            "range_tags": np.array(json.dumps([list(t) for t in self.range_tags])),
+            "tag_names": np.array(self.tag_names, dtype=str).reshape(-1),
+            "frame_tags": (self.frame_tags if self.frame_tags is not None
+                           else np.zeros((self.n_frames, 0), dtype=bool)),
         }
 
     def save(self, path) -> None:
@@ -141,7 +174,7 @@ class Database:
             with np.load(path, allow_pickle=False) as z:
                 if int(z["format_version"]) != DB_FORMAT_VERSION:
                     raise DatabaseError(f"{path}: database format {int(z['format_version'])}, expected {DB_FORMAT_VERSION}")
-                return cls(
+                db = cls(
                     names=[str(s) for s in z["names"]], parents=z["parents"].astype(np.int64),
                     positions=z["positions"], rotations=z["rotations"], velocities=z["velocities"],
                     angular_velocities=z["angular_velocities"], contacts=z["contacts"], toe_speeds=z["toe_speeds"],
@@ -150,6 +183,13 @@ class Database:
                     fps=float(z["fps"]), bone_roles=json.loads(str(z["bone_roles"])),
                     mirror_map=z["mirror_map"].astype(np.int64), key=str(z["key"]), name=str(z["name"]),
                     build_fingerprint=str(z["build_fingerprint"]) if "build_fingerprint" in z.files else "")
+                if "range_tags" in z.files:  # older caches have no tags (and a different build fingerprint)
+                    db.range_tags = [tuple(t) for t in json.loads(str(z["range_tags"]))]
+                    db.tag_names = [str(t) for t in z["tag_names"]]
+                    db.frame_tags = z["frame_tags"].astype(bool)
+                else:
+                    db.set_tags([()] * db.n_ranges)
+                return db
         except DatabaseError:
             raise
         except Exception as e:  # zipfile.BadZipFile, OSError, KeyError, ValueError...: all mean "not a cache"
@@ -298,8 +338,20 @@ def build_code_fingerprint() -> str:
     return h.hexdigest()
 
 
+def database_range_tags(manifest: Manifest) -> list[tuple[str, ...]]:
+    """The tags of every database range in build order (each range, then its mirror when mirrored)."""
+    out = []
+    for clip in manifest.clips:
+        for k in range(len(clip.ranges or [None])):
+            out += [clip.tags_of(k)] * (2 if manifest.mirror else 1)
+    return out
+
+
 def manifest_key(manifest: Manifest) -> str:
-    """Hash of everything the build reads: file contents, settings and the build code's version."""
+    """Hash of everything the build reads: file contents, settings and the build code's version.
+
+    Tags are not part of it: they change no frame, so retagging keeps trained networks valid (a cached
+    database whose tags differ from the manifest's is retagged on load)."""
     h = hashlib.sha256()
     h.update(f"lmm-db-v{DB_FORMAT_VERSION}".encode())
     h.update(json.dumps(manifest.settings(), sort_keys=True).encode())
@@ -397,7 +449,7 @@ def build(manifest: Manifest, progress=None) -> Database:
         offset += n
 
     mirror_full = np.concatenate([[0], mirror_idx + 1]).astype(np.int64)
-    return Database(
+    db = Database(
         names=all_names, parents=all_parents,
         positions=np.concatenate(out["pos"]).astype(np.float32),
         rotations=np.concatenate(out["rot"]).astype(np.float32),
@@ -409,6 +461,8 @@ def build(manifest: Manifest, progress=None) -> Database:
         range_names=range_names, range_mirrored=np.array(mirrored, dtype=bool),
         fps=float(manifest.target_fps), bone_roles=dict(manifest.bones), mirror_map=mirror_full,
         key=manifest_key(manifest), name=manifest.name, build_fingerprint=build_code_fingerprint())
+    db.set_tags(database_range_tags(manifest))
+    return db
 
 
 @dataclass
@@ -429,6 +483,13 @@ def load_or_build(manifest_path=None, cache_dir=None, progress=None, rebuild: bo
         try:
             db = Database.load(path)
             if db.key == key and db.build_fingerprint == build_code_fingerprint():
+                tags = database_range_tags(manifest)
+                if db.range_tags != tags:  # retagged manifest: same frames, new masks
+                    db.set_tags(tags)
+                    try:
+                        db.save(path)
+                    except OSError:
+                        pass
                 return db, LoadInfo(path, True, time.perf_counter() - t0)
         except DatabaseError:
             pass  # stale or damaged cache: rebuild below

@@ -1,11 +1,15 @@
 """Dataset manifests: which BVH files, which frame ranges, and how to turn them into a database.
 
 A manifest is a JSON (or TOML) file. Paths inside it are relative to the manifest's folder.
+A clip's ``ranges`` are ``[start, stop]`` pairs or ``{"range": [start, stop], "tags": ["walk", "run"]}``
+tables; a clip-level ``"tags"`` list applies to every range of the clip. Tags are words: lowercase
+letters, digits, ``_`` and ``-``.
 Every problem raises :class:`ManifestError` naming the file and the field.
 """
 from __future__ import annotations
 
 import json
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -24,10 +28,20 @@ class ManifestError(ValueError):
         super().__init__(f"{where}field '{field_name}': {message}")
 
 
+TAG_PATTERN = re.compile(r"^[a-z0-9_-]+$")
+
+
 @dataclass
 class ClipSpec:
     file: Path
     ranges: list[tuple[int, int]] | None  # None: the whole take; [start, stop) in source frames
+    source: str = ""                      # the file as written in the manifest
+    tags: tuple[str, ...] = ()            # clip-level tags (every range has them)
+    range_tags: list[tuple[str, ...]] | None = None  # per range (clip tags included); None: whole take
+
+    def tags_of(self, k: int) -> tuple[str, ...]:
+        """Tags of range ``k`` (or of the whole take when ``ranges`` is None), clip tags included."""
+        return self.range_tags[k] if self.range_tags is not None else self.tags
 
 
 @dataclass
@@ -62,6 +76,14 @@ class Manifest:
             "clips": [{"file": c.file.name, "ranges": c.ranges} for c in self.clips],
         }
 
+    def tag_names(self) -> list[str]:
+        """Every tag used by any range, sorted."""
+        return sorted({t for c in self.clips for k in range(len(c.ranges or [None])) for t in c.tags_of(k)})
+
+    def tag_settings(self) -> list:
+        """The tags of every range in clip order (what a database's tag masks are built from)."""
+        return [[list(c.tags_of(k)) for k in range(len(c.ranges or [None]))] for c in self.clips]
+
 
 REQUIRED_BONES = ("hips", "spine", "left_foot", "right_foot", "left_toe", "right_toe")
 
@@ -78,6 +100,15 @@ def _num(path, name, value, *, positive=False, integer=False, odd=False):
     if odd and int(value) % 2 != 1:
         raise ManifestError(path, name, f"expected an odd integer, got {value!r}")
     return int(value) if integer else float(value)
+
+
+def _tags(path, name, value) -> tuple[str, ...]:
+    if not isinstance(value, list):
+        raise ManifestError(path, name, f"expected a list of tag words, got {value!r}")
+    for k, t in enumerate(value):
+        if not isinstance(t, str) or not TAG_PATTERN.match(t):
+            raise ManifestError(path, f"{name}[{k}]", f"bad tag {t!r}: a tag is lowercase letters, digits, '_' or '-'")
+    return tuple(dict.fromkeys(value))  # in order, without repeats
 
 
 def parse_manifest(data: dict, path: Path | None = None, base_dir: Path | None = None) -> Manifest:
@@ -144,20 +175,35 @@ def parse_manifest(data: dict, path: Path | None = None, base_dir: Path | None =
         file = (base_dir / clip["file"]).resolve()
         if not file.is_file():
             raise ManifestError(path, f"{where}.file", f"no such file: {file}")
+        unknown = sorted(set(clip) - {"file", "ranges", "tags"})
+        if unknown:
+            raise ManifestError(path, f"{where}.{unknown[0]}", "unknown field (known: file, ranges, tags)")
+        clip_tags = _tags(path, f"{where}.tags", clip["tags"]) if "tags" in clip else ()
         ranges = clip.get("ranges")
+        range_tags = None
         if ranges is not None:
             if not isinstance(ranges, list) or not ranges:
                 raise ManifestError(path, f"{where}.ranges", "expected a non-empty list of [start, stop] pairs")
-            parsed = []
+            parsed, range_tags = [], []
             for k, r in enumerate(ranges):
+                tags = clip_tags
+                if isinstance(r, dict):
+                    extra = sorted(set(r) - {"range", "tags"})
+                    if extra or "range" not in r:
+                        raise ManifestError(path, f"{where}.ranges[{k}]" + (f".{extra[0]}" if extra else ""),
+                                            'expected {"range": [start, stop], "tags": [...]}')
+                    if "tags" in r:
+                        tags = tuple(dict.fromkeys(clip_tags + _tags(path, f"{where}.ranges[{k}].tags", r["tags"])))
+                    r = r["range"]
                 if (not isinstance(r, list) or len(r) != 2
                         or not all(isinstance(v, int) and not isinstance(v, bool) for v in r)):
                     raise ManifestError(path, f"{where}.ranges[{k}]", f"expected [start, stop] integers, got {r!r}")
                 if r[0] < 0 or r[1] <= r[0]:
                     raise ManifestError(path, f"{where}.ranges[{k}]", f"expected 0 <= start < stop, got {r!r}")
                 parsed.append((r[0], r[1]))
+                range_tags.append(tags)
             ranges = parsed
-        m.clips.append(ClipSpec(file=file, ranges=ranges))
+        m.clips.append(ClipSpec(file=file, ranges=ranges, source=clip["file"], tags=clip_tags, range_tags=range_tags))
     for role in REQUIRED_BONES:
         if role not in m.bones:
             raise ManifestError(path, f"bones.{role}", "missing")

@@ -1,0 +1,106 @@
+"""Tags in the search: a per-tag cost bias and the idle set (a tag filter while the stick is released)."""
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import pytest
+
+from lmm.data.inputs import builtin
+from lmm.mm import MotionMatchingController
+from lmm.search import biased_search, brute_force_search
+from lmm.tuning import Tuning, TuningError
+
+
+@pytest.fixture
+def mm(db, features):
+    c = MotionMatchingController(db, features, Tuning())
+    c.reset()
+    return c
+
+
+def _far_frame(db, frame):
+    """A playing frame far from ``frame`` (so the exclusion window does not hide it)."""
+    return (frame + db.n_frames // 2) % db.n_frames
+
+
+def test_a_tag_bias_changes_the_chosen_frame(mm, db):
+    idle = np.flatnonzero(db.tag_mask("idle") & mm.candidate_mask())   # not in the excluded end of a range
+    f0 = int(idle[len(idle) // 2])
+    query = mm.features.normalized[f0].copy()
+    mm.frame = _far_frame(db, f0)
+    assert mm.search(query).best_frame == f0          # its own features: cost 0
+    mm.tuning.tag_bias["idle"] = 5.0
+    res = mm.search(query)
+    assert res.best_frame != f0 and "idle" not in db.tags_of(res.best_frame)
+    mm.tuning.tag_bias["idle"] = 0.0
+    mm.tuning.tag_bias["run"] = -5.0                  # a bonus: the best frame now runs
+    res = mm.search(query)
+    assert "run" in db.tags_of(res.best_frame) and res.best_cost < 0
+    assert mm.search(query, accelerated=False).best_frame == res.best_frame
+
+
+def test_the_idle_set_never_returns_a_frame_outside_it(mm, db):
+    idle = db.tag_mask("idle")
+    rng = np.random.default_rng(3)
+    mm.stick_released_s = 10.0
+    assert mm.idle_set_active()
+    for bias in (0.0, 2.0):
+        mm.tuning.tag_bias["walk"] = bias
+        for _ in range(25):
+            f = int(rng.integers(db.n_frames))
+            query = mm.features.normalized[f] + rng.normal(0, 0.3, mm.features.normalized.shape[1]).astype(np.float32)
+            mm.frame = int(rng.integers(db.n_frames))
+            fast, slow = mm.search(query), mm.search(query, accelerated=False)
+            assert idle[fast.frames].all() and idle[slow.frames].all()
+            assert np.array_equal(fast.frames, slow.frames)
+    assert mm.tag_error is None
+    mm.stick_released_s = 0.0                          # stick pushed: every frame again
+    assert not mm.idle_set_active()
+
+
+def test_biased_search_matches_brute_force_with_the_bias_added(features, db):
+    rng = np.random.default_rng(5)
+    X = features.normalized
+    frame_bias = (db.frame_tags.astype(np.float32) @ rng.uniform(-1, 1, len(db.tag_names)).astype(np.float32))
+    mask = np.ones(db.n_frames, dtype=bool)
+    for _ in range(5):
+        q = X[int(rng.integers(db.n_frames))]
+        res = biased_search(lambda **kw: brute_force_search(X, q, **kw), mask, frame_bias, top_k=4)
+        total = ((X - q) ** 2).sum(axis=1) + frame_bias
+        assert res.best_cost == pytest.approx(float(total.min()), abs=1e-3)
+
+
+def test_an_idle_set_that_matches_nothing_is_one_line_and_searches_everything(db, features):
+    untagged = copy.copy(db)
+    untagged.set_tags([()] * db.n_ranges)
+    c = MotionMatchingController(untagged, features, Tuning())
+    c.reset()
+    c.stick_released_s = 10.0
+    res = c.search(c.features.normalized[100])
+    assert res.best_frame >= 0
+    assert c.tag_error is not None and "'idle_set_enabled'" in c.tag_error and "\n" not in c.tag_error
+    c.tuning.tag_bias["sprint"] = 1.0
+    c.stick_released_s = 0.0
+    c.search(c.features.normalized[100])
+    assert "'tag_bias.sprint'" in c.tag_error
+
+
+def test_tag_bias_values_are_validated():
+    with pytest.raises(TuningError, match=r"'tag_bias.run'"):
+        Tuning.from_dict({"tag_bias": {"run": 50.0}})
+    t = Tuning.from_dict({"tag_bias": {"run": -1.0, "mine": 2.0}})
+    t.reset_group("search")
+    assert t.tag_bias["run"] == 0.0 and t.tag_bias["mine"] == 0.0
+
+
+def test_after_the_stick_is_released_the_character_plays_an_idle_range(mm, db):
+    log = builtin("stop-and-go", 8.0)   # runs 2.5 s, then stands 1.5 s
+    dt = 1.0 / 60.0
+    seen = []
+    for i in range(int(4.0 / dt)):
+        t = i * dt
+        _, snap = mm.step(log(t), dt)
+        if 2.5 + mm.tuning.idle_delay_s + 0.25 <= t < 4.0:
+            seen.append("idle" in db.tags_of(snap.matched_frame))
+    assert seen and all(seen)
