@@ -330,6 +330,7 @@ class ReferenceClip:
     parents: np.ndarray
     positions: np.ndarray     # (F, J, 3) metres, first root at the origin (x, z)
     frame_time: float
+    names: tuple[str, ...] = ()   # joint names (they size the drawn body parts)
 
     def at(self, t: float) -> np.ndarray:
         f = int(t / self.frame_time) % len(self.positions)
@@ -351,4 +352,5 @@ def load_reference_clip(path) -> ReferenceClip:
     if height > 10.0:        # centimetres (or larger): bring to metres
         pos = pos * (0.01 if height < 1000 else 0.001)
     pos = pos - np.array([pos[0, 0, 0], 0.0, pos[0, 0, 2]])
-    return ReferenceClip(Path(path).name, anim.parents, pos.astype(np.float32), float(anim.frame_time))
+    return ReferenceClip(Path(path).name, anim.parents, pos.astype(np.float32), float(anim.frame_time),
+                         tuple(anim.names))

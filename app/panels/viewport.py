@@ -46,17 +46,13 @@ def separate_labels(anchors: dict, sizes: dict, gap: float = 2.0) -> dict:
         placed[name] = (x, y)
     return placed
 
-def is_software_renderer(name: str) -> bool:
-    """True for Mesa's CPU rasterisers (llvmpipe, softpipe, swrast) and similar."""
-    n = name.lower()
-    return any(k in n for k in ("llvmpipe", "softpipe", "swrast", "software", "swiftshader"))
-
 class ViewportPanel(Panel):
     """The 3D view. GL objects are created in ``init_gl`` after dearpygui's first frame."""
     key = "viewport"
 
     TOGGLES = (("ghost", "Ghost", True), ("trajectory", "Trajectory", True), ("matched", "Matched traj.", True),
-               ("contacts", "Contacts", True), ("features", "Features", True), ("trail", "Trail", True))
+               ("contacts", "Contacts", True), ("features", "Features", True), ("trail", "Trail", True),
+               ("sticks", "Sticks", False), ("shadow", "Shadow", True))
 
     def __init__(self, ctx: PanelContext, samples: int = -1, render_scale: float = 1.0):
         super().__init__(ctx)
@@ -115,6 +111,18 @@ class ViewportPanel(Panel):
 
     def _on_toggle(self, sender, value, key):
         self.show[key] = bool(value)
+        if key in ("sticks", "shadow"):
+            for d in self.drawings.values():
+                d.set_style(self._style(), self.show["shadow"])
+            if self.reference_skeleton is not None:
+                self.reference_skeleton.style = self._style()
+                self.reference_skeleton.shadow = self.show["shadow"]
+
+    def _style(self) -> str:
+        return "sticks" if self.show["sticks"] else "capsules"
+
+    def _body_style(self) -> dict:
+        return {"names": self.ctx.engine.db.names, "style": self._style(), "shadow": self.show["shadow"]}
 
     def toggle_follow(self) -> None:
         self.follow = not self.follow
@@ -139,7 +147,7 @@ class ViewportPanel(Panel):
         self.scene.add(self.ground)
         parents = self.ctx.engine.db.parents
         for name in self.ctx.engine.controller_names():
-            d = CharacterDrawing(viewer, self.gl, parents, COLORS.get(name, (0.8, 0.8, 0.8)))
+            d = CharacterDrawing(viewer, self.gl, parents, COLORS.get(name, (0.8, 0.8, 0.8)), **self._body_style())
             self.drawings[name] = d
             self.scene.add(*d.all())
         self.batch = MarkerBatch(viewer, self.gl)
@@ -148,15 +156,17 @@ class ViewportPanel(Panel):
         self.camera = viewer.OrbitCamera(target=np.array([0.8, 0.8, 0.0]), distance=4.6, yaw_deg=35.0,
                                          pitch_deg=16.0)
         self.gl_renderer = str(self.gl.info.get("GL_RENDERER", ""))
-        if self.samples < 0:  # auto: multisampling costs several times the whole scene on software GL
-            self.samples = 0 if is_software_renderer(self.gl_renderer) else 4
-        self.renderer = viewer.Renderer(self.gl, 64, 64, samples=self.samples)
+        # auto (None): the renderer picks 4x MSAA on a GPU and none on software GL, where it costs several
+        # times the whole scene
+        self.renderer = viewer.Renderer(self.gl, 64, 64, samples=None if self.samples < 0 else self.samples)
+        self.samples = self.renderer.samples
 
     def add_controller(self, name: str) -> None:
         """A controller appeared (e.g. LMM weights loaded at run time)."""
         if self.gl is None or name in self.drawings:
             return
-        d = CharacterDrawing(self.viewer, self.gl, self.ctx.engine.db.parents, COLORS.get(name, (0.8, 0.8, 0.8)))
+        d = CharacterDrawing(self.viewer, self.gl, self.ctx.engine.db.parents, COLORS.get(name, (0.8, 0.8, 0.8)),
+                             **self._body_style())
         self.drawings[name] = d
         self.scene.add(*d.all())
 
@@ -171,6 +181,8 @@ class ViewportPanel(Panel):
         self.reference = clip
         if clip is not None:
             self.reference_skeleton = self.viewer.Skeleton(self.gl, clip.parents, color=(0.7, 0.72, 0.75),
+                                                           names=clip.names, style=self._style(),
+                                                           shadow=self.show["shadow"],
                                                            joint_radius=0.024, bone_radius=0.016)
             self.scene.add(self.reference_skeleton)
 

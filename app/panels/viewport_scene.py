@@ -113,16 +113,24 @@ class MarkerBatch:
 class CharacterDrawing:
     """A character's skeleton and ghost; its markers go into the shared :class:`MarkerBatch`."""
 
-    def __init__(self, viewer, ctx, parents, color):
+    def __init__(self, viewer, ctx, parents, color, names=None, style: str = "capsules", shadow: bool = True):
         self.color = color
-        self.skeleton = viewer.Skeleton(ctx, parents, color=color, joint_radius=0.028, bone_radius=0.02)
-        self.ghost = viewer.Skeleton(ctx, parents, color=lighter(color, 0.55), alpha=0.32,
+        # joint names size the body parts and hide the unnamed simulation bone (see viewer.Skeleton)
+        self.skeleton = viewer.Skeleton(ctx, parents, color=color, names=names, style=style, shadow=shadow,
+                                        joint_radius=0.028, bone_radius=0.02)
+        self.ghost = viewer.Skeleton(ctx, parents, color=lighter(color, 0.55), alpha=0.32, names=names,
+                                     style=style, shadow=shadow, thickness=0.9,
                                      joint_radius=0.024, bone_radius=0.017)
         self.traj_color = lighter(color, 0.35)
         self.trail_color = darker(color, 0.3)
 
     def all(self):
         return [self.skeleton, self.ghost]
+
+    def set_style(self, style: str, shadow: bool) -> None:
+        for s in self.all():
+            s.style = style
+            s.shadow = shadow
 
     def hide(self) -> None:
         self.skeleton.visible = False

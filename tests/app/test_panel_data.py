@@ -19,7 +19,8 @@ from app.panels.search import candidate_rows, column_fractions, frame_label, rol
 from app.frame_times import FrameTimes
 from app.panels.timeline import scrub_target
 from app.panels.tuning import pretty_label, widget_specs
-from app.panels.viewport import is_software_renderer, separate_labels
+from app.panels.viewport import separate_labels
+from viewer.renderer import is_software_renderer
 from app.panels.viewport_scene import feature_markers
 from app.session import RecordingResult, Session, load_reference_clip, recording_paths
 from lmm.controller import Candidates, InputState
