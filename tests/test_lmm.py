@@ -66,7 +66,7 @@ def test_wrong_database_is_refused(dbf, nets):
     import copy
     other = copy.copy(db)
     other.key = "0" * 64
-    with pytest.raises(WeightsError, match="different database"):
+    with pytest.raises(WeightsError, match="trained on another database"):
         LMMNetworks.load(nets.path, other, features)
 
 

@@ -125,13 +125,13 @@ def test_missing_network(good):
 
 
 def test_other_database(good):
-    with pytest.raises(W.WeightsError, match="different database") as e:
+    with pytest.raises(W.WeightsError, match="trained on another database") as e:
         W.load(good, db_key="b" * 64)
     assert "good.npz" in str(e.value)
 
 
 def test_other_layout(good):
-    with pytest.raises(W.WeightsError, match="feature layout differs"):
+    with pytest.raises(W.WeightsError, match="trained on another feature schema"):
         W.load(good, layout_dicts=LAYOUT[:-1])
 
 

@@ -56,6 +56,7 @@ class Database:
     range_tags: list[tuple[str, ...]] = field(default_factory=list)  # (R,) the manifest's tags of each range
     tag_names: list[str] = field(default_factory=list)               # (T,) sorted
     frame_tags: np.ndarray | None = None  # (N, T) bool: frame_tags[i, t] when frame i's range has tag_names[t]
+    feature_schema: list[dict] = field(default_factory=list)  # the manifest's feature channels (empty: shipped)
 
     # -- sizes -----------------------------------------------------------------------------
     @property
@@ -161,6 +162,7 @@ class Database:
             "tag_names": np.array(self.tag_names, dtype=str).reshape(-1),
             "frame_tags": (self.frame_tags if self.frame_tags is not None
                            else np.zeros((self.n_frames, 0), dtype=bool)),
+            "feature_schema": np.array(json.dumps(self.feature_schema)),
         }
 
     def save(self, path) -> None:
@@ -189,6 +191,8 @@ class Database:
                     db.frame_tags = z["frame_tags"].astype(bool)
                 else:
                     db.set_tags([()] * db.n_ranges)
+                if "feature_schema" in z.files:
+                    db.feature_schema = list(json.loads(str(z["feature_schema"])))
                 return db
         except DatabaseError:
             raise
@@ -462,7 +466,21 @@ def build(manifest: Manifest, progress=None) -> Database:
         fps=float(manifest.target_fps), bone_roles=dict(manifest.bones), mirror_map=mirror_full,
         key=manifest_key(manifest), name=manifest.name, build_fingerprint=build_code_fingerprint())
     db.set_tags(database_range_tags(manifest))
+    set_feature_schema(db, manifest)
     return db
+
+
+def set_feature_schema(db: Database, manifest: Manifest) -> None:
+    """Give ``db`` the manifest's feature schema, checking that every channel's bone exists."""
+    for i, ch in enumerate(manifest.features):
+        if ch.get("bone") is not None:
+            try:
+                db.bone(ch["bone"])
+            except KeyError:
+                roles = ", ".join(sorted(db.bone_roles))
+                raise ManifestError(manifest.features_file or manifest.path, f"features[{i}].bone",
+                                    f"no joint or role named {ch['bone']!r} (roles: {roles})") from None
+    db.feature_schema = [dict(ch) for ch in manifest.features]
 
 
 @dataclass
@@ -484,8 +502,12 @@ def load_or_build(manifest_path=None, cache_dir=None, progress=None, rebuild: bo
             db = Database.load(path)
             if db.key == key and db.build_fingerprint == build_code_fingerprint():
                 tags = database_range_tags(manifest)
-                if db.range_tags != tags:  # retagged manifest: same frames, new masks
+                # retagged manifest or a new feature schema: same frames, so the cache is updated in place
+                # (the key, and the networks trained on these frames, stay valid; networks trained on
+                # another schema are refused by lmm.data.weights with what differs)
+                if db.range_tags != tags or db.feature_schema != manifest.features:
                     db.set_tags(tags)
+                    set_feature_schema(db, manifest)
                     try:
                         db.save(path)
                     except OSError:

@@ -4,6 +4,9 @@ A manifest is a JSON (or TOML) file. Paths inside it are relative to the manifes
 A clip's ``ranges`` are ``[start, stop]`` pairs or ``{"range": [start, stop], "tags": ["walk", "run"]}``
 tables; a clip-level ``"tags"`` list applies to every range of the clip. Tags are words: lowercase
 letters, digits, ``_`` and ``-``.
+``features`` declares the feature schema: the channels matched (kind, bone or role, trajectory sample
+times in frames ahead, default weight), as a list of tables or the name of a JSON file holding one
+(relative to the manifest). Without it the shipped schema is used (:data:`lmm.features.DEFAULT_LAYOUT`).
 Every problem raises :class:`ManifestError` naming the file and the field.
 """
 from __future__ import annotations
@@ -12,6 +15,8 @@ import json
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
+
+from lmm.features import DEFAULT_LAYOUT, SchemaError, layout_from_schema, schema_of
 
 try:  # Python 3.11+
     import tomllib
@@ -64,6 +69,8 @@ class Manifest:
     contact_speed_threshold_m_s: float = 0.15
     contact_median_window: int = 5
     clips: list[ClipSpec] = field(default_factory=list)
+    features: list[dict] = field(default_factory=lambda: schema_of(DEFAULT_LAYOUT))  # the feature schema
+    features_file: Path | None = None     # where ``features`` came from when the manifest names a file
 
     def settings(self) -> dict:
         """Everything that changes the built database, except the file contents (hashed separately)."""
@@ -117,7 +124,7 @@ def parse_manifest(data: dict, path: Path | None = None, base_dir: Path | None =
     base_dir = base_dir or (path.parent if path else Path.cwd())
     m = Manifest(path=path)
     known = {"format", "version", "name", "description", "unit_scale", "target_fps", "speed_scale", "mirror",
-             "mirror_name_pairs", "bones", "hips_forward_axis", "simulation", "contacts", "clips"}
+             "mirror_name_pairs", "bones", "hips_forward_axis", "simulation", "contacts", "clips", "features"}
     unknown = sorted(set(data) - known)
     if unknown:
         raise ManifestError(path, unknown[0], f"unknown field (known: {', '.join(sorted(known))})")
@@ -207,7 +214,40 @@ def parse_manifest(data: dict, path: Path | None = None, base_dir: Path | None =
     for role in REQUIRED_BONES:
         if role not in m.bones:
             raise ManifestError(path, f"bones.{role}", "missing")
+    if "features" in data:
+        m.features, m.features_file = _feature_schema(path, base_dir, data["features"])
     return m
+
+
+MAX_SCHEMA_BYTES = 1 << 20
+
+
+def _feature_schema(path, base_dir: Path, value) -> tuple[list[dict], Path | None]:
+    """The manifest's ``features``: a list of channel tables, or a JSON file (relative path) holding one
+    (a list, or a table with a ``features`` list). Errors name the file and field."""
+    source, file = path, None
+    if isinstance(value, str):
+        file = (base_dir / value).resolve()
+        try:
+            if file.stat().st_size > MAX_SCHEMA_BYTES:
+                raise ManifestError(path, "features", f"{value}: larger than {MAX_SCHEMA_BYTES} bytes")
+            text = file.read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError) as e:
+            raise ManifestError(path, "features", f"cannot read the feature schema {value!r} "
+                                f"({getattr(e, 'strerror', None) or e})") from None
+        try:
+            value = json.loads(text)
+        except (json.JSONDecodeError, RecursionError) as e:
+            where = f"line {e.lineno} column {e.colno}: {e.msg}" if isinstance(e, json.JSONDecodeError) else "nested too deep"
+            raise ManifestError(file, "<file>", f"invalid JSON at {where}") from None
+        if isinstance(value, dict) and set(value) <= {"features", "format", "version", "description"}:
+            value = value.get("features")
+        source = file
+    try:
+        layout = layout_from_schema(value, "features")
+    except SchemaError as e:
+        raise ManifestError(source, e.field, e.message) from None
+    return schema_of(layout), file
 
 
 def load_manifest(path) -> Manifest:

@@ -136,15 +136,20 @@ def load(path, require=None, db_key: str | None = None, layout_dicts: list[dict]
                 raise WeightsError(f"{path}: {key} holds {bad} NaN/inf values")
         if np.any(arrays[f"{name}.in_std"] <= 0):
             raise WeightsError(f"{path}: {name}.in_std has non-positive entries")
+    fix = ("open the data they were trained on (--manifest), or retrain on this data: "
+           "`lmm-studio train all --manifest YOUR_MANIFEST --out DIR`, then --weights DIR/default.npz")
     if db_key is not None and metadata.get("database_key") != db_key:
-        raise WeightsError(f"{path}: trained on a different database (key {str(metadata.get('database_key'))[:16]}, "
-                           f"the loaded database is {db_key[:16]}); retrain with `lmm-studio train`")
+        trained = (f"'{metadata.get('database_name', '?')}', {metadata.get('n_frames', '?')} frames, "
+                   f"key {str(metadata.get('database_key'))[:16]}")
+        raise WeightsError(f"{path}: trained on another database ({trained}; the loaded database has key "
+                           f"{db_key[:16]}): {fix}")
     if layout_dicts is not None:
-        if layout_signature(metadata.get("feature_layout", [])) != layout_signature(layout_dicts):
-            theirs = ", ".join(d.get("name", "?") for d in metadata.get("feature_layout", []))
-            ours = ", ".join(d.get("name", "?") for d in layout_dicts)
-            raise WeightsError(f"{path}: feature layout differs from the database's (file: [{theirs}]; "
-                               f"database: [{ours}]); retrain with `lmm-studio train`")
+        theirs = metadata.get("feature_layout", [])
+        if layout_signature(theirs) != layout_signature(layout_dicts):
+            from lmm.features import describe_schema_difference
+
+            raise WeightsError(f"{path}: trained on another feature schema ("
+                               f"{describe_schema_difference(theirs, layout_dicts)}): {fix}")
     for key in ("feature_mean", "feature_inv_scale"):
         v = np.asarray(metadata.get(key, []), dtype=np.float64)
         if "decompressor" in nets and v.shape != (int(nets["decompressor"]["n_in"]) - int(metadata.get("latent", 0)),):
