@@ -102,6 +102,9 @@ class DebugSnapshot:
     # cost of the playing pose's features against this tick's query (a per-tick cost timeline; best_cost
     # is the last search's best, carried between searches like ``candidates``)
     current_cost: float = float("nan")
+    # a one-line warning about this tick's search (e.g. a tag filter that matched no frame, so every frame
+    # was searched); empty when all is well
+    search_note: str = ""
 
 
 class Controller(ABC):

@@ -191,7 +191,10 @@ class MotionMatchingController(CharacterController):
 
     def _snapshot_extras(self) -> dict:
         table = self.latent_table
-        return {} if table is None else {"matched_latent": np.array(table[self.frame], np.float32)}
+        extras = {"search_note": self.tag_error or ""}
+        if table is not None:
+            extras["matched_latent"] = np.array(table[self.frame], np.float32)
+        return extras
 
     def _pose(self, frame: int) -> SourcePose:
         return database_source_pose(self.db, frame, self._root_vel, self._root_ang)

@@ -104,3 +104,32 @@ def test_after_the_stick_is_released_the_character_plays_an_idle_range(mm, db):
         if 2.5 + mm.tuning.idle_delay_s + 0.25 <= t < 4.0:
             seen.append("idle" in db.tags_of(snap.matched_frame))
     assert seen and all(seen)
+
+
+def test_a_filter_that_matches_nothing_is_reported_in_the_snapshot():
+    """The idle set on a database with no idle range: every frame is searched, and the snapshot says why
+    in one line naming the tuning field (the studio's Search Candidates panel shows it)."""
+    from lmm.controller import InputState
+    from lmm.data.database import load_or_build
+    from lmm.factory import make_controller
+    from lmm.features import build_features
+    import json, tempfile
+    from pathlib import Path
+    from lmm import DEFAULT_MANIFEST
+
+    with tempfile.TemporaryDirectory() as d:
+        m = Path(d) / "m.json"
+        take = DEFAULT_MANIFEST.parent / "lafan1" / "obstacles3_subject4.bvh.gz"
+        m.write_text(json.dumps({"name": "no-idle", "clips": [{"file": str(take), "ranges": [
+            {"range": [2600, 2900], "tags": ["walk"]}]}]}))
+        db, _ = load_or_build(m, cache_dir=Path(d) / "cache")
+        ctrl = make_controller("mm", db, build_features(db))
+        snap = None
+        for _ in range(120):   # the stick stays released past idle_delay_s
+            _, snap = ctrl.step(InputState(), 1.0 / 60.0)
+        assert "tuning field 'idle_set_enabled'" in snap.search_note and "\n" not in snap.search_note
+        _, snap = ctrl.step(InputState(left_y=1.0), 1.0 / 60.0)
+        ctrl.tuning.idle_set_enabled = False
+        _, snap = ctrl.step(InputState(), 1.0 / 60.0)
+        _, snap = ctrl.step(InputState(), 1.0 / 60.0)
+        assert snap.search_note == ""

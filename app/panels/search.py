@@ -35,15 +35,23 @@ def frame_label(db, frame: int) -> tuple[str, float]:
     return name, (frame - int(db.range_starts[r])) / db.fps
 
 
+def frame_tags(db, frame: int) -> str:
+    """The tags of a database frame's range, comma separated ("" when it has none)."""
+    if db is None or frame is None or not 0 <= frame < db.n_frames:
+        return ""
+    return ", ".join(db.tags_of(int(frame)))
+
+
 def candidate_rows(candidates, db=None) -> list[dict]:
-    """One dict per ranked candidate (pure, for tests): rank, frame, clip, t, total, bias, channels."""
+    """One dict per ranked candidate (pure, for tests): rank, frame, clip, tags, t, total, bias, channels."""
     rows = []
     if candidates is None:
         return rows
     frames = np.asarray(candidates.frames)
     for i in range(len(frames)):
         clip, t = frame_label(db, int(frames[i])) if db is not None else ("-", float("nan"))
-        rows.append({"rank": i + 1, "frame": int(frames[i]), "clip": clip, "t": t,
+        rows.append({"rank": i + 1, "frame": int(frames[i]), "clip": clip, "tags": frame_tags(db, int(frames[i])),
+                     "t": t,
                      "total": float(candidates.costs[i]), "bias": float(candidates.bias[i]),
                      "channels": [float(c) for c in np.asarray(candidates.channel_costs[i])]})
     return rows
@@ -189,7 +197,8 @@ class SearchPanel(Panel):
         for col in ("nn", "proj", "mm"):
             frame, cost = shown.get(col, (-1, float("nan")))
             clip, tc = frame_label(db, frame)
-            self.text.set(f"nn_{col}_frame", "-" if frame < 0 else str(frame))
+            tags = frame_tags(db, frame)
+            self.text.set(f"nn_{col}_frame", "-" if frame < 0 else str(frame) + (f" [{tags}]" if tags else ""))
             self.text.set(f"nn_{col}_clip", "-" if frame < 0 else f"{clip[:22]} {tc:5.2f}s")
             self.text.set(f"nn_{col}_cost", fmt_num(cost))
         self.text.set("nn_distance", fmt_num(dist))
@@ -240,15 +249,16 @@ class CandidatesPanel(Panel):
     def build(self, window_kwargs: dict) -> None:
         dpg = self.dpg
         names = self.ctx.engine.channel_names
-        self.columns = ["rank", "frame", "clip", "t", "total", "bias"] + [f"ch{i}" for i in range(len(names))]
-        labels = ["#", "frame", "clip", "t (s)", "total", "bias"] + [short_channel_name(n) for n in names]
+        self.columns = (["rank", "frame", "clip", "tags", "t", "total", "bias"]
+                        + [f"ch{i}" for i in range(len(names))])
+        labels = ["#", "frame", "clip", "tags", "t (s)", "total", "bias"] + [short_channel_name(n) for n in names]
         with self.window(window_kwargs):
             dpg.add_text("", tag="cand_status")
             with dpg.table(tag="cand_table", header_row=True, sortable=True, callback=self._on_sort,
                            borders_innerV=True, borders_outerH=True, borders_outerV=True, resizable=True,
                            policy=dpg.mvTable_SizingFixedFit, scrollY=True, scrollX=True, freeze_rows=1,
                            height=-1):
-                widths = {"rank": 18, "frame": 50, "clip": 150, "t": 40, "total": 46, "bias": 40}
+                widths = {"rank": 18, "frame": 50, "clip": 150, "tags": 90, "t": 40, "total": 46, "bias": 40}
                 for i, (key, label) in enumerate(zip(self.columns, labels)):
                     dpg.add_table_column(label=label, tag=f"cand_col_{key}", user_data=key,
                                          default_sort=(key == "total"), prefer_sort_ascending=True,
@@ -282,8 +292,12 @@ class CandidatesPanel(Panel):
         name = SHORT.get(view.inspected, view.inspected)
         searched = "searched this tick" if snap.searched else "last search"
         forced = " (forced)" if snap.forced_search else ""
-        self.text.set("cand_status", f"{name}: {searched}{forced}, best frame {snap.matched_frame}, "
-                                     f"cost {fmt_num(snap.best_cost)}")
+        tags = frame_tags(self.ctx.engine.db, snap.matched_frame)
+        status = (f"{name}: {searched}{forced}, best frame {snap.matched_frame}"
+                  + (f" [{tags}]" if tags else "") + f", cost {fmt_num(snap.best_cost)}")
+        if snap.search_note:
+            status += f"\n{snap.search_note}"
+        self.text.set("cand_status", status)
         if key == self._shown_for:
             return
         self._shown_for = key
@@ -302,6 +316,8 @@ class CandidatesPanel(Panel):
                     txt = f"{v:.3f}"
                 elif k == "clip":
                     txt = row["clip"][:24]
+                elif k == "tags":
+                    txt = row["tags"][:20]
                 elif k == "t":
                     txt = f"{row['t']:.2f}"
                 elif k in ("total", "bias"):
