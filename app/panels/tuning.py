@@ -42,13 +42,15 @@ def pretty_label(name: str) -> str:
     return words.replace("_", " ")
 
 
-def widget_specs(tuning_cls=Tuning) -> list[dict]:
+def widget_specs(tuning: Tuning | None = None) -> list[dict]:
     """Every widget the panel builds (pure, for tests): group, field, optional channel, kind, range,
-    format and tooltip, in group order."""
+    format and tooltip, in group order. Per-channel fields (feature weights, tag biases) get one slider
+    per key of ``tuning`` (default ``Tuning()``): the controllers add their database's channels and tags,
+    so a user's own feature schema and tags get sliders too."""
     specs = []
-    defaults = tuning_cls()
-    for group in tuning_cls.groups():
-        for f in tuning_cls.fields_in(group):
+    defaults = tuning if tuning is not None else Tuning()
+    for group in Tuning.groups():
+        for f in Tuning.fields_in(group):
             kind = field_kind(f)
             md = f.metadata
             unit = md.get("unit", "")
@@ -76,7 +78,7 @@ class TuningPanel(Panel):
     def __init__(self, ctx):
         super().__init__(ctx)
         self.tuning: Tuning = ctx.tuning
-        self.specs = widget_specs()
+        self.specs = widget_specs(self.ctx.tuning)
         self.changes = 0
 
     def build(self, window_kwargs: dict) -> None:

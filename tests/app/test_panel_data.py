@@ -461,3 +461,13 @@ def test_hidden_windows_note_names_them_and_the_menu():
     assert hidden_note(()) == ""
     note = hidden_note(("stats", "tuning"))
     assert "Tuning" in note and "Stats" in note and "Windows menu" in note
+
+
+def test_widget_specs_follow_the_live_tuning_keys():
+    """A user's own feature channel or tag (added to the tuning by the controllers) gets its slider."""
+    t = Tuning()
+    t.feature_weights["head_velocity"] = 0.5
+    t.tag_bias["sneak"] = 0.0
+    specs = widget_specs(t)
+    assert {("feature_weights", "head_velocity"), ("tag_bias", "sneak")} <= {(s["field"], s["channel"]) for s in specs}
+    assert not any(s["channel"] == "head_velocity" for s in widget_specs())
