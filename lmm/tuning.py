@@ -207,7 +207,9 @@ class Tuning:
             _check(f, getattr(self, f.name))
 
     def save(self, path) -> None:
-        Path(path).write_text(json.dumps(self.to_dict(), indent=2, sort_keys=False) + "\n")
+        from lmm.data.jsonio import write_json
+
+        write_json(path, self.to_dict())
 
     @classmethod
     def load(cls, path) -> "Tuning":

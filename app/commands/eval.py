@@ -43,9 +43,9 @@ def main(args) -> int:
     if plots_dir:
         loss_csv = weights.with_name("training_log.csv")
         metrics["plots"] = write_plots(plots_dir, artifacts, loss_csv)
-    text = json.dumps(metrics, indent=2)
+    from lmm.data.jsonio import json_safe, write_json
+
     if args.json_path:
-        Path(args.json_path).parent.mkdir(parents=True, exist_ok=True)
-        Path(args.json_path).write_text(text + "\n")
-    print(text)
+        write_json(args.json_path, metrics)
+    print(json.dumps(json_safe(metrics), indent=2))
     return 0
