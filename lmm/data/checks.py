@@ -362,7 +362,9 @@ def format_coverage(cov: Coverage) -> str:
 
 def draw_coverage_png(cov: Coverage, path) -> Path:
     """The speed x turn-rate histogram as a heat map PNG (pillow only)."""
-    from PIL import Image, ImageDraw
+    from PIL import Image, ImageDraw, ImageFont
+
+    from lmm.data.atomic import atomic_write
 
     tb, sb = cov.turn_bins_deg_s, cov.speed_bins_m_s
     rows, cols = cov.histogram_s.shape
@@ -370,6 +372,10 @@ def draw_coverage_png(cov: Coverage, path) -> Path:
     width, height = left + cols * cell_w + 20, top + rows * cell_h + 60
     img = Image.new("RGB", (width, height), (24, 24, 28))
     d = ImageDraw.Draw(img)
+    try:  # pillow's own scalable font (10.1+); the old bitmap font squeezes spaces away
+        d.font = ImageFont.load_default(size=13)
+    except TypeError:  # pragma: no cover - older pillow
+        pass
     d.text((10, 10), f"seconds of used source motion by root speed x turn rate ({cov.seconds_total:.0f} s total)",
            fill=(230, 230, 230))
     d.text((10, 28), "rows: hips speed (m/s), columns: turn rate (deg/s); empty cells: the database lacks it",
@@ -389,8 +395,8 @@ def draw_coverage_png(cov: Coverage, path) -> Path:
         d.text((left + j * cell_w + 8, top + rows * cell_h + 8), _edge_label(tb[j], tb[j + 1], "deg/s"),
                fill=(210, 210, 210))
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    img.save(path)
+    with atomic_write(path) as f:
+        img.save(f, format="PNG")
     return path
 
 
