@@ -331,7 +331,7 @@ class CharacterController(Controller):
             toe_vel = np.zeros((2, 3)) if self._prev_toe is None or dt <= 0 else (toe_now - self._prev_toe) / dt
             self.foot_lock, targets = foot_lock_update(
                 self.foot_lock, toe_now, toe_vel, src.contacts, tun.ik_unlock_radius_m, tun.ik_blend_halflife_s,
-                tun.ik_foot_height_m, dt)
+                tun.ik_foot_height_m, dt, tun.ik_lift_height_m, tun.ik_ground_blend_speed_m_s, tun.ik_step_height_m)
             locked = self.foot_lock.locked.copy()
             new_global = {}
             for i, chain in enumerate(self.leg_chains):

@@ -2,9 +2,10 @@
 
 Foot locking works on the toe joint (the database's contacts are toe contacts). When a foot's contact
 begins, its toe is locked where it is shown at that moment; while locked, the leg is bent by two-bone
-IK so the toe stays there. The lock releases when the contact ends or when the animation has carried
-the toe further than the unlock radius from the lock; the foot then blends back to the animation with a
-critically damped offset (the blend halflife), so nothing pops. Locked toes are kept at least the foot
+IK so the toe stays there. The lock holds while the animation's contact lasts and until the animation
+lifts the toe after it (the unlock radius only as a last resort, then the foot steps); the foot then
+blends back to the animation with a critically damped offset that may not glide along the ground, so
+nothing pops and nothing skates (see :func:`foot_lock_update`). Locked toes are kept at least the foot
 height above the ground, and the toe is bent up if the tip of the foot (toe length ahead of the toe
 joint) would go below the ground.
 
@@ -18,8 +19,6 @@ from dataclasses import dataclass, field
 import math
 
 import numpy as np
-
-from lmm.springs import decay_spring_damper_exact
 
 
 
@@ -116,56 +115,118 @@ def two_bone_ik(hip_pos, knee_pos, ankle_pos, target, hip_rot, knee_rot, eps: fl
 
 @dataclass
 class FootLockState:
-    """Per foot (left, right): lock flag and position, the blend-out offset after an unlock, and whether
-    the foot was released by distance during the current contact (it is not locked again before the
-    contact ends)."""
+    """Per foot (left, right): lock flag and position, the lowest height of the animated toe while locked,
+    the offset (target minus animated toe) that blends out after an unlock and its velocity, and whether
+    the foot was released by the unlock radius during the current contact (it is not locked again before
+    that contact ends)."""
     locked: np.ndarray = field(default_factory=lambda: np.zeros(2, dtype=bool))
     lock_position: np.ndarray = field(default_factory=lambda: np.zeros((2, 3)))
     offset_position: np.ndarray = field(default_factory=lambda: np.zeros((2, 3)))
     offset_velocity: np.ndarray = field(default_factory=lambda: np.zeros((2, 3)))
     released: np.ndarray = field(default_factory=lambda: np.zeros(2, dtype=bool))  # unlocked by distance
     previous_target: np.ndarray | None = None
+    lowest_animated: np.ndarray = field(default_factory=lambda: np.zeros(2))
 
     def copy(self) -> "FootLockState":
         return FootLockState(self.locked.copy(), self.lock_position.copy(), self.offset_position.copy(),
                              self.offset_velocity.copy(), self.released.copy(),
-                             None if self.previous_target is None else self.previous_target.copy())
+                             None if self.previous_target is None else self.previous_target.copy(),
+                             self.lowest_animated.copy())
+
+
+def _decay(x: float, v: float, y: float, e: float, dt: float) -> tuple[float, float]:
+    """One component of a critically damped decay towards zero (damping ``y``, ``e = exp(-y dt)``)."""
+    j1 = v + x * y
+    return e * (x + j1 * dt), e * (v - j1 * y * dt)
 
 
 def foot_lock_update(state: FootLockState, toe_positions, toe_velocities, contacts, unlock_radius: float,
-                     blend_halflife: float, foot_height: float, dt: float) -> tuple[FootLockState, np.ndarray]:
-    """Advance the locks one tick. Returns the new state and the toe targets (2, 3), world space."""
-    toe_positions = np.asarray(toe_positions, dtype=np.float64)
-    toe_velocities = np.asarray(toe_velocities, dtype=np.float64)
-    contacts = np.asarray(contacts, dtype=bool)
-    s = state.copy()
-    s.offset_position, s.offset_velocity = decay_spring_damper_exact(
-        s.offset_position, s.offset_velocity, blend_halflife, dt)
-    targets = np.empty((2, 3))
+                     blend_halflife: float, foot_height: float, dt: float, lift_height: float = 0.02,
+                     ground_blend_speed: float = 0.1, step_height: float = 0.04) -> tuple[FootLockState, np.ndarray]:
+    """Advance the locks one tick. Returns the new state and the toe targets (2, 3), world space.
+
+    The rule, per foot:
+
+    * **lock** when the animation's contact begins, where the toe is shown at that moment (so the lock
+      does not pop), at least ``foot_height`` above the ground (y = 0);
+    * **hold** while the contact lasts, and after it ends until the animated toe has risen
+      ``lift_height`` above its lowest point during the lock: the foot leaves the ground when the
+      animation lifts it, not earlier;
+    * **last resort**: release when the animated toe is further than ``unlock_radius`` (horizontally)
+      from the lock; the foot then steps to the animation (its blend gets an upward kick of about
+      ``step_height``) instead of sliding there, and locks again where it comes down if the contact
+      still holds;
+    * **blend back** after a release: the target is the animated toe plus an offset that decays with a
+      critically damped spring (``blend_halflife``), starting at the lock with zero velocity. While the
+      target is near the ground (less than ``lift_height`` above the last lock) the offset may move
+      horizontally at most ``ground_blend_speed``: the rest is absorbed once the foot is in the air (or
+      by the next lock, which starts where the foot is shown).
+    """
+    anim = [tuple(float(v) for v in p) for p in np.asarray(toe_positions, dtype=np.float64)]
+    vel = [tuple(float(v) for v in p) for p in np.asarray(toe_velocities, dtype=np.float64)]
+    contacts = [bool(c) for c in np.asarray(contacts, dtype=bool)]
+    locked = [bool(v) for v in state.locked]
+    released = [bool(v) for v in state.released]
+    lowest = [float(v) for v in state.lowest_animated]
+    lock = [tuple(float(v) for v in p) for p in state.lock_position]
+    off = [list(float(v) for v in p) for p in state.offset_position]
+    off_v = [list(float(v) for v in p) for p in state.offset_velocity]
+    y = 2.0 * math.log(2.0) / (blend_halflife + 1e-5)  # halflife_to_damping / 2
+    e = math.exp(-y * dt)
+    targets = []
     for i in range(2):
-        anim = toe_positions[i]
-        if not contacts[i]:
-            s.released[i] = False
-        if s.locked[i]:
-            far = _norm(tuple(float(v) for v in anim - s.lock_position[i])) > unlock_radius
-            if not contacts[i] or far:
-                # unlock: carry the lock as an offset that blends back to the animation
-                s.locked[i] = False
-                s.released[i] = bool(contacts[i])  # stays free until this contact ends
-                s.offset_position[i] = s.lock_position[i] - anim
-                s.offset_velocity[i] = -toe_velocities[i]
-        elif contacts[i] and not s.released[i]:
-            # in contact (it began, or a transition brought one): lock where the toe is shown now,
-            # so the lock itself does not pop
-            s.locked[i] = True
-            shown = anim + s.offset_position[i]
-            shown[1] = max(shown[1], foot_height)
-            s.lock_position[i] = shown
-            s.offset_position[i] = 0.0
-            s.offset_velocity[i] = 0.0
-        targets[i] = s.lock_position[i] if s.locked[i] else anim + s.offset_position[i]
-    s.previous_target = targets.copy()
-    return s, targets
+        a, c = anim[i], contacts[i]
+        if not c:
+            released[i] = False
+        elif released[i] and (off_v[i][1] < 0.0 and off[i][1] < 0.25 * step_height if step_height > 0.0
+                              else abs(off[i][0]) + abs(off[i][1]) + abs(off[i][2]) < 0.01):
+            released[i] = False  # the step after a last-resort release has come down: lock again
+        if locked[i]:
+            lx, ly, lz = lock[i]
+            lowest[i] = min(lowest[i], a[1])
+            far = math.hypot(a[0] - lx, a[2] - lz) > unlock_radius
+            if far or (not c and a[1] > lowest[i] + lift_height):
+                # release: the offset carries the target from the lock (at rest) back to the animation
+                locked[i] = False
+                released[i] = c
+                off[i] = [lx - a[0], ly - a[1], lz - a[2]]
+                off_v[i] = [-vel[i][0], -vel[i][1], -vel[i][2]]
+                if far and step_height > 0.0:
+                    # an upward kick whose critically damped arc peaks at about step_height: x(t) = V t e^-yt
+                    off_v[i][1] += step_height * y * math.e
+                targets.append(lock[i])  # this tick the foot is still where it was locked
+                continue
+        elif c and not released[i]:
+            # a contact (it began, or a transition brought one): lock where the toe is shown now
+            shown = (a[0] + off[i][0], max(a[1] + off[i][1], foot_height), a[2] + off[i][2])
+            locked[i] = True
+            lock[i] = shown
+            lowest[i] = a[1]
+            off[i] = [0.0, 0.0, 0.0]
+            off_v[i] = [0.0, 0.0, 0.0]
+        if locked[i]:
+            targets.append(lock[i])
+            continue
+        ox, oy, oz = off[i]
+        vx, vy, vz = off_v[i]
+        nx, vx = _decay(ox, vx, y, e, dt)
+        ny, vy = _decay(oy, vy, y, e, dt)
+        nz, vz = _decay(oz, vz, y, e, dt)
+        if a[1] + ny < lock[i][1] + lift_height and dt > 0.0:
+            # near the ground: the blend may not glide the foot faster than ground_blend_speed
+            step = math.hypot(nx - ox, nz - oz)
+            cap = ground_blend_speed * dt
+            if step > cap:
+                k = cap / step
+                nx, nz = ox + (nx - ox) * k, oz + (nz - oz) * k
+                vx, vz = (nx - ox) / dt, (nz - oz) / dt
+        off[i] = [nx, ny, nz]
+        off_v[i] = [vx, vy, vz]
+        targets.append((a[0] + nx, a[1] + ny, a[2] + nz))
+    t = np.array(targets)
+    s = FootLockState(np.array(locked), np.array(lock, dtype=np.float64), np.array(off, dtype=np.float64),
+                      np.array(off_v, dtype=np.float64), np.array(released), t.copy(), np.array(lowest))
+    return s, t
 
 
 def toe_clear_ground(toe_pos, toe_rot, toe_axis_local, toe_length: float, ground_height: float):

@@ -3,6 +3,9 @@
 * foot skating (:class:`FootSkating`, the one definition, also used by ``lmm-studio eval``): mean
   horizontal speed (cm/s) of a foot's contact point (its toe joint; the database's contacts are toe
   contacts) over the ticks it is in contact, in the pose shown (after IK);
+* ground skating (:class:`GroundSkating`, :func:`ground_skating`, the one definition for runs, ``eval``
+  and the source takes, :func:`source_ground_skating`): the fraction of ground-level toe steps whose
+  horizontal speed exceeds 30 cm/s. It needs no contact flags, so recordings and mocap are measured alike;
 * trajectory following error: distance (m) between the character root and the simulation object;
 * transitions per second and searches per second;
 * search time per query (us) and controller step time (us).
@@ -51,6 +54,136 @@ class FootSkating:
         return [float(s / n) if n else float("nan") for s, n in zip(self.sum, self.count)]
 
 
+GROUND_BAND_M = 0.02          # a toe within this of its lowest level is at ground level
+GROUND_SPEED_M_S = 0.30       # faster than this along the ground is skating
+GROUND_FLOOR_PERCENTILE = 5.0  # "its lowest level": this low percentile of the toe's heights
+_BIN_M = 0.001                # height histogram resolution
+_BIN_LOW_M, _BIN_HIGH_M = -1.0, 3.0
+_N_BINS = int(round((_BIN_HIGH_M - _BIN_LOW_M) / _BIN_M))
+
+
+class GroundSkating:
+    """Ground skating, accumulated in bounded memory (height histograms, never the frames).
+
+    A *step* is one toe from one frame to the next. It is at ground level when the toe is at ground
+    level at both ends: its height within :data:`GROUND_BAND_M` (2 cm) above the floor. It skates when its
+    horizontal (x, z) speed exceeds :data:`GROUND_SPEED_M_S` (30 cm/s). The result is the fraction of
+    ground-level steps that skate, over both toes.
+
+    The floor, per toe, is either given (``floor_m``) or the toe's own lowest level over everything added:
+    the :data:`GROUND_FLOOR_PERCENTILE` th percentile of its heights. The percentile, not the minimum,
+    because a few frames far below the rest (an IK or blending artefact in a recording, a marker glitch
+    in mocap) would otherwise set the floor; per toe and per clip, because mocap takes differ in their
+    floor calibration by a few centimetres. Recordings and source takes use the same rule, so their
+    figures compare. Heights are binned at 1 mm (floor and band are exact to the bin).
+    """
+
+    def __init__(self, floor_m: float | None = None):
+        self.floor_m = floor_m
+        self.heights = np.zeros((2, _N_BINS), dtype=np.int64)    # frames per height bin, per toe
+        self.steps = np.zeros((2, _N_BINS), dtype=np.int64)      # steps per bin of the step's higher end
+        self.fast = np.zeros((2, _N_BINS), dtype=np.int64)       # of those, the ones faster than the limit
+        self._last = None  # the last frame's toes seen by add_frame
+
+    @staticmethod
+    def _bins(y: np.ndarray) -> np.ndarray:
+        return np.clip(np.floor((np.asarray(y, np.float64) - _BIN_LOW_M) / _BIN_M), 0, _N_BINS - 1).astype(np.int64)
+
+    def add(self, toes: np.ndarray, dt: float) -> None:
+        """A clip of toe positions (m, ``(F, 2, 3)``, F >= 1) at ``dt`` s per frame; its first frame is not
+        joined to anything added before (use :meth:`add_frame` to stream)."""
+        toes = np.asarray(toes, np.float64).reshape(-1, 2, 3)
+        if not dt > 0 or len(toes) == 0:
+            return
+        for i in range(2):
+            np.add.at(self.heights[i], self._bins(toes[:, i, 1]), 1)
+        if len(toes) < 2:
+            return
+        speed = np.linalg.norm(np.diff(toes[..., [0, 2]], axis=0), axis=-1) / dt
+        high = self._bins(np.maximum(toes[1:, :, 1], toes[:-1, :, 1]))
+        for i in range(2):
+            np.add.at(self.steps[i], high[:, i], 1)
+            np.add.at(self.fast[i], high[speed[:, i] > GROUND_SPEED_M_S, i], 1)
+
+    def add_frame(self, toes: np.ndarray, dt: float) -> None:
+        """One frame (``(2, 3)``) of a stream, ``dt`` s after the previous one (plain floats: this runs
+        every tick)."""
+        (lx, ly, lz), (rx, ry, rz) = (tuple(float(v) for v in t) for t in toes)
+        for i, y in ((0, ly), (1, ry)):
+            self.heights[i, min(max(int(math.floor((y - _BIN_LOW_M) / _BIN_M)), 0), _N_BINS - 1)] += 1
+        last = self._last
+        self._last = ((lx, ly, lz), (rx, ry, rz))
+        if last is None or not dt > 0:
+            return
+        for i, (x, y, z) in enumerate(self._last):
+            px, py, pz = last[i]
+            b = min(max(int(math.floor((max(y, py) - _BIN_LOW_M) / _BIN_M)), 0), _N_BINS - 1)
+            self.steps[i, b] += 1
+            if math.hypot(x - px, z - pz) / dt > GROUND_SPEED_M_S:
+                self.fast[i, b] += 1
+
+    def floor_bins(self) -> list[int]:
+        """Per toe, the bin of its floor (-1 for a toe with no frames)."""
+        if self.floor_m is not None:
+            b = int(self._bins(np.array([self.floor_m]))[0])
+            return [b, b]
+        out = []
+        for i in range(2):
+            n = int(self.heights[i].sum())
+            if n == 0:
+                out.append(-1)
+                continue
+            rank = GROUND_FLOOR_PERCENTILE / 100.0 * n
+            out.append(int(np.searchsorted(np.cumsum(self.heights[i]), max(rank, 1), side="left")))
+        return out
+
+    def counts(self) -> tuple[int, int]:
+        """(skating steps, ground-level steps), over both toes."""
+        band = int(round(GROUND_BAND_M / _BIN_M))
+        fast = ground = 0
+        for i, b in enumerate(self.floor_bins()):
+            if b < 0:
+                continue
+            fast += int(self.fast[i, :b + band + 1].sum())
+            ground += int(self.steps[i, :b + band + 1].sum())
+        return fast, ground
+
+    def fraction(self) -> float:
+        """Skating steps / ground-level steps (NaN when no step was at ground level)."""
+        fast, ground = self.counts()
+        return fast / ground if ground else float("nan")
+
+    def result(self, prefix: str = "ground_skating") -> dict:
+        fast, ground = self.counts()
+        return {f"{prefix}_fraction": fast / ground if ground else float("nan"),
+                f"{prefix}_steps": fast, f"{prefix}_ground_steps": ground}
+
+
+def ground_skating(toes: np.ndarray, fps: float, floor_m: float | None = None) -> dict:
+    """The ground skating of one clip of toe positions (m, ``(F, 2, 3)``) at ``fps``: a dict with
+    ``fraction`` (NaN when no step was at ground level), ``skating_steps`` and ``ground_steps``
+    (see :class:`GroundSkating` for the rule and the floor)."""
+    g = GroundSkating(floor_m)
+    g.add(toes, 1.0 / fps)
+    fast, ground = g.counts()
+    return {"fraction": fast / ground if ground else float("nan"), "skating_steps": fast, "ground_steps": ground}
+
+
+def source_ground_skating(db, include_mirrored: bool = False) -> dict:
+    """Ground skating of the database's source ranges (the mocap), each range with its own floor, counts
+    summed over ranges; mirrored copies are left out by default (they hold the same steps)."""
+    toes = [db.bone("left_toe"), db.bone("right_toe")]
+    fast = ground = 0
+    for r, (start, stop) in enumerate(zip(db.range_starts, db.range_stops)):
+        if db.range_mirrored[r] and not include_mirrored:
+            continue
+        _, g_pos = db.global_transforms(slice(int(start), int(stop)))
+        one = ground_skating(g_pos[:, toes], db.fps)
+        fast += one["skating_steps"]
+        ground += one["ground_steps"]
+    return {"fraction": fast / ground if ground else float("nan"), "skating_steps": fast, "ground_steps": ground}
+
+
 class MotionMetrics:
     """Feed :meth:`update` one :class:`lmm.controller.DebugSnapshot` per tick, read :meth:`result`."""
 
@@ -61,6 +194,7 @@ class MotionMetrics:
         self._prev_toes = None
         self._prev_time = None
         self.skating = FootSkating()
+        self.ground = GroundSkating()
         self._err_sum = 0.0
         self._err_max = 0.0
         self._angle_sum = 0.0
@@ -82,6 +216,9 @@ class MotionMetrics:
             if dt > 0:
                 self.skating.add(self._prev_toes, toes, snap.foot_contacts, dt)
                 self.seconds += dt
+            self.ground.add_frame(toes, dt)
+        else:
+            self.ground.add_frame(toes, 0.0)
         self._prev_toes, self._prev_time = toes, snap.time_s
         root = pose.global_positions[0].astype(np.float64)
         err = float(np.linalg.norm(root - snap.simulation_position))
@@ -115,6 +252,7 @@ class MotionMetrics:
             "foot_skating_left_cm_s": per_foot[0],
             "foot_skating_right_cm_s": per_foot[1],
             "foot_skating_max_cm_s": float(self.skating.max),
+            **self.ground.result(),
             "contact_fraction": float(n_contact / (2 * max(self.ticks - 1, 1))),
             "trajectory_error_mean_m": float(self._err_sum / self.ticks) if self.ticks else float("nan"),
             "trajectory_error_max_m": float(self._err_max),

@@ -130,6 +130,15 @@ class Tuning:
     ik_toe_length_m: float = _f(
         0.15, "ik", 0.0, 0.3, "m", "Length from the toe joint to the tip of the foot; the tip is kept above "
         "the ground by rotating the toe.")
+    ik_lift_height_m: float = _f(
+        0.02, "ik", 0.0, 0.2, "m", "After its contact ends a locked foot stays locked until the animated toe "
+        "has risen this far; an unlocked foot less than this above its last lock is near the ground.")
+    ik_ground_blend_speed_m_s: float = _f(
+        0.1, "ik", 0.0, 2.0, "m/s", "Fastest horizontal blend of an unlocked foot near the ground back to the "
+        "animation; the rest of the blend happens in the air, so the foot does not glide.")
+    ik_step_height_m: float = _f(
+        0.04, "ik", 0.0, 0.2, "m", "A foot unlocked by the unlock radius (the last resort, during a contact) "
+        "steps back to the animation with about this much lift instead of sliding.")
 
     # -- introspection ------------------------------------------------------------------------------
     @staticmethod

@@ -68,24 +68,76 @@ def test_toe_is_bent_up_above_the_ground():
     assert toe_clear_ground(np.array([0, 0.5, 0]), toe_rot, np.array([0, 0, 1.0]), 0.15, 0.0) is toe_rot
 
 
-def test_foot_lock_locks_holds_unlocks_and_blends_back():
-    s = FootLockState()
+def _lock_run(anims, contacts, dt=1 / 60, state=None, **kw):
+    """Feed a scripted left-foot sequence (the right foot stays in the air); returns states and targets."""
+    s = FootLockState() if state is None else state
+    states, targets = [], []
+    prev = None
+    for a, c in zip(anims, contacts):
+        a = np.asarray(a, float)
+        vel = np.zeros((2, 3)) if prev is None else np.stack([(a - prev) / dt, np.zeros(3)])
+        s, t = foot_lock_update(s, np.stack([a, [1, 0.3, 0]]), vel, [c, False], 0.2, 0.1, 0.02, dt, **kw)
+        states.append(s)
+        targets.append(t[0].copy())
+        prev = a
+    return states, np.array(targets)
+
+
+def test_lock_holds_through_the_contact_and_releases_when_the_animation_lifts_the_toe():
     dt = 1 / 60
+    # 30 ticks in contact while the animation drifts 10 cm (under the radius), then the toe lifts and
+    # swings forward for 30 ticks
+    contact = [(0.1 * i / 29, 0.02, 0.0) for i in range(30)]
+    swing = [(0.1 + 0.02 * k, 0.02 + 0.004 * k, 0.0) for k in range(1, 41)]
+    states, t = _lock_run(contact + swing, [True] * 30 + [False] * 40)
+    assert all(s.locked[0] for s in states[:30]) and np.allclose(t[:30], [0, 0.02, 0])
+    # contact over, the toe not yet 2 cm above its lowest point: still locked (no glide at toe-off)
+    assert states[30].locked[0] and states[33].locked[0]
+    first_free = next(k for k, s in enumerate(states) if not s.locked[0])
+    assert 34 <= first_free <= 36 and np.allclose(t[first_free], [0, 0.02, 0])  # released where locked
+    # the released target converges to the animation
+    err = np.linalg.norm(t[first_free:] - np.array(swing[first_free - 30:]), axis=1)
+    assert err[-1] < 2e-3 and np.all(np.diff(err[10:]) < 0)
+    assert not states[-1].released[0]
+
+
+def test_no_ground_level_glide_after_release():
+    """A contact with 15 cm of drift, then a low swing: the shown toe never moves faster than 30 cm/s
+    while it is within 2 cm of the ground."""
+    from lmm.metrics import ground_skating
+
+    contact = [(0.15 * i / 39, 0.02, 0.0) for i in range(40)]
+    swing = [(0.15 + 0.01 * k, 0.02 + 0.012 * k if k < 10 else 0.14 - 0.012 * (k - 10), 0.0) for k in range(1, 21)]
+    stand = [(0.35, 0.02, 0.0)] * 30
+    _, t = _lock_run(contact + swing + stand, [True] * 40 + [False] * 20 + [True] * 30)
+    toes = np.stack([t, np.tile([1, 0.3, 0], (len(t), 1))], axis=1)
+    g = ground_skating(toes, 60.0, floor_m=0.0)
+    assert g["ground_steps"] > 50 and g["skating_steps"] == 0
+    # locked again where the foot came down (what the blend had not absorbed stays as the lock's offset)
+    assert np.allclose(t[-30:], t[-1]) and np.linalg.norm(t[-1] - stand[-1]) < 0.05
+
+
+def test_the_unlock_radius_is_a_last_resort_and_the_foot_steps():
+    dt = 1 / 60
+    # in contact, the animation slides 25 cm: released past 20 cm, the foot steps (lifts) to it and locks again
+    anims = [(0.25 * min(i, 50) / 50, 0.02, 0.0) for i in range(120)]
+    states, t = _lock_run(anims, [True] * 120)
+    release = next(k for k, s in enumerate(states) if not s.locked[0])
+    assert np.hypot(*(np.array(anims[release]) - t[release - 1])[[0, 2]]) > 0.2 - 1e-9
+    assert states[release].released[0]
+    assert t[release:release + 30, 1].max() > 0.045  # lifted by about the step height
+    # locked again where the step came down, most of the 20 cm made up
+    assert states[-1].locked[0] and np.linalg.norm(t[-1] - anims[-1]) < 0.2 / 3
+    # speed along the ground (toe under 2 cm above the lock) stays under 30 cm/s apart from the lift-off tick
+    speed = np.linalg.norm(np.diff(t[:, [0, 2]], axis=0), axis=-1) / dt
+    low = np.maximum(t[1:, 1], t[:-1, 1]) < 0.04
+    assert np.sum(low & (speed > 0.3)) <= 2
+
+
+def test_a_locked_toe_below_the_foot_height_is_raised_and_the_right_foot_is_independent():
     vel = np.zeros((2, 3))
-    # contact begins on the left foot: locked where it is
-    s, t = foot_lock_update(s, np.array([[0, 0.03, 0], [1, 0.3, 0]]), vel, [True, False], 0.2, 0.1, 0.02, dt)
-    assert s.locked.tolist() == [True, False] and np.allclose(t[0], [0, 0.03, 0])
-    # the animation slides 10 cm: the lock holds
-    s, t = foot_lock_update(s, np.array([[0.1, 0.03, 0], [1, 0.3, 0]]), vel, [True, False], 0.2, 0.1, 0.02, dt)
-    assert s.locked[0] and np.allclose(t[0], [0, 0.03, 0])
-    # 25 cm: past the unlock radius, released without a pop, then blends to the animation
-    anim = np.array([[0.25, 0.03, 0], [1, 0.3, 0]])
-    s, t = foot_lock_update(s, anim, vel, [True, False], 0.2, 0.1, 0.02, dt)
-    assert not s.locked[0] and np.allclose(t[0], [0, 0.03, 0]) and s.released[0]
-    for _ in range(120):
-        s, t = foot_lock_update(s, anim, vel, [True, False], 0.2, 0.1, 0.02, dt)
-    assert not s.locked[0] and np.allclose(t[0], anim[0], atol=1e-4)  # no relock in the same contact
-    # a locked toe below the foot height is raised to it
-    s2, t2 = foot_lock_update(FootLockState(), np.array([[0, -0.01, 0], [0, 0, 0]]), vel, [True, True],
-                              0.2, 0.1, 0.02, dt)
-    assert t2[0][1] == pytest.approx(0.02)
+    s, t = foot_lock_update(FootLockState(), np.array([[0, -0.01, 0], [0.5, 0.01, 0]]), vel, [True, True],
+                            0.2, 0.1, 0.02, 1 / 60)
+    assert t[0][1] == pytest.approx(0.02) and s.locked.tolist() == [True, True]
+    s2, t2 = foot_lock_update(s, np.array([[0, 0.3, 0], [0.5, 0.01, 0]]), vel, [False, True], 0.2, 0.1, 0.02, 1 / 60)
+    assert not s2.locked[0] and s2.locked[1] and np.allclose(t2[0], t[0])  # released where it was

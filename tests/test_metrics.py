@@ -64,3 +64,55 @@ def test_one_skating_rule_for_streams_and_arrays(db):
     high = FootSkating()
     high.add(np.array([[0, 1.0, 0], [0, 1.0, 0]]), np.array([[0.01, 1.0, 0], [0, 1.0, 0]]), [True, False], 0.1)
     assert high.mean_cm_s() == pytest.approx(10.0) and np.isnan(FootSkating().mean_cm_s())
+
+
+def test_ground_skating_counts_fast_steps_at_ground_level_only():
+    from lmm.metrics import ground_skating
+
+    dt = 1 / 60
+    n = 61
+    toes = np.zeros((n, 2, 3))
+    # left: 1 s on the ground (y = 0.01), sliding 60 cm/s for the first half second, still for the second
+    toes[:, 0, 0] = np.concatenate([np.arange(31) * 0.01, np.full(30, 0.30)])
+    toes[:, 0, 1] = 0.01
+    # right: fast (1.2 m/s) but 10 cm up: never ground level
+    toes[:, 1, 1] = 0.10
+    toes[:, 1, 2] = np.arange(n) * 0.02
+    g = ground_skating(toes, 60.0, floor_m=0.0)
+    assert g["ground_steps"] == 60 and g["skating_steps"] == 30 and g["fraction"] == pytest.approx(0.5)
+    # with the floor from the clip itself (each toe's low percentile) the raised toe is at its own ground
+    own = ground_skating(toes, 60.0)
+    assert own["ground_steps"] == 120 and own["skating_steps"] == 90
+    assert math.isnan(ground_skating(toes[:, :, :] + [0, 1.0, 0], 60.0, floor_m=0.0)["fraction"])
+
+
+def test_one_ground_skating_rule_for_streams_and_arrays(db):
+    from lmm.metrics import ground_skating
+
+    rng = np.random.default_rng(5)
+    n, dt = 400, 1 / 60
+    toes = np.cumsum(rng.normal(0, 0.006, (n, 2, 3)), axis=0)
+    toes[..., 1] = np.abs(rng.normal(0.02, 0.02, (n, 2)))
+    toes = toes.astype(np.float32).astype(np.float64)  # what the snapshots hold
+    m = MotionMetrics(db)
+    for i in range(n):
+        m.update(_snap(i * dt, toes[i], [False, False]))
+    r = m.result()
+    g = ground_skating(toes, 1 / dt)
+    assert (r["ground_skating_steps"], r["ground_skating_ground_steps"]) == (g["skating_steps"], g["ground_steps"])
+    assert r["ground_skating_fraction"] == g["fraction"] and 0 < g["fraction"] < 1
+    assert m.ground.heights.nbytes < 100_000  # bounded: histograms, not frames
+
+
+def test_source_ground_skating_is_the_same_rule_per_range(db):
+    from lmm.metrics import ground_skating, source_ground_skating
+
+    src = source_ground_skating(db)
+    toes = [db.bone("left_toe"), db.bone("right_toe")]
+    fast = ground = 0
+    for r, (a, b) in enumerate(zip(db.range_starts, db.range_stops)):
+        if not db.range_mirrored[r]:
+            g = ground_skating(db.global_transforms(slice(int(a), int(b)))[1][:, toes], db.fps)
+            fast, ground = fast + g["skating_steps"], ground + g["ground_steps"]
+    assert (src["skating_steps"], src["ground_steps"]) == (fast, ground) and ground > 0
+    assert 0.0 <= src["fraction"] < 0.2  # mocap barely skates

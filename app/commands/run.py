@@ -101,6 +101,9 @@ def main(args) -> int:
         if writer is not None:
             writer.close()
 
+    # the same ground skating rule over the database's source takes, printed beside the run's
+    from lmm.metrics import source_ground_skating
+    metrics["ground_skating_fraction_source"] = source_ground_skating(db)["fraction"]
     report = {"controller": args.controller, "input": args.input, "seconds": seconds, "fps": args.fps,
               "frames": metrics["ticks"], "metrics": metrics}
     if args.record:

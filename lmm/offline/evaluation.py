@@ -17,6 +17,9 @@ mm_vs_lmm.mean_joint_distance_cm       MM and LMM fed the same built-in input: m
                                        in each character's root space
 foot_skating.{mm,lmm}_cm_s             mean horizontal toe speed while the toe is in contact, by the rule of
                                        :class:`lmm.metrics.FootSkating` (the same as ``lmm-studio run``)
+ground_skating.{mm,lmm,source}         fraction of ground-level toe steps faster than 30 cm/s, by the rule of
+                                       :class:`lmm.metrics.GroundSkating` (as ``lmm-studio run``); source: the
+                                       database's source ranges
 =====================================  ==================================================================
 """
 from __future__ import annotations
@@ -242,11 +245,17 @@ def evaluate(db, features, nets, compressor: MLP, inputs="builtin:random:1", sec
                                                                          axis=-1)) * 100.0)}
     out["projector"].update(projector_runtime_agreement(nets, features, mm["queries"]))
     out["foot_skating"] = {"mm_cm_s": foot_skating_cm_s(mm, toes), "lmm_cm_s": foot_skating_cm_s(lmm, toes)}
+    from lmm.metrics import ground_skating, source_ground_skating
+    out["ground_skating"] = {"mm": ground_skating(mm["positions"][:, toes], 1.0 / mm["dt"])["fraction"],
+                             "lmm": ground_skating(lmm["positions"][:, toes], 1.0 / lmm["dt"])["fraction"],
+                             "source": source_ground_skating(db)["fraction"]}
     out["lmm_run"] = {"finite": bool(np.all(np.isfinite(lmm["positions"]))),
                       "max_bone_length_error_cm": bone_length_error_m(lmm, db) * 100.0,
                       "median_step_us": float(np.median(lmm["step_us"]))}
     log(f"mm vs lmm: mean joint distance {dist.mean():.2f} cm; foot skating mm {out['foot_skating']['mm_cm_s']:.2f} "
-        f"lmm {out['foot_skating']['lmm_cm_s']:.2f} cm/s ({time.perf_counter() - t0:.1f} s)")
+        f"lmm {out['foot_skating']['lmm_cm_s']:.2f} cm/s; ground skating mm {out['ground_skating']['mm']:.3f} "
+        f"lmm {out['ground_skating']['lmm']:.3f} source {out['ground_skating']['source']:.3f} "
+        f"({time.perf_counter() - t0:.1f} s)")
     artifacts = {"per_joint_cm": per_joint, "latents": lmm["latents"], "dt": lmm["dt"]}
     return out, artifacts
 
