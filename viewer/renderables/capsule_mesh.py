@@ -75,8 +75,21 @@ void main() {
 }
 """
 
-# Soft studio lighting on the mesh: a slightly wrapped Lambert key light, a sky/ground hemisphere
-# ambient, a little Blinn specular and a cool rim that separates the silhouette from the background.
+SHADE_GLSL = """
+// Soft studio lighting: a slightly wrapped Lambert key light, a sky/ground hemisphere ambient, a
+// little Blinn specular and a cool rim that separates the silhouette from the background.
+vec3 shade(vec3 n, vec3 to_eye, vec3 color) {
+    vec3 l = normalize(u_light_dir);
+    float key = clamp((dot(n, l) + 0.25) / 1.25, 0.0, 1.0);
+    float sky = 0.5 + 0.5 * n.y;
+    vec3 ambient = mix(vec3(0.42, 0.38, 0.36), vec3(0.9, 0.95, 1.05), sky);
+    float spec = pow(max(dot(n, normalize(l + to_eye)), 0.0), 48.0) * u_specular * 2.0;
+    float rim = pow(1.0 - max(dot(n, to_eye), 0.0), 4.0) * 0.25 * sky;
+    return color * (u_ambient * 0.9 * ambient + u_diffuse * 1.15 * key) + vec3(spec) + rim * vec3(0.7, 0.8, 1.0);
+}
+"""
+
+# the lighting on the mesh's own (interpolated) normals
 CAPSULE_FS = """
 #version 330
 uniform vec3 u_light_dir;   // towards the light, world space
@@ -89,18 +102,9 @@ in vec3 v_world;
 in vec4 v_color;
 in float v_height;
 out vec4 f_color;
+SHADE_GLSL
 void main() {
-    vec3 n = normalize(v_normal);
-    vec3 l = normalize(u_light_dir);
-    vec3 to_eye = normalize(u_eye - v_world);
-    float key = clamp((dot(n, l) + 0.25) / 1.25, 0.0, 1.0);     // slightly wrapped Lambert
-    float sky = 0.5 + 0.5 * n.y;
-    vec3 ambient = mix(vec3(0.42, 0.38, 0.36), vec3(0.9, 0.95, 1.05), sky);
-    float spec = pow(max(dot(n, normalize(l + to_eye)), 0.0), 48.0) * u_specular * 2.0;
-    float rim = pow(1.0 - max(dot(n, to_eye), 0.0), 4.0) * 0.25 * sky;
-    vec3 rgb = v_color.rgb * (u_ambient * 0.9 * ambient + u_diffuse * 1.15 * key) + vec3(spec)
-             + rim * vec3(0.7, 0.8, 1.0);
-    f_color = vec4(rgb, v_color.a);
+    f_color = vec4(shade(normalize(v_normal), normalize(u_eye - v_world), v_color.rgb), v_color.a);
 }
 """
 
@@ -129,7 +133,7 @@ flat in vec3 v_a;
 flat in vec3 v_b;
 flat in vec2 v_r;
 out vec4 f_color;
-
+SHADE_GLSL
 // nearest entry of the ray o + t d (|d| = 1) into a sphere, or 1e30
 float hit_sphere(vec3 o, vec3 d, vec3 c, float r) {
     vec3 oc = o - c;
@@ -183,19 +187,12 @@ void main() {
     vec4 clip = u_proj * (u_view * vec4(p, 1.0));
     gl_FragDepth = 0.5 * clip.z / clip.w + 0.5;
 
-    n = normalize(n);
-    vec3 l = normalize(u_light_dir);
-    vec3 to_eye = -d;
-    float key = clamp((dot(n, l) + 0.25) / 1.25, 0.0, 1.0);     // slightly wrapped Lambert
-    float sky = 0.5 + 0.5 * n.y;
-    vec3 ambient = mix(vec3(0.42, 0.38, 0.36), vec3(0.9, 0.95, 1.05), sky);
-    float spec = pow(max(dot(n, normalize(l + to_eye)), 0.0), 48.0) * u_specular * 2.0;
-    float rim = pow(1.0 - max(dot(n, to_eye), 0.0), 4.0) * 0.25 * sky;
-    vec3 rgb = v_color.rgb * (u_ambient * 0.9 * ambient + u_diffuse * 1.15 * key) + vec3(spec)
-             + rim * vec3(0.7, 0.8, 1.0);
-    f_color = vec4(rgb, v_color.a);
+    f_color = vec4(shade(normalize(n), -d, v_color.rgb), v_color.a);
 }
 """
+
+CAPSULE_FS = CAPSULE_FS.replace("SHADE_GLSL", SHADE_GLSL)
+CAPSULE_EXACT_FS = CAPSULE_EXACT_FS.replace("SHADE_GLSL", SHADE_GLSL)
 
 SHADOW_DEPTH_PULL = 1e-3   # shadows: in front of the ground, behind lines on it (2e-3)
 
