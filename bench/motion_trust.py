@@ -30,8 +30,7 @@ def source_report(manifest_path) -> dict:
     from lmm.data.manifest import load_manifest
 
     m = load_manifest(manifest_path)
-    totals = {"frames": 0, "airborne_frames": 0, "tpose_frames": 0}
-    fast = 0.0
+    totals = {"frames": 0, "airborne_frames": 0, "tpose_frames": 0, "ground_steps": 0, "ground_skating_steps": 0}
     for clip in m.clips:
         anim = bvh.load(clip.file)
         g = anim.global_positions() * m.unit_scale
@@ -39,9 +38,8 @@ def source_report(manifest_path) -> dict:
             r = motion_report(g[a:b], anim.names, source_fps(anim.frame_time), m.bones, ground_m=None)
             for k in totals:
                 totals[k] += r[k]
-            fast += r["ground_toe_fast_fraction"] * r["frames"]
     totals["airborne_fraction"] = totals["airborne_frames"] / max(totals["frames"], 1)
-    totals["ground_toe_fast_fraction"] = fast / max(totals["frames"], 1)  # frame-weighted over ranges
+    totals["ground_toe_fast_fraction"] = totals["ground_skating_steps"] / max(totals["ground_steps"], 1)
     return totals
 
 

@@ -410,16 +410,19 @@ def motion_report(global_positions: np.ndarray, names: list[str], fps: float, bo
 
     ``airborne_fraction`` (frames with both toes more than ``AIRBORNE_HEIGHT_M`` above the floor),
     ``airborne_longest_s``, ``tpose_frames`` (hands at shoulder height and far apart) and
-    ``ground_toe_fast_fraction`` (toe frames within 2 cm of their lowest level, a low percentile, that
-    move faster than 30 cm/s). ``ground_m``: the floor (0 for recordings; None: the take's own ground level).
+    ``ground_toe_fast_fraction``: the ground skating of :func:`lmm.metrics.ground_skating` (the one rule
+    ``run``, ``eval`` and the source takes use: toe steps within 2 cm of the toe's own floor faster than
+    30 cm/s). ``ground_m``: the floor for the airborne test (0 for recordings; None: the take's own level).
     """
+    from lmm.metrics import ground_skating
+
     s = take_signals(global_positions, None, names, fps, bones, ground_m=ground_m)
     F = s.toe_height_m.shape[0]
     air = s.toe_height_m.min(axis=1) > AIRBORNE_HEIGHT_M
     air_runs = runs(air)
-    lowest = np.percentile(s.toe_height_m, GROUND_PERCENTILE, axis=0) if F else np.zeros(2)  # robust to a glitch
-    at_ground = s.toe_height_m < lowest + 0.02
-    fast = at_ground & (s.toe_speed_m_s > 0.3)
+    bones = {**{"left_toe": "LeftToe", "right_toe": "RightToe"}, **(bones or {})}
+    toes = [_joint(names, bones, "left_toe"), _joint(names, bones, "right_toe")]
+    skating = ground_skating(np.asarray(global_positions, np.float64)[:, toes], fps) if F > 1 else None
     return {
         "frames": int(F), "fps": float(fps), "seconds": F / fps if fps else 0.0,
         "airborne_fraction": float(air.mean()) if F else 0.0,
@@ -427,7 +430,9 @@ def motion_report(global_positions: np.ndarray, names: list[str], fps: float, bo
         "airborne_longest_s": max((b - a for a, b in air_runs), default=0) / fps,
         "airborne_max_height_m": float(s.toe_height_m.min(axis=1).max()) if F else 0.0,
         "tpose_frames": int(s.tpose.sum()),
-        "ground_toe_fast_fraction": float(fast.sum() / max(int(at_ground.sum()), 1)),
+        "ground_toe_fast_fraction": float(skating["fraction"]) if skating else float("nan"),
+        "ground_steps": int(skating["ground_steps"]) if skating else 0,
+        "ground_skating_steps": int(skating["skating_steps"]) if skating else 0,
     }
 
 
