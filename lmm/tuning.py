@@ -120,6 +120,9 @@ class Tuning:
     # -- foot locking and two-bone IK -----------------------------------------------------------------
     ik_enabled: bool = _f(
         True, "ik", False, True, "", "Foot locking with two-bone leg IK.")
+    ik_ground_calibration: bool = _f(
+        True, "ik", False, True, "", "Shift each take's poses vertically so its planted toes sit at foot height "
+        "(mocap takes differ by a few centimetres in floor calibration: feet in the floor or floating).")
     ik_unlock_radius_m: float = _f(
         0.2, "ik", 0.0, 0.5, "m", "A locked foot unlocks once the animation has moved this far from the lock.")
     ik_blend_halflife_s: float = _f(
