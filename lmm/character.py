@@ -156,8 +156,10 @@ def bone_heights(db, bones) -> np.ndarray:
 
 
 def range_contact_heights(db, toe_bones, min_frames: int = 10) -> np.ndarray:
-    """Per clip range, the median height (m) of the toes over the frames where they are in contact: where
-    that take's mocap puts a planted toe joint (takes differ by a few centimetres in floor calibration).
+    """Per clip range, the low (10th percentile) height (m) of the toes over the frames where they are in
+    contact: where that take's mocap puts a planted toe joint (takes differ by a few centimetres in floor
+    calibration). The low percentile, not the median, so that after the shift almost no planted toe is
+    below foot height (where a lock would lift it and the blend back would drop it again).
     A range with fewer than ``min_frames`` contact toe-frames gets the database's median; NaN for every
     range when the database has no contact at all."""
     n_ranges = len(db.range_starts)
@@ -169,7 +171,7 @@ def range_contact_heights(db, toe_bones, min_frames: int = 10) -> np.ndarray:
     overall = float(np.median(heights[contacts]))
     for r, (start, stop) in enumerate(zip(db.range_starts, db.range_stops)):
         h = heights[int(start):int(stop)][contacts[int(start):int(stop)]]
-        out[r] = float(np.median(h)) if len(h) >= min_frames else overall
+        out[r] = float(np.percentile(h, 10)) if len(h) >= min_frames else overall
     return out
 
 
@@ -362,6 +364,7 @@ class CharacterController(Controller):
         self.root_position = self.root_position + root_vel_world * dt
         self.root_rotation = quat.normalize(quat.mul(quat.from_scaled_angle_axis(root_ang_world * dt),
                                                      self.root_rotation))
+        integrated = (self.root_position.copy(), self.root_rotation.copy())
         self._synchronize(root_vel_world, root_ang_world, dt)
 
         # world pose, then foot locking
@@ -377,9 +380,11 @@ class CharacterController(Controller):
         toe_now = g_pos[self.toe_bones].copy()
         if tun.ik_enabled:
             toe_vel = np.zeros((2, 3)) if self._prev_toe is None or dt <= 0 else (toe_now - self._prev_toe) / dt
+            shift = self._root_shift(toe_now, *integrated) if tun.ik_counter_adjustment else None
             self.foot_lock, targets = foot_lock_update(
                 self.foot_lock, toe_now, toe_vel, src.contacts, tun.ik_unlock_radius_m, tun.ik_blend_halflife_s,
-                tun.ik_foot_height_m, dt, tun.ik_lift_height_m, tun.ik_ground_blend_speed_m_s, tun.ik_step_height_m)
+                tun.ik_foot_height_m, dt, tun.ik_lift_height_m, tun.ik_ground_blend_speed_m_s, tun.ik_step_height_m,
+                shift, tun.ik_swing_clearance_m)
             locked = self.foot_lock.locked.copy()
             new_global = {}
             for i, chain in enumerate(self.leg_chains):
@@ -453,6 +458,12 @@ class CharacterController(Controller):
             self._rotation_change_high = False
             forced = True
         return forced
+
+    def _root_shift(self, toes, position, rotation) -> np.ndarray:
+        """How far adjustment and clamping moved each toe (2, 3) this tick: the toes as shown minus where
+        they would be with the root left at ``position``/``rotation`` (the integrated root)."""
+        local = quat.inv_mul_vec(self.root_rotation, toes - self.root_position)
+        return toes - (position + quat.mul_vec(rotation, local))
 
     def _ground_offset_target(self) -> float:
         """The height shift (m) that puts the playing take's planted toes at ``ik_foot_height_m`` (0 when
