@@ -131,6 +131,50 @@ def forward_kinematics_pose(local_rot: np.ndarray, local_pos: np.ndarray, parent
     return np.array(g), np.array(p)
 
 
+def bone_heights(db, bones) -> np.ndarray:
+    """World heights (F, len(bones)) of the given bones in every database frame: forward kinematics along
+    each bone's chain only (a handful of bones, not the whole skeleton)."""
+    parents = [int(p) for p in db.parents]
+    out = np.zeros((len(db.positions), len(bones)))
+    for k, b in enumerate(bones):
+        chain = []
+        j = int(b)
+        while j >= 0:
+            chain.append(j)
+            j = parents[j]
+        rot = pos = None
+        for j in reversed(chain):
+            lr = db.rotations[:, j].astype(np.float64)
+            lp = db.positions[:, j].astype(np.float64)
+            if rot is None:
+                rot, pos = lr, lp
+            else:
+                pos = pos + quat.mul_vec(rot, lp)
+                rot = quat.mul(rot, lr)
+        out[:, k] = pos[:, 1]
+    return out
+
+
+def range_contact_heights(db, toe_bones, min_frames: int = 10) -> np.ndarray:
+    """Per clip range, the low (10th percentile) height (m) of the toes over the frames where they are in
+    contact: where that take's mocap puts a planted toe joint (takes differ by a few centimetres in floor
+    calibration). The low percentile, not the median, so that after the shift almost no planted toe is
+    below foot height (where a lock would lift it and the blend back would drop it again).
+    A range with fewer than ``min_frames`` contact toe-frames gets the database's median; NaN for every
+    range when the database has no contact at all."""
+    n_ranges = len(db.range_starts)
+    heights = bone_heights(db, toe_bones)
+    contacts = np.asarray(db.contacts, dtype=bool)
+    out = np.full(n_ranges, np.nan)
+    if not contacts.any():
+        return out
+    overall = float(np.median(heights[contacts]))
+    for r, (start, stop) in enumerate(zip(db.range_starts, db.range_stops)):
+        h = heights[int(start):int(stop)][contacts[int(start):int(stop)]]
+        out[r] = float(np.percentile(h, 10)) if len(h) >= min_frames else overall
+    return out
+
+
 def _norm(v) -> float:
     """Length of one small vector (np.linalg.norm costs several microseconds per call)."""
     v = np.asarray(v, dtype=np.float64).ravel()
@@ -170,6 +214,8 @@ class CharacterController(Controller):
             self.leg_chains.append((hip, knee, f, t))
             axis = db.positions[0, t].astype(np.float64)
             self.toe_axes.append(axis / max(_norm(axis), 1e-9))
+        self.hips_bone = 1  # the child of the simulation bone; its height is the pose's height
+        self._range_contact_height = range_contact_heights(db, self.toe_bones)
         self.reset()
 
     # ------------------------------------------------------------------------------------------
@@ -220,6 +266,8 @@ class CharacterController(Controller):
         self.offsets = Offsets.zeros(self.n_bones)
         self.foot_lock = FootLockState()
         self._prev_toe = None
+        self._ground_offset = self._ground_offset_target()
+        self._ground_offset_velocity = 0.0
         self._velocity_change_high = False
         self._rotation_change_high = False
         self._since_search = 0.0
@@ -316,6 +364,7 @@ class CharacterController(Controller):
         self.root_position = self.root_position + root_vel_world * dt
         self.root_rotation = quat.normalize(quat.mul(quat.from_scaled_angle_axis(root_ang_world * dt),
                                                      self.root_rotation))
+        integrated = (self.root_position.copy(), self.root_rotation.copy())
         self._synchronize(root_vel_world, root_ang_world, dt)
 
         # world pose, then foot locking
@@ -324,14 +373,18 @@ class CharacterController(Controller):
         local_pos = pos.copy()
         local_rot[0] = self.root_rotation
         local_pos[0] = self.root_position
+        self._update_ground_offset(dt)
+        local_pos[self.hips_bone, 1] += self._ground_offset
         g_rot, g_pos = forward_kinematics_pose(local_rot, local_pos, self.parents)
         locked = np.zeros(2, dtype=bool)
         toe_now = g_pos[self.toe_bones].copy()
         if tun.ik_enabled:
             toe_vel = np.zeros((2, 3)) if self._prev_toe is None or dt <= 0 else (toe_now - self._prev_toe) / dt
+            shift = self._root_shift(toe_now, *integrated) if tun.ik_counter_adjustment else None
             self.foot_lock, targets = foot_lock_update(
                 self.foot_lock, toe_now, toe_vel, src.contacts, tun.ik_unlock_radius_m, tun.ik_blend_halflife_s,
-                tun.ik_foot_height_m, dt, tun.ik_lift_height_m, tun.ik_ground_blend_speed_m_s, tun.ik_step_height_m)
+                tun.ik_foot_height_m, dt, tun.ik_lift_height_m, tun.ik_ground_blend_speed_m_s, tun.ik_step_height_m,
+                shift, tun.ik_swing_clearance_m)
             locked = self.foot_lock.locked.copy()
             new_global = {}
             for i, chain in enumerate(self.leg_chains):
@@ -405,6 +458,36 @@ class CharacterController(Controller):
             self._rotation_change_high = False
             forced = True
         return forced
+
+    def _root_shift(self, toes, position, rotation) -> np.ndarray:
+        """How far adjustment and clamping moved each toe (2, 3) this tick: the toes as shown minus where
+        they would be with the root left at ``position``/``rotation`` (the integrated root)."""
+        local = quat.inv_mul_vec(self.root_rotation, toes - self.root_position)
+        return toes - (position + quat.mul_vec(rotation, local))
+
+    def _ground_offset_target(self) -> float:
+        """The height shift (m) that puts the playing take's planted toes at ``ik_foot_height_m`` (0 when
+        ground calibration is off, or the source frame or its take's contact height is unknown)."""
+        if not self.tuning.ik_ground_calibration:
+            return 0.0
+        frame = self._source_frame()
+        if frame < 0 or frame >= len(self.db.contacts):
+            return 0.0
+        h = float(self._range_contact_height[int(self.db.range_index(frame))])
+        return self.tuning.ik_foot_height_m - h if math.isfinite(h) else 0.0
+
+    def _update_ground_offset(self, dt: float) -> None:
+        """Move the ground calibration shift towards the playing take's (a critically damped spring with
+        the inertialization halflife, so a jump to a take calibrated differently does not pop)."""
+        target = self._ground_offset_target()
+        if dt <= 0:
+            return
+        y = 2.0 * LN2 / (self.tuning.inertialization_halflife_s + EPS)  # halflife -> damping / 2
+        x, v = self._ground_offset - target, self._ground_offset_velocity
+        j1 = v + x * y
+        e = math.exp(-y * dt)
+        self._ground_offset = target + e * (x + j1 * dt)
+        self._ground_offset_velocity = e * (v - j1 * y * dt)
 
     def _synchronize(self, root_vel_world, root_ang_world, dt) -> None:
         """Adjustment (pull the character root towards the simulation object) and clamping."""

@@ -140,9 +140,33 @@ def _decay(x: float, v: float, y: float, e: float, dt: float) -> tuple[float, fl
     return e * (x + j1 * dt), e * (v - j1 * y * dt)
 
 
+SWING_SPEEDS_M_S = (0.5, 1.5)  # horizontal toe speed where the swing clearance starts and is complete
+
+
+def swing_floor(speed: float, foot_height: float, clearance: float) -> float:
+    """Lowest height (m) of an unlocked toe moving ``speed`` m/s horizontally: ``foot_height`` (never
+    through the floor) plus ``clearance`` faded in with speed (smoothstep over :data:`SWING_SPEEDS_M_S`),
+    so a foot landing or shuffling slowly is left alone and a fast swing does not skim the ground."""
+    lo, hi = SWING_SPEEDS_M_S
+    t = min(max((speed - lo) / (hi - lo), 0.0), 1.0)
+    return foot_height + clearance * t * t * (3.0 - 2.0 * t)
+
+
+def soft_floor(y: float, floor: float, softness: float = 0.01) -> float:
+    """``max(y, floor)`` with a rounded corner (C1, exact outside ``floor +- softness``): a toe coming
+    down onto its floor slows instead of stopping dead."""
+    if y >= floor + softness:
+        return y
+    if y <= floor - softness:
+        return floor
+    d = y - floor + softness
+    return floor + d * d / (4.0 * softness)
+
+
 def foot_lock_update(state: FootLockState, toe_positions, toe_velocities, contacts, unlock_radius: float,
                      blend_halflife: float, foot_height: float, dt: float, lift_height: float = 0.02,
-                     ground_blend_speed: float = 0.1, step_height: float = 0.04) -> tuple[FootLockState, np.ndarray]:
+                     ground_blend_speed: float = 0.1, step_height: float = 0.04,
+                     root_shift=None, swing_clearance: float = 0.0) -> tuple[FootLockState, np.ndarray]:
     """Advance the locks one tick. Returns the new state and the toe targets (2, 3), world space.
 
     The rule, per foot:
@@ -161,6 +185,10 @@ def foot_lock_update(state: FootLockState, toe_positions, toe_velocities, contac
       target is near the ground (less than ``lift_height`` above the last lock) the offset may move
       horizontally at most ``ground_blend_speed``: the rest is absorbed once the foot is in the air (or
       by the next lock, which starts where the foot is shown).
+    * **not dragged by the root**: ``root_shift`` (2, 3), when given, is how far this tick's root
+      adjustment and clamping moved each animated toe. An unlocked foot near the ground does not follow
+      it horizontally (it goes into the offset, at most ``unlock_radius`` of it, and is blended out under
+      the same ground speed limit); a locked foot is held anyway.
     """
     anim = [tuple(float(v) for v in p) for p in np.asarray(toe_positions, dtype=np.float64)]
     vel = [tuple(float(v) for v in p) for p in np.asarray(toe_velocities, dtype=np.float64)]
@@ -207,6 +235,13 @@ def foot_lock_update(state: FootLockState, toe_positions, toe_velocities, contac
         if locked[i]:
             targets.append(lock[i])
             continue
+        if root_shift is not None and a[1] + off[i][1] < lock[i][1] + lift_height:
+            # the root was pulled towards the simulation object: a foot near the ground stays put
+            cx, cz = off[i][0] - float(root_shift[i][0]), off[i][2] - float(root_shift[i][2])
+            n = math.hypot(cx, cz)
+            if n > unlock_radius:
+                cx, cz = (cx * unlock_radius / n, cz * unlock_radius / n) if n > 0.0 else (0.0, 0.0)
+            off[i][0], off[i][2] = cx, cz
         ox, oy, oz = off[i]
         vx, vy, vz = off_v[i]
         nx, vx = _decay(ox, vx, y, e, dt)
@@ -222,7 +257,10 @@ def foot_lock_update(state: FootLockState, toe_positions, toe_velocities, contac
                 vx, vz = (nx - ox) / dt, (nz - oz) / dt
         off[i] = [nx, ny, nz]
         off_v[i] = [vx, vy, vz]
-        targets.append((a[0] + nx, a[1] + ny, a[2] + nz))
+        ty = a[1] + ny
+        if swing_clearance > 0.0:
+            ty = soft_floor(ty, swing_floor(math.hypot(vel[i][0], vel[i][2]), foot_height, swing_clearance))
+        targets.append((a[0] + nx, ty, a[2] + nz))
     t = np.array(targets)
     s = FootLockState(np.array(locked), np.array(lock, dtype=np.float64), np.array(off, dtype=np.float64),
                       np.array(off_v, dtype=np.float64), np.array(released), t.copy(), np.array(lowest))

@@ -120,6 +120,15 @@ class Tuning:
     # -- foot locking and two-bone IK -----------------------------------------------------------------
     ik_enabled: bool = _f(
         True, "ik", False, True, "", "Foot locking with two-bone leg IK.")
+    ik_ground_calibration: bool = _f(
+        True, "ik", False, True, "", "Shift each take's poses vertically so its planted toes sit at foot height "
+        "(mocap takes differ by a few centimetres in floor calibration: feet in the floor or floating).")
+    ik_counter_adjustment: bool = _f(
+        True, "ik", False, True, "", "Feet near the ground do not follow the root adjustment and clamping "
+        "(the body is pulled towards the simulation object, the legs absorb it), so they are not dragged.")
+    ik_swing_clearance_m: float = _f(
+        0.02, "ik", 0.0, 0.1, "m", "A swinging (unlocked) toe moving faster than 0.5 m/s is lifted to at least this "
+        "above foot height (full at 1.5 m/s) and never below foot height, so it does not skim the ground (0: off).")
     ik_unlock_radius_m: float = _f(
         0.2, "ik", 0.0, 0.5, "m", "A locked foot unlocks once the animation has moved this far from the lock.")
     ik_blend_halflife_s: float = _f(

@@ -141,3 +141,52 @@ def test_a_locked_toe_below_the_foot_height_is_raised_and_the_right_foot_is_inde
     assert t[0][1] == pytest.approx(0.02) and s.locked.tolist() == [True, True]
     s2, t2 = foot_lock_update(s, np.array([[0, 0.3, 0], [0.5, 0.01, 0]]), vel, [False, True], 0.2, 0.1, 0.02, 1 / 60)
     assert not s2.locked[0] and s2.locked[1] and np.allclose(t2[0], t[0])  # released where it was
+
+
+def test_a_fast_swing_near_the_ground_is_lifted_and_a_slow_one_is_left_alone():
+    from lmm.ik import soft_floor, swing_floor
+
+    dt = 1 / 60
+    # a free foot (no contact ever) skimming 5 mm above the ground, fast then slow
+    fast = [(2.0 * k * dt, 0.005, 0.0) for k in range(30)]
+    _, t = _lock_run(fast, [False] * 30, swing_clearance=0.02)
+    assert np.all(t[2:, 1] >= 0.02 + 0.02 - 1e-9)  # 2 m/s: foot height plus the whole clearance
+    _, t0 = _lock_run(fast, [False] * 30)
+    assert np.allclose(t0[:, 1], 0.005)  # clearance 0: untouched
+    slow = [(0.3 * k * dt, 0.03, 0.0) for k in range(30)]
+    _, t = _lock_run(slow, [False] * 30, swing_clearance=0.02)
+    assert np.allclose(t[:, 1], 0.03)  # slow and above foot height: left alone
+    # the floor rises smoothly with speed and the rounded max is continuous and never below its floor
+    assert swing_floor(0.5, 0.02, 0.02) == pytest.approx(0.02) and swing_floor(1.5, 0.02, 0.02) == pytest.approx(0.04)
+    ys = np.linspace(-0.05, 0.1, 301)
+    out = np.array([soft_floor(y, 0.03) for y in ys])
+    assert np.all(out >= 0.03) and np.all(np.diff(out) >= 0) and np.abs(np.diff(out)).max() <= 0.0005 + 1e-12
+    assert np.allclose(out[ys >= 0.04 + 1e-9], ys[ys >= 0.04 + 1e-9])
+
+
+def test_an_unlocked_foot_near_the_ground_is_not_dragged_by_the_root_adjustment():
+    dt = 1 / 60
+    s = FootLockState()
+    still = np.array([[0.0, 0.02, 0.0], [1.0, 0.3, 0.0]])
+    s, _ = foot_lock_update(s, still, np.zeros((2, 3)), [True, False], 0.2, 0.1, 0.02, dt)
+    s, _ = foot_lock_update(s, still + [0, 0.03, 0], np.zeros((2, 3)), [False, False], 0.2, 0.1, 0.02, dt)
+    assert not s.locked[0]
+    # the animated feet stand still in the character, but adjustment pulls the root 1 cm per tick (0.6 m/s)
+    shift = np.array([[0.01, 0.0, 0.0], [0.01, 0.0, 0.0]])
+    low = []
+    high = []
+    for k in range(1, 20):
+        toes = np.array([[0.01 * k, 0.025, 0.0], [1.0 + 0.01 * k, 0.3, 0.0]])
+        s, t = foot_lock_update(s, toes, np.zeros((2, 3)), [False, False], 0.2, 0.1, 0.02, dt, root_shift=shift)
+        low.append(t[0].copy())
+        high.append(t[1].copy())
+    speed = np.linalg.norm(np.diff(np.array(low)[:, [0, 2]], axis=0), axis=1) / dt
+    assert speed.max() <= 0.1 + 1e-9  # near the ground: only the capped blend moves it
+    assert np.allclose(np.diff(np.array(high)[:, 0]), 0.01)  # in the air it follows the body
+    # without the shift the low foot is dragged along at 0.6 m/s
+    s2 = FootLockState()
+    s2, _ = foot_lock_update(s2, still, np.zeros((2, 3)), [True, False], 0.2, 0.1, 0.02, dt)
+    s2, _ = foot_lock_update(s2, still + [0, 0.03, 0], np.zeros((2, 3)), [False, False], 0.2, 0.1, 0.02, dt)
+    ts = [foot_lock_update(s2, np.array([[0.01 * k, 0.025, 0.0], [1.0, 0.3, 0.0]]), np.zeros((2, 3)),
+                           [False, False], 0.2, 0.1, 0.02, dt)[1][0][0] for k in (5, 6)]
+    assert ts[1] - ts[0] > 0.005

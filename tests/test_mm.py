@@ -229,3 +229,31 @@ def test_memory_bytes_counts_pose_features_and_index(db, features):
     assert parts["search index"] == SearchIndex(c.features.normalized).nbytes() > 0
     # the index's own arrays only: not the features it searches (the same array, not a copy)
     assert parts["search index"] < c.features.normalized.nbytes
+
+
+def test_ground_calibration_shifts_each_take_to_foot_height_without_popping(db, features):
+    from lmm.character import range_contact_heights
+
+    toes = [db.bone("left_toe"), db.bone("right_toe")]
+    heights = range_contact_heights(db, toes)
+    assert np.isfinite(heights).all() and np.ptp(heights) > 0.01  # the shipped takes differ in calibration
+    log = builtin("random:1", 8.0)
+    runs = {}
+    for on in (True, False):
+        c = MotionMatchingController(db, features, Tuning(ik_enabled=False, ik_ground_calibration=on))
+        poses, targets = [], []
+        for i in range(480):
+            pose, snap = c.step(log.at(i * DT), DT)
+            poses.append(pose.global_positions.astype(np.float64))
+            targets.append(c.tuning.ik_foot_height_m - heights[db.range_index(snap.matched_frame)])
+        runs[on] = (np.array(poses), np.array(targets), c)
+    on, off = runs[True][0], runs[False][0]
+    shift = on[:, :, 1] - off[:, :, 1]
+    # a rigid vertical shift of the whole pose (the same motion otherwise) ...
+    assert np.allclose(on[:, :, [0, 2]], off[:, :, [0, 2]], atol=1e-5)
+    assert np.allclose(shift[:, 1:], shift[:, 1:2], atol=1e-5)
+    # ... that follows the playing take's target, and never pops at a jump between takes
+    targets = runs[True][1]
+    assert len(np.unique(np.round(targets, 4))) > 1 and np.abs(shift).max() > 0.005
+    assert np.abs(np.diff(shift[:, 1])).max() < 0.004
+    assert np.abs(shift[-1, 1] - targets[-1]) < 0.01
