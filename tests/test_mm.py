@@ -227,8 +227,12 @@ def test_memory_bytes_counts_pose_features_and_index(db, features):
     c.step(InputState(), DT)      # the first tick searches and builds the index
     parts = c.memory_bytes()
     assert parts["search index"] == SearchIndex(c.features.normalized).nbytes() > 0
-    # the index's own arrays only: not the features it searches (the same array, not a copy)
-    assert parts["search index"] < c.features.normalized.nbytes
+    # the index's own arrays only: the features it searches count once, unless the index had to copy
+    # them (a frame count that is not a whole number of blocks is padded)
+    idx = c.index
+    copied = sum(getattr(idx, n).nbytes for n in ("X", "rows")
+                 if not np.shares_memory(getattr(idx, n), c.features.normalized))
+    assert parts["search index"] - copied < c.features.normalized.nbytes
 
 
 def test_ground_calibration_shifts_each_take_to_foot_height_without_popping(db, features):
