@@ -42,24 +42,28 @@ def source_report(manifest_path) -> dict:
     return totals
 
 
-def idle_report(manifest_path, seconds: float = 120.0) -> dict:
+def idle_report(manifest_path, controller: str = "mm", input_spec: str = "builtin:strafe",
+                seconds: float = 120.0) -> dict:
+    """Which fraction of the ticks played 3 s or more after the stick was released lie in an idle-tagged
+    range (MM: the frame it plays; LMM: its nearest database frame, the frame its state stands for)."""
     from lmm.data.database import load_or_build
-    from lmm.data.inputs import builtin
+    from lmm.data.inputs import open_input
+    from lmm.factory import make_controller
     from lmm.features import build_features
-    from lmm.mm import MotionMatchingController
 
     db, _ = load_or_build(manifest_path)
-    c = MotionMatchingController(db, build_features(db))
+    c = make_controller(controller, db, build_features(db))
     c.reset()
-    log, dt = builtin("strafe", seconds), 1.0 / 60.0
+    log, dt = open_input(input_spec, seconds), 1.0 / 60.0
     judged = idle = 0
     for i in range(int(seconds / dt)):
         _, snap = c.step(log(i * dt), dt)
         if c.stick_released_s >= 3.0:
             judged += 1
             idle += "idle" in db.tags_of(snap.matched_frame)
-    return {"frames_3s_after_release": judged, "idle_tagged_fraction": idle / max(judged, 1),
-            "idle_tags_in_database": "idle" in db.tag_names, "tag_error": c.tag_error}
+    return {"controller": controller, "input": input_spec, "seconds": seconds,
+            "ticks_3s_after_release": judged, "idle_tagged_fraction": idle / judged if judged else None,
+            "idle_tags_in_database": "idle" in db.tag_names, "search_note": snap.search_note}
 
 
 def main() -> int:
@@ -67,6 +71,9 @@ def main() -> int:
     p.add_argument("recordings", nargs="*", help="BVH recordings (lmm-studio run --record)")
     p.add_argument("--idle", metavar="MANIFEST", help="run the idle test on this manifest ('default': the shipped one)")
     p.add_argument("--source", metavar="MANIFEST", help="the same numbers over a manifest's used ranges")
+    p.add_argument("--idle-controllers", default="mm", help="controllers of the idle test, e.g. mm,lmm")
+    p.add_argument("--idle-input", default="builtin:strafe", help="input of the idle test (default builtin:strafe)")
+    p.add_argument("--idle-seconds", type=float, default=120.0)
     args = p.parse_args()
     from lmm.data.checks import recording_report
 
@@ -82,7 +89,9 @@ def main() -> int:
               f"{100 * r['airborne_fraction']:.2f} %; T-pose frames: {r['tpose_frames']}; ground-level toe frames "
               f"> 30 cm/s: {100 * r['ground_toe_fast_fraction']:.1f} % (30 fps, per range)")
     if args.idle:
-        print(f"idle test on {args.idle}: " + json.dumps(idle_report(_manifest(args.idle))))
+        for name in args.idle_controllers.split(","):
+            r = idle_report(_manifest(args.idle), name, args.idle_input, args.idle_seconds)
+            print(f"idle test on {args.idle}: " + json.dumps(r))
     return 0
 
 
