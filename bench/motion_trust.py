@@ -45,22 +45,32 @@ def source_report(manifest_path) -> dict:
 def idle_report(manifest_path, controller: str = "mm", input_spec: str = "builtin:strafe",
                 seconds: float = 120.0) -> dict:
     """Which fraction of the ticks played 3 s or more after the stick was released lie in an idle-tagged
-    range (MM: the frame it plays; LMM: its nearest database frame, the frame its state stands for)."""
+    range (MM: the frame it plays; LMM: whether an idle-tagged frame is (one of) the database frames
+    nearest its state's features; the default data's idle ranges repeat standing stretches of locomotion
+    ranges, so a standing pose has an idle-tagged and an untagged twin at the same distance)."""
     from lmm.data.database import load_or_build
     from lmm.data.inputs import open_input
     from lmm.factory import make_controller
     from lmm.features import build_features
 
+    import numpy as np
+
     db, _ = load_or_build(manifest_path)
-    c = make_controller(controller, db, build_features(db))
+    features = build_features(db)
+    c = make_controller(controller, db, features)
     c.reset()
     log, dt = open_input(input_spec, seconds), 1.0 / 60.0
     judged = idle = 0
+    idle_mask = db.tag_mask("idle")
     for i in range(int(seconds / dt)):
         _, snap = c.step(log(i * dt), dt)
         if c.stick_released_s >= 3.0:
             judged += 1
-            idle += "idle" in db.tags_of(snap.matched_frame)
+            if controller == "mm":
+                idle += "idle" in db.tags_of(snap.matched_frame)
+            else:
+                cost = np.sum((features.normalized - snap.current_features) ** 2, axis=1)
+                idle += bool(cost[idle_mask].min() <= cost.min() + 1e-6)
     return {"controller": controller, "input": input_spec, "seconds": seconds,
             "ticks_3s_after_release": judged, "idle_tagged_fraction": idle / judged if judged else None,
             "idle_tags_in_database": "idle" in db.tag_names, "search_note": snap.search_note}

@@ -27,7 +27,11 @@ def batched(fn, x: np.ndarray, chunk: int = 4096) -> np.ndarray:
     return np.concatenate([fn(x[i:i + chunk]) for i in range(0, x.shape[0], chunk)])
 
 
-def database_latents(compressor: MLP, db) -> np.ndarray:
-    """The compressor's latent of every database frame, (N, L) float32."""
-    c_in = np.concatenate([pose_vectors(db), character_space(db)], axis=1)
-    return batched(compressor, c_in)
+def database_latents(compressor: MLP, db, frames=None) -> np.ndarray:
+    """The compressor's latent of every database frame (or of ``frames``, an index array), (N, L) float32."""
+    if frames is None:
+        c_in = np.concatenate([pose_vectors(db), character_space(db)], axis=1)
+        return batched(compressor, c_in)
+    frames = np.asarray(frames, dtype=np.int64)
+    return batched(lambda f: compressor(np.concatenate([pose_vectors(db, f), character_space(db, f)], axis=1)),
+                   frames, chunk=1024) if len(frames) else np.zeros((0, compressor.n_out), np.float32)

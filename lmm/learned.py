@@ -30,7 +30,7 @@ from lmm.controller import Candidates
 from lmm.mm import default_start_frame
 from lmm.nn import MLP, pose_vector_slices
 from lmm.search import SearchIndex
-from lmm.tuning import Tuning
+from lmm.tuning import IDLE_TAG, Tuning
 from lmm.data.weights import WeightsError, load as load_weights
 
 WEIGHTS_DIR = Path(__file__).resolve().parent / "data" / "weights"
@@ -164,6 +164,9 @@ class LearnedMotionMatchingController(CharacterController):
         self._projected = None
         self._projected_cost = float("nan")
         self._projected_frame = -1
+        self._idle = None            # (frames, their network states) of the idle set, built on first use
+        self.idle_note = ""          # why the idle set cannot be used ("" when it can)
+        self._idle_playing = False   # the state was last set from the idle set
         super().__init__(db, features, tuning)
 
     # -- the networks ---------------------------------------------------------------------------
@@ -192,6 +195,48 @@ class LearnedMotionMatchingController(CharacterController):
         index is not counted (it is off in a shipped runtime)."""
         return {name: int(getattr(self.nets, name).nbytes()) for name in RUNTIME_NETWORKS}
 
+    # -- the idle set ------------------------------------------------------------------------------
+    def idle_set_active(self) -> bool:
+        """The stick has been released long enough for the idle set (see :class:`lmm.tuning.Tuning`)."""
+        tun = self.tuning
+        return bool(tun.idle_set_enabled) and self.stick_released_s >= tun.idle_delay_s - 1e-9
+
+    def idle_states(self):
+        """``(frames, states)`` of the database's idle-tagged frames: each state is the frame's features
+        (in the networks' space) and its compressor latent, what the projector would ideally output for
+        it. A projector cannot be told to keep to a subset, so while the idle set is active the learned
+        controller finds the nearest idle frame exactly and jumps its state there; the table is small
+        (a few thousand frames x 59 floats). Needs ``compressor.npz`` beside the weights; without it
+        (or without idle tags) it is None and ``idle_note`` says why."""
+        if self._idle is None:
+            frames = np.nonzero(self.db.tag_mask(IDLE_TAG))[0]
+            comp = None if self.nets.path is None else Path(self.nets.path).with_name("compressor.npz")
+            if len(frames) == 0:
+                self._idle, self.idle_note = False, f"database {self.db.name!r} has no {IDLE_TAG!r}-tagged range"
+            elif comp is None or not comp.is_file():
+                self._idle, self.idle_note = False, "no compressor.npz beside the weights: LMM has no idle set"
+            else:
+                from lmm.latents import database_latents, load_compressor
+
+                try:
+                    latents = database_latents(load_compressor(comp, self.db, self.features), self.db, frames)
+                except (WeightsError, OSError, ValueError) as e:
+                    self._idle, self.idle_note = False, f"LMM idle set unavailable: {e}"
+                else:
+                    feats = self.nets.to_network_space(self.features.raw[frames])
+                    self._idle = (frames, np.concatenate([feats, latents], axis=1).astype(np.float32))
+        return self._idle or None
+
+    def _idle_search(self, query_norm: np.ndarray):
+        """(state, frame, cost) of the idle frame nearest the query, or None without an idle set."""
+        idle = self.idle_states()
+        if idle is None:
+            return None
+        frames, states = idle
+        costs = np.sum((self.features.normalized[frames] - query_norm) ** 2, axis=1)
+        k = int(np.argmin(costs))
+        return states[k], int(frames[k]), float(costs[k])
+
     # -- hooks ----------------------------------------------------------------------------------
     def _reset_source(self, frame: int | None) -> None:
         frame = default_start_frame(self.db) if frame is None else int(frame)
@@ -203,6 +248,7 @@ class LearnedMotionMatchingController(CharacterController):
         self._projected = self.features.normalize(self.nets.from_network_space(self.state[:self.nets.n_features]))
         self._projected_cost = float("nan")
         self._projected_frame = -1
+        self._idle_playing = False
 
     def _source_features(self) -> np.ndarray:
         return self.nets.from_network_space(self.state[:self.nets.n_features])
@@ -217,8 +263,9 @@ class LearnedMotionMatchingController(CharacterController):
     def _search(self, query_norm: np.ndarray, forced: bool) -> SearchOutcome:
         timings = {}
         t0 = time.perf_counter()
-        projected = self.project(query_norm)
-        timings["projector"] = (time.perf_counter() - t0) * 1e6
+        idle = self._idle_search(query_norm) if self.idle_set_active() else None
+        projected = self.project(query_norm) if idle is None else idle[0].copy()
+        timings["projector" if idle is None else "idle_search"] = (time.perf_counter() - t0) * 1e6
         d = self.nets.n_features
         proj_norm = self.features.normalize(self.nets.from_network_space(projected[:d]))
         projected_cost = float(np.sum((query_norm - proj_norm) ** 2))
@@ -237,7 +284,15 @@ class LearnedMotionMatchingController(CharacterController):
             self._projected_frame = int(self.exact_nearest(proj_norm, top_k=1)[0])
             timings["projected_frame_search"] = (time.perf_counter() - t0) * 1e6
         target = None
-        if projected_cost + float(self.tuning.transition_cost) < current_cost:
+        if idle is not None:
+            self._projected_frame = idle[1]     # the frame the "projection" stands for
+        # entering the idle set always jumps (as MM's search then only sees idle frames); inside it, and
+        # outside it, the usual rule: jump when the projection matches the query better
+        entering_idle = idle is not None and not self._idle_playing
+        if idle is None:
+            self._idle_playing = False
+        if entering_idle or projected_cost + float(self.tuning.transition_cost) < current_cost:
+            self._idle_playing = idle is not None
             self.state[:] = projected
             t0 = time.perf_counter()
             target = self.decompress(self.state)
@@ -258,5 +313,6 @@ class LearnedMotionMatchingController(CharacterController):
         return {"latent": self.state[d:].copy(),
                 "projected_features": None if self._projected is None else self._projected.copy(),
                 "nn_frame": int(self._nn_frame), "nn_cost": float(self._nn_cost),
+                "search_note": self.idle_note if self.idle_set_active() else "",
                 "projected_cost": float(self._projected_cost),
                 "projected_frame": int(projected_frame)}

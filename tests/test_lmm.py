@@ -141,3 +141,48 @@ def test_ten_minutes_of_random_input_stay_sane(dbf, nets):
         worst = max(worst, float(np.max(np.abs(lengths - ref))))
         assert np.linalg.norm(g[1] - g[0]) < 2.0, f"hips 2 m from the root at tick {i}"
     assert worst < 0.01, f"bone length off by {worst * 100:.2f} cm"
+
+
+def test_idle_set_jumps_the_state_to_an_idle_frame(dbf, nets):
+    """Stick released past idle_delay_s: the learned controller's next search is an exact search over the
+    idle-tagged frames and its state jumps to that frame's features and compressor latent (the projector
+    cannot keep to a subset). Without a compressor beside the weights the snapshot says why."""
+    from pathlib import Path
+
+    db, features = dbf
+    if not db.tag_mask("idle").any():
+        pytest.skip("the database has no idle range")
+    if not Path(nets.path).with_name("compressor.npz").is_file():
+        pytest.skip("no compressor beside the networks")
+    ctrl = LearnedMotionMatchingController(db, features, networks=nets)
+    ctrl.tuning.search_interval_s = 0.05
+    for _ in range(30):
+        ctrl.step(InputState(left_y=1.0), 1.0 / 60.0)
+    jumped = None
+    for _ in range(120):
+        _, snap = ctrl.step(InputState(), 1.0 / 60.0)
+        if snap.searched and ctrl.idle_set_active():
+            jumped = snap
+            break
+    assert jumped is not None and "idle" in db.tags_of(jumped.projected_frame) and jumped.search_note == ""
+    frames, states = ctrl.idle_states()
+    k = int(np.nonzero(frames == jumped.projected_frame)[0][0])
+    # the state is the idle frame's, advanced by the stepper since (one tick at most)
+    assert np.abs(ctrl.state - states[k]).max() < 0.5
+    ctrl.tuning.idle_set_enabled = False
+    assert not ctrl.idle_set_active()
+
+
+def test_idle_set_without_compressor_is_a_note(dbf, nets, tmp_path):
+    import shutil
+
+    db, features = dbf
+    if not db.tag_mask("idle").any():
+        pytest.skip("the database has no idle range")
+    shutil.copy(nets.path, tmp_path / "default.npz")     # no compressor.npz beside this copy
+    lonely = LMMNetworks.load(tmp_path / "default.npz", db, features)
+    ctrl = LearnedMotionMatchingController(db, features, networks=lonely)
+    snap = None
+    for _ in range(90):
+        _, snap = ctrl.step(InputState(), 1.0 / 60.0)
+    assert ctrl.idle_states() is None and "compressor.npz" in snap.search_note
