@@ -6,7 +6,7 @@ import numpy as np
 from lmm.character import CharacterController, SearchOutcome, SourcePose, database_source_pose, root_local_velocities
 from lmm.controller import Candidates
 from lmm.search import SearchIndex, biased_search, brute_force_search, candidate_mask
-from lmm.tuning import IDLE_TAG, Tuning, TuningError
+from lmm.tuning import DEFAULT_TAG_BIAS, IDLE_TAG, Tuning, TuningError
 
 
 def default_start_frame(db) -> int:
@@ -115,7 +115,9 @@ class MotionMatchingController(CharacterController):
         idle = self.idle_set_active()
         tags = list(getattr(self.db, "tag_names", []))
         bias = tuple(float(tun.tag_bias.get(t, 0.0)) for t in tags)
-        unknown = tuple(sorted(t for t, b in tun.tag_bias.items() if b != 0.0 and t not in tags))
+        # a bias the user set on a tag this database lacks is worth a note; a shipped default is not
+        unknown = tuple(sorted(t for t, b in tun.tag_bias.items()
+                               if b != DEFAULT_TAG_BIAS.get(t, 0.0) and t not in tags))
         key = (id(mask), idle, bias, unknown)
         if self._tag_groups is not None and self._tag_groups[0] == key:
             return self._tag_groups[1]

@@ -42,12 +42,15 @@ def _default_feature_weights() -> dict[str, float]:
 
 
 # the tags of the shipped data; a controller adds any other tag of its database with bias 0
-DEFAULT_TAGS = ("idle", "walk", "jog", "run", "strafe", "turn", "stop")
+DEFAULT_TAGS = ("idle", "walk", "jog", "run", "strafe", "turn", "stop", "crouch")
+# the shipped data's crouched runs and walks (multipleActions1_subject3) play only when they match clearly
+# better: a character asked to run should run upright
+DEFAULT_TAG_BIAS = {"crouch": 1.0}
 IDLE_TAG = "idle"  # the tag of the idle set (see Tuning.idle_set_enabled)
 
 
 def _default_tag_bias() -> dict[str, float]:
-    return {t: 0.0 for t in DEFAULT_TAGS}
+    return {t: DEFAULT_TAG_BIAS.get(t, 0.0) for t in DEFAULT_TAGS}
 
 
 @dataclass
