@@ -56,7 +56,9 @@ def smooth_latents(data):
 
 def test_stepper_loss_drops(data):
     Z = smooth_latents(data)
-    stepper, log = T.train_stepper(data, Z, tiny(60, 16), window=8, hidden=64, log_every=10, quiet=True)
+    # 150 iterations: on the curated data's first 3000 frames 60 were too few to show the drop reliably
+    # (measured: 1.82 -> 1.69 after 60, -> 1.40 after 150)
+    stepper, log = T.train_stepper(data, Z, tiny(150, 16), window=8, hidden=64, log_every=10, quiet=True)
     assert log.last_loss < 0.9 * log.first_loss
 
 
