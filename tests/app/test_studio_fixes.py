@@ -4,16 +4,13 @@ and a restored layout that hid panels without saying so."""
 from __future__ import annotations
 
 import json
-import os
 import shutil
-import subprocess
-import sys
 import time
 from pathlib import Path
 
 import pytest
 
-from studio_testutil import ROOT
+from studio_testutil import RealKeyStudio
 
 pytestmark = pytest.mark.gui
 
@@ -81,28 +78,16 @@ def test_typing_into_fields_never_pauses_or_moves_xdotool(xvfb_display, studio_c
     (W, A, S, D and Space are movement and pause keys): the simulation stays live and still."""
     if shutil.which("xdotool") is None:
         pytest.skip("xdotool is not installed")
-    stop, rects = tmp_path / "stop", tmp_path / "rects.json"
+    rects = tmp_path / "rects.json"
     slider = "tun_run_forward_speed_m_s"
-    (tmp_path / "script.json").write_text(json.dumps({"actions": [
-        {"frame": 0, "do": "quit_when_exists", "path": str(stop)},
-        {"frame": 20, "do": "write_rects", "path": str(rects), "items": [slider, "rec_path"]}]}))
-    env = dict(os.environ, DISPLAY=xvfb_display, LMM_STUDIO_CONFIG=str(tmp_path / "cfg"),
-               LMM_STUDIO_CACHE=str(studio_cache), PYTHONPATH=str(ROOT), LP_NUM_THREADS="0")
-    proc = subprocess.Popen([sys.executable, "-m", "app.cli", "--no-lmm", "--no-gamepads", "--layout", "default",
-                             "--script", str(tmp_path / "script.json"), "--dump-state", str(tmp_path / "dump.json")],
-                            cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-
-    def xdo(*args, timeout=30):
-        return subprocess.run(["xdotool", *args], env=env, capture_output=True, text=True, timeout=timeout)
+    actions = [{"frame": 20, "do": "write_rects", "path": str(rects), "items": [slider, "rec_path"]}]
 
     def centre(item):
         x0, y0, x1, y1 = json.loads(rects.read_text())[item]
         return str(int((x0 + x1) / 2)), str(int((y0 + y1) / 2))
 
-    try:
-        found = xdo("search", "--sync", "--onlyvisible", "--name", "lmm-studio", timeout=90)
-        assert found.returncode == 0 and found.stdout.split(), found.stderr
-        win = found.stdout.split()[0]
+    with RealKeyStudio(tmp_path, xvfb_display, studio_cache, actions, ["--layout", "default"]) as s:
+        xdo, win = s.xdo, s.win
         for _ in range(120):
             if rects.exists():
                 break
@@ -125,14 +110,8 @@ def test_typing_into_fields_never_pauses_or_moves_xdotool(xvfb_display, studio_c
         xdo("key", "space")
         time.sleep(1.0)
         xdo("key", "Escape")
-        stop.write_text("")
-        out, err = proc.communicate(timeout=60)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.communicate()
-    assert proc.returncode == 0, err[-3000:]
-    d = json.loads((tmp_path / "dump.json").read_text())
+    assert s.returncode == 0, s.stderr[-3000:]
+    d = s.dump()
     assert all(f["live"] and not f["paused"] for f in d["frames"]), "typing paused or stepped the simulation"
     assert not any(t["input"]["left_y"] or t["input"]["left_x"] for t in d["ticks"]), "typing moved the character"
     assert d["final"]["viewport"]["camera"] is not None

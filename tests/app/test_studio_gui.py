@@ -14,7 +14,7 @@ import pytest
 
 from app import layout_files as layouts
 
-from studio_testutil import CORPUS, ROOT
+from studio_testutil import CORPUS, ROOT, RealKeyStudio
 
 pytestmark = pytest.mark.gui
 
@@ -275,37 +275,16 @@ def test_broken_files_show_an_error_and_the_studio_runs_on(run_studio, tmp_path)
 def test_keyboard_moves_the_character_xdotool(xvfb_display, studio_cache, tmp_path):
     if shutil.which("xdotool") is None:
         pytest.skip("xdotool is not installed")
-    stop = tmp_path / "stop"
-    (tmp_path / "script.json").write_text(json.dumps({"actions": [
-        {"frame": 0, "do": "quit_when_exists", "path": str(stop)}]}))
-    env = dict(os.environ, DISPLAY=xvfb_display, LMM_STUDIO_CONFIG=str(tmp_path / "cfg"),
-               LMM_STUDIO_CACHE=str(studio_cache), PYTHONPATH=str(ROOT), LP_NUM_THREADS="0")
-    proc = subprocess.Popen([sys.executable, "-m", "app.cli", "--no-lmm", "--no-gamepads", "--script",
-                             str(tmp_path / "script.json"), "--dump-state", str(tmp_path / "dump.json")],
-                            cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-
-    def xdo(*args, timeout=30):
-        return subprocess.run(["xdotool", *args], env=env, capture_output=True, text=True, timeout=timeout)
-
-    try:
-        found = xdo("search", "--sync", "--onlyvisible", "--name", "lmm-studio", timeout=90)
-        assert found.returncode == 0 and found.stdout.split(), found.stderr
-        win = found.stdout.split()[0]
+    with RealKeyStudio(tmp_path, xvfb_display, studio_cache) as s:
         time.sleep(3.0)          # let it settle into its frame loop
-        xdo("windowfocus", "--sync", win)
-        xdo("mousemove", "--window", win, "700", "300")
-        xdo("keydown", "w")
+        s.xdo("windowfocus", "--sync", s.win)
+        s.xdo("mousemove", "--window", s.win, "700", "300")
+        s.xdo("keydown", "w")
         time.sleep(3.5)
-        xdo("keyup", "w")
+        s.xdo("keyup", "w")
         time.sleep(1.0)
-        stop.write_text("")
-        out, err = proc.communicate(timeout=60)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.communicate()
-    assert proc.returncode == 0, err[-3000:]
-    d = json.loads((tmp_path / "dump.json").read_text())
+    assert s.returncode == 0, s.stderr[-3000:]
+    d = s.dump()
     pushed = [t for t in d["ticks"] if t["input"]["left_y"] > 0.5]
     assert len(pushed) > 5, "the W key never reached the input"
     start = d["ticks"][0]["roots"]["mm"]
