@@ -156,10 +156,12 @@ def bone_heights(db, bones) -> np.ndarray:
 
 
 def range_contact_heights(db, toe_bones, min_frames: int = 10) -> np.ndarray:
-    """Per clip range, the low (10th percentile) height (m) of the toes over the frames where they are in
-    contact: where that take's mocap puts a planted toe joint (takes differ by a few centimetres in floor
-    calibration). The low percentile, not the median, so that after the shift almost no planted toe is
-    below foot height (where a lock would lift it and the blend back would drop it again).
+    """Per clip range, the median height (m) of the toes over the frames where they are in contact: where
+    that take's mocap puts a planted toe joint (takes differ by a few centimetres in floor calibration).
+    The median, not a low percentile: a low percentile shifts every take up by the spread of its planted
+    heights (about 0.6 cm on the default data), which lifts running flight phases with it (both toes
+    above 15 cm: 1.07 % of a 600 s random run with the 10th percentile, 0.68 % with the median); a planted
+    toe left below foot height is lifted by its lock by a few millimetres, which nobody sees.
     A range with fewer than ``min_frames`` contact toe-frames gets the database's median; NaN for every
     range when the database has no contact at all."""
     n_ranges = len(db.range_starts)
@@ -171,7 +173,7 @@ def range_contact_heights(db, toe_bones, min_frames: int = 10) -> np.ndarray:
     overall = float(np.median(heights[contacts]))
     for r, (start, stop) in enumerate(zip(db.range_starts, db.range_stops)):
         h = heights[int(start):int(stop)][contacts[int(start):int(stop)]]
-        out[r] = float(np.percentile(h, 10)) if len(h) >= min_frames else overall
+        out[r] = float(np.median(h)) if len(h) >= min_frames else overall
     return out
 
 

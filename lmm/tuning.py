@@ -130,7 +130,7 @@ class Tuning:
         True, "ik", False, True, "", "Feet near the ground do not follow the root adjustment and clamping "
         "(the body is pulled towards the simulation object, the legs absorb it), so they are not dragged.")
     ik_swing_clearance_m: float = _f(
-        0.02, "ik", 0.0, 0.1, "m", "A swinging (unlocked) toe moving faster than 0.5 m/s is lifted to at least this "
+        0.03, "ik", 0.0, 0.1, "m", "A swinging (unlocked) toe moving faster than 0.5 m/s is lifted to at least this "
         "above foot height (full at 1.5 m/s) and never below foot height, so it does not skim the ground (0: off).")
     ik_unlock_radius_m: float = _f(
         0.2, "ik", 0.0, 0.5, "m", "A locked foot unlocks once the animation has moved this far from the lock.")
