@@ -37,6 +37,25 @@ COMMANDS: dict[str, tuple[str, str]] = {
 }
 
 
+def number_in(lo: float, hi: float, integer: bool = False, unit: str = ""):
+    """An argparse ``type`` accepting a finite number in ``[lo, hi]`` (an integer if ``integer``); the
+    error names the range, e.g. ``argument --fps: 0 is outside [1, 1000] Hz``. NaN and inf never pass."""
+    import math
+
+    def parse(text: str):
+        try:
+            value = int(text) if integer else float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected {'an integer' if integer else 'a number'}, "
+                                             f"got {text[:40]!r}") from None
+        if not (math.isfinite(value) and lo <= value <= hi):
+            raise argparse.ArgumentTypeError(f"{text[:40]} is outside [{lo:g}, {hi:g}]{' ' + unit if unit else ''}")
+        return value
+
+    parse.__name__ = "integer" if integer else "number"
+    return parse
+
+
 class CommandParser(argparse.ArgumentParser):
     """argparse with a one-line error (argparse prints the usage block too): ``PROG: error: MSG``, exit 2."""
 

@@ -24,12 +24,13 @@ import numbers
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from lmm.errors import InputError
 from lmm.features import DEFAULT_LAYOUT
 
 GROUPS = ("simulation", "speeds", "inertialization", "features", "search", "sync", "ik")
 
 
-class TuningError(ValueError):
+class TuningError(InputError):
     """A bad tuning value or preset; the message names the field."""
 
 

@@ -31,10 +31,10 @@ BROKEN = {
 @pytest.mark.parametrize("name", sorted(BROKEN))
 def test_bad_input_logs_exit_with_line_and_column(name):
     r = cli("run", "--input", str(CORPUS / name), "--seconds", "1")
-    assert r.returncode == 2
+    assert r.returncode == 1
     assert "Traceback" not in r.stderr
     line, column = BROKEN[name]
-    assert r.stderr.startswith("error: ") and name in r.stderr and line in r.stderr and column in r.stderr, r.stderr
+    assert r.stderr.startswith("lmm-studio run: error: ") and name in r.stderr and line in r.stderr and column in r.stderr, r.stderr
     assert r.stderr.count("\n") == 1
 
 
@@ -43,14 +43,14 @@ def test_bad_input_logs_exit_with_line_and_column(name):
                                          ("does/not/exist.csv", "no such input file")])
 def test_bad_input_specs(spec, words):
     r = cli("run", "--input", spec, "--seconds", "1")
-    assert r.returncode == 2 and "Traceback" not in r.stderr and words in r.stderr, r.stderr
+    assert r.returncode == 1 and "Traceback" not in r.stderr and words in r.stderr, r.stderr
 
 
 def test_bad_tuning_preset(tmp_path):
     p = tmp_path / "preset.json"
     p.write_text(json.dumps({"transition_cost": -3}))
     r = cli("run", "--input", "builtin:circle", "--seconds", "1", "--tuning", str(p))
-    assert r.returncode == 2 and "transition_cost" in r.stderr and "Traceback" not in r.stderr
+    assert r.returncode == 1 and "transition_cost" in r.stderr and "Traceback" not in r.stderr
 
 
 def test_run_records_and_writes_metrics(tmp_path):

@@ -23,12 +23,13 @@ from pathlib import Path
 import numpy as np
 
 from lmm.data.atomic import atomic_write
+from lmm.errors import InputError
 
 WEIGHTS_FORMAT_VERSION = 1
 PARTS = ("in_mean", "in_std", "out_mean", "out_std")
 
 
-class WeightsError(RuntimeError):
+class WeightsError(InputError):
     """A weights file that cannot be used; the message names the file and the problem."""
 
 
