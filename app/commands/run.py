@@ -49,7 +49,8 @@ def main(args) -> int:
 
     # everything the user typed is checked before the (slower) database load, targets included
     source = open_input(args.input, args.seconds)
-    tuning = Tuning.load(args.tuning) if args.tuning else Tuning()
+    preset = Tuning.read_preset(args.tuning) if args.tuning else None
+    tuning = Tuning.from_preset(preset, args.tuning) if preset is not None else Tuning()
     seconds = args.seconds if args.seconds is not None else max(source.duration, 1.0 / args.fps)
     record_input = None
     if args.record:
@@ -70,6 +71,8 @@ def main(args) -> int:
 
     db, _ = load_or_build(args.manifest)
     features = build_features(db)
+    if preset is not None:  # now the channels are known: a misspelt feature_weights name is an error
+        tuning = Tuning.from_preset(preset, args.tuning, channels=[ch.name for ch in features.layout])
     controller = make_controller(args.controller, db, features, tuning, args.weights)
 
     recorder = writer = None
