@@ -49,7 +49,8 @@ def number_in(lo: float, hi: float, integer: bool = False, unit: str = ""):
             raise argparse.ArgumentTypeError(f"expected {'an integer' if integer else 'a number'}, "
                                              f"got {text[:40]!r}") from None
         if not (math.isfinite(value) and lo <= value <= hi):
-            raise argparse.ArgumentTypeError(f"{text[:40]} is outside [{lo:g}, {hi:g}]{' ' + unit if unit else ''}")
+            shown = f"[{lo}, {hi}]" if integer else f"[{lo:g}, {hi:g}]"
+            raise argparse.ArgumentTypeError(f"{text[:40]} is outside {shown}{' ' + unit if unit else ''}")
         return value
 
     parse.__name__ = "integer" if integer else "number"

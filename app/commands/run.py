@@ -62,6 +62,10 @@ def main(args) -> int:
     for target in (record_input, args.metrics_json):
         if target is not None:
             check_writable(target)
+    if args.controller == "lmm" and args.weights:
+        from lmm.data.weights import load as load_weights
+        from lmm.learned import RUNTIME_NETWORKS
+        load_weights(args.weights, require=RUNTIME_NETWORKS)  # metadata and arrays, before the database
 
     from lmm.data.database import load_or_build
     from lmm.features import build_features
