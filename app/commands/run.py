@@ -42,6 +42,17 @@ def add_arguments(p) -> None:
     p.add_argument("--quiet", action="store_true", help="print nothing but errors")
 
 
+def _close(stream) -> OSError | None:
+    """Close a recording stream; the error instead of raising it."""
+    if stream is None:
+        return None
+    try:
+        stream.close()
+    except OSError as e:
+        return e
+    return None
+
+
 def main(args) -> int:
     from lmm.data.atomic import check_writable
     from lmm.data.inputs import open_input
@@ -87,16 +98,16 @@ def main(args) -> int:
         try:
             recorder = BVHRecorder(Path(args.record), db, fps=args.fps)
         except BaseException:
-            writer.close()
+            _close(writer)
             raise
     try:
         metrics = run_headless(controller, source, seconds, dt=1.0 / args.fps, recorder=recorder,
                                input_writer=writer, realtime=args.realtime)
     finally:
-        if recorder is not None:
-            recorder.close()
-        if writer is not None:
-            writer.close()
+        # both streams are closed even when one fails (a full disk); the first error is the one reported
+        close_errors = [e for e in (_close(recorder), _close(writer)) if e is not None]
+    if close_errors:
+        raise close_errors[0]
 
     # the same ground skating rule over the database's source takes, printed beside the run's
     from lmm.metrics import source_ground_skating
