@@ -84,8 +84,7 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     name = argv[0]
     if name not in COMMANDS:
-        _top_parser().print_usage(sys.stderr)
-        print(f"lmm-studio: error: unknown command {name!r} (commands: {', '.join(COMMANDS)})", file=sys.stderr)
+        print(f"lmm-studio: error: unknown command {name[:40]!r} (commands: {', '.join(COMMANDS)})", file=sys.stderr)
         return 2
     module_name, help_text = COMMANDS[name]
     try:

@@ -137,3 +137,9 @@ def test_number_in_accepts_the_range_ends():
     assert parse("1") == 1 and parse("10") == 10 and isinstance(parse("5"), int)
     with pytest.raises(Exception, match="expected an integer"):
         parse("2.5")
+
+
+def test_unknown_command_is_one_line(capsys):
+    assert cli.main(["no-such-command"]) == 2
+    assert _lines(capsys.readouterr().err) == [
+        f"lmm-studio: error: unknown command 'no-such-command' (commands: {', '.join(cli.COMMANDS)})"]
