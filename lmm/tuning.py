@@ -24,13 +24,14 @@ import numbers
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from lmm.errors import InputError
 from lmm.features import DEFAULT_LAYOUT
 
 GROUPS = ("simulation", "speeds", "inertialization", "features", "search", "sync", "ik")
 
 
-class TuningError(ValueError):
-    """A bad tuning value or preset; the message names the field."""
+class TuningError(InputError):
+    """A bad tuning value or preset; the message names the field (and the preset file, when from one)."""
 
 
 def _f(default, group, lo, hi, unit, doc):
@@ -47,6 +48,8 @@ DEFAULT_TAGS = ("idle", "walk", "jog", "run", "strafe", "turn", "stop", "crouch"
 # better: a character asked to run should run upright
 DEFAULT_TAG_BIAS = {"crouch": 1.0}
 IDLE_TAG = "idle"  # the tag of the idle set (see Tuning.idle_set_enabled)
+#: Largest preset file read (bytes): a full preset is about 2 KB; 1 MB leaves room for many channels/tags.
+MAX_PRESET_BYTES = 1024 * 1024
 
 
 def _default_tag_bias() -> dict[str, float]:
@@ -210,16 +213,28 @@ class Tuning:
         return out
 
     @classmethod
-    def from_dict(cls, d: dict, base: "Tuning | None" = None) -> "Tuning":
-        """A tuning from a (possibly partial) dict; missing fields keep ``base``'s (or default) values."""
+    def from_dict(cls, d: dict, base: "Tuning | None" = None, channels=None) -> "Tuning":
+        """A tuning from a (possibly partial) dict; missing fields keep ``base``'s (or default) values.
+        ``channels``: when given, the feature channel names ``feature_weights`` may name (the database's
+        feature schema); a name outside it is an error (a typo would otherwise be silently ignored)."""
         if not isinstance(d, dict):
             raise TuningError(f"a tuning preset must be a JSON object, got {type(d).__name__}")
         t = base.copy() if base is not None else cls()
         names = {f.name: f for f in dataclasses.fields(cls)}
         for key, value in d.items():
             if key not in names:
-                raise TuningError(f"unknown tuning field {key!r}")
+                raise TuningError(f"unknown tuning field {key[:80]!r}")
             setattr(t, key, _check(names[key], value))
+        fw = d.get("feature_weights")
+        if fw is not None and not fw:
+            raise TuningError("tuning field 'feature_weights': empty; name channels to change (channel -> weight) "
+                              "or leave the field out to keep the defaults")
+        if fw and channels is not None:
+            known = list(channels)
+            unknown = [k for k in fw if k not in known]
+            if unknown:
+                raise TuningError(f"tuning field 'feature_weights.{unknown[0][:80]}': no such feature channel "
+                                  f"(channels: {', '.join(known)})")
         return t
 
     def validate(self) -> None:
@@ -232,16 +247,38 @@ class Tuning:
 
         write_json(path, self.to_dict())
 
+    @staticmethod
+    def read_preset(path) -> dict:
+        """The JSON object of a preset file, read safely (size, depth, UTF-8; see :mod:`lmm.data.jsonio`)."""
+        from lmm.data.jsonio import JsonError, read_json
+
+        try:
+            d = read_json(path, "tuning preset", max_bytes=MAX_PRESET_BYTES)
+        except JsonError as e:
+            raise TuningError(str(e)) from None
+        if not isinstance(d, dict):
+            raise TuningError(f"{path}: a tuning preset must be a JSON object, got {type(d).__name__}")
+        return d
+
     @classmethod
-    def load(cls, path) -> "Tuning":
+    def from_preset(cls, d: dict, path, channels=None) -> "Tuning":
+        """:meth:`from_dict` with errors naming the preset file ``path``."""
         try:
-            d = json.loads(Path(path).read_text())
-        except json.JSONDecodeError as e:
-            raise TuningError(f"{path}: not valid JSON (line {e.lineno}, column {e.colno}): {e.msg}") from None
-        try:
-            return cls.from_dict(d)
+            return cls.from_dict(d, channels=channels)
         except TuningError as e:
             raise TuningError(f"{path}: {e}") from None
+
+    @classmethod
+    def load(cls, path, channels=None) -> "Tuning":
+        """A preset file; every problem is a :class:`TuningError` naming the file and the field.
+        ``channels``: the feature channel names ``feature_weights`` may name (see :meth:`from_dict`)."""
+        return cls.from_preset(cls.read_preset(path), path, channels)
+
+
+#: Most entries in a name -> number field (feature_weights, tag_bias): a schema has ~10 channels, a
+#: database a handful of tags. Names are channel or tag names, short identifiers.
+MAX_DICT_ENTRIES = 1000
+MAX_NAME_CHARS = 100
 
 
 def _check(f: dataclasses.Field, value):
@@ -250,31 +287,45 @@ def _check(f: dataclasses.Field, value):
     kind = f.type if isinstance(f.type, str) else getattr(f.type, "__name__", str(f.type))
     if kind == "bool":
         if not isinstance(value, bool):
-            raise TuningError(f"tuning field {f.name!r}: expected true or false, got {value!r}")
+            raise TuningError(f"tuning field {f.name!r}: expected true or false, got {_short(value)}")
         return value
     if kind == "dict":
         if not isinstance(value, dict):
-            raise TuningError(f"tuning field {f.name!r}: expected an object of name -> number, got {value!r}")
+            raise TuningError(f"tuning field {f.name!r}: expected an object of name -> number, got {_short(value)}")
+        if len(value) > MAX_DICT_ENTRIES:
+            raise TuningError(f"tuning field {f.name!r}: {len(value)} entries, more than {MAX_DICT_ENTRIES}")
         out = {}
         for k, w in value.items():
-            if not isinstance(k, str):
-                raise TuningError(f"tuning field {f.name!r}: names must be strings, got {k!r}")
+            if not isinstance(k, str) or not 0 < len(k) <= MAX_NAME_CHARS:
+                raise TuningError(f"tuning field {f.name!r}: names must be strings of 1 to {MAX_NAME_CHARS} "
+                                  f"characters, got {str(k)[:40]!r}")
             out[k] = _number(f"{f.name}.{k}", w, lo, hi, integer=False)
         return out
     return _number(f.name, value, lo, hi, integer=(kind == "int"))
 
 
+def _short(value, limit: int = 40) -> str:
+    """``repr(value)`` cut to ``limit`` characters for an error message."""
+    text = repr(value)
+    return text if len(text) <= limit else text[:limit] + "..."
+
+
 def _number(name, value, lo, hi, integer):
     if isinstance(value, bool) or not isinstance(value, numbers.Real):  # numpy scalars are Real too
-        raise TuningError(f"tuning field {name!r}: expected a number, got {value!r}")
+        raise TuningError(f"tuning field {name!r}: expected a number, got {_short(value)}")
+    try:
+        float(value)
+    except OverflowError:  # an integer beyond float range (JSON allows 4300 digits)
+        raise TuningError(f"tuning field {name!r}: a {len(str(abs(int(value))))}-digit number is outside "
+                          f"[{lo}, {hi}]") from None
     if integer:
         if not float(value).is_integer():
-            raise TuningError(f"tuning field {name!r}: expected an integer, got {value!r}")
+            raise TuningError(f"tuning field {name!r}: expected an integer, got {_short(value)}")
         value = int(value)
     else:
         value = float(value)
         if not math.isfinite(value):
-            raise TuningError(f"tuning field {name!r}: expected a finite number, got {value!r}")
+            raise TuningError(f"tuning field {name!r}: expected a finite number, got {_short(value)}")
     if not lo <= value <= hi:
         raise TuningError(f"tuning field {name!r}: {value!r} is outside [{lo}, {hi}]")
     return value

@@ -48,3 +48,39 @@ def test_json_safe_and_write_json(tmp_path):
     assert json_safe(value) == {"a": 1.5, "b": None, "c": [0, 1, 2], "d": [None, True, False], "e": str(tmp_path)}
     path = write_json(tmp_path / "o.json", value)
     assert path.read_text().startswith("{") and "NaN" not in path.read_text()
+
+
+def test_errors_name_the_target_not_the_temporary_file(tmp_path, monkeypatch):
+    import errno
+
+    from lmm.data import atomic
+
+    def full(*a, **k):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    target = tmp_path / "m.json"
+    with pytest.raises(OSError) as e:
+        with atomic_write(target, "w") as f:
+            f.write("x")
+            full()
+    assert e.value.errno == errno.ENOSPC and e.value.filename == str(target)
+    monkeypatch.setattr(atomic.os, "replace", lambda a, b: (_ for _ in ()).throw(
+        PermissionError(errno.EROFS, "Read-only file system", str(a), None, str(b))))
+    with pytest.raises(PermissionError) as e:
+        write_text_atomic(target, "{}")
+    assert e.value.filename == str(target) and not target.exists() and list(tmp_path.iterdir()) == []
+
+
+def test_check_writable(tmp_path):
+    from lmm.data.atomic import check_writable
+
+    check_writable(tmp_path / "new" / "out.json")  # creates the folder, leaves no file
+    assert (tmp_path / "new").is_dir() and list((tmp_path / "new").iterdir()) == []
+    with pytest.raises(IsADirectoryError) as e:
+        check_writable(tmp_path)
+    assert e.value.filename == str(tmp_path)
+    blocker = tmp_path / "file"
+    blocker.write_text("")
+    with pytest.raises(NotADirectoryError, match="is a file, not a folder") as e:
+        check_writable(blocker / "sub" / "out.json")
+    assert e.value.filename == str(blocker / "sub" / "out.json")

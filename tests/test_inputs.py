@@ -103,3 +103,47 @@ def test_builtin_specs_and_errors():
         open_input("builtin:nope")
     with pytest.raises(InputError, match="seed"):
         open_input("builtin:random:abc")
+
+
+HEADER = "time,left_x,left_y,right_x,right_y,walk,strafe,camera_azimuth\n"
+
+
+@pytest.mark.parametrize("row, column, words", [
+    ("1e308,0,0,0,0,0,0,0", 1, "outside [0, 86400]"),
+    ("86400.5,0,0,0,0,0,0,0", 1, "MAX_INPUT_SECONDS"),
+    ("-1,0,0,0,0,0,0,0", 1, "outside [0, 86400]"),
+    ("inf,0,0,0,0,0,0,0", 1, "finite"),
+    ("1,0,0,0,0,0,0,1e300", 8, "MAX_CAMERA_AZIMUTH_RAD"),
+])
+def test_times_and_magnitudes_beyond_what_a_run_can_do_are_refused(tmp_path, row, column, words):
+    p = tmp_path / "log.csv"
+    p.write_text(HEADER + "0,0,0,0,0,0,0,0\n" + row + "\n")
+    with pytest.raises(InputError) as e:
+        load_input_csv(p)
+    assert e.value.line == 3 and e.value.column == column and words in str(e.value) and str(p) in str(e.value)
+    from lmm.errors import InputError as BaseInputError
+    assert isinstance(e.value, BaseInputError)
+
+
+def test_size_and_line_limits_are_checked_before_parsing(tmp_path, monkeypatch):
+    import lmm.data.inputs as inputs
+
+    p = tmp_path / "long.csv"
+    p.write_text(HEADER + "0,0,0,0,0,0,0,0\n" * 20)
+    monkeypatch.setattr(inputs, "MAX_INPUT_LOG_LINES", 10)
+    with pytest.raises(InputError, match="MAX_INPUT_LOG_LINES") as e:
+        load_input_csv(p)
+    assert str(p) in str(e.value)
+    monkeypatch.setattr(inputs, "MAX_INPUT_LOG_BYTES", 100)
+    with pytest.raises(InputError, match="MAX_INPUT_LOG_BYTES"):
+        load_input_csv(p)
+    with pytest.raises(InputError, match="is a folder"):
+        load_input_csv(tmp_path)
+
+
+@pytest.mark.parametrize("seconds", [float("inf"), float("nan"), 1e308, -1.0])
+def test_builtin_length_is_bounded(seconds):
+    with pytest.raises(InputError, match="outside"):
+        builtin("circle", seconds)
+    with pytest.raises(InputError, match="outside"):
+        builtin("random:1", seconds)

@@ -31,10 +31,10 @@ BROKEN = {
 @pytest.mark.parametrize("name", sorted(BROKEN))
 def test_bad_input_logs_exit_with_line_and_column(name):
     r = cli("run", "--input", str(CORPUS / name), "--seconds", "1")
-    assert r.returncode == 2
+    assert r.returncode == 1
     assert "Traceback" not in r.stderr
     line, column = BROKEN[name]
-    assert r.stderr.startswith("error: ") and name in r.stderr and line in r.stderr and column in r.stderr, r.stderr
+    assert r.stderr.startswith("lmm-studio run: error: ") and name in r.stderr and line in r.stderr and column in r.stderr, r.stderr
     assert r.stderr.count("\n") == 1
 
 
@@ -43,14 +43,14 @@ def test_bad_input_logs_exit_with_line_and_column(name):
                                          ("does/not/exist.csv", "no such input file")])
 def test_bad_input_specs(spec, words):
     r = cli("run", "--input", spec, "--seconds", "1")
-    assert r.returncode == 2 and "Traceback" not in r.stderr and words in r.stderr, r.stderr
+    assert r.returncode == 1 and "Traceback" not in r.stderr and words in r.stderr, r.stderr
 
 
 def test_bad_tuning_preset(tmp_path):
     p = tmp_path / "preset.json"
     p.write_text(json.dumps({"transition_cost": -3}))
     r = cli("run", "--input", "builtin:circle", "--seconds", "1", "--tuning", str(p))
-    assert r.returncode == 2 and "transition_cost" in r.stderr and "Traceback" not in r.stderr
+    assert r.returncode == 1 and "transition_cost" in r.stderr and "Traceback" not in r.stderr
 
 
 def test_run_records_and_writes_metrics(tmp_path):
@@ -85,3 +85,74 @@ def test_bench_json_sections(tmp_path):
     assert "[search]" in r.stdout
     r = cli("bench", "--sections", "nope")
     assert r.returncode == 2 and "unknown bench section" in r.stderr
+
+
+def _no_n_bones(tmp_path):
+    """The shipped weights with the metadata's n_bones removed (the issue's KeyError 'n_bones')."""
+    import numpy as np
+
+    from lmm.learned import DEFAULT_WEIGHTS
+
+    with np.load(DEFAULT_WEIGHTS) as z:
+        arrays = {k: z[k] for k in z.files}
+    meta = json.loads(arrays["metadata"].tobytes())
+    del meta["n_bones"]
+    arrays["metadata"] = np.frombuffer(json.dumps(meta).encode(), np.uint8)
+    path = tmp_path / "no_n_bones.npz"
+    np.savez(path, **arrays)
+    return path
+
+
+@pytest.mark.parametrize("command", [["run", "--controller", "lmm", "--input", "builtin:circle", "--seconds", "1"],
+                                     ["eval"], ["export-onnx", "--out", "OUT"]])
+def test_malformed_weights_metadata_is_one_line_in_every_command(tmp_path, command):
+    bad = _no_n_bones(tmp_path)
+    args = [str(tmp_path / "onnx") if a == "OUT" else a for a in command]
+    r = cli(*args, "--weights", str(bad))
+    lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+    assert r.returncode == 1 and "Traceback" not in r.stderr, r.stderr
+    assert lines == [f"lmm-studio {command[0]}: error: {bad}: metadata field 'n_bones': expected an integer in "
+                     f"[1, 1024], got missing"], lines
+
+
+def test_preset_naming_an_unknown_feature_channel(tmp_path):
+    p = tmp_path / "typo.json"
+    p.write_text(json.dumps({"feature_weights": {"hip_velocty": 2.0}}))
+    r = cli("run", "--input", "builtin:circle", "--seconds", "1", "--tuning", str(p))
+    assert r.returncode == 1 and "Traceback" not in r.stderr
+    assert f"{p}: tuning field 'feature_weights.hip_velocty': no such feature channel" in r.stderr
+    assert r.stderr.count("\n") == 1
+
+
+def test_unwritable_targets_fail_before_the_run(tmp_path):
+    blocker = tmp_path / "file"
+    blocker.write_text("")
+    for option in ("--metrics-json", "--record", "--record-input"):
+        target = blocker / "out.x"
+        r = cli("run", "--input", "builtin:circle", "--seconds", "1", option, str(target))
+        assert r.returncode == 1 and r.stderr == f"lmm-studio run: error: {target}: {blocker} is a file, not a folder\n"
+    r = cli("export-onnx", "--out", str(blocker))
+    assert r.returncode == 1 and str(blocker) in r.stderr and r.stderr.count("\n") == 1
+
+
+def test_full_disk_at_the_metrics_write_is_one_line(tmp_path, monkeypatch, capsys):
+    """ENOSPC when the metrics JSON is written at the end of a run (simulated: the issue's two chained
+    tracebacks); the target is left as it was and nothing half-written stays beside it."""
+    import errno
+
+    from app import cli as cli_module
+    from lmm.data import atomic
+
+    real_replace = atomic.os.replace
+
+    def full(src, dst):
+        if str(dst).endswith("m.json"):
+            raise OSError(errno.ENOSPC, "No space left on device", str(src))
+        return real_replace(src, dst)
+
+    monkeypatch.setattr(atomic.os, "replace", full)
+    metrics = tmp_path / "m.json"
+    assert cli_module.main(["run", "--input", "builtin:circle", "--seconds", "1", "--quiet",
+                            "--metrics-json", str(metrics)]) == 1
+    assert capsys.readouterr().err == f"lmm-studio run: error: {metrics}: No space left on device\n"
+    assert list(tmp_path.iterdir()) == []

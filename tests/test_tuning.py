@@ -101,3 +101,49 @@ def test_set_validates_one_field_and_names_it():
             t.set(*args)
         assert t.to_dict() == before, args       # a refused value changes nothing
     t.validate()
+
+
+@pytest.mark.parametrize("content, words", [
+    (b"\xff\xfe{\x00}\x00", "not UTF-8 text (byte 0)"),
+    (b"[" * 100000 + b"]" * 100000, "nested 100000 levels deep, more than 64 (MAX_JSON_DEPTH)"),
+    (b'{"top_k": ' + b"9" * 5000 + b"}", "Exceeds the limit (4300 digits)"),
+    (b'{"top_k": ' + b"9" * 4000 + b"}", "tuning field 'top_k': a 4000-digit number is outside [1, 64]"),
+    (b'{"transition_cost": 1e999}', "tuning field 'transition_cost': expected a finite number"),
+    (b'{"feature_weights": {}}', "tuning field 'feature_weights': empty"),
+    (b'[1, 2]', "a tuning preset must be a JSON object, got list"),
+    (b'{"top_k": 8', "not valid JSON (line 1, column 12)"),
+    (b'{"tag_bias": {"' + b"x" * 300 + b'": 1}}', "names must be strings of 1 to 100 characters"),
+])
+def test_hostile_presets_are_one_line_errors_naming_the_file(tmp_path, content, words):
+    p = tmp_path / "hostile.json"
+    p.write_bytes(content)
+    with pytest.raises(TuningError) as e:
+        Tuning.load(p)
+    msg = str(e.value)
+    assert msg.startswith(f"{p}: ") and words in msg and "\n" not in msg and len(msg) < 400, msg
+    from lmm.errors import InputError
+    assert isinstance(e.value, InputError)
+
+
+def test_preset_size_is_checked_before_reading(tmp_path, monkeypatch):
+    import lmm.tuning as tuning
+
+    monkeypatch.setattr(tuning, "MAX_PRESET_BYTES", 10)
+    p = tmp_path / "big.json"
+    p.write_text('{"top_k": 8, "transition_cost": 0.5}')
+    with pytest.raises(TuningError, match="larger than 10 bytes"):
+        Tuning.load(p)
+    with pytest.raises(TuningError, match="no such tuning preset"):
+        Tuning.load(tmp_path / "missing.json")
+
+
+def test_unknown_feature_channels_are_refused_when_the_channels_are_known(tmp_path):
+    p = tmp_path / "typo.json"
+    p.write_text(json.dumps({"feature_weights": {"hip_velocty": 2.0}}))
+    assert Tuning.load(p).feature_weights["hip_velocty"] == 2.0  # no schema given: kept (custom schemas)
+    channels = [ch.name for ch in DEFAULT_LAYOUT]
+    with pytest.raises(TuningError, match=r"'feature_weights\.hip_velocty': no such feature channel") as e:
+        Tuning.load(p, channels=channels)
+    assert str(e.value).startswith(f"{p}: ")
+    p.write_text(json.dumps({"feature_weights": {"hip_velocity": 2.0}}))
+    assert Tuning.load(p, channels=channels).feature_weights["hip_velocity"] == 2.0

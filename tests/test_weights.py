@@ -158,3 +158,96 @@ def test_shipped_weights_are_valid():
     wf = W.load(DEFAULT_WEIGHTS, require=["decompressor", "stepper", "projector"])
     assert wf.metadata["latent"] == 32
     assert DEFAULT_WEIGHTS.stat().st_size < 8 * 2**20
+
+
+def _with_meta(tmp_path, change, name="m.npz"):
+    import copy
+
+    meta = copy.deepcopy(metadata())  # SPECS is shared
+    meta["format_version"] = W.WEIGHTS_FORMAT_VERSION
+    change(meta)
+    p = tmp_path / name
+    _write_raw(p, make_arrays(), meta)
+    return p
+
+
+@pytest.mark.parametrize("change, words", [
+    (lambda m: m.pop("n_bones"), "metadata field 'n_bones': expected an integer in [1, 1024], got missing"),
+    (lambda m: m.update(n_bones="abc"), "metadata field 'n_bones': expected an integer in [1, 1024], got 'abc'"),
+    (lambda m: m.update(n_bones=True), "metadata field 'n_bones'"),
+    (lambda m: m.update(latent="32"), "metadata field 'latent'"),
+    (lambda m: m.update(latent=100), "metadata field 'latent': 100 leaves no features"),
+    (lambda m: m.pop("feature_mean"), "metadata field 'feature_mean': expected a list of numbers, got missing"),
+    (lambda m: m.update(feature_mean=[0.0] * 5), "metadata field 'feature_mean' has 5 entries"),
+    (lambda m: m.update(feature_inv_scale=[0.0] * 27), "metadata field 'feature_inv_scale': entry 0 is 0"),
+    (lambda m: m.update(feature_inv_scale=[1.0] * 26 + ["x"]), "expected a list of numbers"),
+    (lambda m: m.update(feature_mean=[1e300] * 27), "metadata field 'feature_mean': entry 0 is 1e+300, outside"),
+    (lambda m: m["networks"]["stepper"].update(hidden="512"), "'networks.stepper' 'hidden'"),
+    (lambda m: m["networks"]["stepper"].update(hidden=[10 ** 9]), "'networks.stepper' 'hidden'"),
+    (lambda m: m["networks"]["stepper"].pop("n_in"), "'networks.stepper' 'n_in': expected an integer"),
+    (lambda m: m["networks"]["projector"].update(activation="tanh"), "'networks.projector' 'activation'"),
+    (lambda m: m.update(networks=[1]), "metadata lists no networks"),
+    (lambda m: m.update(feature_layout="x"), "metadata field 'feature_layout': expected a list"),
+    (lambda m: m.update(recipe=[]), "metadata field 'recipe'"),
+])
+def test_malformed_metadata_names_the_field(tmp_path, change, words):
+    p = _with_meta(tmp_path, change)
+    with pytest.raises(W.WeightsError) as e:
+        W.load(p)
+    assert str(e.value).startswith(f"{p}: ") and words in str(e.value), str(e.value)
+
+
+def test_metadata_not_an_object_or_too_deep(tmp_path):
+    arrays = make_arrays()
+    for name, text, words in (("list.npz", b"[1]", "not a JSON object"),
+                              ("deep.npz", b"[" * 5000 + b"]" * 5000, "metadata record nested 5000 levels")):
+        arrays["metadata"] = np.frombuffer(text, np.uint8)
+        np.savez(tmp_path / name, **arrays)
+        with pytest.raises(W.WeightsError, match=words):
+            W.load(tmp_path / name)
+
+
+@pytest.mark.parametrize("key, value, words", [
+    ("stepper.W1", 3e38, "stepper.W1 holds values up to 3e+38, beyond +-10000"),
+    ("decompressor.out_std", 0.0, "decompressor.out_std has non-positive entries"),
+    ("projector.in_std", 0.0, "projector.in_std has non-positive entries"),
+])
+def test_absurd_arrays_are_refused(tmp_path, key, value, words):
+    arrays = make_arrays()
+    arrays[key][...] = value
+    meta = dict(metadata(), format_version=W.WEIGHTS_FORMAT_VERSION)
+    _write_raw(tmp_path / "a.npz", arrays, meta)
+    with pytest.raises(W.WeightsError, match=words.replace("+", r"\+").replace(".", r"\.")):
+        W.load(tmp_path / "a.npz")
+
+
+def test_extra_and_oversized_members_are_never_read(tmp_path):
+    import tracemalloc
+
+    arrays = make_arrays()
+    arrays["metadata"] = np.frombuffer(json.dumps(dict(metadata(), format_version=1)).encode(), np.uint8)
+    extra = dict(arrays, extra=np.zeros(64 * 1024 * 1024 // 8))  # 64 MB that compresses to almost nothing
+    np.savez_compressed(tmp_path / "extra.npz", **extra)
+    del extra
+    tracemalloc.start()
+    wf = W.load(tmp_path / "extra.npz")
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    assert "extra" not in wf.arrays and peak < 16 * 1024 * 1024, peak
+    big = dict(arrays)
+    big["stepper.W1"] = np.zeros((4096, 4096), np.float32)  # 64 MB where 8 x 8 floats are expected
+    np.savez_compressed(tmp_path / "big.npz", **big)
+    tracemalloc.start()
+    with pytest.raises(W.WeightsError, match=r"member stepper\.W1 declares 67108992 bytes, more than"):
+        W.load(tmp_path / "big.npz")
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    assert peak < 16 * 1024 * 1024, peak
+
+
+def test_lmm_networks_report_the_file_and_field(tmp_path):
+    from lmm.learned import LMMNetworks
+
+    p = _with_meta(tmp_path, lambda m: m.pop("n_bones"))
+    with pytest.raises(W.WeightsError, match=f"{p}: metadata field 'n_bones'"):
+        LMMNetworks.load(p)

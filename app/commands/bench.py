@@ -26,8 +26,14 @@ import time
 
 def add_arguments(p) -> None:
     p.add_argument("--json", dest="json_path", metavar="PATH", help="write the results here (nested JSON)")
-    p.add_argument("--queries", type=int, default=2400, help="search queries to collect (default 2400, >= 2000)")
-    p.add_argument("--sections", default="search,frame,memory", help="comma-separated sections to run")
+    from app.cli import number_in
+
+    # a query holds a feature vector and its masks (~300 bytes) and costs about 1 ms of searching per
+    # pass: 100,000 take ~30 MB and a few minutes, more only makes the bench slower, not better
+    p.add_argument("--queries", type=number_in(1, 100_000, integer=True), default=2400,
+                   help="search queries to collect, 1..100000 (default 2400; >= 2000 for stable numbers)")
+    p.add_argument("--sections", type=_sections, default="search,frame,memory",
+                   help=f"comma-separated sections to run ({', '.join(SECTIONS)})")
     p.add_argument("--manifest", help="dataset manifest (default: the shipped LAFAN1 locomotion set)")
 
 
@@ -266,24 +272,28 @@ def format_results(results: dict) -> str:
     return "\n".join(lines)
 
 
-def main(args) -> int:
-    names = [s.strip() for s in args.sections.split(",") if s.strip()]
-    unknown = [s for s in names if s not in SECTIONS]
-    if unknown:
-        print(f"error: unknown bench section(s) {', '.join(unknown)} (known: {', '.join(SECTIONS)})", file=sys.stderr)
-        return 2
-    if args.queries < 1:
-        print(f"error: --queries must be positive, got {args.queries}", file=sys.stderr)
-        return 2
+def _sections(text: str) -> list[str]:
+    """``--sections``: known section names, comma-separated (an argparse type: a bad name exits 2)."""
+    import argparse
 
-    from lmm.data.database import DatabaseError, load_or_build
+    names = [s.strip() for s in text.split(",") if s.strip()]
+    unknown = [s[:40] for s in names if s not in SECTIONS]
+    if unknown or not names:
+        raise argparse.ArgumentTypeError(f"unknown bench section(s) {', '.join(unknown) or '(none given)'} "
+                                         f"(known: {', '.join(SECTIONS)})")
+    return names
+
+
+def main(args) -> int:
+    names = args.sections if isinstance(args.sections, list) else _sections(args.sections)
+    if args.json_path:
+        from lmm.data.atomic import check_writable
+        check_writable(args.json_path)  # before minutes of benchmarking
+
+    from lmm.data.database import load_or_build
     from lmm.features import build_features
 
-    try:
-        db, _ = load_or_build(args.manifest)
-    except DatabaseError as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 1
+    db, _ = load_or_build(args.manifest)
     features = build_features(db)
     collected = None
     if {"search", "frame"} & set(names):

@@ -5,6 +5,13 @@ import json
 import sys
 from pathlib import Path
 
+from app.cli import number_in
+from lmm.data.inputs import MAX_INPUT_SECONDS
+
+#: Noisy queries for the projector metrics: each is a feature vector (~100 bytes) and a brute-force
+#: nearest-neighbour search over the database (~1 ms); 100,000 take ~10 MB and a couple of minutes.
+MAX_QUERIES = 100_000
+
 
 def add_arguments(p) -> None:
     p.add_argument("--weights", help="runtime weights (default: the shipped lmm/data/weights/default.npz)")
@@ -12,8 +19,10 @@ def add_arguments(p) -> None:
     p.add_argument("--json", dest="json_path", help="write the metrics here as JSON")
     p.add_argument("--plots", help="folder for the PNG plots (default: beside --json, else no plots)")
     p.add_argument("--input", default="builtin:random:1", help="input for the MM vs LMM comparison")
-    p.add_argument("--seconds", type=float, default=60.0, help="length of the MM vs LMM run (s)")
-    p.add_argument("--queries", type=int, default=4096, help="noisy queries for the projector metrics")
+    p.add_argument("--seconds", type=number_in(1.0, MAX_INPUT_SECONDS, unit="s"), default=60.0,
+                   help=f"length of the MM vs LMM run, 1..{MAX_INPUT_SECONDS:g} s (default 60)")
+    p.add_argument("--queries", type=number_in(1, MAX_QUERIES, integer=True), default=4096,
+                   help=f"noisy queries for the projector metrics, 1..{MAX_QUERIES} (default 4096)")
     p.add_argument("--manifest", help="dataset manifest (default: the shipped LAFAN1 locomotion set)")
 
 
@@ -21,25 +30,32 @@ def main(args) -> int:
     from app.commands.extras import require
     if (args.json_path or args.plots) and not require("eval", "matplotlib", purpose=" for its plots"):
         return 2
+    from lmm.data.atomic import check_writable
     from lmm.data.database import load_or_build
+    from lmm.data.inputs import open_input
+    from lmm.data.weights import load as load_weights
     from lmm.offline.evaluation import evaluate, load_compressor, write_plots
     from lmm.features import build_features
-    from lmm.learned import DEFAULT_WEIGHTS, LMMNetworks
-    from lmm.data.weights import WeightsError
+    from lmm.learned import DEFAULT_WEIGHTS, RUNTIME_NETWORKS, LMMNetworks
+
+    # everything the user named is checked before the database load and the minutes of evaluation
+    weights = Path(args.weights) if args.weights else DEFAULT_WEIGHTS
+    comp = Path(args.compressor) if args.compressor else weights.with_name("compressor.npz")
+    load_weights(weights, require=RUNTIME_NETWORKS)  # WeightsError names the file and field
+    load_weights(comp, require=["compressor"])
+    open_input(args.input, args.seconds)
+    plots_dir = args.plots or (str(Path(args.json_path).parent) if args.json_path else None)
+    if args.json_path:
+        check_writable(args.json_path)
+    if plots_dir:
+        check_writable(Path(plots_dir) / "latents.png")
 
     db, _ = load_or_build(args.manifest)
     features = build_features(db)
-    weights = Path(args.weights) if args.weights else DEFAULT_WEIGHTS
-    comp = Path(args.compressor) if args.compressor else weights.with_name("compressor.npz")
-    try:
-        nets = LMMNetworks.load(weights, db, features)
-        compressor = load_compressor(comp, db, features)
-    except WeightsError as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 1
+    nets = LMMNetworks.load(weights, db, features)
+    compressor = load_compressor(comp, db, features)
     log = lambda msg: print(msg, file=sys.stderr)  # noqa: E731
     metrics, artifacts = evaluate(db, features, nets, compressor, args.input, args.seconds, args.queries, log)
-    plots_dir = args.plots or (str(Path(args.json_path).parent) if args.json_path else None)
     if plots_dir:
         loss_csv = weights.with_name("training_log.csv")
         metrics["plots"] = write_plots(plots_dir, artifacts, loss_csv)

@@ -1,7 +1,6 @@
 """``lmm-studio export-onnx --out DIR``: the decompressor, stepper and projector as ONNX files."""
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 
@@ -14,16 +13,12 @@ def main(args) -> int:
     from app.commands.extras import require
     if not require("export-onnx", "onnx"):
         return 2
+    from lmm.data.atomic import check_writable
     from lmm.learned import DEFAULT_WEIGHTS, LMMNetworks
-    from lmm.data.weights import WeightsError
-
     from lmm.offline.onnx_export import export_networks
 
-    try:
-        nets = LMMNetworks.load(Path(args.weights) if args.weights else DEFAULT_WEIGHTS)
-    except WeightsError as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 1
+    check_writable(Path(args.out) / "decompressor.onnx")  # a read-only or file --out: one line, exit 1
+    nets = LMMNetworks.load(Path(args.weights) if args.weights else DEFAULT_WEIGHTS)  # WeightsError: file + field
     for path in export_networks(nets, args.out):
         print(path)
     return 0

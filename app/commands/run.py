@@ -6,12 +6,21 @@
 Deterministic: the same input gives a byte-identical recording on the same machine. ``--record``
 streams the character to BVH (crash-safe, see :mod:`lmm.data.recording`) and the input to CSV beside it
 (``OUT.input.csv``, or ``--record-input``). Bad input (unreadable or broken logs, unknown scenarios,
-bad presets) prints one ``error: ...`` line naming the file, line and column and exits with 2.
+bad presets or weights, an unwritable target) raises an :class:`lmm.errors.InputError` or ``OSError``
+naming the file, line and column, which ``app/cli.py`` prints as one line (exit 1); bad numbers on the
+command line are refused by argparse (exit 2). Every target is checked before the run starts.
 """
 from __future__ import annotations
 
-import sys
 from pathlib import Path
+
+from app.cli import number_in
+from lmm.data.inputs import MAX_INPUT_SECONDS
+
+#: Tick rates accepted (Hz). Below 1 Hz one tick is longer than every halflife and the search interval
+#: (at most 1 s) the tuning allows; at 1000 Hz a recording's Frame Time is 1 ms, well inside what the
+#: BVH reader accepts, and a tick is still ~1000 times float64's resolution of a day.
+MIN_FPS, MAX_FPS = 1.0, 1000.0
 
 
 def add_arguments(p) -> None:
@@ -19,8 +28,10 @@ def add_arguments(p) -> None:
     p.add_argument("--input", required=True, metavar="CSV|builtin:NAME",
                    help="an input log (CSV: time,left_x,left_y,right_x,right_y,walk,strafe) or a built-in "
                         "scenario: circle, zigzag, stop-and-go, strafe, turns, random:SEED")
-    p.add_argument("--seconds", type=float, help="how long to run (default: the log's length, 60 s for built-ins)")
-    p.add_argument("--fps", type=float, default=60.0, help="ticks per second (default 60)")
+    p.add_argument("--seconds", type=number_in(0.0, MAX_INPUT_SECONDS, unit="s"),
+                   help=f"how long to run, 0..{MAX_INPUT_SECONDS:g} s (default: the log's length, 60 s for built-ins)")
+    p.add_argument("--fps", type=number_in(MIN_FPS, MAX_FPS, unit="Hz"), default=60.0,
+                   help=f"ticks per second, {MIN_FPS:g}..{MAX_FPS:g} (default 60)")
     p.add_argument("--record", metavar="OUT.bvh", help="stream the character's animation to this BVH file")
     p.add_argument("--record-input", metavar="PATH", help="stream the input to this CSV (default: OUT.input.csv)")
     p.add_argument("--metrics-json", metavar="PATH", help="write the run's metrics here as JSON")
@@ -31,75 +42,72 @@ def add_arguments(p) -> None:
     p.add_argument("--quiet", action="store_true", help="print nothing but errors")
 
 
-def _error(message: str, code: int = 2) -> int:
-    print(f"error: {message}", file=sys.stderr)
-    return code
+def _close(stream) -> OSError | None:
+    """Close a recording stream; the error instead of raising it."""
+    if stream is None:
+        return None
+    try:
+        stream.close()
+    except OSError as e:
+        return e
+    return None
 
 
 def main(args) -> int:
-    from lmm.data.inputs import InputError, open_input
-    from lmm.tuning import Tuning, TuningError
+    from lmm.data.atomic import check_writable
+    from lmm.data.inputs import open_input
+    from lmm.tuning import Tuning
 
-    # everything the user typed is checked before the (slower) database load
-    if not args.fps > 0:
-        return _error(f"--fps must be positive, got {args.fps}")
-    if args.seconds is not None and not args.seconds >= 0:
-        return _error(f"--seconds must be >= 0, got {args.seconds}")
-    try:
-        source = open_input(args.input, args.seconds)
-    except InputError as e:
-        return _error(str(e))
-    try:
-        tuning = Tuning.load(args.tuning) if args.tuning else Tuning()
-    except TuningError as e:
-        return _error(str(e))
-    except OSError as e:
-        return _error(f"{args.tuning}: cannot read the tuning preset ({e.strerror})")
+    # everything the user typed is checked before the (slower) database load, targets included
+    source = open_input(args.input, args.seconds)
+    preset = Tuning.read_preset(args.tuning) if args.tuning else None
+    tuning = Tuning.from_preset(preset, args.tuning) if preset is not None else Tuning()
     seconds = args.seconds if args.seconds is not None else max(source.duration, 1.0 / args.fps)
+    record_input = None
+    if args.record:
+        out = Path(args.record)
+        record_input = Path(args.record_input) if args.record_input else out.with_name(out.stem + ".input.csv")
+        check_writable(out)
+    elif args.record_input:
+        record_input = Path(args.record_input)
+    for target in (record_input, args.metrics_json):
+        if target is not None:
+            check_writable(target)
+    if args.controller == "lmm" and args.weights:
+        from lmm.data.weights import load as load_weights
+        from lmm.learned import RUNTIME_NETWORKS
+        load_weights(args.weights, require=RUNTIME_NETWORKS)  # metadata and arrays, before the database
 
-    from lmm.data.bvh import BVHError
-    from lmm.data.database import DatabaseError, load_or_build
+    from lmm.data.database import load_or_build
     from lmm.features import build_features
-    from lmm.data.manifest import ManifestError
     from lmm.data.recording import BVHRecorder
     from lmm.factory import make_controller
     from lmm.runner import run_headless
 
-    try:
-        db, _ = load_or_build(args.manifest)
-    except (BVHError, ManifestError, DatabaseError) as e:
-        return _error(str(e), 1)
+    db, _ = load_or_build(args.manifest)
     features = build_features(db)
-    try:
-        controller = make_controller(args.controller, db, features, tuning, args.weights)
-    except TuningError as e:
-        return _error(str(e))
-    except Exception as e:  # e.g. missing or broken network weights
-        return _error(f"cannot start the {args.controller} controller: {e}", 1)
+    if preset is not None:  # now the channels are known: a misspelt feature_weights name is an error
+        tuning = Tuning.from_preset(preset, args.tuning, channels=[ch.name for ch in features.layout])
+    controller = make_controller(args.controller, db, features, tuning, args.weights)
 
     recorder = writer = None
-    try:
-        if args.record:
-            from lmm.data.inputs import InputCsvWriter
-            out = Path(args.record)
-            out.parent.mkdir(parents=True, exist_ok=True)
-            input_path = Path(args.record_input) if args.record_input else out.with_name(out.stem + ".input.csv")
-            writer = InputCsvWriter(input_path)
-            recorder = BVHRecorder(out, db, fps=args.fps)
-        elif args.record_input:
-            from lmm.data.inputs import InputCsvWriter
-            Path(args.record_input).parent.mkdir(parents=True, exist_ok=True)
-            writer = InputCsvWriter(args.record_input)
-    except OSError as e:
-        return _error(f"cannot write the recording: {e}", 1)
+    if record_input is not None:
+        from lmm.data.inputs import InputCsvWriter
+        writer = InputCsvWriter(record_input)
+    if args.record:
+        try:
+            recorder = BVHRecorder(Path(args.record), db, fps=args.fps)
+        except BaseException:
+            _close(writer)
+            raise
     try:
         metrics = run_headless(controller, source, seconds, dt=1.0 / args.fps, recorder=recorder,
                                input_writer=writer, realtime=args.realtime)
     finally:
-        if recorder is not None:
-            recorder.close()
-        if writer is not None:
-            writer.close()
+        # both streams are closed even when one fails (a full disk); the first error is the one reported
+        close_errors = [e for e in (_close(recorder), _close(writer)) if e is not None]
+    if close_errors:
+        raise close_errors[0]
 
     # the same ground skating rule over the database's source takes, printed beside the run's
     from lmm.metrics import source_ground_skating

@@ -10,21 +10,36 @@ import json
 import sys
 import time
 
+from app.cli import number_in
+
 STAGES = ("all", "decompressor", "stepper", "projector")
+
+# Accepted ranges. The recipe's longest stage is 24,000 iterations at ~20-40 per second on 2 cores:
+# a million is half a day. A batch of 65,536 poses (668 floats each for the compressor) is ~175 MB per
+# tensor. Learning rates beyond 1 only diverge. Seeds are numpy's (uint32).
+MAX_ITERATIONS = 1_000_000
+MAX_BATCH = 65_536
+MAX_THREADS = 256
 
 
 def add_arguments(p) -> None:
     p.add_argument("stage", nargs="?", default="all", choices=STAGES,
                    help="what to train (default: all; decompressor trains the compressor with it)")
-    p.add_argument("--iterations", type=int, help="iterations per network (default: the recipe's)")
-    p.add_argument("--batch", type=int, help="batch size per network (default: the recipe's)")
-    p.add_argument("--lr", type=float, help="peak learning rate (default: the recipe's)")
+    p.add_argument("--iterations", type=number_in(1, MAX_ITERATIONS, integer=True),
+                   help=f"iterations per network, 1..{MAX_ITERATIONS} (default: the recipe's)")
+    p.add_argument("--batch", type=number_in(1, MAX_BATCH, integer=True),
+                   help=f"batch size per network, 1..{MAX_BATCH} (default: the recipe's)")
+    p.add_argument("--lr", type=number_in(1e-9, 1.0), help="peak learning rate, 1e-9..1 (default: the recipe's)")
     p.add_argument("--out", default="lmm-weights", help="output folder (default: ./lmm-weights)")
     p.add_argument("--manifest", help="dataset manifest (default: the shipped LAFAN1 locomotion set)")
-    p.add_argument("--seed", type=int, default=1234, help="random seed (default 1234)")
-    p.add_argument("--threads", type=int, default=2, help="torch threads (default 2)")
-    p.add_argument("--frames", type=int, help="train on the first N database frames only (quick checks)")
-    p.add_argument("--log-every", type=int, default=200, help="print a loss line every N iterations")
+    p.add_argument("--seed", type=number_in(0, 2 ** 32 - 1, integer=True), default=1234,
+                   help="random seed, 0..2^32-1 (default 1234)")
+    p.add_argument("--threads", type=number_in(1, MAX_THREADS, integer=True), default=2,
+                   help="torch threads (default 2)")
+    p.add_argument("--frames", type=number_in(1, 2 ** 31, integer=True),
+                   help="train on the first N database frames only (quick checks)")
+    p.add_argument("--log-every", type=number_in(1, MAX_ITERATIONS, integer=True), default=200,
+                   help="print a loss line every N iterations")
     p.add_argument("--resume", action="store_true",
                    help="stepper/projector: continue from the networks in --out with a new schedule")
     p.add_argument("--quiet", action="store_true", help="no progress bar or loss lines")
@@ -35,12 +50,14 @@ def main(args) -> int:
     if not require("train", "torch"):  # before the database: a missing extra fails at once
         return 2
     import numpy as np
+    from pathlib import Path
 
+    from lmm.data.atomic import check_writable
     from lmm.data.database import load_or_build
     from lmm.features import build_features
     from lmm.offline.training import NETWORKS, Recipe, train_pipeline
-    from lmm.data.weights import WeightsError
 
+    check_writable(Path(args.out) / "default.npz")  # a read-only or file --out fails now, not after training
     db, _ = load_or_build(args.manifest)
     features = build_features(db)
     recipe = Recipe(seed=args.seed, threads=args.threads, log_every=args.log_every)
@@ -57,12 +74,8 @@ def main(args) -> int:
     print(f"training {', '.join(stages)} on {db.name} ({db.n_frames} frames, key {db.key[:16]}) -> {args.out}",
           file=sys.stderr)
     t0 = time.perf_counter()
-    try:
-        summary = train_pipeline(db, features, stages, recipe, args.out, frames=frames, quiet=args.quiet,
-                                 resume=args.resume)
-    except (WeightsError, FileNotFoundError) as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 1
+    summary = train_pipeline(db, features, stages, recipe, args.out, frames=frames, quiet=args.quiet,
+                             resume=args.resume)  # WeightsError / OSError: one line from app/cli.py
     summary["command_wall_s"] = round(time.perf_counter() - t0, 1)
     print(json.dumps(summary, indent=2))
     return 0

@@ -158,7 +158,8 @@ class TuningPanel(Panel):
             self.dpg.set_value(widget_tag(spec), self._value(spec))
 
     def load_preset(self, path) -> None:
-        t = Tuning.load(path)            # raises TuningError with the file and field
+        # TuningError with the file and field; a feature channel the running controllers lack is one
+        t = Tuning.load(path, channels=list(self.tuning.feature_weights))
         for f in dataclasses.fields(Tuning):
             setattr(self.tuning, f.name, getattr(t, f.name))
         self.sync()

@@ -4,6 +4,7 @@ crash or a full disk never leaves one behind under the real name. Streams (live 
 exception; see :mod:`lmm.data.recording`."""
 from __future__ import annotations
 
+import errno
 import os
 import secrets
 from contextlib import contextmanager
@@ -15,23 +16,44 @@ def atomic_write(path, mode: str = "wb", encoding: str | None = None):
     """``with atomic_write(path) as f: ...`` writes to a temporary file beside ``path`` (same folder,
     so the rename cannot cross file systems) and renames it over ``path`` when the block ends without
     an exception; on any exception the temporary file is removed and ``path`` is left as it was.
-    The folder is created if needed. ``mode`` is ``"wb"`` or ``"w"`` (text, UTF-8 by default)."""
+    The folder is created if needed. ``mode`` is ``"wb"`` or ``"w"`` (text, UTF-8 by default).
+    An ``OSError`` (read-only folder, full disk) is re-raised naming ``path``, not the temporary file."""
     if mode not in ("wb", "w"):
         raise ValueError(f"atomic_write mode must be 'wb' or 'w', got {mode!r}")
     path = Path(os.fspath(path))
-    path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.{os.getpid()}.{secrets.token_hex(4)}.tmp")
     try:
+        path.parent.mkdir(parents=True, exist_ok=True)
         binary = mode == "wb"
         with open(tmp, "xb" if binary else "x", encoding=None if binary else (encoding or "utf-8")) as f:
             yield f
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as e:
         try:
             os.unlink(tmp)
         except OSError:
             pass
+        if isinstance(e, OSError) and e.errno is not None and e.filename in (None, str(tmp), tmp):
+            raise type(e)(e.errno, e.strerror, str(path)) from None  # name the file the user asked for
         raise
+
+
+def check_writable(path) -> None:
+    """Raise ``OSError`` naming ``path`` unless a file can be created in its folder (made if missing):
+    checked before a long computation so a read-only target fails at once, not after the work."""
+    path = Path(os.fspath(path))
+    probe = path.with_name(f".{path.name}.{os.getpid()}.{secrets.token_hex(4)}.probe")
+    try:
+        if path.is_dir():
+            raise IsADirectoryError(errno.EISDIR, "is a folder, expected a file name", str(path))
+        existing = next(p for p in path.parents if p.exists() or p == p.parent)
+        if not existing.is_dir():
+            raise NotADirectoryError(errno.ENOTDIR, f"{existing} is a file, not a folder", str(path))
+        path.parent.mkdir(parents=True, exist_ok=True)
+        os.close(os.open(probe, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))
+        os.unlink(probe)
+    except OSError as e:
+        raise type(e)(e.errno, e.strerror, str(path)) from None
 
 
 def write_bytes_atomic(path, data: bytes) -> Path:

@@ -7,7 +7,9 @@ last row holds forever. Sticks are in [-1, 1]; ``walk``/``strafe`` are 0/1 (``tr
 Built-in scenarios (``builtin:NAME``) are deterministic logs for tests, evaluation and benchmarks:
 ``circle``, ``zigzag``, ``stop-and-go``, ``strafe``, ``turns`` and ``random:SEED``.
 
-Every problem in a log raises :class:`InputError` naming the file, the 1-based line and the column.
+Every problem in a log raises :class:`InputLogError` (an :class:`lmm.errors.InputError`) naming the file,
+the 1-based line and the column. Accepted ranges and costs are checked before the work:
+``MAX_INPUT_SECONDS`` for times, ``MAX_INPUT_LOG_BYTES`` for the file (read no further).
 """
 from __future__ import annotations
 
@@ -18,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from lmm import errors
 from lmm.controller import InputState
 from lmm.data.atomic import write_text_atomic
 
@@ -28,8 +31,22 @@ BUILTIN_RATE_HZ = 60.0
 DEFAULT_BUILTIN_SECONDS = 60.0
 _TIME_EPS = 1e-9  # a query a rounding error before a row's time still gets that row
 
+#: Longest run (s) the program accepts: ``run --seconds``, a log's times, a built-in's length. A day of
+#: simulated time at the highest accepted tick rate (1000 Hz, see app/commands/run.py) is 8.64e7 ticks,
+#: counted exactly in an int and timed to ~1e-8 s in float64; beyond it a headless run takes days at its
+#: measured speed and ``seconds * fps`` stops being a sane tick count (1e308 overflows).
+MAX_INPUT_SECONDS = 86400.0
+#: Most lines in an input log, counted before parsing. Our writer adds a row only when the input changes,
+#: at most one per tick: a million rows is 4.6 h of input changing at every 60 Hz tick. Parsing costs
+#: about 300 bytes per row (a Python float per cell, the line's string), so at most ~0.3 GB.
+MAX_INPUT_LOG_LINES = 1_000_000
+#: Largest input log read (bytes): a million rows of about 60 bytes (the writer's shortest-float cells).
+MAX_INPUT_LOG_BYTES = 64 * 1024 * 1024
+#: Largest |camera_azimuth| (rad) accepted: 160,000 turns of the camera; float64 still resolves 1e-10 rad.
+MAX_CAMERA_AZIMUTH_RAD = 1e6
 
-class InputError(ValueError):
+
+class InputLogError(errors.InputError):
     """A bad input log or input spec. ``str(e)`` is ``'<file>: line L, column C (<name>): <message>'``."""
 
     def __init__(self, message: str, path=None, line: int | None = None, column: int | None = None,
@@ -42,6 +59,9 @@ class InputError(ValueError):
             where.append(f"column {column}" + (f" ({column_name})" if column_name else ""))
         prefix = f"{path}: " if path is not None else ""
         super().__init__(prefix + (", ".join(where) + ": " if where else "") + message)
+
+
+InputError = InputLogError  # this module's name for it before lmm.errors existed (app/actions.py, tests)
 
 
 @dataclass
@@ -113,9 +133,21 @@ def header_line(with_camera: bool) -> str:
 def load_input_csv(path) -> InputLog:
     path = Path(path)
     try:
-        text = path.read_bytes().decode("utf-8-sig")
+        with open(path, "rb") as f:
+            data = f.read(MAX_INPUT_LOG_BYTES + 1)  # never more than the limit in memory
+        if len(data) > MAX_INPUT_LOG_BYTES:
+            raise InputError(f"input log larger than {MAX_INPUT_LOG_BYTES // (1024 * 1024)} MB "
+                             f"(MAX_INPUT_LOG_BYTES; over a million input changes)", path)
+        lines = data.count(b"\n") + 1
+        if lines > MAX_INPUT_LOG_LINES:
+            raise InputError(f"input log has {lines} lines, more than {MAX_INPUT_LOG_LINES} "
+                             f"(MAX_INPUT_LOG_LINES)", path)
+        text = data.decode("utf-8-sig")
+        del data
     except FileNotFoundError:
         raise InputError("no such input file", path) from None
+    except IsADirectoryError:
+        raise InputError("is a folder, not an input log", path) from None
     except OSError as e:
         raise InputError(f"cannot read the input file ({e.strerror})", path) from None
     except UnicodeDecodeError as e:
@@ -173,7 +205,13 @@ def parse_input_csv(text: str, path="<input>") -> InputLog:
                     if abs(v) > 1.0 + 1e-6:
                         raise InputError(f"stick value {cell[:20]} is outside [-1, 1]", path, line, c, name)
                     v = min(max(v, -1.0), 1.0)
+                if name == "camera_azimuth" and abs(v) > MAX_CAMERA_AZIMUTH_RAD:
+                    raise InputError(f"camera azimuth {cell[:20]} rad is outside +-{MAX_CAMERA_AZIMUTH_RAD:g} "
+                                     f"(MAX_CAMERA_AZIMUTH_RAD)", path, line, c, name)
                 if name == "time":
+                    if not 0.0 <= v <= MAX_INPUT_SECONDS:
+                        raise InputError(f"time {cell[:20]} is outside [0, {MAX_INPUT_SECONDS:g}] s "
+                                         f"(MAX_INPUT_SECONDS, one day)", path, line, c, name)
                     if last_t is not None and v < last_t:
                         raise InputError(f"time goes backwards: {cell} after {last_t!r} on line {last_line}",
                                          path, line, c, name)
@@ -353,6 +391,9 @@ def builtin_names(random_seeds=(1,)) -> list[str]:
 def builtin(name: str, seconds: float | None = None) -> InputLog:
     """The built-in scenario ``name`` (without the ``builtin:`` prefix) covering ``seconds``."""
     seconds = DEFAULT_BUILTIN_SECONDS if seconds is None else float(seconds)
+    if not 0.0 <= seconds <= MAX_INPUT_SECONDS:  # NaN fails too
+        raise InputError(f"built-in scenario {name!r}: length {seconds!r} s is outside "
+                         f"[0, {MAX_INPUT_SECONDS:g}] (MAX_INPUT_SECONDS, one day)")
     if name.startswith("random:"):
         seed_text = name[len("random:"):]
         try:

@@ -9,9 +9,12 @@ Layout of a file:
   feature layout, the database key, the feature normalisation the networks were trained in, the
   skeleton, latent statistics and the training settings.
 
-:func:`load` checks everything and raises :class:`WeightsError` naming the file and the problem:
-truncated or corrupt file, missing arrays, wrong shapes, NaN/inf weights, a different database,
-a different feature layout.
+:func:`load` checks everything and raises :class:`WeightsError` naming the file and the problem (the
+metadata field or the array): truncated or corrupt file, missing or malformed metadata fields, missing
+arrays, wrong shapes, NaN/inf or absurd weights, a zero normalisation, a different database, a different
+feature layout. Costs are checked before the work: only the arrays the metadata names are read, each
+after its declared size is checked against its expected shape (an extra or oversized member costs
+nothing), and the metadata record has a size and nesting limit.
 """
 from __future__ import annotations
 
@@ -23,13 +26,130 @@ from pathlib import Path
 import numpy as np
 
 from lmm.data.atomic import atomic_write
+from lmm.errors import InputError
 
 WEIGHTS_FORMAT_VERSION = 1
 PARTS = ("in_mean", "in_std", "out_mean", "out_std")
 
+#: Widest layer accepted (units; also n_in/n_out): the shipped networks are 512 wide and read 27 to 668
+#: features; 4096 leaves room for 8x wider ones (a 4096 x 4096 float32 layer is 64 MB).
+MAX_UNITS = 4096
+#: Most hidden layers per network: the shipped projector has 4.
+MAX_HIDDEN_LAYERS = 8
+#: Most networks in one file: a file holds the 3 runtime networks or the compressor.
+MAX_NETWORKS = 8
+#: Most bones: the shipped skeleton has 23; a pose vector grows ~15 floats per bone.
+MAX_BONES = 1024
+#: Largest |value| of any weight, bias or normalisation entry. Trained files stay under 15 (the shipped
+#: ones: weights <= 2.3, out_std <= 13.3); with inputs normalised to ~10, a layer of at most 4096 units
+#: of |w| <= 1e4 multiplies magnitudes by <= 4e7, so 4 layers stay below float32's 3.4e38 instead of
+#: overflowing to inf (a weight of 3e38 overflowed in the first tick and broke the run).
+MAX_WEIGHT_MAGNITUDE = 1e4
+#: Largest |feature_mean| and feature_inv_scale: raw features are in metres, m/s and unit vectors
+#: (the shipped means <= 3, inv scales 0.98..4.7).
+MAX_FEATURE_MAGNITUDE = 1e6
+#: Largest metadata record (bytes): the shipped one is ~5 KB (layout, bone names, recipe).
+MAX_METADATA_BYTES = 1024 * 1024
+_NPY_HEADER_SLACK = 4096  # a .npy member is its header (<= a few hundred bytes) plus the raw data
 
-class WeightsError(RuntimeError):
+
+class WeightsError(InputError):
     """A weights file that cannot be used; the message names the file and the problem."""
+
+
+def _int_field(path, meta: dict, key: str, lo: int, hi: int, where: str = "metadata field") -> int:
+    value = meta.get(key) if isinstance(meta, dict) else None
+    if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
+        shown = "missing" if value is None else repr(value)[:40]
+        raise WeightsError(f"{path}: {where} {key!r}: expected an integer in [{lo}, {hi}], got {shown}")
+    return value
+
+
+def _vector_field(path, meta: dict, key: str, n: int | None, lo: float, hi: float) -> np.ndarray:
+    """A metadata list of ``n`` numbers (any length if None), each finite and in [lo, hi]."""
+    value = meta.get(key)
+    if not isinstance(value, list) or not all(isinstance(v, (int, float)) and not isinstance(v, bool)
+                                              for v in value):
+        shown = "missing" if value is None else f"a {type(value).__name__}" if not isinstance(value, list) \
+            else "a list holding a non-number"
+        raise WeightsError(f"{path}: metadata field {key!r}: expected a list of numbers, got {shown}")
+    if n is not None and len(value) != n:
+        raise WeightsError(f"{path}: metadata field {key!r} has {len(value)} entries, does not match the "
+                           f"networks ({n} features)")
+    try:
+        v = np.asarray(value, dtype=np.float64)
+    except OverflowError:
+        raise WeightsError(f"{path}: metadata field {key!r}: a number beyond float range") from None
+    if not np.all(np.isfinite(v)):
+        raise WeightsError(f"{path}: metadata field {key!r} holds NaN/inf values")
+    bad = np.flatnonzero((v < lo) | (v > hi))
+    if bad.size:
+        raise WeightsError(f"{path}: metadata field {key!r}: entry {int(bad[0])} is {float(v[bad[0]]):g}, "
+                           f"outside [{lo:g}, {hi:g}]")
+    return v
+
+
+def check_network_spec(path, name, spec) -> None:
+    """``networks[name]``: sizes within the limits, a known activation; WeightsError naming the field."""
+    where = f"metadata field 'networks.{name}'"
+    if not isinstance(name, str) or not isinstance(spec, dict):
+        raise WeightsError(f"{path}: {where}: expected an object with n_in, hidden, n_out, activation")
+    _int_field(path, spec, "n_in", 1, MAX_UNITS, where)
+    _int_field(path, spec, "n_out", 1, MAX_UNITS, where)
+    hidden = spec.get("hidden")
+    if not isinstance(hidden, list) or len(hidden) > MAX_HIDDEN_LAYERS or not all(
+            isinstance(h, int) and not isinstance(h, bool) and 1 <= h <= MAX_UNITS for h in hidden):
+        raise WeightsError(f"{path}: {where} 'hidden': expected a list of at most {MAX_HIDDEN_LAYERS} layer "
+                           f"sizes in [1, {MAX_UNITS}], got {repr(hidden)[:40]}")
+    if spec.get("activation") not in ("relu", "elu"):
+        raise WeightsError(f"{path}: {where} 'activation': expected 'relu' or 'elu', "
+                           f"got {repr(spec.get('activation'))[:40]}")
+    skip = spec.get("skip", False)
+    if not isinstance(skip, bool) or (skip and spec["n_out"] < spec["n_in"]):
+        raise WeightsError(f"{path}: {where} 'skip': expected false, or true with n_out >= n_in")
+
+
+def check_metadata(path, meta) -> None:
+    """Every metadata field the program reads, checked for presence, type and range (one line per
+    problem naming the field). The runtime file (with a decompressor) must also say its feature
+    normalisation, latent size and bone count."""
+    if not isinstance(meta, dict):
+        raise WeightsError(f"{path}: metadata record is not a JSON object")
+    if meta.get("format_version") != WEIGHTS_FORMAT_VERSION:
+        raise WeightsError(f"{path}: weights format {repr(meta.get('format_version'))[:40]}, "
+                           f"expected {WEIGHTS_FORMAT_VERSION}")
+    nets = meta.get("networks")
+    if not isinstance(nets, dict) or not nets:
+        raise WeightsError(f"{path}: metadata lists no networks")
+    if len(nets) > MAX_NETWORKS:
+        raise WeightsError(f"{path}: metadata field 'networks': {len(nets)} networks, more than {MAX_NETWORKS}")
+    for name, spec in nets.items():
+        check_network_spec(path, name, spec)
+    runtime = "decompressor" in nets
+    if runtime or "latent" in meta:
+        latent = _int_field(path, meta, "latent", 0, MAX_UNITS)
+    if runtime or "n_bones" in meta:
+        _int_field(path, meta, "n_bones", 1, MAX_BONES)
+    if "n_frames" in meta:
+        _int_field(path, meta, "n_frames", 0, 2 ** 40)
+    n_features = int(nets["decompressor"]["n_in"]) - latent if runtime else None
+    if runtime and n_features < 1:
+        raise WeightsError(f"{path}: metadata field 'latent': {latent} leaves no features in the decompressor's "
+                           f"{nets['decompressor']['n_in']} inputs")
+    for key, lo in (("feature_mean", -MAX_FEATURE_MAGNITUDE), ("feature_inv_scale", 0.0)):
+        if runtime or key in meta:
+            v = _vector_field(path, meta, key, n_features, lo, MAX_FEATURE_MAGNITUDE)
+            if key == "feature_inv_scale" and np.any(v <= 0.0):
+                raise WeightsError(f"{path}: metadata field 'feature_inv_scale': entry {int(np.argmax(v <= 0))} "
+                                   f"is 0 (every feature's scale must be positive)")
+    for key in ("feature_layout", "bone_names", "parents"):
+        if key in meta and not isinstance(meta[key], list):
+            raise WeightsError(f"{path}: metadata field {key!r}: expected a list, got {type(meta[key]).__name__}")
+    if "feature_layout" in meta and not all(isinstance(d, dict) for d in meta["feature_layout"]):
+        raise WeightsError(f"{path}: metadata field 'feature_layout': expected a list of channel objects")
+    recipe = meta.get("recipe", {})
+    if not isinstance(recipe, dict) or not isinstance(recipe.get("projector_noise", 1.0), (int, float)):
+        raise WeightsError(f"{path}: metadata field 'recipe': expected an object (projector_noise a number)")
 
 
 @dataclass
@@ -86,6 +206,16 @@ def save(path, arrays: dict[str, np.ndarray], metadata: dict) -> Path:
     return path
 
 
+def _check_member_size(path, z, key: str, limit: int, shape=None) -> None:
+    """Refuse an npz member whose declared uncompressed size is over ``limit`` bytes, before reading it
+    (zipfile reads no more than the declared size)."""
+    info = z.zip.getinfo(f"{key}.npy")
+    if info.file_size > limit:
+        expected = f" for shape {shape}" if shape is not None else ""
+        raise WeightsError(f"{path}: member {key} declares {info.file_size} bytes, more than the {limit}"
+                           f"{expected}")
+
+
 def load(path, require=None, db_key: str | None = None, layout_dicts: list[dict] | None = None) -> WeightsFile:
     """Load and validate a weights file.
 
@@ -98,33 +228,45 @@ def load(path, require=None, db_key: str | None = None, layout_dicts: list[dict]
         raise WeightsError(f"{path}: weights file not found")
     try:
         with np.load(path, allow_pickle=False) as z:
-            names = list(z.files)
-            if "metadata" not in names:
+            if not hasattr(z, "files"):
+                raise WeightsError(f"{path}: not an lmm-studio weights file (a single array, not an .npz)")
+            if "metadata" not in z.files:
                 raise WeightsError(f"{path}: not an lmm-studio weights file (no metadata record)")
-            arrays = {k: z[k] for k in names}
+            _check_member_size(path, z, "metadata", MAX_METADATA_BYTES)
+            raw_meta = z["metadata"]
+            if raw_meta.dtype != np.uint8 or raw_meta.ndim != 1:
+                raise WeightsError(f"{path}: metadata record is not UTF-8 JSON bytes ({raw_meta.dtype})")
+            from lmm.data.jsonio import JsonError, parse_json
+
+            try:
+                metadata = parse_json(raw_meta.tobytes().decode("utf-8"), path)
+            except UnicodeDecodeError as e:
+                raise WeightsError(f"{path}: metadata record is not valid JSON (not UTF-8 at byte {e.start})") from None
+            except JsonError as e:
+                rest = str(e)[len(str(path)) + 2:]  # after "PATH: "
+                raise WeightsError(f"{path}: metadata record {'is ' if rest.startswith('not') else ''}{rest}") from None
+            check_metadata(path, metadata)
+            nets = metadata["networks"]
+            require = list(nets) if require is None else list(require)
+            for name in require:
+                if name not in nets:
+                    raise WeightsError(f"{path}: no {name} network in this file (it holds: {', '.join(nets)})")
+            arrays = {}
+            for name in nets:
+                for key, shape in expected_shapes(name, nets[name]).items():
+                    if key not in z.files:
+                        raise WeightsError(f"{path}: missing array {key}")
+                    # read no member bigger than its expected shape in float64: an extra or oversized
+                    # member costs nothing
+                    _check_member_size(path, z, key, int(np.prod(shape)) * 8 + _NPY_HEADER_SLACK, shape)
+                    arrays[key] = z[key]
     except WeightsError:
         raise
-    except (zipfile.BadZipFile, EOFError, OSError, ValueError, KeyError, zipfile.LargeZipFile) as e:
-        raise WeightsError(f"{path}: truncated or corrupt weights file ({type(e).__name__}: {e})") from None
-    except Exception as e:  # zlib.error and friends from a damaged member
-        raise WeightsError(f"{path}: truncated or corrupt weights file ({type(e).__name__}: {e})") from None
-    try:
-        metadata = json.loads(arrays.pop("metadata").tobytes().decode("utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError, ValueError) as e:
-        raise WeightsError(f"{path}: metadata record is not valid JSON ({e})") from None
-    if metadata.get("format_version") != WEIGHTS_FORMAT_VERSION:
-        raise WeightsError(f"{path}: weights format {metadata.get('format_version')!r}, expected {WEIGHTS_FORMAT_VERSION}")
-    nets = metadata.get("networks")
-    if not isinstance(nets, dict) or not nets:
-        raise WeightsError(f"{path}: metadata lists no networks")
-    require = list(nets) if require is None else list(require)
-    for name in require:
-        if name not in nets:
-            raise WeightsError(f"{path}: no {name} network in this file (it holds: {', '.join(nets)})")
+    except Exception as e:  # zipfile.BadZipFile, EOFError, OSError, ValueError, zlib.error from a damaged member
+        raise WeightsError(f"{path}: truncated or corrupt weights file ({type(e).__name__}: "
+                           f"{' '.join(str(e).split())[:200]})") from None
     for name in nets:
         for key, shape in expected_shapes(name, nets[name]).items():
-            if key not in arrays:
-                raise WeightsError(f"{path}: missing array {key}")
             a = arrays[key]
             if tuple(a.shape) != shape:
                 raise WeightsError(f"{path}: {key} has shape {tuple(a.shape)}, expected {shape} "
@@ -134,8 +276,14 @@ def load(path, require=None, db_key: str | None = None, layout_dicts: list[dict]
             if not np.all(np.isfinite(a)):
                 bad = int(np.size(a) - np.count_nonzero(np.isfinite(a)))
                 raise WeightsError(f"{path}: {key} holds {bad} NaN/inf values")
-        if np.any(arrays[f"{name}.in_std"] <= 0):
-            raise WeightsError(f"{path}: {name}.in_std has non-positive entries")
+            if a.size and float(np.max(np.abs(a))) > MAX_WEIGHT_MAGNITUDE:
+                raise WeightsError(f"{path}: {key} holds values up to {float(np.max(np.abs(a))):.3g}, beyond "
+                                   f"+-{MAX_WEIGHT_MAGNITUDE:g} (MAX_WEIGHT_MAGNITUDE; trained weights stay "
+                                   f"under 15)")
+        for part in ("in_std", "out_std"):
+            if np.any(arrays[f"{name}.{part}"] <= 0):
+                raise WeightsError(f"{path}: {name}.{part} has non-positive entries (a normalisation "
+                                   f"scale must be positive)")
     fix = ("open the data they were trained on (--manifest), or retrain on this data: "
            "`lmm-studio train all --manifest YOUR_MANIFEST --out DIR`, then --weights DIR/default.npz")
     if db_key is not None and metadata.get("database_key") != db_key:
@@ -150,10 +298,4 @@ def load(path, require=None, db_key: str | None = None, layout_dicts: list[dict]
 
             raise WeightsError(f"{path}: trained on another feature schema ("
                                f"{describe_schema_difference(theirs, layout_dicts)}): {fix}")
-    for key in ("feature_mean", "feature_inv_scale"):
-        v = np.asarray(metadata.get(key, []), dtype=np.float64)
-        if "decompressor" in nets and v.shape != (int(nets["decompressor"]["n_in"]) - int(metadata.get("latent", 0)),):
-            raise WeightsError(f"{path}: metadata {key} has {v.size} entries, does not match the networks")
-        if not np.all(np.isfinite(v)):
-            raise WeightsError(f"{path}: metadata {key} holds NaN/inf values")
     return WeightsFile(path, arrays, metadata)

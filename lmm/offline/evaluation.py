@@ -285,9 +285,15 @@ def write_plots(out_dir, artifacts: dict, loss_csv=None) -> list[str]:
     written = []
 
     def save(fig, name):
+        import io
+
+        from lmm.data.atomic import write_bytes_atomic
+
         fig.tight_layout()
-        fig.savefig(out_dir / name, dpi=110)
+        buf = io.BytesIO()
+        fig.savefig(buf, format="png", dpi=110)
         plt.close(fig)
+        write_bytes_atomic(out_dir / name, buf.getvalue())  # a full disk never leaves half a PNG
         written.append(str(out_dir / name))
 
     if loss_csv and Path(loss_csv).exists():

@@ -61,11 +61,12 @@ def mlp_to_onnx(mlp, name: str, metadata: dict | None = None):
 
 
 def export_networks(nets, out_dir) -> list[Path]:
-    """Write decompressor.onnx, stepper.onnx and projector.onnx for an :class:`lmm.learned.LMMNetworks`."""
-    import onnx
+    """Write decompressor.onnx, stepper.onnx and projector.onnx for an :class:`lmm.learned.LMMNetworks`,
+    each atomically (a full disk or a kill never leaves a truncated model; ``OSError`` names the file)."""
+    from lmm.data.atomic import check_writable, write_bytes_atomic
 
     out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    check_writable(out_dir / "decompressor.onnx")  # before building any model
     meta = {k: nets.metadata.get(k) for k in ("database_key", "feature_layout", "feature_mean",
                                               "feature_inv_scale", "latent", "bone_names", "pose_vector_size")}
     meta["dt_s"] = 1.0 / 60.0
@@ -73,6 +74,6 @@ def export_networks(nets, out_dir) -> list[Path]:
     for name in ("decompressor", "stepper", "projector"):
         model = mlp_to_onnx(getattr(nets, name), name, meta)
         path = out_dir / f"{name}.onnx"
-        onnx.save(model, str(path))
+        write_bytes_atomic(path, model.SerializeToString())  # what onnx.save writes, without external data
         paths.append(path)
     return paths
