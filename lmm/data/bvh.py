@@ -46,6 +46,7 @@ import numpy as np
 
 from lmm import quat
 from lmm.data.atomic import write_bytes_atomic
+from lmm.errors import InputError
 
 __all__ = [
     "BVHError", "Animation", "load", "loads", "save", "dumps",
@@ -71,7 +72,7 @@ _GZIP_MAGIC = b"\x1f\x8b"
 # errors
 # --------------------------------------------------------------------------------------
 
-class BVHError(Exception):
+class BVHError(InputError):
     """A malformed BVH file. ``path`` (str or None), ``line`` (1-based int or None), ``message``."""
 
     def __init__(self, message: str, path: str | os.PathLike | None = None, line: int | None = None):

@@ -24,13 +24,14 @@ from lmm.data import bvh
 from lmm.data.atomic import atomic_write
 from lmm.filters import catmull_rom, central_difference, median_filter, savgol_smooth
 from lmm.data.manifest import Manifest, ManifestError, load_manifest
+from lmm.errors import InputError
 
 DB_FORMAT_VERSION = 5  # 5: mirrored clips keep the original bone offsets
 SIMULATION_BONE = "Simulation"
 
 
-class DatabaseError(RuntimeError):
-    pass
+class DatabaseError(InputError):
+    """A file that is not a usable database (or cache); ``str(e)`` names the file."""
 
 
 @dataclass

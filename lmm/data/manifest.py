@@ -16,6 +16,7 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from lmm.errors import InputError
 from lmm.features import DEFAULT_LAYOUT, SchemaError, layout_from_schema, schema_of
 
 try:  # Python 3.11+
@@ -24,7 +25,7 @@ except ImportError:  # pragma: no cover
     tomllib = None
 
 
-class ManifestError(ValueError):
+class ManifestError(InputError):
     def __init__(self, path, field_name: str, message: str):
         self.path = str(path) if path is not None else None
         self.field = field_name
