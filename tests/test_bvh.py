@@ -265,9 +265,29 @@ def test_declared_frames_and_values_limits(monkeypatch):
         bvh.loads(SMALL)
     monkeypatch.setattr(bvh, "MAX_VALUES", 36)
     bvh.loads(SMALL)
+    monkeypatch.setattr(bvh, "MAX_JOINT_FRAMES", 8)  # 3 frames x 3 joints = 9
+    with pytest.raises(bvh.BVHError, match="at most .* and 8 frames x joints"):
+        bvh.loads(SMALL)
+    monkeypatch.setattr(bvh, "MAX_JOINT_FRAMES", 9)
+    bvh.loads(SMALL)
     monkeypatch.setattr(bvh, "MAX_FRAMES", 2)
     with pytest.raises(bvh.BVHError, match="at most 2 frames"):
         bvh.loads(SMALL)
+
+
+def test_joints_without_channels_still_count_against_the_joint_frames_limit():
+    """Frames of a channel-free skeleton take no text, but posing them costs memory per joint."""
+    joints = "".join(f"JOINT J{i}\n{{\nOFFSET 0 1 0\nCHANNELS 0\n" for i in range(999))
+    text = ("HIERARCHY\nROOT R\n{\nOFFSET 0 0 0\nCHANNELS 0\n" + joints + "}\n" * 1000
+            + "MOTION\nFrames: 5000000\nFrame Time: 0.01\n")
+    tracemalloc.start()
+    try:
+        with pytest.raises(bvh.BVHError, match="frames x joints"):
+            bvh.loads(text)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 20 * 2**20
 
 
 def test_padding_past_what_the_frames_can_hold_is_refused_before_parsing():

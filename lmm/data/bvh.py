@@ -17,7 +17,7 @@ from the declared ``Frames:`` count.
 Limits (checked before the work, so a hostile file costs bounded time and memory): the text is
 at most :data:`MAX_TEXT_BYTES` (a gzip stream is inflated incrementally and abandoned past it), a
 header line at most :data:`MAX_HEADER_LINE_CHARS`, at most :data:`MAX_JOINTS` joints,
-:data:`MAX_FRAMES` frames and :data:`MAX_VALUES` values, and the motion block no longer than its
+:data:`MAX_FRAMES` frames, :data:`MAX_VALUES` values and :data:`MAX_JOINT_FRAMES` frames x joints, and the motion block no longer than its
 declared frames of values can be (:data:`MAX_VALUE_CHARS` per value). Accepted values: a
 ``Frame Time`` from :data:`MIN_FRAME_TIME` to :data:`MAX_FRAME_TIME` seconds, every OFFSET and frame
 value finite with magnitude at most :data:`MAX_ABS_VALUE`.
@@ -61,7 +61,7 @@ __all__ = [
     "BVHError", "Animation", "load", "loads", "save", "dumps",
     "header_text", "format_frames", "frames_field", "frames_field_offset",
     "FRAMES_FIELD_WIDTH", "CHANNEL_NAMES", "MAX_TEXT_BYTES", "MAX_HEADER_LINE_CHARS", "MAX_JOINTS",
-    "MAX_FRAMES", "MAX_VALUES", "MAX_VALUE_CHARS", "MIN_FRAME_TIME", "MAX_FRAME_TIME", "MAX_ABS_VALUE",
+    "MAX_FRAMES", "MAX_VALUES", "MAX_JOINT_FRAMES", "MAX_VALUE_CHARS", "MIN_FRAME_TIME", "MAX_FRAME_TIME", "MAX_ABS_VALUE",
 ]
 
 #: The six standard channel names.
@@ -95,6 +95,11 @@ MAX_FRAMES = 5_000_000
 #: Most values (frames x channels): 256 MB as float64, the motion array itself; the database and the
 #: viewer keep several arrays of that size per take.
 MAX_VALUES = 32 * 2**20
+#: Most joint-frames (frames x joints, joints without channels included): the viewer, the checks and
+#: the database pose every joint of every frame in float64, about 230 bytes a joint-frame at the peak
+#: (measured: 3.46 million take 790 MB), so 3 million keeps loading and posing a take under 700 MB.
+#: A shipped take has 0.18 million; a 23-joint skeleton may have 130,000 frames (72 min at 30 fps).
+MAX_JOINT_FRAMES = 3_000_000
 #: Longest text of one frame value with its separator: a float64 written with all 17 significant
 #: digits, sign and exponent takes 24. The motion block may be at most this per value (plus a line
 #: end per frame and 64 KiB of blank space), which bounds any padding and the length of a frame line.
@@ -581,10 +586,13 @@ class _Parser:
     # --- motion ------------------------------------------------------------------------
     def check_motion_size(self, n_frames: int, n_channels: int, frames_line: int) -> None:
         """The declared size and the size of the motion block, against the limits, before parsing it."""
-        if n_frames > MAX_FRAMES or n_frames * n_channels > MAX_VALUES:
-            raise self.error(frames_line, f"'Frames: {n_frames}' with {n_channels} channels declares more frame "
-                                          f"lines than the reader accepts (at most {MAX_FRAMES} frames and "
-                                          f"{MAX_VALUES} values)")
+        n_joints = len(self.names)
+        if (n_frames > MAX_FRAMES or n_frames * n_channels > MAX_VALUES
+                or n_frames * n_joints > MAX_JOINT_FRAMES):
+            raise self.error(frames_line, f"'Frames: {n_frames}' with {n_joints} joints and {n_channels} channels "
+                                          f"declares more frame lines than the reader accepts (at most "
+                                          f"{MAX_FRAMES} frames, {MAX_VALUES} values and {MAX_JOINT_FRAMES} "
+                                          f"frames x joints)")
         body_chars = self.n - self.pos
         room = n_frames * (n_channels * MAX_VALUE_CHARS + 2) + _BLANK_SLACK_CHARS
         if body_chars > room:
