@@ -8,6 +8,7 @@ import pickle
 import re
 import time
 import tracemalloc
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -199,6 +200,170 @@ def test_error_str_and_pickle():
 def test_missing_file_is_an_oserror(tmp_path):
     with pytest.raises(FileNotFoundError):
         bvh.load(tmp_path / "nope.bvh")
+
+
+# --------------------------------------------------------------------------------------
+# limits: accepted ranges and bounded cost, checked before the work
+# --------------------------------------------------------------------------------------
+
+def _with_frame_time(text: str, value: str) -> str:
+    return re.sub(r"Frame Time: \S+", f"Frame Time: {value}", text)
+
+
+@pytest.mark.parametrize("value, ok", [("0.0001", True), ("1", True), ("1.0001", False), ("1000", False),
+                                       ("0.0000999", False), ("1e-300", False)])
+def test_frame_time_range(value, ok):
+    text = _with_frame_time(SMALL, value)
+    if ok:
+        assert bvh.loads(text).frame_time == float(value)
+    else:
+        with pytest.raises(bvh.BVHError, match="frame time from 0.0001 to 1 seconds") as info:
+            bvh.loads(text, path="t.bvh")
+        assert info.value.line == SMALL.splitlines().index("Frame Time: 0.033333") + 1
+
+
+@pytest.mark.parametrize("value, ok", [("1e6", True), ("-1e6", True), ("1.000001e6", False), ("-1e308", False),
+                                       ("3e38", False)])
+def test_value_magnitude_limit_on_both_parsing_paths(value, ok):
+    lines = SMALL.splitlines()
+    row = next(i for i, line in enumerate(lines) if line.startswith("1.5 "))
+    fast = lines.copy()
+    fast[row] = fast[row].replace("1.5 ", value + " ", 1)
+    slow = fast.copy()
+    slow.append("")  # a blank line is fine for both paths; an extra column below forces the slow one
+    offset = [line.replace("OFFSET 0.0 10.0 0.0", f"OFFSET 0.0 {value} 0.0") for line in lines]
+    for variant, line in ((fast, row + 1), (offset, next(i for i, s in enumerate(lines) if "10.0" in s) + 1)):
+        text = "\n".join(variant) + "\n"
+        if ok:
+            bvh.loads(text)
+        else:
+            with pytest.raises(bvh.BVHError, match="value from -1e\\+06 to 1e\\+06") as info:
+                bvh.loads(text, path="t.bvh")
+            assert info.value.line == line
+    if not ok:  # the slow path (a wrong line first would stop it there): the bad value is found too
+        with pytest.raises(bvh.BVHError, match="value from"):
+            bvh.loads("\n".join(slow) + "\n")
+
+
+def test_not_a_bvh_file_is_not_echoed():
+    secret = "root:x:0:0:root:/root:/bin/bash"
+    with pytest.raises(bvh.BVHError) as info:
+        bvh.loads(secret + "\n", path="/etc/passwd")
+    assert "root" not in info.value.message and str(info.value).startswith("/etc/passwd:1: ")
+
+
+def test_too_many_joints(monkeypatch):
+    monkeypatch.setattr(bvh, "MAX_JOINTS", 2)
+    with pytest.raises(bvh.BVHError, match="more than 2 joints") as info:
+        bvh.loads(SMALL, path="t.bvh")
+    assert info.value.line == SMALL.splitlines().index("\t\tJOINT Head") + 1
+
+
+def test_declared_frames_and_values_limits(monkeypatch):
+    monkeypatch.setattr(bvh, "MAX_VALUES", 35)  # SMALL: 3 frames x 12 channels = 36 values
+    with pytest.raises(bvh.BVHError, match="declares more frame lines than the reader accepts"):
+        bvh.loads(SMALL)
+    monkeypatch.setattr(bvh, "MAX_VALUES", 36)
+    bvh.loads(SMALL)
+    monkeypatch.setattr(bvh, "MAX_JOINT_FRAMES", 8)  # 3 frames x 3 joints = 9
+    with pytest.raises(bvh.BVHError, match="at most .* and 8 frames x joints"):
+        bvh.loads(SMALL)
+    monkeypatch.setattr(bvh, "MAX_JOINT_FRAMES", 9)
+    bvh.loads(SMALL)
+    monkeypatch.setattr(bvh, "MAX_FRAMES", 2)
+    with pytest.raises(bvh.BVHError, match="at most 2 frames"):
+        bvh.loads(SMALL)
+
+
+def test_joints_without_channels_still_count_against_the_joint_frames_limit():
+    """Frames of a channel-free skeleton take no text, but posing them costs memory per joint."""
+    joints = "".join(f"JOINT J{i}\n{{\nOFFSET 0 1 0\nCHANNELS 0\n" for i in range(999))
+    text = ("HIERARCHY\nROOT R\n{\nOFFSET 0 0 0\nCHANNELS 0\n" + joints + "}\n" * 1000
+            + "MOTION\nFrames: 5000000\nFrame Time: 0.01\n")
+    tracemalloc.start()
+    try:
+        with pytest.raises(bvh.BVHError, match="frames x joints"):
+            bvh.loads(text)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 20 * 2**20
+
+
+def test_padding_past_what_the_frames_can_hold_is_refused_before_parsing():
+    room = 3 * (12 * bvh.MAX_VALUE_CHARS + 2) + 65536
+    bvh.loads(SMALL + " " * (room // 2))  # blank space within the slack is fine
+    with pytest.raises(bvh.BVHError, match="motion block has"):
+        bvh.loads(SMALL + " " * room + "\n")
+    one_long_line = SMALL.replace("\n1.5 ", "\n1.5" + " " * 600 + " ")  # a frame line longer than 12 values
+    with pytest.raises(bvh.BVHError, match="line of 6.. characters") as info:
+        bvh.loads(one_long_line + "x\n")  # the x makes the fast path fail
+    assert info.value.line == SMALL.splitlines().index(next(s for s in SMALL.splitlines() if s.startswith("1.5"))) + 1
+
+
+def _bomb(inflated_mib: int) -> bytes:
+    z = zlib.compressobj(9, zlib.DEFLATED, 31)
+    spaces = b" " * 2**20
+    return z.compress(SMALL.encode()) + b"".join(z.compress(spaces) for _ in range(inflated_mib)) + z.flush()
+
+
+def test_gzip_bomb_is_abandoned_at_the_text_limit_with_bounded_memory(monkeypatch, tmp_path):
+    monkeypatch.setattr(bvh, "MAX_TEXT_BYTES", 2**20)
+    bomb = _bomb(64)
+    assert len(bomb) < 100_000
+    path = tmp_path / "bomb.bvh.gz"
+    path.write_bytes(bomb)
+    tracemalloc.start()
+    try:
+        for load in (lambda: bvh.load(path), lambda: bvh.loads(bomb, path=str(path))):
+            with pytest.raises(bvh.BVHError, match="inflates to more than 1048576 bytes") as info:
+                load()
+            assert info.value.path == str(path)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 8 * 2**20  # never the 64 MiB it inflates to
+
+
+def test_big_plain_file_is_refused_before_reading(monkeypatch, tmp_path):
+    path = tmp_path / "big.bvh"
+    path.write_text(SMALL)
+    monkeypatch.setattr(bvh, "MAX_TEXT_BYTES", len(SMALL) - 1)
+    with pytest.raises(bvh.BVHError, match="more than"):
+        bvh.load(path)
+    with pytest.raises(bvh.BVHError, match="more than"):
+        bvh.loads(SMALL)
+    monkeypatch.setattr(bvh, "MAX_TEXT_BYTES", len(SMALL))
+    bvh.load(path)
+
+
+def test_truncated_gzip_within_the_limit_still_names_its_line(monkeypatch):
+    monkeypatch.setattr(bvh, "MAX_TEXT_BYTES", 2**20)
+    small = gzip.compress(SMALL.encode())
+    with pytest.raises(bvh.BVHError, match="truncated gzip") as info:
+        bvh.loads(small[:-9], path="cut.bvh.gz")  # crc and size cut off: the stream is incomplete
+    assert info.value.line == SMALL.count("\n") + 1
+    with pytest.raises(bvh.BVHError, match="inflates to more"):  # past the limit, the limit is what is said
+        bvh.loads(_bomb(4)[:-9], path="cut.bvh.gz")
+
+
+def test_slow_path_keeps_values_packed():
+    """A bad value on the last line of a long file: the line-by-line pass must not hold Python floats."""
+    head, _, rest = SMALL.partition("MOTION\n")
+    frames = [line for line in rest.splitlines()[2:] if line.strip()]
+    n = 20000
+    body = "\n".join(frames * (n // 3)) + "\n" + "1 " * 11 + "2e6\n"
+    text = head + f"MOTION\nFrames: {len(frames) * (n // 3) + 1}\nFrame Time: 0.1\n" + body
+    tracemalloc.start()
+    try:
+        with pytest.raises(bvh.BVHError, match="value from"):
+            bvh.loads(text)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    # text (~0.9 MB) as str and bytes, the fast array (2 MB) and the packed values (2 MB); a list of
+    # Python floats would be about 8 MB more
+    assert peak < 4 * len(text) + 5 * 2**20
 
 
 def test_blank_trailing_lines_and_blank_lines_between_frames_are_fine():

@@ -325,3 +325,99 @@ def test_tags_give_per_frame_masks_kept_in_the_cache_and_outside_the_key(tmp_pat
     retagged, info = load_or_build(manifest(["run", "turn"]), cache_dir=cache)
     assert info.cached and retagged.key == db.key      # tags change no frame: same key, networks stay valid
     assert retagged.tag_names == ["run", "s4", "turn"] and retagged.tag_mask("run").sum() == walk.sum()
+
+
+# ---------------------------------------------------------------------------------------------
+# bounded builds, cache names from the hash only, outputs that cannot be written
+# ---------------------------------------------------------------------------------------------
+
+def test_cache_file_name_is_the_hash_only(tmp_path):
+    import re
+
+    cache = tmp_path / "cache"
+    m = small_manifest(tmp_path)
+    m.write_text(m.read_text().replace('"name": "small"', '"name": "walks \\u00fc (v2) .."'))
+    db, info = load_or_build(m, cache_dir=cache)
+    assert info.path.parent == cache and re.fullmatch(r"db-[0-9a-f]{32}\.npz", info.path.name)
+    assert db.name == "walks ü (v2) .." and [p.name for p in cache.iterdir()] == [info.path.name]
+
+
+def _take_with_frame_time(tmp_path: Path, frame_time: float) -> Path:
+    anim = bvh.load(DATA / "lafan1" / "obstacles3_subject4.bvh.gz").slice(0, 200)
+    anim.frame_time = frame_time
+    path = tmp_path / f"take_{frame_time:g}.bvh"
+    bvh.save(path, anim)
+    return path
+
+
+def test_frame_time_out_of_range_is_a_bvh_error_not_a_division_by_zero(tmp_path):
+    take = _take_with_frame_time(tmp_path, 0.5)
+    take.write_text(take.read_text().replace("Frame Time: 0.5", "Frame Time: 1000"))
+    with pytest.raises(bvh.BVHError, match=r"take_0.5.bvh:\d+: expected a frame time from"):
+        build(load_manifest(small_manifest(tmp_path, clips=[{"file": str(take)}])))
+
+
+def test_a_range_resampled_below_four_frames_is_refused(tmp_path):
+    take = _take_with_frame_time(tmp_path, 1e-4)  # 10 kHz: 100 frames are 10 ms, under one frame at 60 fps
+    m = small_manifest(tmp_path, clips=[{"file": str(take), "ranges": [[0, 100]]}])
+    with pytest.raises(ManifestError, match=r"clips\[0\]\.ranges\[0\].*make 1 at target_fps 60.*at least 4"):
+        build(load_manifest(m))
+
+
+def test_database_frame_limit_stops_the_build_before_resampling(tmp_path, monkeypatch):
+    import lmm.data.database as database
+
+    calls = []
+    real = database.resample
+    monkeypatch.setattr(database, "resample", lambda *a, **k: calls.append(1) or real(*a, **k))
+    monkeypatch.setattr(database, "MAX_DATABASE_FRAMES", 1500)  # the first range: 599 x 2 mirrored
+    with pytest.raises(ManifestError, match=r"clips\[0\]\.ranges\[1\].*pass 1500 frames"):
+        build(load_manifest(small_manifest(tmp_path, clips=[
+            {"file": str(DATA / "lafan1" / "obstacles3_subject4.bvh.gz"), "ranges": [[100, 400], [500, 620]]}])))
+    assert len(calls) == 1  # the second range was refused before it was resampled
+
+
+def test_unwritable_out_is_an_oserror_and_unwritable_cache_is_reported(tmp_path, monkeypatch):
+    def refuse(self, path):
+        raise PermissionError(13, "Permission denied", str(path))
+
+    monkeypatch.setattr(Database, "save", refuse)
+    m = small_manifest(tmp_path, clips=[{"file": str(DATA / "lafan1" / "obstacles3_subject4.bvh.gz"),
+                                         "ranges": [[0, 50]]}])
+    with pytest.raises(PermissionError):
+        load_or_build(m, out_path=tmp_path / "ro" / "db.npz")
+    db, info = load_or_build(m, cache_dir=tmp_path / "cache")
+    assert info.path is None and "cannot write the cache" in info.not_saved and db.n_frames > 0
+
+
+def test_unreadable_take_is_a_manifest_error(tmp_path, monkeypatch):
+    import lmm.data.database as database
+    from lmm.data.database import manifest_key
+
+    def refuse(path):
+        raise PermissionError(13, "Permission denied", str(path))
+
+    monkeypatch.setattr(database, "_file_digest", refuse)
+    with pytest.raises(ManifestError, match=r"clips\[0\]\.file.*Permission denied"):
+        manifest_key(load_manifest(small_manifest(tmp_path)))
+
+
+def test_build_db_out_into_a_folder_it_cannot_write(tmp_path):
+    blocker = tmp_path / "file.txt"
+    blocker.write_text("a file, not a folder")
+    out = blocker / "db.npz"
+    m = small_manifest(tmp_path, clips=[{"file": str(DATA / "lafan1" / "obstacles3_subject4.bvh.gz"),
+                                         "ranges": [[0, 50]]}])
+    r = subprocess.run([sys.executable, "-m", "app.cli", "build-db", "--manifest", str(m), "--out", str(out),
+                        "--quiet", "--no-checks"], capture_output=True, text=True, timeout=120)
+    lines = [line for line in r.stderr.splitlines() if line.strip()]
+    assert r.returncode == 1 and len(lines) == 1 and "db.npz" in lines[0] and "Traceback" not in r.stderr
+    assert "file " not in r.stdout and not out.exists()
+
+
+def test_build_db_refuses_a_bad_manifest_field_in_one_line(tmp_path):
+    m = small_manifest(tmp_path, target_fps=1e12)
+    r = subprocess.run([sys.executable, "-m", "app.cli", "build-db", "--manifest", str(m), "--quiet"],
+                       capture_output=True, text=True, timeout=60)
+    lines = [line for line in r.stderr.splitlines() if line.strip()]
+    assert r.returncode == 1 and len(lines) == 1 and "manifest.json" in lines[0] and "'target_fps'" in lines[0]

@@ -12,10 +12,20 @@ def add_arguments(p) -> None:
     p.add_argument("--no-checks", action="store_true", help="skip the data checks (see check-data)")
 
 
+def _error(message: str) -> None:
+    print(f"lmm-studio build-db: error: {message}", file=sys.stderr)
+
+
+def _os_error_line(e: OSError, out) -> str:
+    """An OSError as one line naming the file asked for (not a temporary name or a parent folder)."""
+    target = out if out else e.filename
+    reason = e.strerror or str(e) or type(e).__name__
+    return f"cannot write {target}: {reason}" if target is not None else reason
+
+
 def main(args) -> int:
-    from lmm.data.bvh import BVHError
-    from lmm.data.database import DatabaseError, load_or_build
-    from lmm.data.manifest import ManifestError
+    from lmm.data.database import load_or_build
+    from lmm.errors import InputError
     from lmm.progress import Progress
 
     bar = None
@@ -30,15 +40,18 @@ def main(args) -> int:
 
     try:
         db, info = load_or_build(args.manifest, progress=progress, rebuild=args.rebuild, out_path=args.out)
-    except (BVHError, ManifestError, DatabaseError) as e:
-        print(f"error: {e}", file=sys.stderr)
+    except InputError as e:  # a bad manifest, take or field: the line names the file and field
+        _error(str(e))
+        return 1
+    except OSError as e:  # --out not writable (read-only folder, full disk): nothing was written there
+        _error(_os_error_line(e, args.out))
         return 1
     finally:
         if bar is not None:
             bar.close()
     source = "cache" if info.cached else "built"
     print(f"database  {db.name} ({source} in {info.seconds:.2f} s)")
-    print(f"file      {info.path}")
+    print(f"file      {info.path}" if info.path is not None else f"file      not saved ({info.not_saved})")
     print(f"clips     {db.n_ranges} ranges ({int(db.range_mirrored.sum())} mirrored)")
     print(f"frames    {db.n_frames} at {db.fps:g} fps")
     print(f"seconds   {db.seconds:.1f}")

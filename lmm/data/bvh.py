@@ -14,6 +14,14 @@ finiteness. Only when that fails does a slow line-by-line pass run, whose only
 job is to find the first bad line for the error message. Nothing is allocated
 from the declared ``Frames:`` count.
 
+Limits (checked before the work, so a hostile file costs bounded time and memory): the text is
+at most :data:`MAX_TEXT_BYTES` (a gzip stream is inflated incrementally and abandoned past it), a
+header line at most :data:`MAX_HEADER_LINE_CHARS`, at most :data:`MAX_JOINTS` joints,
+:data:`MAX_FRAMES` frames, :data:`MAX_VALUES` values and :data:`MAX_JOINT_FRAMES` frames x joints, and the motion block no longer than its
+declared frames of values can be (:data:`MAX_VALUE_CHARS` per value). Accepted values: a
+``Frame Time`` from :data:`MIN_FRAME_TIME` to :data:`MAX_FRAME_TIME` seconds, every OFFSET and frame
+value finite with magnitude at most :data:`MAX_ABS_VALUE`.
+
 Every problem in a file raises :class:`BVHError`, which names the file, the
 1-based line and what was expected; ``str(e) == f"{path}:{line}: {message}"``
 (missing parts left out). A file that cannot be opened raises the usual
@@ -31,6 +39,7 @@ changes.
 """
 from __future__ import annotations
 
+import array
 import dataclasses
 import gzip
 import io
@@ -46,11 +55,13 @@ import numpy as np
 
 from lmm import quat
 from lmm.data.atomic import write_bytes_atomic
+from lmm.errors import InputError
 
 __all__ = [
     "BVHError", "Animation", "load", "loads", "save", "dumps",
     "header_text", "format_frames", "frames_field", "frames_field_offset",
-    "FRAMES_FIELD_WIDTH", "CHANNEL_NAMES",
+    "FRAMES_FIELD_WIDTH", "CHANNEL_NAMES", "MAX_TEXT_BYTES", "MAX_HEADER_LINE_CHARS", "MAX_JOINTS",
+    "MAX_FRAMES", "MAX_VALUES", "MAX_JOINT_FRAMES", "MAX_VALUE_CHARS", "MIN_FRAME_TIME", "MAX_FRAME_TIME", "MAX_ABS_VALUE",
 ]
 
 #: The six standard channel names.
@@ -66,12 +77,50 @@ _FRAMES_PREFIX = "Frames: "
 
 _GZIP_MAGIC = b"\x1f\x8b"
 
+# --------------------------------------------------------------------------------------
+# what the reader accepts: each limit is what the rest of the program can actually use
+# --------------------------------------------------------------------------------------
+
+#: Largest BVH text, after gzip. Parsing costs about 3x the text in memory (the text, its motion
+#: block as bytes, the values), so 128 MiB stays well under 1 GB; it is 40x the largest shipped take
+#: (3.2 MB) and holds about 190,000 frames of a 69-channel skeleton (1.7 hours at 30 fps).
+MAX_TEXT_BYTES = 128 * 2**20
+#: Longest header line (HIERARCHY, ROOT/JOINT name, OFFSET, CHANNELS, Frames:): real ones are under
+#: 100 characters; a line is split into words, so its length bounds that work.
+MAX_HEADER_LINE_CHARS = 4096
+#: Most joints: full-body skeletons with fingers and a face rig have a few hundred.
+MAX_JOINTS = 1000
+#: Most frames: 11.5 hours at 120 fps; more cannot fit in MAX_TEXT_BYTES with even one channel each.
+MAX_FRAMES = 5_000_000
+#: Most values (frames x channels): 256 MB as float64, the motion array itself; the database and the
+#: viewer keep several arrays of that size per take.
+MAX_VALUES = 32 * 2**20
+#: Most joint-frames (frames x joints, joints without channels included): the viewer, the checks and
+#: the database pose every joint of every frame in float64, about 230 bytes a joint-frame at the peak
+#: (measured: 3.46 million take 790 MB), so 3 million keeps loading and posing a take under 700 MB.
+#: A shipped take has 0.18 million; a 23-joint skeleton may have 130,000 frames (72 min at 30 fps).
+MAX_JOINT_FRAMES = 3_000_000
+#: Longest text of one frame value with its separator: a float64 written with all 17 significant
+#: digits, sign and exponent takes 24. The motion block may be at most this per value (plus a line
+#: end per frame and 64 KiB of blank space), which bounds any padding and the length of a frame line.
+MAX_VALUE_CHARS = 32
+#: Accepted ``Frame Time`` (seconds): 10 kHz capture to 1 frame per second. The database resamples
+#: a take by source_fps / target_fps (target 10..240 fps); slower than 1 fps is not an animation and
+#: rounds to 0 fps, faster than 10 kHz leaves a few frames per range after resampling.
+MIN_FRAME_TIME = 1e-4
+MAX_FRAME_TIME = 1.0
+#: Largest magnitude of an OFFSET or frame value: 10 km in centimetres (1 km in millimetres), or
+#: 2,778 turns in degrees. Beyond it float32 (the database, the GPU) keeps less than 1 mm of a
+#: position in metres, and velocities from differences of such values lose their meaning.
+MAX_ABS_VALUE = 1e6
+_BLANK_SLACK_CHARS = 65536
+
 
 # --------------------------------------------------------------------------------------
 # errors
 # --------------------------------------------------------------------------------------
 
-class BVHError(Exception):
+class BVHError(InputError):
     """A malformed BVH file. ``path`` (str or None), ``line`` (1-based int or None), ``message``."""
 
     def __init__(self, message: str, path: str | os.PathLike | None = None, line: int | None = None):
@@ -324,6 +373,7 @@ class _Parser:
         self.channels: list[tuple[str, ...]] = []
         self.open_lines: list[int] = []
         self.end_sites: dict[int, np.ndarray] = {}
+        self.max_line_chars = MAX_HEADER_LINE_CHARS
 
     def error(self, line: int | None, message: str) -> BVHError:
         return BVHError(message, self.path, line)
@@ -335,6 +385,10 @@ class _Parser:
             end = text.find("\n", self.pos)
             if end < 0:
                 end = self.n
+            if end - self.pos > self.max_line_chars:
+                self.lineno += 1
+                raise self.error(self.lineno, f"line of {end - self.pos} characters: expected at most "
+                                              f"{self.max_line_chars} here")
             line = text[self.pos:end]
             self.pos = end + 1
             self.lineno += 1
@@ -354,8 +408,8 @@ class _Parser:
         if not self.text or self.text.isspace():
             raise self.error(1, "empty file: expected HIERARCHY")
         ln, toks = self.expect_line("HIERARCHY")
-        if toks != ["HIERARCHY"]:
-            raise self.error(ln, f"expected HIERARCHY, found {_show(toks)}")
+        if toks != ["HIERARCHY"]:  # the words of a file that is no BVH are not echoed (it may be any file)
+            raise self.error(ln, "expected HIERARCHY as the first line: not a BVH file")
         while True:
             item = self.next_line()
             if item is None:
@@ -372,6 +426,7 @@ class _Parser:
         n_frames, frames_line = self.parse_frames()
         frame_time = self.parse_frame_time()
         n_channels = sum(len(c) for c in self.channels)
+        self.check_motion_size(n_frames, n_channels, frames_line)
         motion = self.parse_motion(n_frames, n_channels, frames_line)
         return Animation(names=self.names, parents=np.asarray(self.parents, dtype=np.int64),
                          offsets=np.asarray(self.offsets, dtype=np.float64).reshape(-1, 3),
@@ -422,6 +477,8 @@ class _Parser:
         offset = self.parse_offset(f"{kw} {name!r}")
         chans = self.parse_channels(f"{kw} {name!r}")
         j = len(self.names)
+        if j >= MAX_JOINTS:
+            raise self.error(ln, f"more than {MAX_JOINTS} joints: expected at most {MAX_JOINTS}")
         self.names.append(name)
         self.name_set.add(name)
         self.parents.append(parent)
@@ -457,6 +514,9 @@ class _Parser:
                 raise self.error(ln, f"expected a number in OFFSET, found {t!r}") from None
             if not math.isfinite(v):
                 raise self.error(ln, f"expected a finite number in OFFSET, found {t!r}")
+            if abs(v) > MAX_ABS_VALUE:
+                raise self.error(ln, f"expected an OFFSET value from {-MAX_ABS_VALUE:g} to {MAX_ABS_VALUE:g}, "
+                                     f"found {t[:20]!r}")
             values.append(v)
         return values
 
@@ -516,59 +576,88 @@ class _Parser:
                 raise ValueError
         except ValueError:
             raise self.error(ln, f"expected a positive frame time in seconds after 'Frame Time:', "
-                                 f"found {' '.join(rest)!r}") from None
+                                 f"found {' '.join(rest)[:40]!r}") from None
+        if not MIN_FRAME_TIME <= t <= MAX_FRAME_TIME:
+            raise self.error(ln, f"expected a frame time from {MIN_FRAME_TIME:g} to {MAX_FRAME_TIME:g} seconds "
+                                 f"({1 / MAX_FRAME_TIME:g} to {1 / MIN_FRAME_TIME:g} fps) after 'Frame Time:', "
+                                 f"found {rest[0][:40]!r}")
         return t
 
     # --- motion ------------------------------------------------------------------------
+    def check_motion_size(self, n_frames: int, n_channels: int, frames_line: int) -> None:
+        """The declared size and the size of the motion block, against the limits, before parsing it."""
+        n_joints = len(self.names)
+        if (n_frames > MAX_FRAMES or n_frames * n_channels > MAX_VALUES
+                or n_frames * n_joints > MAX_JOINT_FRAMES):
+            raise self.error(frames_line, f"'Frames: {n_frames}' with {n_joints} joints and {n_channels} channels "
+                                          f"declares more frame lines than the reader accepts (at most "
+                                          f"{MAX_FRAMES} frames, {MAX_VALUES} values and {MAX_JOINT_FRAMES} "
+                                          f"frames x joints)")
+        body_chars = self.n - self.pos
+        room = n_frames * (n_channels * MAX_VALUE_CHARS + 2) + _BLANK_SLACK_CHARS
+        if body_chars > room:
+            raise self.error(frames_line, f"the motion block has {body_chars} characters, more than "
+                                          f"{n_frames} frame lines of {n_channels} values can hold "
+                                          f"(at most {room}: {MAX_VALUE_CHARS} per value)")
+        # a frame line is at most its values' text (checked line by line on the slow path)
+        self.max_line_chars = n_channels * MAX_VALUE_CHARS + 2 + 256
+
     def parse_motion(self, n_frames: int, n_channels: int, frames_line: int) -> np.ndarray:
         if n_channels == 0:
             item = self.next_line()
             if item is not None:
                 raise self.error(item[0], "expected no frame values: the hierarchy declares 0 channels")
             return np.zeros((n_frames, 0))
-        body = self.text[self.pos:]
+        # bytes, not a StringIO (4 bytes a character); at most one row more than declared is read
+        body = self.text[self.pos:].encode("utf-8")
         if n_frames > 0 and body and not body.isspace():
             try:
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore")
-                    motion = np.loadtxt(io.StringIO(body), dtype=np.float64, comments=None, ndmin=2)
+                    motion = np.loadtxt(io.BytesIO(body), dtype=np.float64, comments=None, ndmin=2,
+                                        max_rows=n_frames + 1, encoding="utf-8")
             except Exception:
                 motion = None
+            del body
             if (motion is not None and motion.shape == (n_frames, n_channels)
-                    and np.isfinite(motion).all()):
+                    and (np.abs(motion) <= MAX_ABS_VALUE).all()):  # NaN fails the comparison too
                 return motion
         return self.parse_motion_slowly(n_frames, n_channels, frames_line)
 
     def parse_motion_slowly(self, n_frames: int, n_channels: int, frames_line: int) -> np.ndarray:
-        """Line by line, to find the first bad line (or, failing that, to parse the data)."""
-        rows: list[list[float]] = []
+        """Line by line, to find the first bad line (or, failing that, to parse the data).
+        Values are kept packed (8 bytes each), never as Python lists of floats."""
+        values = array.array("d")
+        n_rows = 0
         while True:
             item = self.next_line()
             if item is None:
                 break
             ln, toks = item
-            if len(rows) == n_frames:
+            if n_rows == n_frames:
                 raise self.error(ln, f"expected end of file: 'Frames: {n_frames}' on line {frames_line} "
                                      f"declares {n_frames} frames but more frame lines follow")
             if len(toks) != n_channels:
-                raise self.error(ln, f"expected {n_channels} values on frame line {len(rows) + 1}, "
+                raise self.error(ln, f"expected {n_channels} values on frame line {n_rows + 1}, "
                                      f"found {len(toks)}")
-            values = []
             for k, t in enumerate(toks):
                 try:
                     v = float(t)
                 except ValueError:
-                    raise self.error(ln, f"expected a number (value {k + 1} of frame {len(rows) + 1}), "
+                    raise self.error(ln, f"expected a number (value {k + 1} of frame {n_rows + 1}), "
                                          f"found {t[:20]!r}") from None
                 if not math.isfinite(v):
                     raise self.error(ln, f"expected a finite number (value {k + 1} of frame "
-                                         f"{len(rows) + 1}), found {t[:20]!r}")
+                                         f"{n_rows + 1}), found {t[:20]!r}")
+                if abs(v) > MAX_ABS_VALUE:
+                    raise self.error(ln, f"expected a value from {-MAX_ABS_VALUE:g} to {MAX_ABS_VALUE:g} "
+                                         f"(value {k + 1} of frame {n_rows + 1}), found {t[:20]!r}")
                 values.append(v)
-            rows.append(values)
-        if len(rows) != n_frames:
+            n_rows += 1
+        if n_rows != n_frames:
             raise self.error(frames_line, f"expected {n_frames} frame lines as declared by 'Frames: {n_frames}', "
-                                          f"found {len(rows)} (the file ends at line {self.lineno})")
-        return np.asarray(rows, dtype=np.float64).reshape(n_frames, n_channels)
+                                          f"found {n_rows} (the file ends at line {self.lineno})")
+        return np.frombuffer(values, dtype=np.float64).reshape(n_frames, n_channels).copy()
 
 
 def _decode(data: bytes, path: str | None) -> str:
@@ -584,18 +673,52 @@ def _decode(data: bytes, path: str | None) -> str:
     return text
 
 
-def _gunzip(data: bytes, path: str | None) -> bytes:
+def _too_big(path: str | None, what: str) -> BVHError:
+    return BVHError(f"{what} more than {MAX_TEXT_BYTES} bytes of text ({MAX_TEXT_BYTES >> 20} MiB): "
+                    f"expected a smaller file (split the take)", path)
+
+
+def _gunzip(f, path: str | None) -> bytes:
+    """Inflate the gzip stream of the open binary file ``f``, incrementally: a stream that inflates
+    past :data:`MAX_TEXT_BYTES` is abandoned there (memory and time stay bounded)."""
+    start = f.tell()
     try:
-        return gzip.decompress(data)
+        with gzip.GzipFile(fileobj=f, mode="rb") as g:
+            data = g.read(MAX_TEXT_BYTES + 1)
     except (EOFError, OSError, zlib.error, ValueError) as e:
-        # decompress what we can, to say on which line of the text the data stops
+        # inflate what we can (bounded), to say on which line of the text the data stops
+        f.seek(start)
+        inflater = zlib.decompressobj(wbits=31)
+        partial = 0
+        lines = 0
         try:
-            partial = zlib.decompressobj(wbits=31).decompress(data)
+            for chunk in iter(lambda: f.read(1 << 20), b""):
+                out = inflater.decompress(chunk, MAX_TEXT_BYTES - partial)
+                partial += len(out)
+                lines += out.count(b"\n")
+                if partial >= MAX_TEXT_BYTES or inflater.unconsumed_tail:
+                    break
         except zlib.error:
-            partial = b""
-        line = partial.count(b"\n") + 1 if partial else None
+            pass
+        line = lines + 1 if partial else None
         raise BVHError(f"corrupt or truncated gzip data ({e}): expected a complete gzip stream",
                        path, line) from None
+    if len(data) > MAX_TEXT_BYTES:
+        raise _too_big(path, "the gzip data inflates to")
+    return data
+
+
+def _read_bytes(f, path: str | None) -> bytes:
+    """The (inflated) bytes of the open binary file ``f``, at most :data:`MAX_TEXT_BYTES`."""
+    start = f.tell()
+    if f.read(2) == _GZIP_MAGIC:
+        f.seek(start)
+        return _gunzip(f, path)
+    f.seek(start)
+    data = f.read(MAX_TEXT_BYTES + 1)  # not trusting the size a file reports (pipes, /dev/zero)
+    if len(data) > MAX_TEXT_BYTES:
+        raise _too_big(path, "the file has")
+    return data
 
 
 def _parse_text(text: str, path: str | None) -> Animation:
@@ -613,10 +736,9 @@ def loads(text: str | bytes, path: str | os.PathLike | None = None) -> Animation
     """Parse BVH text (``bytes`` are accepted too, gzip-compressed or not)."""
     path = None if path is None else os.fspath(path)
     if isinstance(text, (bytes, bytearray, memoryview)):
-        data = bytes(text)
-        if data[:2] == _GZIP_MAGIC:
-            data = _gunzip(data, path)
-        text = _decode(data, path)
+        text = _decode(_read_bytes(io.BytesIO(text), path), path)
+    elif len(text) > MAX_TEXT_BYTES:
+        raise _too_big(path, "the text has")
     return _parse_text(text, path)
 
 
@@ -624,10 +746,11 @@ def load(path: str | os.PathLike) -> Animation:
     """Read a ``.bvh`` file, or a gzip-compressed one (detected by its magic bytes)."""
     p = os.fspath(path)
     with open(p, "rb") as f:
-        data = f.read()
-    if data[:2] == _GZIP_MAGIC:
-        data = _gunzip(data, p)
-    return _parse_text(_decode(data, p), p)
+        if os.fstat(f.fileno()).st_size > MAX_TEXT_BYTES and f.read(2) != _GZIP_MAGIC:
+            raise _too_big(p, "the file has")  # refused before reading it
+        f.seek(0)
+        text = _decode(_read_bytes(f, p), p)  # the bytes are freed once decoded
+    return _parse_text(text, p)
 
 
 # --------------------------------------------------------------------------------------

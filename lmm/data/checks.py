@@ -26,6 +26,7 @@ import numpy as np
 from lmm import quat
 from lmm.data import bvh
 from lmm.data.manifest import Manifest
+from lmm.errors import InputError
 
 # -- thresholds (metres, seconds) ---------------------------------------------------------------------
 GROUND_PERCENTILE = 2.0          # a take's ground level: this percentile of the lower toe's height
@@ -59,7 +60,7 @@ SPEED_BINS_M_S = (0.0, 0.25, 0.75, 1.25, 1.75, 2.5, 3.25, 4.0, np.inf)
 TURN_BINS_DEG_S = (0.0, 15.0, 45.0, 90.0, 180.0, 360.0, np.inf)
 
 
-class CheckError(ValueError):
+class CheckError(InputError):
     """A take or manifest the checks cannot read; the message names the file."""
 
 

@@ -6,7 +6,10 @@ BVH -> local rotations/positions (unit scaled) -> trim to ranges -> cubic resamp
 -> foot contacts. Bone 0 is always the simulation bone; its position/velocity are in world space and
 every other bone is local to its parent (velocities and angular velocities in the parent's frame).
 
-The result is cached as a pickle-free ``.npz`` keyed by a hash of the file contents and settings.
+The result is cached as a pickle-free ``.npz`` keyed by a hash of the file contents and settings; the
+cache file's name is made of that hash only (never of text from the manifest), and it is written
+atomically. A build stops with a ManifestError before resampling a range that would take the database
+past :data:`MAX_DATABASE_FRAMES` frames.
 """
 from __future__ import annotations
 
@@ -24,13 +27,20 @@ from lmm.data import bvh
 from lmm.data.atomic import atomic_write
 from lmm.filters import catmull_rom, central_difference, median_filter, savgol_smooth
 from lmm.data.manifest import Manifest, ManifestError, load_manifest
+from lmm.errors import InputError
 
 DB_FORMAT_VERSION = 5  # 5: mirrored clips keep the original bone offsets
 SIMULATION_BONE = "Simulation"
+#: Most frames in a built database (mirrored copies included): 55 minutes at 60 fps, 3.5x the shipped
+#: set (57,500 frames). Building costs about 6 KB a frame at its peak (the shipped set: 350 MB), so this
+#: keeps a build near 1.2 GB; the runtime keeps about 1.2 KB a frame (23 bones).
+MAX_DATABASE_FRAMES = 200_000
+#: Fewest frames in a range after resampling: the velocities and the trajectory features need them.
+MIN_RANGE_FRAMES = 4
 
 
-class DatabaseError(RuntimeError):
-    pass
+class DatabaseError(InputError):
+    """A file that is not a usable database (or cache); ``str(e)`` names the file."""
 
 
 @dataclass
@@ -268,6 +278,14 @@ def mirror_local(local_rot, local_pos, parents, mirror_idx):
     return global_to_local(g_rot, g_pos, parents)
 
 
+def resampled_length(n: int, source_fps: float, target_fps: float, speed_scale: float = 1.0) -> int:
+    """How many frames :func:`resample` makes of ``n`` (computed without making them)."""
+    step = source_fps * speed_scale / target_fps
+    if abs(step - 1.0) < 1e-12:
+        return int(n)
+    return max(0, int(np.ceil((n - 1 + 1e-9) / step)))
+
+
 def resample(local_rot, local_pos, source_fps: float, target_fps: float, speed_scale: float = 1.0):
     """Cubic resampling of one contiguous range; ``speed_scale`` > 1 plays the motion faster."""
     n = local_rot.shape[0]
@@ -359,9 +377,20 @@ def manifest_key(manifest: Manifest) -> str:
     h = hashlib.sha256()
     h.update(f"lmm-db-v{DB_FORMAT_VERSION}".encode())
     h.update(json.dumps(manifest.settings(), sort_keys=True).encode())
-    for clip in manifest.clips:
-        h.update(_file_digest(clip.file).encode())
+    for ci, clip in enumerate(manifest.clips):
+        try:
+            h.update(_file_digest(clip.file).encode())
+        except OSError as e:
+            raise ManifestError(manifest.path, f"clips[{ci}].file",
+                                f"cannot read {clip.file}: {e.strerror or type(e).__name__}") from None
     return h.hexdigest()
+
+
+def cache_file_name(key: str) -> str:
+    """The cache file of a database: its key only (hex digits), never text from the manifest."""
+    if not key or any(c not in "0123456789abcdef" for c in key):
+        raise ValueError(f"a database key is hex digits, got {key[:20]!r}")
+    return f"db-{key[:32]}.npz"
 
 
 def default_cache_dir() -> Path:
@@ -379,8 +408,14 @@ def build(manifest: Manifest, progress=None) -> Database:
     total_ranges = sum(len(c.ranges) if c.ranges else 1 for c in manifest.clips) * (2 if manifest.mirror else 1)
     done = 0
     mpath = manifest.path
+    total_frames = 0
+    copies = 2 if manifest.mirror else 1
     for ci, clip in enumerate(manifest.clips):
-        anim = bvh.load(clip.file)  # BVHError names the file and line
+        try:
+            anim = bvh.load(clip.file)  # BVHError names the file and line
+        except OSError as e:
+            raise ManifestError(mpath, f"clips[{ci}].file",
+                                f"cannot read {clip.file}: {e.strerror or type(e).__name__}") from None
         if names is None:
             names, parents = list(anim.names), np.asarray(anim.parents, dtype=np.int64)
             for role, bone_name in manifest.bones.items():
@@ -401,8 +436,20 @@ def build(manifest: Manifest, progress=None) -> Database:
             if stop > anim.n_frames:
                 raise ManifestError(mpath, f"clips[{ci}].ranges[{ri}]",
                                     f"stop {stop} is past the last frame of {clip.file.name} ({anim.n_frames} frames)")
-            if stop - start < 4:
+            if stop - start < MIN_RANGE_FRAMES:
                 raise ManifestError(mpath, f"clips[{ci}].ranges[{ri}]", "a range needs at least 4 frames")
+            n_out = resampled_length(stop - start, source_fps, manifest.target_fps, manifest.speed_scale)
+            if n_out < MIN_RANGE_FRAMES:
+                raise ManifestError(mpath, f"clips[{ci}].ranges[{ri}]",
+                                    f"{stop - start} frames at {source_fps:g} fps make {n_out} at target_fps "
+                                    f"{manifest.target_fps:g} (speed_scale {manifest.speed_scale:g}): a range "
+                                    f"needs at least {MIN_RANGE_FRAMES} frames")
+            total_frames += n_out * copies
+            if total_frames > MAX_DATABASE_FRAMES:
+                raise ManifestError(mpath, f"clips[{ci}].ranges[{ri}]",
+                                    f"the database would pass {MAX_DATABASE_FRAMES} frames here (at target_fps "
+                                    f"{manifest.target_fps:g}, speed_scale {manifest.speed_scale:g}"
+                                    f"{', mirrored' if manifest.mirror else ''}): use fewer or shorter ranges")
             rot, pos = resample(quat.unroll(local_rot[start:stop]), local_pos[start:stop], source_fps,
                                 manifest.target_fps, manifest.speed_scale)
             base = f"{clip.file.name.split('.')[0]}[{start}:{stop}]"
@@ -485,18 +532,22 @@ def set_feature_schema(db: Database, manifest: Manifest) -> None:
 
 @dataclass
 class LoadInfo:
-    path: Path
+    path: Path | None     # the database file read or written; None when it could not be saved
     cached: bool
     seconds: float
+    not_saved: str = ""   # why a built database could not be cached (a read-only cache folder...)
 
 
 def load_or_build(manifest_path=None, cache_dir=None, progress=None, rebuild: bool = False,
                   out_path=None) -> tuple[Database, LoadInfo]:
-    """The database for a manifest, from the cache when its key matches, else built and cached."""
+    """The database for a manifest, from the cache when its key matches, else built and cached.
+
+    With ``out_path`` the database is written there and a failure to write it is an ``OSError`` (the
+    caller asked for that file); a cache that cannot be written is only reported in ``LoadInfo``."""
     t0 = time.perf_counter()
     manifest = load_manifest(manifest_path or DEFAULT_MANIFEST)
     key = manifest_key(manifest)
-    path = Path(out_path) if out_path else Path(cache_dir or default_cache_dir()) / f"db-{manifest.name}-{key[:16]}.npz"
+    path = Path(out_path) if out_path else Path(cache_dir or default_cache_dir()) / cache_file_name(key)
     if not rebuild and path.is_file():
         try:
             db = Database.load(path)
@@ -516,10 +567,14 @@ def load_or_build(manifest_path=None, cache_dir=None, progress=None, rebuild: bo
         except DatabaseError:
             pass  # stale or damaged cache: rebuild below
     db = build(manifest, progress=progress)
+    if out_path:
+        db.save(path)  # atomic: an OSError leaves no file behind, and the caller reports it
+        return db, LoadInfo(path, False, time.perf_counter() - t0)
     try:
         db.save(path)
-    except OSError:
-        pass  # a read-only cache location must not stop the tool
+    except OSError as e:  # a read-only or full cache location must not stop the tool
+        return db, LoadInfo(None, False, time.perf_counter() - t0,
+                            not_saved=f"cannot write the cache {path}: {e.strerror or type(e).__name__}")
     return db, LoadInfo(path, False, time.perf_counter() - t0)
 
 

@@ -7,15 +7,19 @@ letters, digits, ``_`` and ``-``.
 ``features`` declares the feature schema: the channels matched (kind, bone or role, trajectory sample
 times in frames ahead, default weight), as a list of tables or the name of a JSON file holding one
 (relative to the manifest). Without it the shipped schema is used (:data:`lmm.features.DEFAULT_LAYOUT`).
-Every problem raises :class:`ManifestError` naming the file and the field.
+Every problem raises :class:`ManifestError` naming the file and the field (paths, never the contents
+of the files they point at). Every number has an accepted range and every list a length limit (the
+``MAX_``/``MIN_`` constants below, each with what it is derived from), all checked before any work.
 """
 from __future__ import annotations
 
 import json
+import math
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from lmm.errors import InputError
 from lmm.features import DEFAULT_LAYOUT, SchemaError, layout_from_schema, schema_of
 
 try:  # Python 3.11+
@@ -24,7 +28,7 @@ except ImportError:  # pragma: no cover
     tomllib = None
 
 
-class ManifestError(ValueError):
+class ManifestError(InputError):
     def __init__(self, path, field_name: str, message: str):
         self.path = str(path) if path is not None else None
         self.field = field_name
@@ -34,6 +38,48 @@ class ManifestError(ValueError):
 
 
 TAG_PATTERN = re.compile(r"^[a-z0-9_-]+$")
+
+# --- accepted ranges and sizes (what the build can actually do) ----------------------------------------
+#: Largest manifest file: the shipped one is 5 KB; 1 MiB holds thousands of ranges.
+MAX_MANIFEST_BYTES = 1 << 20
+#: Deepest nesting of lists and tables: a manifest needs 6 (clips > clip > ranges > range > tags); the
+#: limit keeps every later walk over the data far from Python's recursion limit.
+MAX_NESTING = 8
+#: Longest ``name`` (shown in the studio and stored in the database; never a file name) and ``description``.
+MAX_NAME_CHARS = 80
+MAX_DESCRIPTION_CHARS = 4096
+#: Most clip entries and ranges (all clips together): each clip is one BVH read (0.1-0.5 s for a shipped
+#: take) and each range one resampling pass; the shipped set has 6 clips and 40 ranges.
+MAX_CLIPS = 256
+MAX_RANGES = 4096
+#: Most tags on a range, longest tag, most bone roles, mirror name pairs, longest joint or mark name.
+MAX_TAGS = 32
+MAX_TAG_CHARS = 32
+MAX_BONES = 64
+MAX_MIRROR_PAIRS = 16
+MAX_JOINT_NAME_CHARS = 256
+MAX_PATH_CHARS = 4096
+#: Largest frame index in a range: the BVH reader accepts at most this many frames.
+MAX_RANGE_FRAME = 5_000_000
+#: ``unit_scale``: file units to metres, from 0.1 mm (1e-4) to 100 m per unit (mm 0.001, inch 0.0254, cm 0.01).
+UNIT_SCALE_RANGE = (1e-4, 100.0)
+#: ``target_fps``: the database's frame rate, also the controllers' tick: below 10 fps trajectory samples
+#: and inertialization have too few frames to work with, above 240 fps the database grows with no gain
+#: (capture is 30-120 fps); 1e5 built for a minute and 5.5 GB before this limit.
+TARGET_FPS_RANGE = (10.0, 240.0)
+#: ``speed_scale``: playback speed of every clip; 0.1..10 keeps the resampled frame count within 10x of
+#: the source's (1e-9 would ask for a billion frames per source frame).
+SPEED_SCALE_RANGE = (0.1, 10.0)
+#: Savitzky-Golay smoothing of the simulation bone: odd windows up to 601 frames (10 s at 60 fps; the
+#: cost is window x frames), polynomial order 0..7 (a higher order fits noise and is ill-conditioned).
+MAX_SMOOTHING_WINDOW = 601
+MAX_SMOOTHING_ORDER = 7
+#: Contacts: the median window is odd, at most 61 frames (1 s at 60 fps; a median wider than a step
+#: erases the contact, and its memory is window x frames); the speed threshold is at most 10 m/s.
+MAX_MEDIAN_WINDOW = 61
+MAX_CONTACT_SPEED_M_S = 10.0
+#: Components of ``hips_forward_axis`` (a direction; its length does not matter).
+MAX_AXIS_COMPONENT = 1e3
 
 
 @dataclass
@@ -95,32 +141,85 @@ class Manifest:
 REQUIRED_BONES = ("hips", "spine", "left_foot", "right_foot", "left_toe", "right_toe")
 
 
-def _num(path, name, value, *, positive=False, integer=False, odd=False):
+def _short(value, limit: int = 40) -> str:
+    """A value for an error message, cut to ``limit`` characters."""
+    s = repr(value)
+    return s if len(s) <= limit else s[:limit] + "..."
+
+
+def _num(path, name, value, *, positive=False, integer=False, odd=False, lo=None, hi=None):
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ManifestError(path, name, f"expected a number, got {value!r}")
-    if value != value or value in (float("inf"), float("-inf")):
+        raise ManifestError(path, name, f"expected a number, got {_short(value)}")
+    if isinstance(value, float) and not math.isfinite(value):
         raise ManifestError(path, name, f"expected a finite number, got {value!r}")
     if integer and int(value) != value:
         raise ManifestError(path, name, f"expected an integer, got {value!r}")
     if positive and value <= 0:
-        raise ManifestError(path, name, f"expected a positive number, got {value!r}")
+        raise ManifestError(path, name, f"expected a positive number, got {_short(value)}")
     if odd and int(value) % 2 != 1:
-        raise ManifestError(path, name, f"expected an odd integer, got {value!r}")
+        raise ManifestError(path, name, f"expected an odd integer, got {_short(value)}")
+    if (lo is not None and value < lo) or (hi is not None and value > hi):
+        raise ManifestError(path, name, f"expected {'an integer' if integer else 'a number'} from {lo:g} to "
+                                        f"{hi:g}, got {_short(value)}")
     return int(value) if integer else float(value)
+
+
+def _text(path, name, value, limit: int, *, allow_empty: bool = False) -> str:
+    if not isinstance(value, str):
+        raise ManifestError(path, name, f"expected a string, got {_short(value)}")
+    if len(value) > limit:
+        raise ManifestError(path, name, f"expected at most {limit} characters, got {len(value)}")
+    if not value and not allow_empty:
+        raise ManifestError(path, name, "expected a non-empty string")
+    if "\x00" in value:
+        raise ManifestError(path, name, "expected text without NUL characters")
+    return value
+
+
+def _dataset_name(path, value) -> str:
+    """``name``: printable text without path separators (it never becomes a file name, but it is shown)."""
+    name = _text(path, "name", value, MAX_NAME_CHARS)
+    if not name.isprintable() or "/" in name or "\\" in name or name.strip() in ("", ".", ".."):
+        raise ManifestError(path, "name", "expected printable text without '/', '\\' or control "
+                                          f"characters, got {_short(name)}")
+    return name
+
+
+def _check_table(path, name, table, known) -> None:
+    unknown = sorted(set(table) - set(known))
+    if unknown:
+        raise ManifestError(path, f"{name}.{unknown[0]}", f"unknown field (known: {', '.join(sorted(known))})")
+
+
+def _nesting(value) -> int:
+    """Deepest nesting of lists and tables in ``value``, without recursion."""
+    deepest, stack = 0, [(value, 1)]
+    while stack:
+        v, depth = stack.pop()
+        if isinstance(v, (dict, list)):
+            deepest = max(deepest, depth)
+            if depth <= MAX_NESTING:
+                stack.extend((c, depth + 1) for c in (v.values() if isinstance(v, dict) else v))
+    return deepest
 
 
 def _tags(path, name, value) -> tuple[str, ...]:
     if not isinstance(value, list):
-        raise ManifestError(path, name, f"expected a list of tag words, got {value!r}")
+        raise ManifestError(path, name, f"expected a list of tag words, got {_short(value)}")
+    if len(value) > MAX_TAGS:
+        raise ManifestError(path, name, f"expected at most {MAX_TAGS} tags, got {len(value)}")
     for k, t in enumerate(value):
-        if not isinstance(t, str) or not TAG_PATTERN.match(t):
-            raise ManifestError(path, f"{name}[{k}]", f"bad tag {t!r}: a tag is lowercase letters, digits, '_' or '-'")
+        if not isinstance(t, str) or not TAG_PATTERN.match(t) or len(t) > MAX_TAG_CHARS:
+            raise ManifestError(path, f"{name}[{k}]", f"bad tag {_short(t)}: a tag is up to {MAX_TAG_CHARS} "
+                                                      "lowercase letters, digits, '_' or '-'")
     return tuple(dict.fromkeys(value))  # in order, without repeats
 
 
 def parse_manifest(data: dict, path: Path | None = None, base_dir: Path | None = None) -> Manifest:
     if not isinstance(data, dict):
         raise ManifestError(path, "<top>", "expected a JSON object / TOML table")
+    if _nesting(data) > MAX_NESTING:
+        raise ManifestError(path, "<top>", f"lists and tables nested deeper than {MAX_NESTING} levels")
     base_dir = base_dir or (path.parent if path else Path.cwd())
     m = Manifest(path=path)
     known = {"format", "version", "name", "description", "unit_scale", "target_fps", "speed_scale", "mirror",
@@ -128,59 +227,90 @@ def parse_manifest(data: dict, path: Path | None = None, base_dir: Path | None =
     unknown = sorted(set(data) - known)
     if unknown:
         raise ManifestError(path, unknown[0], f"unknown field (known: {', '.join(sorted(known))})")
-    m.name = str(data.get("name", path.stem if path else "dataset"))
-    m.description = str(data.get("description", ""))
+    if "name" in data:
+        m.name = _dataset_name(path, data["name"])
+    elif path is not None:
+        m.name = path.stem[:MAX_NAME_CHARS]
+    if "description" in data:
+        m.description = _text(path, "description", data["description"], MAX_DESCRIPTION_CHARS, allow_empty=True)
     if "unit_scale" in data:
-        m.unit_scale = _num(path, "unit_scale", data["unit_scale"], positive=True)
+        m.unit_scale = _num(path, "unit_scale", data["unit_scale"], positive=True,
+                            lo=UNIT_SCALE_RANGE[0], hi=UNIT_SCALE_RANGE[1])
     if "target_fps" in data:
-        m.target_fps = _num(path, "target_fps", data["target_fps"], positive=True)
+        m.target_fps = _num(path, "target_fps", data["target_fps"], positive=True,
+                            lo=TARGET_FPS_RANGE[0], hi=TARGET_FPS_RANGE[1])
     if "speed_scale" in data:
-        m.speed_scale = _num(path, "speed_scale", data["speed_scale"], positive=True)
+        m.speed_scale = _num(path, "speed_scale", data["speed_scale"], positive=True,
+                             lo=SPEED_SCALE_RANGE[0], hi=SPEED_SCALE_RANGE[1])
     if "mirror" in data:
         if not isinstance(data["mirror"], bool):
             raise ManifestError(path, "mirror", f"expected true or false, got {data['mirror']!r}")
         m.mirror = data["mirror"]
     if "mirror_name_pairs" in data:
         pairs = data["mirror_name_pairs"]
-        if not isinstance(pairs, list) or not all(
-                isinstance(p, list) and len(p) == 2 and all(isinstance(s, str) and s for s in p) for p in pairs):
-            raise ManifestError(path, "mirror_name_pairs", 'expected a list of ["LeftMark", "RightMark"] pairs')
+        if not isinstance(pairs, list) or len(pairs) > MAX_MIRROR_PAIRS or not all(
+                isinstance(p, list) and len(p) == 2
+                and all(isinstance(s, str) and s and len(s) <= MAX_JOINT_NAME_CHARS for s in p) for p in pairs):
+            raise ManifestError(path, "mirror_name_pairs", f'expected a list of at most {MAX_MIRROR_PAIRS} '
+                                                           '["LeftMark", "RightMark"] pairs')
         m.mirror_name_pairs = [tuple(p) for p in pairs]
     if "bones" in data:
         bones = data["bones"]
-        if not isinstance(bones, dict) or not all(isinstance(v, str) for v in bones.values()):
-            raise ManifestError(path, "bones", "expected a table of role -> joint name")
+        if (not isinstance(bones, dict) or len(bones) > MAX_BONES
+                or not all(isinstance(v, str) and 0 < len(v) <= MAX_JOINT_NAME_CHARS for v in bones.values())
+                or not all(0 < len(k) <= MAX_JOINT_NAME_CHARS for k in bones)):
+            raise ManifestError(path, "bones", f"expected a table of at most {MAX_BONES} role -> joint name")
         m.bones = {**m.bones, **bones}
     if "hips_forward_axis" in data:
         axis = data["hips_forward_axis"]
         if not isinstance(axis, list) or len(axis) != 3:
             raise ManifestError(path, "hips_forward_axis", "expected three numbers")
-        m.hips_forward_axis = tuple(_num(path, f"hips_forward_axis[{i}]", a) for i, a in enumerate(axis))
+        m.hips_forward_axis = tuple(_num(path, f"hips_forward_axis[{i}]", a, lo=-MAX_AXIS_COMPONENT,
+                                         hi=MAX_AXIS_COMPONENT) for i, a in enumerate(axis))
         if sum(a * a for a in m.hips_forward_axis) == 0:
             raise ManifestError(path, "hips_forward_axis", "must not be zero")
     sim = data.get("simulation", {})
     if not isinstance(sim, dict):
         raise ManifestError(path, "simulation", "expected a table")
-    m.simulation_position_window = _num(path, "simulation.position_window", sim.get("position_window", 31), integer=True, odd=True)
-    m.simulation_direction_window = _num(path, "simulation.direction_window", sim.get("direction_window", 61), integer=True, odd=True)
-    m.simulation_order = _num(path, "simulation.order", sim.get("order", 3), integer=True)
+    _check_table(path, "simulation", sim, ("position_window", "direction_window", "order"))
+    m.simulation_position_window = _num(path, "simulation.position_window", sim.get("position_window", 31),
+                                        integer=True, odd=True, lo=1, hi=MAX_SMOOTHING_WINDOW)
+    m.simulation_direction_window = _num(path, "simulation.direction_window", sim.get("direction_window", 61),
+                                         integer=True, odd=True, lo=1, hi=MAX_SMOOTHING_WINDOW)
+    m.simulation_order = _num(path, "simulation.order", sim.get("order", 3), integer=True,
+                              lo=0, hi=MAX_SMOOTHING_ORDER)
     contacts = data.get("contacts", {})
     if not isinstance(contacts, dict):
         raise ManifestError(path, "contacts", "expected a table")
-    m.contact_speed_threshold_m_s = _num(path, "contacts.speed_threshold_m_s", contacts.get("speed_threshold_m_s", 0.15), positive=True)
-    m.contact_median_window = _num(path, "contacts.median_window", contacts.get("median_window", 5), integer=True, odd=True)
+    _check_table(path, "contacts", contacts, ("speed_threshold_m_s", "median_window"))
+    m.contact_speed_threshold_m_s = _num(path, "contacts.speed_threshold_m_s",
+                                         contacts.get("speed_threshold_m_s", 0.15), positive=True,
+                                         lo=0.0, hi=MAX_CONTACT_SPEED_M_S)
+    m.contact_median_window = _num(path, "contacts.median_window", contacts.get("median_window", 5),
+                                   integer=True, odd=True, lo=1, hi=MAX_MEDIAN_WINDOW)
 
     clips = data.get("clips")
     if not isinstance(clips, list) or not clips:
         raise ManifestError(path, "clips", "expected a non-empty list of {file, ranges}")
+    if len(clips) > MAX_CLIPS:
+        raise ManifestError(path, "clips", f"expected at most {MAX_CLIPS} clips, got {len(clips)}")
+    n_ranges = sum(len(c["ranges"]) if isinstance(c, dict) and isinstance(c.get("ranges"), list) else 1
+                   for c in clips)
+    if n_ranges > MAX_RANGES:
+        raise ManifestError(path, "clips", f"expected at most {MAX_RANGES} ranges in all, got {n_ranges}")
     for i, clip in enumerate(clips):
         where = f"clips[{i}]"
         if not isinstance(clip, dict) or "file" not in clip:
             raise ManifestError(path, where, "expected a table with a 'file'")
         if not isinstance(clip["file"], str):
             raise ManifestError(path, f"{where}.file", "expected a path string")
-        file = (base_dir / clip["file"]).resolve()
-        if not file.is_file():
+        _text(path, f"{where}.file", clip["file"], MAX_PATH_CHARS)
+        try:
+            file = (base_dir / clip["file"]).resolve()
+            found = file.is_file()
+        except (OSError, ValueError) as e:  # a name too long for the file system, a loop of links...
+            raise ManifestError(path, f"{where}.file", f"cannot use the path ({getattr(e, 'strerror', None) or e})") from None
+        if not found:
             raise ManifestError(path, f"{where}.file", f"no such file: {file}")
         unknown = sorted(set(clip) - {"file", "ranges", "tags"})
         if unknown:
@@ -204,9 +334,10 @@ def parse_manifest(data: dict, path: Path | None = None, base_dir: Path | None =
                     r = r["range"]
                 if (not isinstance(r, list) or len(r) != 2
                         or not all(isinstance(v, int) and not isinstance(v, bool) for v in r)):
-                    raise ManifestError(path, f"{where}.ranges[{k}]", f"expected [start, stop] integers, got {r!r}")
-                if r[0] < 0 or r[1] <= r[0]:
-                    raise ManifestError(path, f"{where}.ranges[{k}]", f"expected 0 <= start < stop, got {r!r}")
+                    raise ManifestError(path, f"{where}.ranges[{k}]", f"expected [start, stop] integers, got {_short(r)}")
+                if r[0] < 0 or r[1] <= r[0] or r[1] > MAX_RANGE_FRAME:
+                    raise ManifestError(path, f"{where}.ranges[{k}]",
+                                        f"expected 0 <= start < stop <= {MAX_RANGE_FRAME}, got {_short(r)}")
                 parsed.append((r[0], r[1]))
                 range_tags.append(tags)
             ranges = parsed
@@ -227,19 +358,18 @@ def _feature_schema(path, base_dir: Path, value) -> tuple[list[dict], Path | Non
     (a list, or a table with a ``features`` list). Errors name the file and field."""
     source, file = path, None
     if isinstance(value, str):
-        file = (base_dir / value).resolve()
+        _text(path, "features", value, MAX_PATH_CHARS)
         try:
+            file = (base_dir / value).resolve()
             if file.stat().st_size > MAX_SCHEMA_BYTES:
                 raise ManifestError(path, "features", f"{value}: larger than {MAX_SCHEMA_BYTES} bytes")
             text = file.read_text(encoding="utf-8")
-        except (OSError, UnicodeDecodeError) as e:
+        except (OSError, UnicodeDecodeError, ValueError) as e:
             raise ManifestError(path, "features", f"cannot read the feature schema {value!r} "
                                 f"({getattr(e, 'strerror', None) or e})") from None
-        try:
-            value = json.loads(text)
-        except (json.JSONDecodeError, RecursionError) as e:
-            where = f"line {e.lineno} column {e.colno}: {e.msg}" if isinstance(e, json.JSONDecodeError) else "nested too deep"
-            raise ManifestError(file, "<file>", f"invalid JSON at {where}") from None
+        value = _parse_json(file, text)
+        if _nesting(value) > MAX_NESTING:
+            raise ManifestError(file, "<top>", f"lists and tables nested deeper than {MAX_NESTING} levels")
         if isinstance(value, dict) and set(value) <= {"features", "format", "version", "description"}:
             value = value.get("features")
         source = file
@@ -250,12 +380,28 @@ def _feature_schema(path, base_dir: Path, value) -> tuple[list[dict], Path | Non
     return schema_of(layout), file
 
 
+def _parse_json(path, text: str):
+    """JSON text -> data; every failure (syntax, nesting past the recursion limit, a number past
+    Python's digit limit) is a ManifestError naming the file and line, never the text itself."""
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as e:
+        raise ManifestError(path, "<file>", f"invalid JSON at line {e.lineno} column {e.colno}: {e.msg}") from None
+    except RecursionError:
+        raise ManifestError(path, "<file>", f"lists and tables nested deeper than {MAX_NESTING} levels") from None
+    except ValueError:  # e.g. an integer of more than 4300 digits
+        raise ManifestError(path, "<file>", "invalid JSON: a number too long to read") from None
+
+
 def load_manifest(path) -> Manifest:
     path = Path(path)
     try:
-        raw = path.read_bytes()
-    except OSError as e:
-        raise ManifestError(path, "<file>", f"cannot read: {e.strerror or e}") from None
+        with open(path, "rb") as f:
+            raw = f.read(MAX_MANIFEST_BYTES + 1)
+    except (OSError, ValueError) as e:  # ValueError: a NUL in the path
+        raise ManifestError(path, "<file>", f"cannot read: {getattr(e, 'strerror', None) or e}") from None
+    if len(raw) > MAX_MANIFEST_BYTES:
+        raise ManifestError(path, "<file>", f"larger than {MAX_MANIFEST_BYTES} bytes: expected a manifest")
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError:
@@ -266,10 +412,11 @@ def load_manifest(path) -> Manifest:
         try:
             data = tomllib.loads(text)
         except tomllib.TOMLDecodeError as e:
-            raise ManifestError(path, "<file>", f"invalid TOML: {e}") from None
+            raise ManifestError(path, "<file>", f"invalid TOML: {str(e)[:200]}") from None
+        except RecursionError:
+            raise ManifestError(path, "<file>", f"lists and tables nested deeper than {MAX_NESTING} levels") from None
+        except ValueError:
+            raise ManifestError(path, "<file>", "invalid TOML: a number too long to read") from None
     else:
-        try:
-            data = json.loads(text)
-        except json.JSONDecodeError as e:
-            raise ManifestError(path, "<file>", f"invalid JSON at line {e.lineno} column {e.colno}: {e.msg}") from None
+        data = _parse_json(path, text)
     return parse_manifest(data, path=path.resolve())

@@ -116,6 +116,22 @@ def test_bad_files_give_one_line_errors(bad, capsys, tmp_path):
     assert not (tmp_path / "x.png").exists()
 
 
+def test_gzip_bomb_is_refused_at_the_text_limit(capsys, tmp_path, monkeypatch):
+    """A small .bvh.gz inflating to far more text than the reader accepts: refused while inflating."""
+    import zlib
+
+    bvh = pytest.importorskip("lmm.data.bvh")
+    monkeypatch.setattr(bvh, "MAX_TEXT_BYTES", 2**20)
+    z = zlib.compressobj(9, zlib.DEFLATED, 31)
+    bomb = tmp_path / "bomb.bvh.gz"
+    bomb.write_bytes(z.compress((CORPUS[0].parent / "huge_value.bvh").read_bytes().replace(b"1e308", b"1"))
+                     + b"".join(z.compress(b" " * 2**20) for _ in range(16)) + z.flush())
+    code, err = run_in_process([bomb, "--screenshot", tmp_path / "x.png"], capsys)
+    lines = err.strip().splitlines()
+    assert code == 1 and len(lines) == 1 and "bomb.bvh.gz" in lines[0] and "inflates to more than" in lines[0]
+    assert not (tmp_path / "x.png").exists()
+
+
 def test_bad_file_subprocess_has_no_traceback(tmp_path):
     pytest.importorskip("lmm.data.bvh")
     bad = tmp_path / "broken.bvh"
