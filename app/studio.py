@@ -242,6 +242,9 @@ class Studio(SessionActions):
                                            f"{type(e).__name__}: {e}")
             self.playback.pause()
             finished = []
+        if self.session.recording_error:     # a write failed (full disk): the recording stopped itself
+            self.stop_recording()
+            self.errors.show("Recording", self.last_recording)
         step_ms = per_tick_ms(finished, self.session.names)
         if self.dump is not None:
             self.dump.ticks(finished)

@@ -36,6 +36,17 @@ def _error(message: str, code: int = 2) -> int:
     return code
 
 
+def _close(stream) -> OSError | None:
+    """Close a recording stream; the error instead of raising it."""
+    if stream is None:
+        return None
+    try:
+        stream.close()
+    except OSError as e:
+        return e
+    return None
+
+
 def main(args) -> int:
     from lmm.data.inputs import InputError, open_input
     from lmm.tuning import Tuning, TuningError
@@ -92,14 +103,18 @@ def main(args) -> int:
             writer = InputCsvWriter(args.record_input)
     except OSError as e:
         return _error(f"cannot write the recording: {e}", 1)
+    from lmm.data.stream import StreamWriteError
     try:
-        metrics = run_headless(controller, source, seconds, dt=1.0 / args.fps, recorder=recorder,
-                               input_writer=writer, realtime=args.realtime)
-    finally:
-        if recorder is not None:
-            recorder.close()
-        if writer is not None:
-            writer.close()
+        try:
+            metrics = run_headless(controller, source, seconds, dt=1.0 / args.fps, recorder=recorder,
+                                   input_writer=writer, realtime=args.realtime)
+        finally:
+            # both streams are closed even when one failed; each keeps its last complete flush
+            close_errors = [e for e in (_close(recorder), _close(writer)) if e is not None]
+        if close_errors:
+            raise close_errors[0]
+    except StreamWriteError as e:   # a full disk: the recording is valid up to its last flush, or absent
+        return _error(f"cannot write the recording: {e}", 1)
 
     # the same ground skating rule over the database's source takes, printed beside the run's
     from lmm.metrics import source_ground_skating

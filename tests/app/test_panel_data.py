@@ -304,10 +304,10 @@ def test_recording_never_overwrites_and_never_leaves_empty_files(dbf, tmp_path):
     controllers, _ = make_controllers(db, features, tuning, with_lmm=False)
     controllers["mm2"] = make_controllers(db, features, tuning, with_lmm=False)[0]["mm"]   # two characters
     s = Session(db, features, tuning, controllers)
-    # nothing recorded: the files it opened are gone again
+    # nothing recorded: no file ever appears (files appear with their first flushed frames)
     paths = s.start_recording(tmp_path / "take.bvh", ("mm", "mm2"))
     assert [p.name for p in paths.values()] == ["take_mm.bvh", "take_mm2.bvh", "take_input.csv"]
-    assert all(p.exists() for p in paths.values())
+    assert not any(p.exists() for p in paths.values())
     result = s.stop_recording()
     assert result.paths == {} and result.frames == 0 and result.message == "nothing recorded (0 frames): no file written"
     assert list(tmp_path.iterdir()) == []
@@ -331,6 +331,40 @@ def test_recording_never_overwrites_and_never_leaves_empty_files(dbf, tmp_path):
     assert (tmp_path / "take_001_mm2.bvh").read_text() == "keep me too"
     assert not (tmp_path / "take_mm.bvh").exists() and not (tmp_path / "take_001_mm.bvh").exists()
     assert s.stop_recording().paths == {}                      # not recording: nothing to stop
+
+
+def test_a_full_disk_stops_the_studio_recording_and_keeps_valid_files(dbf, tmp_path, monkeypatch):
+    import errno
+    import os
+
+    from lmm.data import bvh, stream
+    from lmm.data.inputs import load_input_csv
+
+    db, features = dbf
+    tuning = Tuning()
+    controllers, _ = make_controllers(db, features, tuning, with_lmm=False)
+    s = Session(db, features, tuning, controllers)
+    paths = s.start_recording(tmp_path / "take.bvh", ("mm",))
+    for r in s.recording.writers().values():
+        r.flush_interval_s = 0.0                              # flush every tick
+    for _ in range(20):
+        s.step(InputState(left_y=1.0))
+    real_write = os.write
+
+    def full(fd, data):
+        raise OSError(errno.ENOSPC, "No space left on device")
+    monkeypatch.setattr(stream.os, "write", full)
+    monkeypatch.setattr(stream.os, "pwrite", lambda fd, data, off: full(fd, data))
+    for _ in range(5):
+        s.step(InputState(left_y=1.0))                        # the studio keeps ticking
+    assert s.recording is None and "No space left" in s.recording_error
+    monkeypatch.setattr(stream.os, "write", real_write)
+    result = s.stop_recording()
+    assert result.frames == 20 and set(result.paths) == {"mm", "input"}
+    assert result.message.startswith("recording stopped by a write error: ") and "take.bvh" in result.message
+    assert "\n" not in result.message
+    assert bvh.load(paths["mm"]).n_frames == 20 and load_input_csv(paths["input"]).n_rows >= 1
+    assert s.stop_recording().message == "not recording"
 
 
 def test_session_fills_projected_frame_and_mm_latents(dbf):
