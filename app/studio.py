@@ -320,8 +320,11 @@ class Studio(SessionActions):
                 if last and self.opts.screenshot:
                     self.request_screenshot(self.opts.screenshot)
                 self.frame()
+                if self.frame_index >= 3:
+                    self.layouts.started()    # the start layout works: no crash-loop guard needed
                 if self.opts.frames is not None and self.frame_index >= self.opts.frames:
                     break
+            self.layouts.started()
             self.exit_code = max(self.exit_code, self.screenshots.finish(self.errors.show))
         finally:
             self.shutdown()
