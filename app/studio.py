@@ -131,7 +131,8 @@ class Studio(SessionActions):
         self.dialogs = FileDialogs(dpg, {
             "input": self.open_input, "reference": self.open_reference, "preset_load": self.load_preset,
             "preset_save": self.save_preset, "weights": self.load_weights, "layout_load": self.switch_layout,
-            "layout_save": self.layouts.save, "record": self.panels["recording"].set_path})
+            "layout_save": self.layouts.save, "record": self.panels["recording"].set_path},
+            report_error=self.errors.show)
         self.dialogs.build()
         self._text_items = [i for i in dpg.get_all_items()
                             if dpg.get_item_type(i).rsplit("::", 1)[-1] in TEXT_ENTRY_TYPES]
