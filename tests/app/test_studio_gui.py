@@ -299,6 +299,11 @@ def test_hostile_presets_and_layouts_never_take_the_studio_down(run_studio, tmp_
         msgs = [e["message"] for e in r.dump["errors"]]
         assert len(msgs) == 1 and name in msgs[0] and "out of range" in msgs[0], msgs
         assert r.dump["layout"] == "default"
+    # a screenshot target that cannot be written: one error line, exit 1, no file
+    (tmp_path / "plain").write_text("not a folder")
+    r = run_studio("--frames", 4, "--no-lmm", "--screenshot", tmp_path / "plain" / "shot.png", config=config)
+    msgs = [e["message"] for e in r.dump["errors"]]
+    assert r.rc == 1 and "Traceback" not in r.stderr and len(msgs) == 1 and "shot.png" in msgs[0], r.stderr
 
 
 # -----------------------------------------------------------------------------------------------
