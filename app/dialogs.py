@@ -1,5 +1,10 @@
 """File dialogs: one modal dearpygui file dialog per kind of file the studio opens or writes. A chosen
-path goes to the handler the studio registered for that kind."""
+path goes to the handler the studio registered for that kind.
+
+A chosen file never takes the studio down: a handler reports the bad files it expects itself (one line
+in the error dialog naming the file and field), and anything it raises all the same (a file deeper or
+stranger than the readers foresaw) is reported here as one line naming the file and the studio goes on.
+"""
 from __future__ import annotations
 
 from pathlib import Path
@@ -21,12 +26,14 @@ DIALOGS = {
 
 
 class FileDialogs:
-    def __init__(self, dpg, handlers: dict[str, Callable[[str], object]]):
+    def __init__(self, dpg, handlers: dict[str, Callable[[str], object]],
+                 report_error: Callable[[str, str], None] | None = None):
         missing = set(DIALOGS) - set(handlers)
         if missing:
             raise ValueError(f"no handler for the file dialogs {sorted(missing)}")
         self.dpg = dpg
         self.handlers = handlers
+        self.report_error = report_error
 
     def build(self) -> None:
         dpg = self.dpg
@@ -55,6 +62,17 @@ class FileDialogs:
         if path:
             self.handle(kind, path)
 
-    def handle(self, kind: str, path: str) -> None:
-        """What choosing ``path`` in the dialog of ``kind`` does (test scripts call this directly)."""
-        self.handlers[kind](path)
+    def handle(self, kind: str, path: str) -> bool:
+        """What choosing ``path`` in the dialog of ``kind`` does (test scripts call this directly).
+        False when the handler failed (reported in the error dialog, never raised)."""
+        try:
+            return self.handlers[kind](path) is not False
+        except (RecursionError, MemoryError) as e:    # e.g. a preset nested 100,000 deep
+            message = f"{path}: cannot read the file ({type(e).__name__}: nested too deeply or too large)"
+        except Exception as e:
+            text = str(e).splitlines()[0] if str(e) else type(e).__name__
+            message = text if str(path) in text else f"{path}: {text}"
+        if self.report_error is None:
+            raise RuntimeError(message)
+        self.report_error(DIALOGS[kind][0], message[:500])
+        return False

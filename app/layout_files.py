@@ -16,6 +16,7 @@ windows from the file (scaled to the current viewport). ``layouts/*.ini`` are ge
 """
 from __future__ import annotations
 
+import math
 import os
 import re
 from dataclasses import dataclass, field
@@ -25,6 +26,18 @@ from .panels.common import WINDOWS
 
 REFERENCE_SIZE = (1600, 900)
 MENU_HEIGHT = 22
+
+# Accepted ranges of the numbers in a layout file (a value outside refuses the file, so the default
+# layout is used instead of a studio that cannot start):
+#: largest window or viewport side in pixels: an 8K display is 7680 x 4320, and the 3D view allocates
+#: a framebuffer (and a float32 copy, 16 bytes a pixel) of its window's size, which at 8192 x 8192 is
+#: already 1 GiB; every OpenGL 3.3 driver in use allows 8192 x 8192 render targets.
+MAX_SIDE_PX = 8192
+#: a window may sit partly off screen, but not further away than one largest display
+MAX_POS_PX = 8192
+#: the smallest viewport a layout can have been saved at: the layouts scale by viewport / reference,
+#: and the studio's own minimum window is larger than this
+MIN_VIEWPORT = (320, 240)
 LAYOUT_DIR = Path(__file__).resolve().parents[1] / "layouts"
 
 # name -> window key -> (x, y, width, height) at 1600x900, or None for hidden
@@ -149,14 +162,14 @@ def parse(text: str, name: str = "layout", path: Path | None = None) -> Layout:
             if key == "Hidden":
                 layout.hidden = {k.strip() for k in value.split(",") if k.strip() in WINDOWS}
             elif key == "Viewport":
-                layout.reference_size = _pair(value, where, lineno, key)
+                layout.reference_size = _pair(value, where, lineno, key, MIN_VIEWPORT, (MAX_SIDE_PX,) * 2)
             continue
         if current is None:
             continue
         if key == "Pos":
-            current["pos"] = _pair(value, where, lineno, key)
+            current["pos"] = _pair(value, where, lineno, key, (-MAX_POS_PX,) * 2, (MAX_POS_PX,) * 2)
         elif key == "Size":
-            current["size"] = _pair(value, where, lineno, key)
+            current["size"] = _pair(value, where, lineno, key, (1, 1), (MAX_SIDE_PX,) * 2)
         elif key == "DockId":
             current["docked"] = True
     if section is None:
@@ -166,12 +179,19 @@ def parse(text: str, name: str = "layout", path: Path | None = None) -> Layout:
     return layout
 
 
-def _pair(value: str, where, lineno, key) -> tuple[int, int]:
+def _pair(value: str, where, lineno, key, low, high) -> tuple[int, int]:
+    """Two numbers ``a,b`` with ``low[i] <= v <= high[i]`` (ranges above), as ints."""
     try:
-        a, b = (int(float(v)) for v in value.split(","))
+        pair = [float(v) for v in value.split(",")]
     except ValueError:
-        raise LayoutError(f"{where}: line {lineno}: {key} must be two numbers 'x,y', got {value!r}") from None
-    return a, b
+        pair = []
+    if len(pair) != 2 or not all(math.isfinite(v) for v in pair):
+        raise LayoutError(f"{where}: line {lineno}: {key} must be two numbers 'x,y', got {value[:60]!r}")
+    for v, lo, hi in zip(pair, low, high):
+        if not lo <= v <= hi:
+            raise LayoutError(f"{where}: line {lineno}: {key}={value[:60]} is out of range "
+                              f"({lo}..{hi} on each side)")
+    return int(pair[0]), int(pair[1])
 
 
 def load(name_or_path: str) -> Layout:
@@ -209,7 +229,10 @@ def scaled(rect_pos, rect_size, reference, viewport) -> tuple[tuple[int, int], t
     w, h = rect_size
     nx = int(round(x * sx))
     ny = int(round(MENU_HEIGHT + (y - MENU_HEIGHT) * sy)) if y >= MENU_HEIGHT else int(y)
-    return (nx, ny), (max(int(round(w * sx)), 80), max(int(round(h * sy)), 60))
+    # never larger than the viewport (nor than MAX_SIDE_PX): a window's 3D view allocates its size
+    nw = min(max(int(round(w * sx)), 80), max(int(vw), 80), MAX_SIDE_PX)
+    nh = min(max(int(round(h * sy)), 60), max(int(vh), 60), MAX_SIDE_PX)
+    return (nx, ny), (nw, nh)
 
 
 def extra_section(hidden, viewport) -> str:

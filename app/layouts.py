@@ -1,8 +1,15 @@
 """Window layouts while the studio runs: choosing the one to start with, applying one (moving, sizing,
 showing and hiding the panels' windows), switching and saving. The file format is
-:mod:`app.layout_files`."""
+:mod:`app.layout_files`.
+
+A saved user layout never locks the studio in a crash loop: one that cannot be read or applied is
+reported, set aside as ``layout.ini.bad`` and replaced by the default; and a start with the user
+layout leaves a marker (``layout.ini.starting``) until its first frames are drawn, so a start that
+died with it (a crash the checks did not foresee) sets it aside on the next start.
+"""
 from __future__ import annotations
 
+import os
 import shutil
 import tempfile
 from pathlib import Path
@@ -23,6 +30,7 @@ class LayoutManager:
         self.layout: Layout | None = None
         self.switches: list[dict] = []          # {"frame", "layout"} for the test dump
         self._working_ini: Path | None = None
+        self._starting_marker: Path | None = None
 
     @property
     def name(self) -> str:
@@ -33,10 +41,15 @@ class LayoutManager:
         """Pick the start layout (``requested``, else the user's last one, else the default) and return
         the ini file to hand dearpygui: a private copy, since dearpygui may write it back while running."""
         candidates = []
+        user = layout_files.user_layout_path()
+        marker = _marker(user)
         if requested:
             candidates.append(("--layout", requested))
-        elif layout_files.user_layout_path().is_file():
-            candidates.append(("user", str(layout_files.user_layout_path())))
+        elif user.is_file():
+            if marker.exists():
+                self._set_aside(user, "the last start with it did not finish drawing its first frame")
+            else:
+                candidates.append(("user", str(user)))
         candidates.append(("default", "default"))
         self.layout = None
         for origin, spec in candidates:
@@ -44,9 +57,14 @@ class LayoutManager:
                 self.layout = layout_files.load(spec)
                 if origin == "user":
                     self.layout.name = "user"
+                    self._starting_marker = marker
+                    _touch(marker)
                 break
             except LayoutError as e:
-                self.report_error("Layout", f"{e} - using the default layout instead")
+                if origin == "user":
+                    self._set_aside(user, str(e))
+                else:
+                    self.report_error("Layout", f"{e} - using the default layout instead")
         if self.layout is None:
             self.layout = layout_files.from_builtin("default")
         work = Path(tempfile.mkdtemp(prefix="lmm-studio-")) / "session.ini"
@@ -58,6 +76,18 @@ class LayoutManager:
         self._working_ini = work
         return str(work)
 
+    def _set_aside(self, user: Path, why: str) -> None:
+        """Move a saved user layout that cannot be used to ``layout.ini.bad`` and say so."""
+        bad = user.with_name(user.name + ".bad")
+        try:
+            os.replace(user, bad)
+            where = f"moved to {bad}"
+        except OSError as e:
+            where = f"could not be moved aside ({e.strerror})"
+        _marker(user).unlink(missing_ok=True)
+        self.report_error("Layout", f"the saved layout {user} cannot be used ({why}); it was {where} "
+                                    f"and the default layout is used instead")
+
     def window_kwargs(self, key: str) -> dict:
         """Where a panel's window starts (before the ini file, if any, places it)."""
         code = layout_files.from_builtin("default")
@@ -67,9 +97,21 @@ class LayoutManager:
                     show=key not in self.layout.hidden, no_collapse=False)
 
     def settle(self) -> None:
-        """After the first frame: scale the start layout to the window unless dearpygui restored it."""
+        """After the first frame: scale the start layout to the window unless dearpygui restored it.
+        The start is then known to work: the user layout's start marker is removed."""
         if self.layout.path is None or tuple(self.layout.reference_size) != self._viewport_size():
-            self.apply(self.layout, at_start=True)
+            try:
+                self.apply(self.layout, at_start=True)
+            except Exception as e:   # never a studio that cannot start because of a layout
+                self.report_error("Layout", f"{self.layout.path or self.layout.name}: cannot be applied "
+                                            f"({type(e).__name__}: {e}) - using the default layout instead")
+                self.apply(layout_files.from_builtin("default"), at_start=True)
+
+    def started(self) -> None:
+        """The first frames were drawn with the start layout: remove the start marker."""
+        if self._starting_marker is not None:
+            self._starting_marker.unlink(missing_ok=True)
+            self._starting_marker = None
 
     def close(self) -> None:
         if self._working_ini is not None:
@@ -107,16 +149,26 @@ class LayoutManager:
         self.layout = layout
 
     def save(self, path: str) -> bool:
+        """Write the current layout to ``path`` atomically (a crash or a full disk never leaves half a
+        layout, which would be the next start's layout); a failure is reported, not raised."""
+        from lmm.data.atomic import write_text_atomic
+
         dpg = self.dpg
+        path = Path(path)
+        scratch = None
         try:
-            Path(path).parent.mkdir(parents=True, exist_ok=True)
-            dpg.save_init_file(str(path))
-            text = layout_files.strip_extra_section(Path(path).read_text(encoding="utf-8"))
+            path.parent.mkdir(parents=True, exist_ok=True)
+            scratch = Path(tempfile.mkdtemp(prefix="lmm-studio-save-")) / "layout.ini"
+            dpg.save_init_file(str(scratch))
+            text = layout_files.strip_extra_section(scratch.read_text(encoding="utf-8", errors="replace"))
             text += layout_files.extra_section(self.hidden(), self._viewport_size())
-            Path(path).write_text(text, encoding="utf-8")
+            write_text_atomic(path, text)
         except OSError as e:
             self.report_error("Layout", f"{path}: cannot write ({e.strerror or e})")
             return False
+        finally:
+            if scratch is not None:
+                shutil.rmtree(scratch.parent, ignore_errors=True)
         return True
 
     def show_window(self, key: str, show: bool) -> None:
@@ -131,3 +183,14 @@ class LayoutManager:
         return {key: {"pos": list(dpg.get_item_pos(window_tag(key))),
                       "size": [dpg.get_item_width(window_tag(key)), dpg.get_item_height(window_tag(key))],
                       "shown": bool(dpg.is_item_shown(window_tag(key)))} for key in WINDOWS}
+
+
+def _marker(user_layout: Path) -> Path:
+    return user_layout.with_name(user_layout.name + ".starting")
+
+
+def _touch(path: Path) -> None:
+    try:
+        path.write_text("the studio is starting with the layout beside this file\n", encoding="utf-8")
+    except OSError:
+        pass   # a read-only config folder: no crash-loop guard, nothing else changes

@@ -3,6 +3,7 @@ writes at exit (``--dump-state``). The GUI tests drive the real studio with thes
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -99,28 +100,55 @@ class Screenshots:
     def __init__(self, dpg):
         self.dpg = dpg
         self.requested: list[Path] = []
+        self._temporary: dict[Path, Path] = {}     # target -> the file dearpygui writes first
+        self._failed: list[str] = []               # one line per target that cannot be written
 
     def request(self, path) -> Path:
-        """Ask dearpygui to save the whole window during the next frame it renders."""
+        """Ask dearpygui to save the whole window during the next frame it renders. dearpygui writes
+        a hidden temporary file beside the target, renamed over it once complete (:meth:`finish`),
+        so a full disk or a crash never leaves half a PNG under the target's name; a target that
+        cannot be written is reported by :meth:`finish`."""
+        from viewer.png import check_writable
+
         out = Path(path)
-        out.parent.mkdir(parents=True, exist_ok=True)
-        if out.exists():
-            out.unlink()
-        self.dpg.output_frame_buffer(file=str(out))
+        try:
+            check_writable(out)
+        except OSError as e:
+            self._failed.append(f"{e.filename}: {e.strerror}")
+            return out
+        tmp = out.with_name(f".{out.name}.{os.getpid()}.partial.png")
+        tmp.unlink(missing_ok=True)
+        self.dpg.output_frame_buffer(file=str(tmp))
         self.requested.append(out)
+        self._temporary[out] = tmp
         return out
 
     def finish(self, report_error) -> int:
         """Render (without simulating) until every requested file is on disk; 1 when one never came."""
-        pending = [p for p in self.requested if not p.exists()]
+        def done(p):
+            return self._temporary[p].exists() or (p.exists() and not self._temporary[p].exists())
+
+        pending = [p for p in self.requested if not done(p)]
         tries = 0
         while pending and tries < 5:
             self.dpg.render_dearpygui_frame()
             tries += 1
-            pending = [p for p in pending if not p.exists()]
+            pending = [p for p in pending if not done(p)]
+        for out, tmp in list(self._temporary.items()):
+            if tmp.exists():
+                try:
+                    os.replace(tmp, out)
+                except OSError as e:
+                    tmp.unlink(missing_ok=True)
+                    self._failed.append(f"{out}: cannot write ({e.strerror})")
         for p in pending:
             report_error("Screenshot", f"{p}: dearpygui did not write the screenshot")
-        return 1 if pending else 0
+        for line in self._failed:
+            report_error("Screenshot", line)
+        failed = bool(pending or self._failed)
+        self._temporary.clear()
+        self._failed = []
+        return 1 if failed else 0
 
 
 class StateDump:

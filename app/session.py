@@ -72,23 +72,35 @@ class RecordingResult:
 
 @dataclass
 class Recording:
-    """A recording in progress: one streaming BVH per controller and the input CSV, open from the start
-    (so a path that cannot be written fails at once) and removed again if no frame arrives."""
+    """A recording in progress: one streaming BVH per controller and the input CSV, checked from the
+    start (so a folder that cannot be written fails at once). Each file appears with its first flushed
+    frames (:mod:`lmm.data.stream`), so a recording that gets no frame leaves no file."""
     paths: dict[str, Path]
     recorders: dict          # controller name -> lmm.data.recording.BVHRecorder
     input_writer: object     # lmm.data.inputs.InputCsvWriter
     start_tick: int
     frames: int = 0
 
-    def close(self) -> None:
-        for r in self.recorders.values():
-            r.close()
+    def writers(self) -> dict:
+        """Controller name (and "input") -> its writer."""
+        out = dict(self.recorders)
         if self.input_writer is not None:
-            self.input_writer.close()
+            out["input"] = self.input_writer
+        return out
 
-    def remove_files(self) -> None:
-        for p in self.paths.values():
-            Path(p).unlink(missing_ok=True)
+    def close(self) -> list[str]:
+        """Close every file, even when one fails (e.g. a full disk); returns one line per failure."""
+        errors = []
+        for w in self.writers().values():
+            try:
+                w.close()
+            except OSError as e:
+                errors.append(str(e))
+        return errors
+
+    def written(self) -> dict[str, Path]:
+        """The files that exist (a file appears with its first flushed frames)."""
+        return {name: self.paths[name] for name, w in self.writers().items() if w.exists}
 
 
 # ------------------------------------------------------------------------------------------------
@@ -108,6 +120,8 @@ class Session:
         self.input_log = None          # an lmm.data.inputs.InputLog being replayed, or None (live input)
         self.input_log_start_tick = 0
         self.recording: Recording | None = None
+        self.recording_error = ""           # one line: why the recording stopped by itself ("" = it did not)
+        self._failed_recording: Recording | None = None
         self.step_ms: dict[str, float] = {}
         self.latent_table_status = ""  # "" once MM's latent table is attached, else why not (one line)
         self._latent_job = 0
@@ -231,38 +245,56 @@ class Session:
         try:
             Path(paths["input"]).parent.mkdir(parents=True, exist_ok=True)
             for name in which:
-                rec.recorders[name] = BVHRecorder(paths[name], self.db, fps=1.0 / self.dt)
-            rec.input_writer = InputCsvWriter(paths["input"], with_camera=True)
+                rec.recorders[name] = BVHRecorder(paths[name], self.db, fps=1.0 / self.dt, overwrite=False)
+            rec.input_writer = InputCsvWriter(paths["input"], with_camera=True, overwrite=False)
         except BaseException:
-            rec.close()
-            for name, path in paths.items():   # only what this call created: the paths were free before
-                if name in rec.recorders or (name == "input" and rec.input_writer is not None):
-                    Path(path).unlink(missing_ok=True)
+            rec.close()       # nothing was written yet: no file exists
             raise
         self.recording = rec
+        self.recording_error = ""
         return dict(paths)
 
     def _record(self, tick: Tick, inp: InputState) -> None:
         rec = self.recording
-        rec.input_writer.write(rec.frames * self.dt, inp)
-        for name, r in rec.recorders.items():
-            r.write(tick.snapshots[name].pose)
+        try:
+            rec.input_writer.write(rec.frames * self.dt, inp)
+            for name, r in rec.recorders.items():
+                r.write(tick.snapshots[name].pose)
+        except OSError as e:
+            # a full disk (or a vanished folder): the files keep their last complete flush; the
+            # recording stops here and the studio shows why (see stop_recording)
+            self.recording_error = str(e)
+            self.recording = None
+            rec.close()
+            self._failed_recording = rec
+            return
         rec.frames += 1
 
     def stop_recording(self) -> RecordingResult:
-        """Finish the recording. With no frame recorded its files are removed again: nothing is written."""
-        rec = self.recording
+        """Finish the recording, or report the one a write error stopped (``recording_error``). Only
+        files that received frames exist; with no frame recorded nothing is written."""
+        rec, error = self.recording, self.recording_error
         if rec is None:
-            return RecordingResult({}, 0, 0.0, "not recording")
-        self.recording = None
-        rec.close()
-        seconds = rec.frames * self.dt
-        if rec.frames == 0:
-            rec.remove_files()
+            rec, self._failed_recording = self._failed_recording, None
+            if rec is None:
+                return RecordingResult({}, 0, 0.0, "not recording")
+        self.recording, self.recording_error = None, ""
+        errors = rec.close()
+        error = error or (errors[0] if errors else "")
+        written = rec.written()
+        # after a write error each BVH keeps its last complete flush: report the shortest
+        frames = rec.frames if not error else min(
+            (r.frames_written for name, r in rec.recorders.items() if name in written), default=0)
+        if not written or frames == 0:
+            if error:
+                return RecordingResult(written, 0, 0.0, f"recording failed: {error}")
             return RecordingResult({}, 0, 0.0, "nothing recorded (0 frames): no file written")
-        names = ", ".join(Path(p).name for p in rec.paths.values())
-        return RecordingResult(dict(rec.paths), rec.frames, seconds,
-                               f"recorded {seconds:.2f} s ({rec.frames} frames) to {names}")
+        seconds = frames * self.dt
+        names = ", ".join(Path(p).name for p in written.values())
+        if error:
+            return RecordingResult(written, frames, seconds, f"recording stopped by a write error: {error}; "
+                                                             f"kept {seconds:.2f} s ({frames} frames) in {names}")
+        return RecordingResult(written, frames, seconds, f"recorded {seconds:.2f} s ({frames} frames) to {names}")
 
 
 class TickWorker:

@@ -131,7 +131,8 @@ class Studio(SessionActions):
         self.dialogs = FileDialogs(dpg, {
             "input": self.open_input, "reference": self.open_reference, "preset_load": self.load_preset,
             "preset_save": self.save_preset, "weights": self.load_weights, "layout_load": self.switch_layout,
-            "layout_save": self.layouts.save, "record": self.panels["recording"].set_path})
+            "layout_save": self.layouts.save, "record": self.panels["recording"].set_path},
+            report_error=self.errors.show)
         self.dialogs.build()
         self._text_items = [i for i in dpg.get_all_items()
                             if dpg.get_item_type(i).rsplit("::", 1)[-1] in TEXT_ENTRY_TYPES]
@@ -242,6 +243,9 @@ class Studio(SessionActions):
                                            f"{type(e).__name__}: {e}")
             self.playback.pause()
             finished = []
+        if self.session.recording_error:     # a write failed (full disk): the recording stopped itself
+            self.stop_recording()
+            self.errors.show("Recording", self.last_recording)
         step_ms = per_tick_ms(finished, self.session.names)
         if self.dump is not None:
             self.dump.ticks(finished)
@@ -317,8 +321,11 @@ class Studio(SessionActions):
                 if last and self.opts.screenshot:
                     self.request_screenshot(self.opts.screenshot)
                 self.frame()
+                if self.frame_index >= 3:
+                    self.layouts.started()    # the start layout works: no crash-loop guard needed
                 if self.opts.frames is not None and self.frame_index >= self.opts.frames:
                     break
+            self.layouts.started()
             self.exit_code = max(self.exit_code, self.screenshots.finish(self.errors.show))
         finally:
             self.shutdown()

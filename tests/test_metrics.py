@@ -116,3 +116,44 @@ def test_source_ground_skating_is_the_same_rule_per_range(db):
             fast, ground = fast + g["skating_steps"], ground + g["ground_steps"]
     assert (src["skating_steps"], src["ground_steps"]) == (fast, ground) and ground > 0
     assert 0.0 <= src["fraction"] < 0.2  # mocap barely skates
+
+
+def test_duration_stats_median_is_exact_then_within_a_bin():
+    from lmm.metrics import DurationStats
+
+    s = DurationStats()
+    assert math.isnan(s.median()) and math.isnan(s.mean())
+    for v in (5.0, 1.0, 3.0):
+        s.add(v)
+    assert s.median() == 3.0 and s.mean() == 3.0 and s.count == 3
+    rng = np.random.default_rng(0)
+    values = rng.lognormal(np.log(300.0), 0.8, size=50_000)     # microseconds, a long tail
+    s = DurationStats()
+    for v in values:
+        s.add(v)
+    assert s.count == values.size and s.mean() == pytest.approx(values.mean(), rel=1e-9)
+    assert s.median() == pytest.approx(np.median(values), rel=0.01)
+    assert s.quantile(0.95) == pytest.approx(np.quantile(values, 0.95), rel=0.01)
+    s.add(0.0)
+    s.add(1e30)                                                 # out of range: counted at the ends
+    assert s.count == values.size + 2
+
+
+def test_metrics_memory_does_not_grow_with_the_run(db):
+    """A long run feeds millions of ticks: after warming up, 20,000 more keep the metrics' memory
+    constant (the per-tick timing lists grew ~38 bytes per tick)."""
+    import tracemalloc
+
+    m = MotionMetrics(db)
+    snaps = [_snap(i / 60, [(0.001 * i, 0, 0), (0, 0, 0.001 * i)], [True, i % 3 == 0], searched=(i % 2 == 0),
+                   search_us=40.0 + i % 7) for i in range(64)]
+    for i in range(5000):
+        m.update(snaps[i % 64])
+    tracemalloc.start()
+    before = tracemalloc.get_traced_memory()[0]
+    for i in range(20_000):
+        m.update(snaps[i % 64])
+    grown = tracemalloc.get_traced_memory()[0] - before
+    tracemalloc.stop()
+    assert grown < 20_000, grown          # bytes, for 20,000 ticks: < 1 byte per tick
+    assert m.result()["ticks"] == 25_000

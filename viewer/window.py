@@ -158,8 +158,8 @@ class PlayerWindow:
                 shown += 1
                 if max_frames is not None and shown >= max_frames:
                     if screenshot_path:
-                        from PIL import Image
-                        Image.fromarray(self.screenshot()).save(screenshot_path)
+                        from .png import save_png
+                        save_png(screenshot_path, self.screenshot())
                     break
                 glfw.swap_buffers(self.window)
                 self._update_title(now)

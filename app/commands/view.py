@@ -33,6 +33,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="with --frames: save the window's framebuffer after the last frame")
 
 
+#: largest --width / --height: the image is rendered into one framebuffer of that size (with 4x MSAA
+#: colour and depth, ~20 bytes a pixel: 8192 x 8192 is 1.3 GiB), and OpenGL 3.3 drivers in use allow
+#: 8192 x 8192 render targets
+MAX_IMAGE_SIDE = 8192
+
+
 def _error(message: str) -> None:
     print(f"error: {message}", file=sys.stderr)
 
@@ -70,12 +76,18 @@ def _look(args, names) -> dict:
 
 def _screenshot(args, parents, names, positions) -> int:
     import numpy as np
-    from PIL import Image
 
     from viewer.context import ContextError, create_headless_context
     from viewer.player import AnimationView
     from viewer.renderer import Renderer
 
+    from viewer.png import check_writable, save_png
+
+    try:
+        check_writable(args.screenshot)      # before the rendering: a read-only target fails at once
+    except OSError as e:
+        _error(f"{e.filename}: {e.strerror}")
+        return 1
     try:
         ctx = create_headless_context()
     except ContextError as e:
@@ -88,16 +100,18 @@ def _screenshot(args, parents, names, positions) -> int:
     renderer = Renderer(ctx, args.width, args.height, samples=args.samples)
     image = renderer.render(view.scene, view.camera, dtype=np.uint8)
     out = Path(args.screenshot)
-    if out.parent and not out.parent.exists():
-        out.parent.mkdir(parents=True, exist_ok=True)
-    Image.fromarray(image[..., :3]).save(out)
+    try:
+        save_png(out, image[..., :3])
+    except OSError as e:
+        _error(f"{e.filename}: {e.strerror}")
+        return 1
     print(f"saved frame {args.frame} of {len(positions)} to {out}")
     return 0
 
 
 def main(args: argparse.Namespace) -> int:
-    if args.width < 16 or args.height < 16:
-        _error("--width and --height must be at least 16")
+    if not (16 <= args.width <= MAX_IMAGE_SIDE and 16 <= args.height <= MAX_IMAGE_SIDE):
+        _error(f"--width and --height must be 16..{MAX_IMAGE_SIDE}, got {args.width}x{args.height}")
         return 2
     if not args.screenshot and not _has_display():
         _error("no display to open a window on (DISPLAY is not set); "
@@ -127,4 +141,15 @@ def main(args: argparse.Namespace) -> int:
         return 2
     window.view.follow = not args.no_follow
     window.playback.paused = args.paused
-    return window.run(max_frames=args.frames, screenshot_path=args.window_screenshot)
+    if args.window_screenshot:
+        from viewer.png import check_writable
+        try:
+            check_writable(args.window_screenshot)
+        except OSError as e:
+            _error(f"{e.filename}: {e.strerror}")
+            return 1
+    try:
+        return window.run(max_frames=args.frames, screenshot_path=args.window_screenshot)
+    except OSError as e:      # the screenshot could not be written after all (e.g. a full disk)
+        _error(f"{e.filename}: {e.strerror}")
+        return 1

@@ -239,23 +239,31 @@ def save_input_csv(path, log: InputLog) -> None:
 class InputCsvWriter:
     """Streams input rows to a CSV log while running; writes a row only when the input changes.
 
-    Crash-safe like the BVH recorder: rows are flushed (and fsynced) at least every
-    ``flush_interval_s`` seconds of wall time, and the file is a valid log after every flush.
+    Crash-safe like the BVH recorder (:class:`lmm.data.stream.StreamFile`): rows are appended whole
+    (and fsynced) at least every ``flush_interval_s`` seconds of wall time; the file appears with its
+    first rows and is a valid log whenever it exists; a full disk keeps the rows of the last good flush.
     """
 
-    def __init__(self, path, with_camera: bool = True, flush_interval_s: float = 0.5, clock=None):
+    def __init__(self, path, with_camera: bool = True, flush_interval_s: float = 0.5, clock=None,
+                 overwrite: bool = True):
         import time as _time
+
+        from lmm.data.stream import StreamFile
         self.path = Path(path)
         self.with_camera = with_camera
         self.flush_interval_s = flush_interval_s
         self._clock = clock or _time.monotonic
-        self._file = open(self.path, "w", encoding="utf-8", newline="\n")
-        self._file.write(header_line(with_camera))
+        self._stream = StreamFile(self.path, header_line(with_camera).encode("utf-8"), overwrite=overwrite,
+                                  unit="rows")
         self._last: InputState | None = None
         self._pending: list[str] = []
         self._last_flush = self._clock()
         self.rows = 0
-        self.flush()
+
+    @property
+    def exists(self) -> bool:
+        """Whether the file was created (it is, with the first flushed rows)."""
+        return self._stream.exists
 
     def write(self, t: float, state: InputState) -> None:
         if self._last is None or state != self._last:
@@ -266,19 +274,20 @@ class InputCsvWriter:
             self.flush()
 
     def flush(self) -> None:
-        if self._file.closed:
+        if self._stream.closed:
             return
         if self._pending:
-            self._file.write("".join(self._pending))
-            self._pending.clear()
-        self._file.flush()
-        os.fsync(self._file.fileno())
+            rows, self._pending = self._pending, []
+            self._stream.append("".join(rows).encode("utf-8"), len(rows))
         self._last_flush = self._clock()
 
     def close(self) -> None:
-        if not self._file.closed:
+        if self._stream.closed:
+            return
+        try:
             self.flush()
-            self._file.close()
+        finally:
+            self._stream.close()
 
     def __enter__(self):
         return self

@@ -7,15 +7,19 @@ centimetres, as in the LAFAN1 source files, so a recording opens like the data i
 joints' world positions equal the pose's global positions (x 100) to well under 0.1 mm. The simulation
 bone is left out because it is a smoothed ground projection, not a joint of the captured skeleton.
 
-Crash safety: frames are buffered in memory and appended at least every ``flush_interval_s`` seconds of
-wall time; after appending, the fixed-width ``Frames:`` count in the header is rewritten in place and
-the file is fsynced. So after every flush the file on disk is a complete, valid BVH, and a killed
-process loses at most the frames of the last ``flush_interval_s`` (0.5 s by default). The only window
-where the file is not valid is between the append and the count rewrite, two consecutive system calls.
+Crash safety (the rules of :class:`lmm.data.stream.StreamFile`): frames are buffered in memory and
+appended at least every ``flush_interval_s`` seconds of wall time, whole frames only; after appending,
+the fixed-width ``Frames:`` count in the header is rewritten in place and the file is fsynced. The file
+appears under its name only with its first frames (header and frames written to a hidden temporary
+file and renamed), so a recording with no frame leaves no file, and a killed process leaves either no
+file or a complete, valid BVH with at least one frame (which Blender's importer needs) that lacks at
+most the frames of the last ``flush_interval_s`` (0.5 s by default). A full disk cuts the file back to
+its last complete flush and raises :class:`lmm.data.stream.StreamWriteError`. The one window where the
+count is lower than the frames present is between the append and the count rewrite, two consecutive
+system calls; :func:`repair` fixes such a file.
 """
 from __future__ import annotations
 
-import os
 import time
 from pathlib import Path
 
@@ -23,6 +27,7 @@ import numpy as np
 
 from lmm import quat
 from lmm.data import bvh
+from lmm.data.stream import StreamFile, repair_count
 
 ROOT_CHANNELS = ("Xposition", "Yposition", "Zposition", "Zrotation", "Yrotation", "Xrotation")
 JOINT_CHANNELS = ("Zrotation", "Yrotation", "Xrotation")
@@ -53,11 +58,19 @@ def pose_to_motion_row(local_rotations, global_positions, global_rotations, scal
     return np.concatenate([root_pos, euler.ravel()])
 
 
+def _count_field(n: int) -> bytes:
+    return bvh.frames_field(n).encode("ascii")
+
+
 class BVHRecorder:
-    """Stream poses to ``path`` as BVH (see the module doc). Use as a context manager or call close()."""
+    """Stream poses to ``path`` as BVH (see the module doc). Use as a context manager or call close().
+
+    ``overwrite=False`` refuses an existing file at the start (the studio's recordings). Raises
+    ``OSError`` at once when the folder cannot be written.
+    """
 
     def __init__(self, path, db, fps: float = 60.0, flush_interval_s: float = 0.5, precision: int = 6,
-                 scale: float = 100.0, clock=time.monotonic):
+                 scale: float = 100.0, clock=time.monotonic, overwrite: bool = True):
         self.path = Path(path)
         self.scale = scale
         self.precision = precision
@@ -65,14 +78,21 @@ class BVHRecorder:
         self._clock = clock
         self.skeleton = recording_skeleton(db, scale)
         header = bvh.header_text(self.skeleton, n_frames=0, frame_time=1.0 / fps, precision=precision)
-        self._count_offset = bvh.frames_field_offset(header)
-        self._fd = os.open(self.path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
-        self._write_all(header.encode("utf-8"))
-        os.fsync(self._fd)
-        self.frames_written = 0   # on disk
+        self._stream = StreamFile(self.path, header.encode("utf-8"), overwrite=overwrite, unit="frames",
+                                  count_offset=bvh.frames_field_offset(header), format_count=_count_field)
         self.frames = 0           # written or pending
         self._pending: list[np.ndarray] = []
         self._last_flush = self._clock()
+
+    @property
+    def frames_written(self) -> int:
+        """Frames in the file on disk (0 while no file exists)."""
+        return self._stream.records
+
+    @property
+    def exists(self) -> bool:
+        """Whether the file was created (it is, with the first flushed frames)."""
+        return self._stream.exists
 
     def write(self, pose) -> None:
         """Append one pose (:class:`lmm.controller.Pose`); flushes when the interval has passed."""
@@ -80,37 +100,33 @@ class BVHRecorder:
                                           self.scale))
 
     def write_row(self, row: np.ndarray) -> None:
-        if self._fd is None:
-            raise ValueError("the recorder is closed")
+        if self._stream.closed:
+            raise ValueError(f"{self.path}: the recorder is closed")
         self._pending.append(np.asarray(row, dtype=np.float64))
         self.frames += 1
         if self._clock() - self._last_flush >= self.flush_interval_s:
             self.flush()
 
     def flush(self) -> None:
-        """Append the pending frames, rewrite the frame count, fsync: a valid BVH on disk."""
-        if self._fd is None:
+        """Append the pending frames, rewrite the frame count, fsync: a valid BVH on disk. Raises
+        :class:`lmm.data.stream.StreamWriteError` (the file keeps its earlier frames) on a failed write."""
+        if self._stream.closed:
             return
         if self._pending:
-            text = bvh.format_frames(np.stack(self._pending), self.precision)
-            self._write_all(text.encode("utf-8"))
-            self.frames_written += len(self._pending)
+            rows = np.stack(self._pending)
             self._pending.clear()
-            os.pwrite(self._fd, bvh.frames_field(self.frames_written).encode("ascii"), self._count_offset)
-            os.fsync(self._fd)
+            self._stream.append(bvh.format_frames(rows, self.precision).encode("utf-8"), len(rows))
         self._last_flush = self._clock()
 
     def close(self) -> None:
-        if self._fd is not None:
+        """Flush and close; with no frame ever written there is no file. Closing twice, or after a
+        failed write, does nothing."""
+        if self._stream.closed:
+            return
+        try:
             self.flush()
-            os.close(self._fd)
-            self._fd = None
-
-    def _write_all(self, data: bytes) -> None:
-        view = memoryview(data)
-        while view:
-            n = os.write(self._fd, view)
-            view = view[n:]
+        finally:
+            self._stream.close()
 
     def __enter__(self):
         return self
@@ -123,3 +139,18 @@ class BVHRecorder:
             self.close()
         except Exception:
             pass
+
+
+def repair(path) -> int:
+    """Make a recording's ``Frames:`` count match its complete frame lines (dropping a partial last
+    line): for a file whose writer was killed between appending frames and rewriting the count.
+    Returns the frame count."""
+    path = Path(path)
+    with open(path, "rb") as f:
+        head = f.read(1 << 20)
+    end = head.find(b"\nFrame Time:")
+    if end < 0:
+        raise ValueError(f"{path}: no 'Frame Time:' line in the first MiB: not a recording")
+    header_size = head.index(b"\n", end + 1) + 1
+    offset = bvh.frames_field_offset(head[:header_size].decode("utf-8"))
+    return repair_count(path, offset, _count_field, header_size)

@@ -304,10 +304,10 @@ def test_recording_never_overwrites_and_never_leaves_empty_files(dbf, tmp_path):
     controllers, _ = make_controllers(db, features, tuning, with_lmm=False)
     controllers["mm2"] = make_controllers(db, features, tuning, with_lmm=False)[0]["mm"]   # two characters
     s = Session(db, features, tuning, controllers)
-    # nothing recorded: the files it opened are gone again
+    # nothing recorded: no file ever appears (files appear with their first flushed frames)
     paths = s.start_recording(tmp_path / "take.bvh", ("mm", "mm2"))
     assert [p.name for p in paths.values()] == ["take_mm.bvh", "take_mm2.bvh", "take_input.csv"]
-    assert all(p.exists() for p in paths.values())
+    assert not any(p.exists() for p in paths.values())
     result = s.stop_recording()
     assert result.paths == {} and result.frames == 0 and result.message == "nothing recorded (0 frames): no file written"
     assert list(tmp_path.iterdir()) == []
@@ -331,6 +331,40 @@ def test_recording_never_overwrites_and_never_leaves_empty_files(dbf, tmp_path):
     assert (tmp_path / "take_001_mm2.bvh").read_text() == "keep me too"
     assert not (tmp_path / "take_mm.bvh").exists() and not (tmp_path / "take_001_mm.bvh").exists()
     assert s.stop_recording().paths == {}                      # not recording: nothing to stop
+
+
+def test_a_full_disk_stops_the_studio_recording_and_keeps_valid_files(dbf, tmp_path, monkeypatch):
+    import errno
+    import os
+
+    from lmm.data import bvh, stream
+    from lmm.data.inputs import load_input_csv
+
+    db, features = dbf
+    tuning = Tuning()
+    controllers, _ = make_controllers(db, features, tuning, with_lmm=False)
+    s = Session(db, features, tuning, controllers)
+    paths = s.start_recording(tmp_path / "take.bvh", ("mm",))
+    for r in s.recording.writers().values():
+        r.flush_interval_s = 0.0                              # flush every tick
+    for _ in range(20):
+        s.step(InputState(left_y=1.0))
+    real_write = os.write
+
+    def full(fd, data):
+        raise OSError(errno.ENOSPC, "No space left on device")
+    monkeypatch.setattr(stream.os, "write", full)
+    monkeypatch.setattr(stream.os, "pwrite", lambda fd, data, off: full(fd, data))
+    for _ in range(5):
+        s.step(InputState(left_y=1.0))                        # the studio keeps ticking
+    assert s.recording is None and "No space left" in s.recording_error
+    monkeypatch.setattr(stream.os, "write", real_write)
+    result = s.stop_recording()
+    assert result.frames == 20 and set(result.paths) == {"mm", "input"}
+    assert result.message.startswith("recording stopped by a write error: ") and "take.bvh" in result.message
+    assert "\n" not in result.message
+    assert bvh.load(paths["mm"]).n_frames == 20 and load_input_csv(paths["input"]).n_rows >= 1
+    assert s.stop_recording().message == "not recording"
 
 
 def test_session_fills_projected_frame_and_mm_latents(dbf):
@@ -471,3 +505,70 @@ def test_widget_specs_follow_the_live_tuning_keys():
     specs = widget_specs(t)
     assert {("feature_weights", "head_velocity"), ("tag_bias", "sneak")} <= {(s["field"], s["channel"]) for s in specs}
     assert not any(s["channel"] == "head_velocity" for s in widget_specs())
+
+
+@pytest.mark.parametrize("line", ["Pos=inf,0", "Pos=0,-inf", "Pos=nan,1", "Pos=1e400,2", "Pos=99999,0",
+                                  "Size=100000,300", "Size=0,300", "Size=300,1e308", "Size=3", "Size=1,2,3"])
+def test_layout_numbers_out_of_range_are_refused(tmp_path, line):
+    path = tmp_path / "bad.ini"
+    path.write_text(f"[Window][###10001]\nPos=10,20\nSize=300,200\n{line}\n")
+    with pytest.raises(layouts.LayoutError, match=r"bad\.ini: line 4: (Pos|Size)") as e:
+        layouts.load(str(path))
+    assert "\n" not in str(e.value)
+
+
+@pytest.mark.parametrize("value", ["inf,900", "0,0", "1600,nan", "100000,900", "-5,900"])
+def test_layout_viewport_out_of_range_is_refused(tmp_path, value):
+    path = tmp_path / "vp.ini"
+    path.write_text("[Window][###10001]\nPos=10,20\nSize=300,200\n" + f"[LmmStudio][Layout]\nViewport={value}\n")
+    with pytest.raises(layouts.LayoutError, match=r"vp\.ini: line 5: Viewport"):
+        layouts.load(str(path))
+
+
+def test_scaled_windows_never_exceed_the_viewport():
+    pos, size = layouts.scaled((0, 22), (8192, 8192), (320, 240), (1600, 900))
+    assert size[0] <= 1600 and size[1] <= 900
+
+
+def test_a_broken_user_layout_is_set_aside_for_the_default(tmp_path, monkeypatch):
+    from app.layouts import LayoutManager
+
+    monkeypatch.setenv("LMM_STUDIO_CONFIG", str(tmp_path))
+    user = tmp_path / "layout.ini"
+    user.write_text("[Window][###10001]\nPos=inf,0\nSize=300,200\n")
+    reports = []
+    m = LayoutManager(None, lambda title, msg: reports.append(msg), (1600, 900))
+    ini = m.choose(None)
+    assert m.layout.name == "default" and not user.exists() and (tmp_path / "layout.ini.bad").exists()
+    assert len(reports) == 1 and "layout.ini" in reports[0] and "default" in reports[0]
+    reports.clear()
+    m.close()
+    m = LayoutManager(None, lambda title, msg: reports.append(msg), (1600, 900))
+    m.choose(None)                                      # the next start: no report, no loop
+    assert m.layout.name == "default" and reports == []
+    m.close()
+    assert not os.path.exists(os.path.dirname(ini))   # the private working copy is gone
+
+
+def test_a_user_layout_that_killed_its_start_is_set_aside(tmp_path, monkeypatch):
+    from app.layouts import LayoutManager
+
+    monkeypatch.setenv("LMM_STUDIO_CONFIG", str(tmp_path))
+    user = tmp_path / "layout.ini"
+    user.write_text((layouts.LAYOUT_DIR / "compare.ini").read_text())
+    reports = []
+    m = LayoutManager(None, lambda title, msg: reports.append(msg), (1600, 900))
+    m.choose(None)
+    assert m.layout.name == "user" and (tmp_path / "layout.ini.starting").exists() and reports == []
+    m.close()                                           # ... and the studio died before started()
+    m = LayoutManager(None, lambda title, msg: reports.append(msg), (1600, 900))
+    m.choose(None)
+    assert m.layout.name == "default" and (tmp_path / "layout.ini.bad").exists() and len(reports) == 1
+    assert "did not finish" in reports[0]
+    m.close()
+    user.write_text((layouts.LAYOUT_DIR / "compare.ini").read_text())
+    m = LayoutManager(None, lambda title, msg: reports.append(msg), (1600, 900))
+    m.choose(None)
+    m.started()                                         # a start that worked leaves no marker
+    assert m.layout.name == "user" and not (tmp_path / "layout.ini.starting").exists()
+    m.close()

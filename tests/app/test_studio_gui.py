@@ -268,6 +268,44 @@ def test_broken_files_show_an_error_and_the_studio_runs_on(run_studio, tmp_path)
     assert d["layout"] == "default"
 
 
+def test_hostile_presets_and_layouts_never_take_the_studio_down(run_studio, tmp_path):
+    """A preset nested 100,000 deep opened from the dialog is one error line; a saved user layout with
+    Pos=inf is set aside for the default (and the next start is clean); layouts with Viewport=0,0 or a
+    huge Size start the studio with the default layout."""
+    deep = tmp_path / "deep_preset.json"
+    deep.write_text("[" * 100_000 + "]" * 100_000)
+    good_preset = tmp_path / "good_preset.json"
+    good_preset.write_text('{"run_forward_speed_m_s": 2.0}')
+    config = tmp_path / "config"
+    config.mkdir()
+    (config / "layout.ini").write_text("[Window][###10001]\nPos=inf,0\nSize=300,200\n")
+    script = [{"frame": 5, "do": "open", "kind": "preset_load", "path": str(deep)},
+              {"frame": 8, "do": "open", "kind": "preset_load", "path": str(good_preset)}]
+    r = run_studio("--frames", 14, "--no-lmm", "--input", "builtin:zigzag", script=script, config=config)
+    assert r.rc == 0 and "Traceback" not in r.stderr, r.stderr[-3000:]
+    msgs = [e["message"] for e in r.dump["errors"]]
+    assert len(msgs) == 2, msgs
+    assert any("deep_preset.json" in m and "\n" not in m for m in msgs), msgs
+    assert any("layout.ini" in m and "default" in m for m in msgs), msgs
+    assert (config / "layout.ini.bad").exists() and r.dump["layout"] == "default"
+    ticks = {t["tick"]: t for t in r.dump["ticks"]}
+    assert ticks[10]["tuning_seen"]["run_forward_speed_m_s"] == 2.0      # it went on, and loads good files
+    for name, text in {"zero_viewport.ini": "[LmmStudio][Layout]\nViewport=0,0\n",
+                       "huge_size.ini": "[Window][###10001]\nPos=0,0\nSize=100000000,100000000\n"}.items():
+        bad = tmp_path / name
+        bad.write_text("[Window][###10002]\nPos=0,22\nSize=300,200\n" + text)
+        r = run_studio("--frames", 6, "--no-lmm", "--layout", bad, config=config)
+        assert r.rc == 0 and "Traceback" not in r.stderr, r.stderr[-3000:]
+        msgs = [e["message"] for e in r.dump["errors"]]
+        assert len(msgs) == 1 and name in msgs[0] and "out of range" in msgs[0], msgs
+        assert r.dump["layout"] == "default"
+    # a screenshot target that cannot be written: one error line, exit 1, no file
+    (tmp_path / "plain").write_text("not a folder")
+    r = run_studio("--frames", 4, "--no-lmm", "--screenshot", tmp_path / "plain" / "shot.png", config=config)
+    msgs = [e["message"] for e in r.dump["errors"]]
+    assert r.rc == 1 and "Traceback" not in r.stderr and len(msgs) == 1 and "shot.png" in msgs[0], r.stderr
+
+
 # -----------------------------------------------------------------------------------------------
 # real keyboard input
 # -----------------------------------------------------------------------------------------------

@@ -186,3 +186,58 @@ def test_unknown_style_is_a_usage_error(tmp_path):
     result = run_view([tmp_path / "x.bvh", "--style", "blobs", "--screenshot", tmp_path / "x.png"],
                       env=no_display_env())
     assert result.returncode == 2 and "--style" in result.stderr and "Traceback" not in result.stderr
+
+
+# -- the screenshot target: written whole or not at all, a bad target is one line -------------------
+
+@pytest.mark.parametrize("target", ["file_as_folder", "a_folder"])
+def test_screenshot_to_an_unwritable_target_is_one_line(capsys, tmp_path, target):
+    (tmp_path / "plain").write_text("not a folder")
+    out = {"file_as_folder": tmp_path / "plain" / "x.png", "a_folder": tmp_path}[target]
+    code, err = run_in_process([_good_bvh(tmp_path), "--screenshot", out], capsys)
+    lines = err.strip().splitlines()
+    assert code == 1 and len(lines) == 1 and lines[0].startswith("error: ") and str(out) in lines[0], err
+    assert "Traceback" not in err
+
+
+def test_screenshot_to_a_read_only_or_full_disk_leaves_no_file(capsys, tmp_path, monkeypatch):
+    import errno
+
+    import viewer.png as png
+
+    out = tmp_path / "shot.png"
+    real_open = png.os.open
+
+    def read_only(path, *a, **k):
+        raise OSError(errno.EROFS, "Read-only file system")
+    monkeypatch.setattr(png.os, "open", read_only)
+    code, err = run_in_process([_good_bvh(tmp_path), "--screenshot", out], capsys)
+    assert code == 1 and "shot.png" in err and "Read-only" in err and len(err.strip().splitlines()) == 1
+    monkeypatch.setattr(png.os, "open", real_open)
+
+    def full(fd):
+        raise OSError(errno.ENOSPC, "No space left on device")
+    monkeypatch.setattr(png.os, "fsync", full)
+    code, err = run_in_process([_good_bvh(tmp_path), "--screenshot", out], capsys)
+    assert code == 1 and "shot.png" in err and "No space" in err and len(err.strip().splitlines()) == 1
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["good.bvh"]      # no PNG, no temporary file
+    monkeypatch.undo()
+    code, err = run_in_process([_good_bvh(tmp_path), "--screenshot", out], capsys)
+    assert code == 0 and out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_screenshot_size_is_bounded(capsys, tmp_path):
+    code, err = run_in_process([_good_bvh(tmp_path), "--screenshot", tmp_path / "x.png", "--width", "100000"],
+                               capsys)
+    assert code == 2 and "--width" in err and not (tmp_path / "x.png").exists()
+
+
+def _good_bvh(tmp_path):
+    """A tiny valid BVH (two joints, three frames)."""
+    path = tmp_path / "good.bvh"
+    if not path.exists():
+        path.write_text("HIERARCHY\nROOT Hips\n{\n OFFSET 0 0 0\n CHANNELS 6 Xposition Yposition Zposition "
+                        "Zrotation Yrotation Xrotation\n JOINT Spine\n {\n  OFFSET 0 10 0\n  CHANNELS 3 Zrotation "
+                        "Yrotation Xrotation\n  End Site\n  {\n   OFFSET 0 10 0\n  }\n }\n}\nMOTION\nFrames: 3\n"
+                        "Frame Time: 0.0333333\n" + "0 90 0 0 0 0 0 0 0\n" * 3)
+    return path
