@@ -78,6 +78,8 @@ def main() -> int:
                          "stderr_head": (r.get("stderr") or "")[:300], "job": r.get("job")})
     finally:
         cc.unmount(mounts)
+        import shutil
+        shutil.rmtree(tmp, ignore_errors=True)  # the generated files are ~160 MB
     total = time.perf_counter() - t0
 
     files = {(c.kind, c.file) for c in cases if c.kind not in ("args", "target", "control")}

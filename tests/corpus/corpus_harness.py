@@ -152,7 +152,11 @@ def run_jobs(jobs: list[Job], workers: int = 2, python: str = sys.executable,
             results.update(out["results"])
             metas.append(out["meta"])
 
-    with ThreadPoolExecutor(max_workers=workers) as pool:
-        for f in [pool.submit(work, j) for j in jobs]:
-            f.result()
+    try:
+        with ThreadPoolExecutor(max_workers=workers) as pool:
+            for f in [pool.submit(work, j) for j in jobs]:
+                f.result()
+    finally:
+        import shutil
+        shutil.rmtree(workdir, ignore_errors=True)
     return results, metas
