@@ -22,6 +22,8 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from lmm.errors import InputError
+
 from .panels.common import WINDOWS
 
 REFERENCE_SIZE = (1600, 900)
@@ -78,7 +80,7 @@ BUILTIN: dict[str, dict[str, tuple[int, int, int, int] | None]] = {
 }
 
 
-class LayoutError(ValueError):
+class LayoutError(InputError):
     """A layout name or file that cannot be used; the message says which and why."""
 
 

@@ -11,6 +11,8 @@ import os
 import sys
 from pathlib import Path
 
+from app.cli import number_in
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("file", help="BVH file (.bvh or .bvh.gz), any units, Y up")
@@ -19,8 +21,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--frame", type=int, default=0, help="frame to start at / to screenshot (default 0)")
     parser.add_argument("--width", type=int, default=1280, help="window or image width (default 1280)")
     parser.add_argument("--height", type=int, default=720, help="window or image height (default 720)")
-    parser.add_argument("--samples", type=int, default=None,
-                        help="multisampling samples (0 disables; default 4 on a GPU, 0 on a software renderer)")
+    parser.add_argument("--samples", type=number_in(0, 16, integer=True), default=None,
+                        help="multisampling samples, 0 to 16 (0 disables; default 4 on a GPU, 0 on a software renderer)")
     parser.add_argument("--paused", action="store_true", help="start paused")
     parser.add_argument("--no-follow", action="store_true", help="start with the camera not following the root")
     parser.add_argument("--style", choices=("capsules", "sticks"), default="capsules",

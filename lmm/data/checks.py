@@ -26,6 +26,7 @@ import numpy as np
 from lmm import quat
 from lmm.data import bvh
 from lmm.data.manifest import Manifest
+from lmm.data.database import MIN_RANGE_FRAMES
 from lmm.errors import InputError
 
 # -- thresholds (metres, seconds) ---------------------------------------------------------------------
@@ -323,6 +324,13 @@ def check_manifest(manifest: Manifest, progress=None) -> tuple[list[Finding], Co
                                       manifest.hips_forward_axis, used_ranges=None)
         n = s.hips_speed_m_s.shape[0]
         ranges = clip.ranges or [(0, n)]
+        for k, (a, b) in enumerate(ranges):  # the ranges build-db would refuse are errors here too
+            field = f"clips[{i}].ranges[{k}]" if clip.ranges else f"clips[{i}].file"
+            if b > n:
+                raise CheckError(f"{manifest.path}: {field}: stop {b} is past the last frame of {name} ({n} frames)")
+            if b - a < MIN_RANGE_FRAMES:
+                raise CheckError(f"{manifest.path}: {field}: {b - a} frames of {name}; a range needs at least "
+                                 f"{MIN_RANGE_FRAMES} frames")
         for f in anim_findings:
             f.in_used_range = any(f.start_frame < b and a < f.end_frame for a, b in ranges)
         findings += anim_findings

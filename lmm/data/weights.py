@@ -251,6 +251,11 @@ def load(path, require=None, db_key: str | None = None, layout_dicts: list[dict]
             for name in require:
                 if name not in nets:
                     raise WeightsError(f"{path}: no {name} network in this file (it holds: {', '.join(nets)})")
+            known = {"metadata"}.union(*(expected_shapes(name, nets[name]) for name in nets))
+            extra = sorted(f for f in z.files if f not in known)
+            if extra:  # never read: it might be huge or a pickled object; a file we did not write
+                raise WeightsError(f"{path}: unexpected member {extra[0]!r} ({len(extra)} in all; a weights file "
+                                   f"holds only 'metadata' and the arrays of its networks: {', '.join(nets)})")
             arrays = {}
             for name in nets:
                 for key, shape in expected_shapes(name, nets[name]).items():
