@@ -74,3 +74,17 @@ def test_take_frames_refuses_an_empty_or_outside_range(take):
     for bad in ((5, 5), (0, anim.n_frames + 1), (-1, 10)):
         with pytest.raises(InputError, match=r"a\.bvh: frames"):
             W.take_frames(anim, "a.bvh", bad)
+
+
+def test_knn_equals_brute_force_and_features_embedder_shape():
+    from lmm.motion_search.embed import FeatureEmbedder, knn
+    rng = np.random.default_rng(3)
+    db = rng.normal(size=(1000, 12)).astype(np.float32)
+    q = rng.normal(size=(7, 12)).astype(np.float32)
+    idx, dist = knn(db, q, 5, chunk=128)
+    full = np.linalg.norm(q[:, None] - db[None], axis=2)
+    np.testing.assert_array_equal(idx, np.argsort(full, axis=1)[:, :5])
+    np.testing.assert_allclose(dist, np.sort(full, axis=1)[:, :5], rtol=1e-4, atol=1e-4)
+    e = FeatureEmbedder(step=4).fit(rng.normal(size=(100, W.FRAME_DIM)))
+    out = e.embed(rng.normal(size=(3, W.WINDOW_FRAMES, W.FRAME_DIM)).astype(np.float32))
+    assert out.shape == (3, e.dim) and out.dtype == np.float32
