@@ -28,6 +28,15 @@ def gl_ctx():
     ctx.release()
 
 
+@pytest.fixture(autouse=True)
+def _gl_ctx_current(request):
+    """Make the shared context current before each test that uses it: a test that runs a command in
+    process (``view --screenshot``) creates and releases a context of its own, which leaves none current."""
+    if "gl_ctx" in request.fixturenames:
+        request.getfixturevalue("gl_ctx").__enter__()
+    yield
+
+
 @pytest.fixture(scope="session")
 def xvfb_env():
     """An environment with DISPLAY set to a fresh Xvfb, for subprocesses; skips when Xvfb is missing."""
