@@ -27,11 +27,11 @@ class Script:
     ``key_down`` / ``key_up`` (key); ``record_start`` (path[, which]) / ``record_stop``; ``layout``
     (name or path); ``pause`` / ``resume`` / ``live`` / ``scrub`` (tick, or back: n ticks) / ``step`` (n);
     ``open`` (kind: a file dialog kind, path); ``inspect`` (controller); ``capture`` (label);
-    ``screenshot`` (path); ``sort`` (key[, descending]); ``help`` (Help > Keys and mouse); ``quit``;
+    ``screenshot`` (path); ``sort`` (key[, descending]); ``help`` (Help > Keys and mouse); ``dismiss`` (OK on the message shown); ``quit``;
     ``quit_when_exists`` (path: quit on the first frame that file exists); ``write_rects`` (path, items:
     write the screen rectangles of those items as JSON, for tests that click them with xdotool);
-    ``click_candidate`` (row: preview a Search Candidates row); ``database`` (op: ``select`` (range),
-    ``frame`` (frame), ``play``, ``pause``, ``scrub`` (source_frame), ``selection`` (start, stop),
+    ``show`` (window[, show]); ``click_candidate`` (row: preview a Search Candidates row); ``database`` (op: ``select`` (range),
+    ``frame`` (db_frame), ``play``, ``pause``, ``scrub`` (source_frame), ``selection`` (start, stop),
     ``mark`` (end: in/out), ``copy``) drives the Database panel.
     """
 
@@ -59,7 +59,7 @@ class Script:
         do = a["do"]
         p = s.playback
         simple = {"record_stop": s.stop_recording, "pause": p.pause, "resume": p.resume, "live": p.go_live,
-                  "quit": s.quit, "help": s.menu.show_keys_help}
+                  "quit": s.quit, "help": s.menu.show_keys_help, "dismiss": s.errors.dismiss}
         if do in simple:
             simple[do]()
         elif do == "set_tuning":
@@ -86,6 +86,8 @@ class Script:
             s.request_screenshot(a["path"])
         elif do == "sort":
             s.panels["candidates"].set_sort(a["key"], bool(a.get("descending", False)))
+        elif do == "show":
+            s.layouts.show_window(a["window"], bool(a.get("show", True)))
         elif do == "click_candidate":
             s.panels["candidates"].click_row(int(a["row"]))
         elif do == "database":
@@ -107,7 +109,7 @@ class Script:
         if op == "select":
             panel.select_range(int(a["range"]))
         elif op == "frame":
-            panel.show_frame(int(a["frame"]), origin="range")
+            panel.show_frame(int(a["db_frame"]), origin="range")
         elif op in ("play", "pause"):
             panel.set_playing(op == "play")
         elif op == "scrub":

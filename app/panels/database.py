@@ -197,7 +197,7 @@ class DatabasePanel(Panel):
     def mark(self, end: str) -> None:
         """Set the selection's start (``in``) or end (``out``, exclusive: after the previewed frame)."""
         if self.selected is None or self.frame < 0:
-            self._error("Database: select a range first")
+            self._error(f"{self.ctx.engine.db.name}: select a range first")
             return
         f = self.selected.source_frame(self.frame)
         a, b = self.selection
@@ -207,7 +207,7 @@ class DatabasePanel(Panel):
         """Put the selection on the clipboard as a manifest range (and show it); "" and an error when the
         selection is empty or outside the range."""
         if self.selected is None:
-            self._error("Database: select a range first (nothing to copy)")
+            self._error(f"{self.ctx.engine.db.name}: select a range first (nothing to copy)")
             return ""
         try:
             entry = manifest_range(self.selected, *self.selection)

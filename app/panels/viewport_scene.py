@@ -245,7 +245,7 @@ class PreviewDrawings:
             if self.skeletons[slot] is not None:
                 self.scene.remove(self.skeletons[slot])
                 self.skeletons[slot].release()
-            sk = self.viewer.Skeleton(self.ctx, parents, color=pose.color, alpha=0.45,
+            sk = self.viewer.Skeleton(self.ctx, parents, color=pose.color, alpha=0.6,
                                       names=list(pose.names) if pose.names is not None else None, style=style,
                                       shadow=shadow, joint_radius=0.024, bone_radius=0.017)
             self.scene.add(sk)
