@@ -223,3 +223,51 @@ def test_screenshot_of_the_data_layout(data_run):
     view = img[60:540, 440:1170]
     green = (view[..., 1] > view[..., 0] + 40) & (view[..., 1] > view[..., 2] + 30)
     assert green.sum() > 300
+
+
+def test_preview_hook_takes_any_skeleton_and_hides_unused_ghosts():
+    """The hook other panels reuse (search results from other BVH skeletons): one skeleton per slot,
+    made again when a pose with other parents arrives, hidden when fewer poses are shown."""
+    from types import SimpleNamespace
+
+    from app.panels.base import PreviewPose
+    from app.panels.viewport_scene import MarkerBatch, PreviewDrawings
+
+    made = []
+
+    class FakeSkeleton:
+        def __init__(self, ctx, parents, **kw):
+            self.parents, self.visible, self.released, self.positions = list(parents), True, False, None
+            made.append(self)
+
+        def update(self, positions):
+            self.positions = np.asarray(positions)
+
+        def release(self):
+            self.released = True
+
+    class FakeRenderable:
+        def __init__(self, *a, **k):
+            self.args = None
+
+        def update(self, *a, **k):
+            self.args = a
+
+    scene = SimpleNamespace(items=[])
+    scene.add = lambda *r: scene.items.extend(r)
+    scene.remove = lambda r: scene.items.remove(r)
+    viewer = SimpleNamespace(Skeleton=FakeSkeleton, Spheres=FakeRenderable, Arrows=FakeRenderable,
+                             Lines=FakeRenderable)
+    batch = MarkerBatch(viewer, None)
+    drawings = PreviewDrawings(viewer, None, scene)
+    three = PreviewPose("a", np.array([[0, 0, 0], [0, 1, 0], [0, 2, 0.0]]), np.array([-1, 0, 1]),
+                        trajectory=np.array([[0, 0, 1.0], [0, 0, 2.0]]))
+    two = PreviewPose("b", np.array([[0, 0, 0], [0, 1.5, 0.0]]), np.array([-1, 0]))
+    out = drawings.update([three, two], batch, np.array([2.0, 0, 0]), np.array([1.0, 0, 0, 0]), "capsules", True)
+    assert [d["label"] for d in out] == ["a", "b"] and len(made) == 2 and len(scene.items) == 2
+    assert np.allclose(made[0].positions[2], [2.0 - PREVIEW_SPACING_M, 2.0, 0.0])
+    assert np.allclose(made[1].positions[0], [2.0 - 2 * PREVIEW_SPACING_M, 0.0, 0.0])
+    # slot 0 gets the two-joint skeleton: made again; slot 1 unused: hidden
+    out = drawings.update([two], batch, np.zeros(3), np.array([1.0, 0, 0, 0]), "capsules", True)
+    assert len(made) == 3 and made[0].released and made[2].parents == [-1, 0]
+    assert made[2].visible and not made[1].visible and len(scene.items) == 2
