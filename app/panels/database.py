@@ -22,6 +22,7 @@ from .features import BAR_WIDTH, bar_layout
 from .viewport_scene import feature_markers
 
 PREVIEW_COLOR = (0.50, 0.95, 0.55)
+TABLE_HEIGHT_PX = 230
 
 
 def database_preview(db, features, frame: int, label: str, color=PREVIEW_COLOR) -> PreviewPose:
@@ -65,6 +66,7 @@ class DatabasePanel(Panel):
         self.copied = ""
         self._shown = None                     # (frame, origin) the preview ghost shows
         self._last_frame_counter = None
+        self._scroll_to = None                 # table row to bring into view
 
     # -- items --------------------------------------------------------------------------------
     def build(self, window_kwargs: dict) -> None:
@@ -79,7 +81,8 @@ class DatabasePanel(Panel):
                          tag="db_summary", wrap=0)
             with dpg.table(tag="db_table", header_row=True, borders_innerV=True, borders_outerH=True,
                            resizable=True, policy=dpg.mvTable_SizingStretchProp, scrollY=True, freeze_rows=1,
-                           height=230, row_background=True):
+                           clipper=True,   # only the rows in view are laid out (manifests may have thousands)
+                           height=TABLE_HEIGHT_PX, row_background=True):
                 for key, label, w in (("take", "take", 1.25), ("frames", "frames", 0.85), ("tags", "tags", 1.3),
                                       ("seconds", "s", 0.4), ("mirrored", "mirror", 0.6)):
                     dpg.add_table_column(label=label, init_width_or_weight=w)
@@ -228,6 +231,7 @@ class DatabasePanel(Panel):
         for i in range(len(self.rows)):
             dpg.set_value(f"db_row_{i}", i == r.index)
         dpg.configure_item("db_scrub", min_value=r.source_start, max_value=r.source_stop - 1)
+        self._scroll_to = r.index      # scrolled into view once the table has been drawn (see update)
 
     # -- per frame ----------------------------------------------------------------------------
     def _advance(self, view: View) -> None:
@@ -253,7 +257,20 @@ class DatabasePanel(Panel):
                 self.set_playing(False)
         self.frame = int(max(f, lo))
 
+    def _scroll_table(self) -> None:
+        """Bring the selected row into the table's view (rows are of equal height)."""
+        dpg = self.dpg
+        most = float(dpg.get_y_scroll_max("db_table"))
+        shown = float(TABLE_HEIGHT_PX)
+        if most <= 0.0 or shown <= 0.0:
+            return
+        row = (most + shown) / (len(self.rows) + 1)          # the header row is one more
+        dpg.set_y_scroll("db_table", float(np.clip((self._scroll_to + 1) * row - shown / 2, 0.0, most)))
+        self._scroll_to = None
+
     def update(self, view: View) -> None:
+        if self._scroll_to is not None:
+            self._scroll_table()
         self._advance(view)
         db, features = self.ctx.engine.db, self.ctx.engine.features
         r = self.selected
