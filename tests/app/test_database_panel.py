@@ -271,3 +271,37 @@ def test_preview_hook_takes_any_skeleton_and_hides_unused_ghosts():
     out = drawings.update([two], batch, np.zeros(3), np.array([1.0, 0, 0, 0]), "capsules", True)
     assert len(made) == 3 and made[0].released and made[2].parents == [-1, 0]
     assert made[2].visible and not made[1].visible and len(scene.items) == 2
+
+
+@pytest.mark.gui
+def test_a_real_click_on_a_candidate_row_previews_its_frame_xdotool(xvfb_display, studio_cache, tmp_path):
+    """Click the second row of Search Candidates with the mouse (xdotool): the Database window opens on
+    that database frame and the 3D view shows it as a candidate ghost."""
+    import shutil
+    import time
+
+    from studio_testutil import RealKeyStudio
+
+    if shutil.which("xdotool") is None:
+        pytest.skip("xdotool is not installed")
+    rects = tmp_path / "rects.json"
+    actions = [{"frame": 30, "do": "pause"},
+               {"frame": 40, "do": "write_rects", "path": str(rects), "items": ["cand_1_rank"]}]
+    with RealKeyStudio(tmp_path, xvfb_display, studio_cache, actions,
+                       ["--layout", "default", "--input", "builtin:circle"]) as s:
+        for _ in range(120):
+            if rects.exists():
+                break
+            time.sleep(0.5)
+        time.sleep(1.0)
+        x0, y0, x1, y1 = json.loads(rects.read_text())["cand_1_rank"]
+        s.xdo("windowfocus", "--sync", s.win)
+        s.xdo("mousemove", "--window", s.win, str(int(x0 + 6)), str(int((y0 + y1) / 2)))
+        s.xdo("click", "1")
+        time.sleep(1.5)
+    assert s.returncode == 0, s.stderr[-3000:]
+    final = s.dump()["final"]
+    frame = final["candidates"]["rows"][1]["frame"]
+    assert final["database"]["frame"] == frame and final["database"]["origin"] == "candidate"
+    assert final["windows"]["database"]["shown"]
+    assert final["viewport"]["previews"][0]["label"].startswith("candidate: ")
