@@ -54,6 +54,9 @@ BUILTIN: dict[str, dict[str, tuple[int, int, int, int] | None]] = {
         "candidates": (1090, 322, 510, 190),
         "latent": (1090, 512, 510, 228),
         "stats": (1090, 740, 510, 160),
+        "database": None,
+        "coverage": None,
+        "motion_search": None,
     },
     "compare": {
         "viewport": (0, 22, 1040, 560),
@@ -65,6 +68,9 @@ BUILTIN: dict[str, dict[str, tuple[int, int, int, int] | None]] = {
         "stats": (1200, 742, 400, 158),
         "tuning": None,
         "recording": None,
+        "database": None,
+        "coverage": None,
+        "motion_search": None,
     },
     "tuning": {
         "tuning": (0, 22, 560, 878),
@@ -75,6 +81,24 @@ BUILTIN: dict[str, dict[str, tuple[int, int, int, int] | None]] = {
         "search": None,
         "candidates": None,
         "latent": None,
+        "recording": None,
+        "database": None,
+        "coverage": None,
+        "motion_search": None,
+    },
+    # the data workbench: browse the database, see its coverage, search motion by example
+    "data": {
+        "database": (0, 22, 430, 878),
+        "viewport": (430, 22, 750, 520),
+        "timeline": (430, 542, 750, 130),
+        "motion_search": (430, 672, 750, 228),
+        "coverage": (1180, 22, 420, 878),
+        "features": None,
+        "latent": None,
+        "search": None,
+        "candidates": None,
+        "tuning": None,
+        "stats": None,
         "recording": None,
     },
 }
@@ -111,7 +135,7 @@ def builtin_names() -> list[str]:
 
 
 def resolve(name_or_path: str) -> Path:
-    """A built-in layout name (``default``, ``compare``, ``tuning``) or a file path -> the file."""
+    """A built-in layout name (``default``, ``compare``, ``tuning``, ``data``) or a file path -> the file."""
     s = str(name_or_path)
     if s in BUILTIN:
         p = LAYOUT_DIR / f"{s}.ini"

@@ -17,7 +17,7 @@ from typing import Callable
 
 from . import layout_files
 from .layout_files import Layout, LayoutError
-from .panels.common import WINDOWS, window_tag
+from .panels.common import built_windows, window_tag
 
 FALLBACK_RECT = {"pos": (40, 60), "size": (400, 300)}
 
@@ -136,7 +136,7 @@ class LayoutManager:
     def apply(self, layout: Layout, at_start: bool = False) -> None:
         dpg = self.dpg
         viewport = self._viewport_size()
-        for key in WINDOWS:
+        for key in built_windows(dpg):
             tag = window_tag(key)
             rect = layout.windows.get(key)
             dpg.configure_item(tag, show=key not in layout.hidden and rect is not None)
@@ -176,13 +176,13 @@ class LayoutManager:
 
     def hidden(self) -> list[str]:
         """Keys of the windows not shown now."""
-        return [k for k in WINDOWS if not self.dpg.is_item_shown(window_tag(k))]
+        return [k for k in built_windows(self.dpg) if not self.dpg.is_item_shown(window_tag(k))]
 
     def window_state(self) -> dict:
         dpg = self.dpg
         return {key: {"pos": list(dpg.get_item_pos(window_tag(key))),
                       "size": [dpg.get_item_width(window_tag(key)), dpg.get_item_height(window_tag(key))],
-                      "shown": bool(dpg.is_item_shown(window_tag(key)))} for key in WINDOWS}
+                      "shown": bool(dpg.is_item_shown(window_tag(key)))} for key in built_windows(dpg)}
 
 
 def _marker(user_layout: Path) -> Path:

@@ -27,9 +27,12 @@ class Script:
     ``key_down`` / ``key_up`` (key); ``record_start`` (path[, which]) / ``record_stop``; ``layout``
     (name or path); ``pause`` / ``resume`` / ``live`` / ``scrub`` (tick, or back: n ticks) / ``step`` (n);
     ``open`` (kind: a file dialog kind, path); ``inspect`` (controller); ``capture`` (label);
-    ``screenshot`` (path); ``sort`` (key[, descending]); ``help`` (Help > Keys and mouse); ``quit``;
+    ``screenshot`` (path); ``sort`` (key[, descending]); ``help`` (Help > Keys and mouse); ``dismiss`` (OK on the message shown); ``quit``;
     ``quit_when_exists`` (path: quit on the first frame that file exists); ``write_rects`` (path, items:
-    write the screen rectangles of those items as JSON, for tests that click them with xdotool).
+    write the screen rectangles of those items as JSON, for tests that click them with xdotool);
+    ``show`` (window[, show]); ``click_candidate`` (row: preview a Search Candidates row); ``database`` (op: ``select`` (range),
+    ``frame`` (db_frame), ``play``, ``pause``, ``scrub`` (source_frame), ``selection`` (start, stop),
+    ``mark`` (end: in/out), ``copy``) drives the Database panel.
     """
 
     def __init__(self, actions: list[dict]):
@@ -56,7 +59,7 @@ class Script:
         do = a["do"]
         p = s.playback
         simple = {"record_stop": s.stop_recording, "pause": p.pause, "resume": p.resume, "live": p.go_live,
-                  "quit": s.quit, "help": s.menu.show_keys_help}
+                  "quit": s.quit, "help": s.menu.show_keys_help, "dismiss": s.errors.dismiss}
         if do in simple:
             simple[do]()
         elif do == "set_tuning":
@@ -83,6 +86,12 @@ class Script:
             s.request_screenshot(a["path"])
         elif do == "sort":
             s.panels["candidates"].set_sort(a["key"], bool(a.get("descending", False)))
+        elif do == "show":
+            s.layouts.show_window(a["window"], bool(a.get("show", True)))
+        elif do == "click_candidate":
+            s.panels["candidates"].click_row(int(a["row"]))
+        elif do == "database":
+            self._database(s.panels["database"], a)
         elif do == "quit_when_exists":  # external tests (real key presses) end the run by creating a file
             self.quit_files.append(Path(a["path"]))
         elif do == "write_rects":
@@ -92,6 +101,27 @@ class Script:
             write_json(a["path"], rects)
         else:
             raise ValueError(f"unknown script action {do!r}")
+
+
+    @staticmethod
+    def _database(panel, a: dict) -> None:
+        op = a["op"]
+        if op == "select":
+            panel.select_range(int(a["range"]))
+        elif op == "frame":
+            panel.show_frame(int(a["db_frame"]), origin="range")
+        elif op in ("play", "pause"):
+            panel.set_playing(op == "play")
+        elif op == "scrub":
+            panel.scrub_to_source(int(a["source_frame"]))
+        elif op == "selection":
+            panel.set_selection(int(a["start"]), int(a["stop"]))
+        elif op == "mark":
+            panel.mark(a["end"])
+        elif op == "copy":
+            panel.copy_range()
+        else:
+            raise ValueError(f"unknown database op {op!r}")
 
 
 class Screenshots:

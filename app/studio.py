@@ -82,7 +82,8 @@ class Studio(SessionActions):
         nets = getattr(s.controllers.get("lmm"), "nets", None)
         engine = EngineFacts(db=s.db, features=s.features, dt=s.dt, latent_dims=int(getattr(nets, "n_latent", 32)),
                              controller_names=lambda: s.names, memory=lambda: s.memory,
-                             features_of=lambda n: getattr(s.controllers.get(n), "features", None) or s.features)
+                             features_of=lambda n: getattr(s.controllers.get(n), "features", None) or s.features,
+                             manifest=self._manifest())
         actions = Actions(pause=p.pause, resume=p.resume, toggle_pause=p.toggle_pause, step=p.step,
                           scrub_to=p.scrub_to, go_live=p.go_live, start_recording=self.start_recording,
                           stop_recording=self.stop_recording, open_dialog=self.open_dialog,
@@ -90,11 +91,25 @@ class Studio(SessionActions):
                           reset_characters=self.reset_characters, set_inspected=self.set_inspected,
                           show_window=self.layouts.show_window, switch_layout=self.switch_layout,
                           orbit_camera=self.orbit_camera, show_error=self.errors.show,
-                          show_info=self.errors.inform, quit=self.quit)
+                          show_info=self.errors.inform, quit=self.quit,
+                          set_preview=lambda owner, poses: self.viewport.set_preview(owner, poses),
+                          preview_database_frame=self.preview_database_frame)
         return PanelContext(dpg=self.dpg, tuning=s.tuning, actions=actions, theme=self.theme, engine=engine)
+
+    def _manifest(self):
+        """The manifest the database was built from (None when it cannot be read: ranges are then named
+        by their takes' stems)."""
+        from lmm import DEFAULT_MANIFEST
+        from lmm.data.manifest import load_manifest
+
+        try:
+            return load_manifest(self.opts.manifest or DEFAULT_MANIFEST)
+        except Exception:
+            return None
 
     def build_ui(self) -> None:
         dpg = self.dpg
+        from .panels.database import DatabasePanel
         from .panels.features import FeaturesPanel
         from .panels.latent import LatentPanel
         from .panels.menu import MenuBar
@@ -119,7 +134,7 @@ class Studio(SessionActions):
                                       render_scale=float(min(max(self.opts.render_scale, 0.25), 1.0)))
         self.panels = {"viewport": self.viewport}
         for cls in (FeaturesPanel, LatentPanel, SearchPanel, CandidatesPanel, TuningPanel, StatsPanel,
-                    TimelinePanel, RecordingPanel):
+                    TimelinePanel, RecordingPanel, DatabasePanel):
             self.panels[cls.key] = cls(ctx)
         self.menu.build()
         for key, panel in self.panels.items():
@@ -174,6 +189,13 @@ class Studio(SessionActions):
 
     def quit(self) -> None:
         self.running = False
+
+    def preview_database_frame(self, frame: int) -> None:
+        """A clicked search candidate: the Database panel previews that frame (its window is shown)."""
+        panel = self.panels.get("database")
+        if panel is not None:
+            self.layouts.show_window("database", True)
+            panel.show_frame(int(frame))
 
     def gamepad_names(self) -> list[str]:
         if self.input is None:

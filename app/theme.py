@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import os
 
-from .panels.common import WINDOWS, overlapping, window_tag
+from .panels.common import built_windows, overlapping, window_tag
 
 FONT_CANDIDATES = (
     "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf",
@@ -90,14 +90,15 @@ class Theme:
         """Opaque background for panels that overlap another (dragged, floating), none for tiled ones."""
         dpg = self.dpg
         rects = {}
-        for key in WINDOWS:
+        keys = built_windows(dpg)
+        for key in keys:
             tag = window_tag(key)
             if dpg.is_item_shown(tag):
                 x, y = dpg.get_item_pos(tag)
                 w, h = dpg.get_item_rect_size(tag)
                 rects[key] = (x, y, x + w, y + h)
         over = overlapping(rects)
-        for key in WINDOWS:
+        for key in keys:
             want = key in over
             if want != (key in self._opaque):
                 dpg.bind_item_theme(window_tag(key), OPAQUE if want else 0)

@@ -46,6 +46,9 @@ class Actions:
     show_error: Callable[[str, str], None]              # title, message
     show_info: Callable[[str, str], None]               # title, message (not an error)
     quit: Callable[[], None]
+    # preview ghosts in the 3D view: owner (a panel key) -> its poses (an empty tuple clears them)
+    set_preview: Callable[[str, tuple], None] = lambda owner, poses: None
+    preview_database_frame: Callable[[int], None] = lambda frame: None   # show a database frame (Database panel)
 
 
 @dataclass(frozen=True)
@@ -58,10 +61,28 @@ class EngineFacts:
     controller_names: Callable[[], list[str]]           # running controllers (LMM may appear later)
     features_of: Callable[[str], Any]                   # the features a controller searches
     memory: Callable[[], dict]                          # controller -> part -> bytes kept at run time
+    manifest: Any = None                                # lmm.data.manifest.Manifest the database was built from
 
     @property
     def channel_names(self) -> list[str]:
         return list(self.features.names)
+
+
+@dataclass(frozen=True)
+class PreviewPose:
+    """A pose a panel asks the 3D view to show as a preview ghost (``Actions.set_preview``).
+
+    Everything is in the ghost's own frame: its root (simulation bone) at the origin facing +Z, metres.
+    The 3D view places each ghost beside the inspected character of the displayed tick, facing the same
+    way, so it follows the picked tick while scrubbing."""
+    label: str
+    positions: Any                                      # (J, 3) global joint positions
+    parents: Any                                        # (J,) int, -1 for roots
+    names: tuple[str, ...] | None = None                # joint names (size the body parts), or None
+    trajectory: Any = None                              # (T, 3) future root positions on the ground, or None
+    directions: Any = None                              # (T, 3) facing at those positions, or None
+    points: Any = None                                  # (P, 3) feature points (e.g. feet), or None
+    color: tuple[float, float, float] = (0.55, 0.95, 0.55)
 
 
 @dataclass

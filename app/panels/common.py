@@ -15,11 +15,20 @@ WINDOWS: dict[str, tuple[int, str]] = {
     "stats": (10007, "Stats"),
     "timeline": (10008, "Timeline"),
     "recording": (10009, "Recording & Input"),
+    "database": (10010, "Database"),
+    "coverage": (10011, "Coverage"),
+    "motion_search": (10012, "Motion Search"),
 }
 
 
 def window_tag(key: str) -> int:
     return WINDOWS[key][0]
+
+
+def built_windows(dpg) -> list[str]:
+    """Keys of the windows this studio has built (a registered window whose panel is not part of this
+    build is left out of layouts, menus and backgrounds)."""
+    return [k for k in WINDOWS if dpg.does_item_exist(window_tag(k))]
 
 
 def window_alias(key: str) -> str:

@@ -5,7 +5,7 @@ from __future__ import annotations
 from app.layout_files import builtin_names
 
 from .base import PanelContext, View
-from .common import WINDOWS, TextCache, window_tag
+from .common import WINDOWS, TextCache, built_windows, window_tag
 
 KEYS_HELP = """Keyboard (the 3D view does not need focus; text fields do take the keys):
   W A S D / arrows   move (camera relative)      Shift  walk        Ctrl  strafe
@@ -73,7 +73,11 @@ class MenuBar:
 
     def sync_window_checks(self) -> None:
         dpg = self.dpg
+        built = set(built_windows(dpg))
         for key in WINDOWS:
+            if key not in built:       # a registered window this build has no panel for
+                dpg.configure_item(f"menu_show_{key}", show=False)
+                continue
             shown = bool(dpg.is_item_shown(window_tag(key)))
             if dpg.get_value(f"menu_show_{key}") != shown:
                 dpg.set_value(f"menu_show_{key}", shown)

@@ -5,7 +5,8 @@
   cost, their feature distance, the agreement rate over time, and a cost timeline (MM best cost, LMM
   exact and projected cost, searches and transitions marked).
 * "Search Candidates": the ranked top-K candidates of the inspected controller with per-channel
-  costs (green = cheapest to red = dearest in each column), sortable by any column.
+  costs (green = cheapest to red = dearest in each column), sortable by any column; clicking a row
+  previews that database frame (the Database panel and a ghost in the 3D view).
 """
 from __future__ import annotations
 
@@ -266,7 +267,11 @@ class CandidatesPanel(Panel):
                 for r in range(MAX_ROWS):
                     with dpg.table_row(tag=f"cand_row_{r}", show=r < 8):
                         for key in self.columns:
-                            dpg.add_text("", tag=f"cand_{r}_{key}")
+                            if key == "rank":   # the whole row is clickable: preview its frame
+                                dpg.add_selectable(label="", tag=f"cand_{r}_{key}", span_columns=True,
+                                                   callback=self._on_click, user_data=r)
+                            else:
+                                dpg.add_text("", tag=f"cand_{r}_{key}")
 
     def _on_sort(self, sender, sort_specs):
         if not sort_specs:
@@ -276,6 +281,15 @@ class CandidatesPanel(Panel):
         self.sort_key = key or "total"
         self.descending = direction < 0
         self._shown_for = None  # redraw
+
+    def _on_click(self, sender, value, r):
+        self.dpg.set_value(sender, False)      # a click previews; the row does not stay selected
+        self.click_row(r)
+
+    def click_row(self, r: int) -> None:
+        """Preview the database frame of the shown row ``r`` (0 = top)."""
+        if 0 <= r < len(self.rows):
+            self.ctx.actions.preview_database_frame(int(self.rows[r]["frame"]))
 
     def set_sort(self, key: str, descending: bool = False) -> None:
         self.sort_key, self.descending = key, descending
@@ -324,6 +338,11 @@ class CandidatesPanel(Panel):
                     txt = f"{row[k]:.3f}"
                 else:
                     txt = str(row[k])
+                if k == "rank":
+                    if self.text.get(f"cand_{r}_{k}") != txt:
+                        self.text.values[f"cand_{r}_{k}"] = txt
+                        dpg.configure_item(f"cand_{r}_{k}", label=txt)
+                    continue
                 self.text.set(f"cand_{r}_{k}", txt)
                 if k in fractions:
                     dpg.highlight_table_cell("cand_table", r, c, cost_color(fractions[k][r]))

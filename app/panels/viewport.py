@@ -7,6 +7,8 @@ characters unless "Follow" is off. The camera's azimuth has one owner, the input
 keys move the characters relative to it): a drag asks it to turn (``actions.orbit_camera``) and the
 camera takes ``view.camera_azimuth`` each frame; pitch, distance and target are the viewport's own. "Side by side" draws the LMM character (and everything of it)
 shifted to the right of the MM one; both simulate from the same start with the same input.
+Preview ghosts that panels ask for (``Actions.set_preview``: a database frame, a search result) stand
+to the left of the inspected character, facing its way, labelled.
 """
 from __future__ import annotations
 
@@ -14,7 +16,7 @@ import numpy as np
 
 from .base import Panel, PanelContext, View
 from .common import COLORS, SHORT
-from .viewport_scene import LEGEND, CharacterDrawing, MarkerBatch, draw_character
+from .viewport_scene import LEGEND, CharacterDrawing, MarkerBatch, PreviewDrawings, draw_character
 
 FORWARD = np.array([0.0, 0.0, 1.0])
 SIDE_OFFSET_M = 1.6
@@ -82,6 +84,9 @@ class ViewportPanel(Panel):
         self.render_scale = render_scale   # 3D image resolution / displayed size
         self.render_size = (0, 0)
         self.gl_renderer = ""
+        self.previews: dict[str, tuple] = {}   # owner -> PreviewPose tuple (see set_preview)
+        self.preview_drawings = None
+        self._preview_labels = 0
 
     # -- items ------------------------------------------------------------------------------
     def build(self, parent_window_kwargs: dict) -> None:
@@ -151,6 +156,7 @@ class ViewportPanel(Panel):
             self.drawings[name] = d
             self.scene.add(*d.all())
         self.batch = MarkerBatch(viewer, self.gl)
+        self.preview_drawings = PreviewDrawings(viewer, self.gl, self.scene)
         self.scene.add(*self.batch.renderables())
         self.reference_skeleton = None
         self.camera = viewer.OrbitCamera(target=np.array([0.8, 0.8, 0.0]), distance=4.6, yaw_deg=35.0,
@@ -169,6 +175,17 @@ class ViewportPanel(Panel):
                              **self._body_style())
         self.drawings[name] = d
         self.scene.add(*d.all())
+
+    def set_preview(self, owner: str, poses) -> None:
+        """Show ``poses`` (:class:`app.panels.base.PreviewPose`) as ``owner``'s preview ghosts (replacing
+        its earlier ones; an empty tuple removes them)."""
+        if poses:
+            self.previews[owner] = tuple(poses)
+        else:
+            self.previews.pop(owner, None)
+
+    def preview_poses(self) -> list:
+        return [p for owner in sorted(self.previews) for p in self.previews[owner]]
 
     def set_reference(self, clip) -> None:
         if self.gl is None:
@@ -307,6 +324,7 @@ class ViewportPanel(Panel):
         if self.reference is not None and self.reference_skeleton is not None:
             t = tick.time_s if tick is not None else 0.0
             self.reference_skeleton.update(self.reference.at(t) + np.array([-SIDE_OFFSET_M, 0.0, 0.0]))
+        self._update_previews(view, roots)
         self.batch.flush()
         if roots and self.follow:
             centre = np.mean(roots, axis=0)
@@ -320,6 +338,21 @@ class ViewportPanel(Panel):
         self.gl.detect_framebuffer(0).use()
         self.render_ms = (t1 - t0) * 1e3
         self.readback_ms = (t2 - t1) * 1e3
+
+    def _update_previews(self, view: View, roots: list) -> None:
+        poses = self.preview_poses()
+        snap = view.snap()
+        if snap is not None:
+            # the inspected character's place without its side-by-side shift: left of the first character
+            anchor_pos = np.asarray(snap.simulation_position, np.float64)
+            anchor_rot = np.asarray(snap.simulation_rotation, np.float64)
+        else:
+            anchor_pos, anchor_rot = np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0])
+        drawn = self.preview_drawings.update(poses, self.batch, anchor_pos, anchor_rot, self._style(),
+                                             self.show["shadow"]) if self.preview_drawings else []
+        self.drawn["previews"] = drawn
+        if drawn and roots:   # the camera keeps the first ghost in view with the characters
+            roots.append(np.asarray(drawn[0]["root"]))
 
     def _update_character(self, d: CharacterDrawing, name: str, snap, off, view: View) -> None:
         trail = None
@@ -356,9 +389,25 @@ class ViewportPanel(Panel):
                 sizes[name] = (LABEL_CHAR_PX * len(texts[name]), LABEL_HEIGHT_PX)
             else:
                 dpg.configure_item(tag, show=False)
+        for i, p in enumerate(self.drawn.get("previews", [])):
+            tag = f"vp_preview_label_{i}"
+            if i >= self._preview_labels:
+                dpg.draw_text((0, 0), "", tag=tag, parent="vp_drawlist", size=15,
+                              color=(150, 240, 150, 255))
+                self._preview_labels = i + 1
+            px, _, front = project_points(np.asarray(p["head"])[None] + [0, 0.25, 0], vp, w, h)
+            if front[0] and 0 <= px[0, 0] < w and 0 <= px[0, 1] < h:
+                texts[tag] = p["label"]
+                anchors[tag] = (float(px[0, 0]) - 12, float(px[0, 1]) - 18)
+                sizes[tag] = (LABEL_CHAR_PX * len(p["label"]), LABEL_HEIGHT_PX)
+            else:
+                dpg.configure_item(tag, show=False)
+        for i in range(len(self.drawn.get("previews", [])), self._preview_labels):
+            dpg.configure_item(f"vp_preview_label_{i}", show=False)
         placed = separate_labels(anchors, sizes)
         for name, pos in placed.items():
-            dpg.configure_item(f"vp_label_{name}", show=True, pos=pos, text=texts[name])
+            tag = name if name.startswith("vp_preview_label_") else f"vp_label_{name}"
+            dpg.configure_item(tag, show=True, pos=pos, text=texts[name])
         self.drawn["labels"] = {n: [float(pos[0]), float(pos[1]), *map(float, sizes[n])] for n, pos in placed.items()}
         state = view.mode
         t = view.tick.time_s if view.tick is not None else 0.0
