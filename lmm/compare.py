@@ -138,18 +138,26 @@ def motion_from_animation(anim, name: str, cm_per_unit: float = 1.0, frames=None
     a, b = (0, n) if frames is None else frames
     if not (0 <= a < b <= n):
         raise CompareError(f"{name}: frames {a}:{b} are not a non-empty range inside the motion's 0:{n}")
-    names = list(anim.names)
     g_rot, g_pos = anim.global_transforms()
-    l_rot = anim.local_rotations()
+    return motion_from_arrays(name, list(anim.names), anim.local_rotations()[a:b], g_rot[a:b],
+                              g_pos[a:b] * cm_per_unit, 1.0 / anim.frame_time, hips_forward_axis)
+
+
+def motion_from_arrays(name: str, names: list[str], local_rot, global_rot, global_pos_cm, fps: float,
+                       hips_forward_axis=(0.0, 0.0, 1.0)) -> Motion:
+    """A :class:`Motion` from per-frame arrays ``(F, J, ...)`` of one skeleton (a leading simulation bone
+    is dropped), e.g. a controller's poses collected in memory."""
     first = 1 if (names[0] in SIMULATION_BONE_NAMES and len(names) > 1) else 0
     keep = slice(first, None)
-    g_rot, g_pos, l_rot = g_rot[a:b, keep], g_pos[a:b, keep] * cm_per_unit, l_rot[a:b, keep]
+    g_rot = np.asarray(global_rot, np.float64)[:, keep]
+    g_pos = np.asarray(global_pos_cm, np.float64)[:, keep]
+    l_rot = np.asarray(local_rot, np.float64)[:, keep]
     heading = _heading(g_rot[:, 0], hips_forward_axis)
     rot = l_rot.copy()
     rot[:, 0] = quat.normalize(quat.inv_mul(heading, g_rot[:, 0]))     # hips without the facing
     rel = g_pos - g_pos[:, :1] * np.array([1.0, 0.0, 1.0])
     local = quat.inv_mul_vec(heading[:, None, :], rel)
-    return Motion(name, names[first:], quat.normalize(rot), g_pos, local, 1.0 / anim.frame_time)
+    return Motion(name, list(names[first:]), quat.normalize(rot), g_pos, local, float(fps))
 
 
 def rotation_cost_rows(a: Motion, b: Motion):

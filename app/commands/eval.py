@@ -24,9 +24,17 @@ def add_arguments(p) -> None:
     p.add_argument("--queries", type=number_in(1, MAX_QUERIES, integer=True), default=4096,
                    help=f"noisy queries for the projector metrics, 1..{MAX_QUERIES} (default 4096)")
     p.add_argument("--manifest", help="dataset manifest (default: the shipped LAFAN1 locomotion set)")
+    p.add_argument("--reconstruction", action="store_true",
+                   help="instead: drive MM and LMM with the input derived from held-out takes and compare "
+                        "their motion with the takes (DTW rotation/position error, root path, skating)")
+    p.add_argument("--heldout", help="with --reconstruction: the held-out list (default: lmm/data/heldout.json)")
+    p.add_argument("--data", help="with --reconstruction: folder of the 'shared:' takes "
+                                  "(default: $LMM_LAFAN1_DIR or ../shared/data/lafan1 beside the repository)")
 
 
 def main(args) -> int:
+    if args.reconstruction:
+        return reconstruction(args)
     from app.commands.extras import require
     if (args.json_path or args.plots) and not require("eval", "matplotlib", purpose=" for its plots"):
         return 2
@@ -64,4 +72,53 @@ def main(args) -> int:
     if args.json_path:
         write_json(args.json_path, metrics)
     print(json.dumps(json_safe(metrics), indent=2))
+    return 0
+
+
+def reconstruction(args) -> int:
+    """``eval --reconstruction``: the held-out takes through MM and LMM (see :mod:`lmm.reconstruction`)."""
+    import time
+
+    from app.commands.extras import require
+    from lmm import DEFAULT_MANIFEST
+    from lmm.data.atomic import check_writable
+    from lmm.data.database import load_or_build
+    from lmm.data.manifest import load_manifest
+    from lmm.factory import make_controllers
+    from lmm.features import build_features
+    from lmm.reconstruction import HELDOUT_FILE, format_table, load_heldout, run_take, summarize, write_plots
+    from lmm.tuning import Tuning
+
+    plots_dir = args.plots or (str(Path(args.json_path).parent) if args.json_path else None)
+    if plots_dir and not require("eval", "matplotlib", purpose=" for its plots"):
+        return 2
+    takes, missing = load_heldout(args.heldout or HELDOUT_FILE, args.data)
+    for line in missing:
+        print(line, file=sys.stderr)
+    if not takes:
+        print("lmm-studio eval: error: no held-out take found (see --data)", file=sys.stderr)
+        return 1
+    if args.json_path:
+        check_writable(args.json_path)
+    if plots_dir:
+        check_writable(Path(plots_dir) / "reconstruction.png")
+    manifest = load_manifest(args.manifest or DEFAULT_MANIFEST)
+    db, _ = load_or_build(args.manifest)
+    features = build_features(db)
+    controllers, problems = make_controllers(db, features, Tuning(), args.weights)
+    for problem, _ in problems:
+        print(problem, file=sys.stderr)
+    results = []
+    for take in takes:
+        t0 = time.perf_counter()
+        results.append(run_take(take, db, features, manifest, controllers))
+        print(f"{take.name} [{take.frames[0]}:{take.frames[1]}]: {time.perf_counter() - t0:.1f} s", file=sys.stderr)
+    names = list(controllers)
+    summary = summarize(results, names)
+    print(format_table(results, summary, names))
+    if args.json_path:
+        from lmm.data.jsonio import write_json
+        write_json(args.json_path, {"takes": results, "summary": summary})
+    if plots_dir:
+        write_plots(results, names, Path(plots_dir) / "reconstruction.png")
     return 0

@@ -1,0 +1,213 @@
+"""Reconstruction benchmark: how close MM and LMM come to real motion they have not seen.
+
+For each held-out range (``lmm/data/heldout.json``: ranges the default database does not use), the
+controller input is derived from the take's root path (:mod:`lmm.input_from_motion`), MM and LMM are
+driven by it from a reset, and each output is compared with the take (:mod:`lmm.compare`): DTW rotation
+error and position error (root-relative and world, the take moved to start where the controllers
+start), the root path error (the character's root against the take's, per tick), and the ground skating
+figure of both (:func:`lmm.metrics.ground_skating`). Per-frame errors are kept for plots over time.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from lmm import quat
+from lmm.errors import InputError
+
+HELDOUT_FILE = Path(__file__).resolve().parent / "data" / "heldout.json"
+SHARED_PREFIX = "shared:"
+
+
+def default_shared_dir() -> Path:
+    """Where the ``shared:`` takes are looked up: ``$LMM_LAFAN1_DIR``, else ``../shared/data/lafan1``
+    beside the repository."""
+    env = os.environ.get("LMM_LAFAN1_DIR")
+    if env:
+        return Path(env)
+    return Path(__file__).resolve().parent.parent.parent / "shared" / "data" / "lafan1"
+
+
+@dataclass
+class HeldOut:
+    file: Path
+    name: str           # as listed
+    frames: tuple[int, int]
+    motion: str
+    note: str = ""
+
+
+def load_heldout(path=HELDOUT_FILE, shared_dir=None) -> tuple[list[HeldOut], list[str]]:
+    """The held-out ranges whose files exist, and a line per listed file that does not."""
+    from lmm.data.jsonio import read_json
+
+    path = Path(path)
+    doc = read_json(path)
+    takes = doc.get("takes") if isinstance(doc, dict) else None
+    if not isinstance(takes, list) or not takes:
+        raise InputError(f"{path}: field 'takes': expected a non-empty list")
+    shared = Path(shared_dir) if shared_dir else default_shared_dir()
+    out, missing = [], []
+    for i, t in enumerate(takes):
+        try:
+            name, (a, b), motion = str(t["file"]), t["frames"], str(t["motion"])
+            a, b = int(a), int(b)
+        except (KeyError, TypeError, ValueError):
+            raise InputError(f"{path}: takes[{i}]: expected file, frames [start, stop] and motion") from None
+        f = shared / name[len(SHARED_PREFIX):] if name.startswith(SHARED_PREFIX) else path.parent / name
+        if not f.is_file():
+            missing.append(f"{name}: not found at {f} (skipped)")
+            continue
+        out.append(HeldOut(f, name, (a, b), motion, str(t.get("note", ""))))
+    return out, missing
+
+
+def _aligned_world(positions_cm: np.ndarray, start_cm: np.ndarray, yaw0: float) -> np.ndarray:
+    """World positions moved so ``start_cm`` (ground) is the origin and turned by ``-yaw0``."""
+    c, s = math.cos(-yaw0), math.sin(-yaw0)
+    d = positions_cm - np.array([start_cm[0], 0.0, start_cm[2]])
+    out = d.copy()
+    out[..., 0] = c * d[..., 0] + s * d[..., 2]
+    out[..., 2] = -s * d[..., 0] + c * d[..., 2]
+    return out
+
+
+def run_take(take: HeldOut, db, features, manifest, controllers: dict, tuning=None, dt: float = 1.0 / 60.0) -> dict:
+    """One held-out range through every controller (reset first). Returns the per-take result."""
+    from lmm.compare import compare_motions, motion_from_arrays
+    from lmm.data import bvh
+    from lmm.input_from_motion import derive_input, take_root_path
+    from lmm.metrics import ground_skating
+    from lmm.runner import step_controllers
+
+    anim = bvh.load(take.file)
+    root = take_root_path(anim, manifest, take.name, take.frames)
+    derived = derive_input(root, tuning, dt)
+    a, b = take.frames
+    g_rot, g_pos = anim.global_transforms()
+    cm = manifest.unit_scale * 100.0
+    world = _aligned_world(g_pos[a:b] * cm, root.positions[0] * 100.0, float(root.yaw[0]))
+    # the take's rotations turned with it (only the hips' facing changes; the pose terms ignore facing)
+    turn = quat.from_axis_angle(np.array([0.0, 1.0, 0.0]), np.array(-float(root.yaw[0])))
+    rot = quat.mul(np.broadcast_to(turn, g_rot[a:b].shape), g_rot[a:b])
+    reference = motion_from_arrays(take.name, list(anim.names), anim.local_rotations()[a:b], rot, world,
+                                   1.0 / anim.frame_time, manifest.hips_forward_axis)
+    toe_names = [manifest.bones["left_toe"], manifest.bones["right_toe"]]
+    take_toes = g_pos[a:b][:, [anim.names.index(n) for n in toe_names]] * manifest.unit_scale
+    result = {"take": take.name, "frames": [a, b], "motion": take.motion, "seconds": (b - a) * anim.frame_time,
+              "input_path_error": derived.path_error(),
+              "source_ground_skating": ground_skating(take_toes, 1.0 / anim.frame_time)["fraction"],
+              "controllers": {}}
+    for c in controllers.values():
+        c.reset()
+    n = len(derived.inputs)
+    names = list(db.names)
+    toes = [names.index(t) for t in toe_names]
+    collected = {k: {"local": np.zeros((n, len(names), 4)), "rot": np.zeros((n, len(names), 4)),
+                     "pos": np.zeros((n, len(names), 3))} for k in controllers}
+    for i, inp in enumerate(derived.inputs):
+        poses, _, _ = step_controllers(controllers, inp, dt)
+        for k, pose in poses.items():
+            collected[k]["local"][i] = pose.local_rotations
+            collected[k]["rot"][i] = pose.global_rotations
+            collected[k]["pos"][i] = pose.global_positions
+    for k, arrays in collected.items():
+        out = motion_from_arrays(k, names, arrays["local"], arrays["rot"], arrays["pos"] * 100.0, 1.0 / dt,
+                                 manifest.hips_forward_axis)
+        cmp = compare_motions(reference, out)
+        root_err = np.linalg.norm((arrays["pos"][:, 0] - derived.reference_positions)[:, [0, 2]], axis=1)
+        result["controllers"][k] = {
+            "rotation_error_rad": cmp["rotation_error_rad"],
+            "position_error_cm": cmp["position_error_cm"],
+            "root_path_error_cm": float(root_err.mean() * 100.0),
+            "ground_skating": ground_skating(arrays["pos"][:, toes], 1.0 / dt)["fraction"],
+            "per_frame_rotation_error_rad": cmp["per_frame"]["rotation_error_rad"],
+            "per_frame_root_relative_cm": cmp["per_frame"]["root_relative_cm"],
+        }
+    result["compare_fps"] = float(min(1.0 / anim.frame_time, 1.0 / dt))
+    return result
+
+
+def summarize(results: list[dict], controller_names) -> dict:
+    """Means per motion type and overall (each take weighted by its seconds)."""
+    groups: dict[str, list[dict]] = {}
+    for r in results:
+        groups.setdefault(r["motion"], []).append(r)
+    groups["all"] = list(results)
+    out = {}
+    for g, rs in groups.items():
+        w = np.array([r["seconds"] for r in rs])
+        row = {"takes": len(rs), "seconds": float(w.sum())}
+        for k in controller_names:
+            pick = lambda f: float(np.average([f(r["controllers"][k]) for r in rs], weights=w))  # noqa: E731
+            row[k] = {"rotation_error_rad": pick(lambda c: c["rotation_error_rad"]),
+                      "root_relative_cm": pick(lambda c: c["position_error_cm"]["root_relative"]),
+                      "world_cm": pick(lambda c: c["position_error_cm"]["world"]),
+                      "root_path_error_cm": pick(lambda c: c["root_path_error_cm"]),
+                      "ground_skating": pick(lambda c: c["ground_skating"])}
+        row["source_ground_skating"] = float(np.average([r["source_ground_skating"] for r in rs], weights=w))
+        out[g] = row
+    return out
+
+
+def format_table(results: list[dict], summary: dict, controller_names) -> str:
+    """Per take and per motion type: rotation (rad), root-relative / world position (cm), root path (cm)
+    and ground skating, one column group per controller."""
+    cols = " | ".join(f"{k.upper()} rot rad, pos cm (rel/world), root cm, skate" for k in controller_names)
+    lines = [f"| take | motion | s | input path cm | {cols} | source skate |",
+             "|---|---|---|---|" + "---|" * len(controller_names) + "---|"]
+
+    def cells(c):
+        return (f"{c['rotation_error_rad']:.3f}, {c['position_error_cm']['root_relative']:.1f} / "
+                f"{c['position_error_cm']['world']:.0f}, {c['root_path_error_cm']:.1f}, {c['ground_skating']:.3f}")
+    for r in results:
+        a, b = r["frames"]
+        name = r["take"].split("/")[-1].replace(".bvh.gz", "").replace(".bvh", "")
+        lines.append(f"| {name} [{a}:{b}] | {r['motion']} | {r['seconds']:.1f} | "
+                     f"{r['input_path_error']['position_mean_m'] * 100:.1f} | "
+                     + " | ".join(cells(r["controllers"][k]) for k in controller_names)
+                     + f" | {r['source_ground_skating']:.3f} |")
+    for g, row in summary.items():
+        lines.append(f"| **{g}** ({row['takes']} takes) | | {row['seconds']:.1f} | | " + " | ".join(
+            f"{row[k]['rotation_error_rad']:.3f}, {row[k]['root_relative_cm']:.1f} / {row[k]['world_cm']:.0f}, "
+            f"{row[k]['root_path_error_cm']:.1f}, {row[k]['ground_skating']:.3f}" for k in controller_names)
+            + f" | {row['source_ground_skating']:.3f} |")
+    return "\n".join(lines)
+
+
+def write_plots(results: list[dict], controller_names, path) -> None:
+    """Rotation error over time per take (one panel each, a line per controller), PNG via matplotlib."""
+    import io
+
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from lmm.data.atomic import write_bytes_atomic
+
+    colors = {"mm": "#f58f29", "lmm": "#38a8ff"}
+    fig, axes = plt.subplots(len(results), 1, figsize=(9, 1.9 * len(results)), squeeze=False)
+    for ax, r in zip(axes[:, 0], results):
+        for k in controller_names:
+            e = np.asarray(r["controllers"][k]["per_frame_rotation_error_rad"])
+            ax.plot(np.arange(len(e)) / r["compare_fps"], e, color=colors.get(k), lw=1.0, label=k.upper())
+        a, b = r["frames"]
+        ax.set_title(f"{r['take'].split('/')[-1]} [{a}:{b}] ({r['motion']})", fontsize=8)
+        ax.set_ylabel("rad", fontsize=7)
+        ax.tick_params(labelsize=7)
+        ax.legend(fontsize=7, loc="upper right")
+    axes[-1, 0].set_xlabel("seconds", fontsize=8)
+    fig.tight_layout()
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=100)
+    plt.close(fig)
+    write_bytes_atomic(path, buf.getvalue())
+
+
+def to_json(results, summary) -> str:
+    return json.dumps({"takes": results, "summary": summary}, indent=1)
