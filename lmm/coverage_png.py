@@ -1,0 +1,151 @@
+"""The coverage of a database as one PNG (pillow only): the 2D feature map coloured by tag, the root
+speed x turning-rate heat map and the per-channel histograms. Numbers: :mod:`lmm.coverage`."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from lmm.coverage import Coverage, subsample
+
+BACKGROUND = (24, 24, 28)
+PANEL = (34, 34, 40)
+TEXT = (230, 230, 230)
+DIM_TEXT = (165, 165, 170)
+EMPTY_CELL = (60, 22, 22)
+#: category colours (tags, speed classes, histogram dimensions), distinguishable on a dark background
+PALETTE = ((0.30, 0.69, 0.95), (0.96, 0.56, 0.16), (0.40, 0.80, 0.40), (0.90, 0.33, 0.40), (0.70, 0.55, 0.95),
+           (0.95, 0.85, 0.30), (0.35, 0.85, 0.80), (0.95, 0.55, 0.80), (0.65, 0.65, 0.65), (0.60, 0.45, 0.30))
+MAP_POINTS = 12000
+
+
+def palette(i: int) -> tuple[int, int, int]:
+    c = PALETTE[i % len(PALETTE)]
+    return int(c[0] * 255), int(c[1] * 255), int(c[2] * 255)
+
+
+def heat_color(fraction: float) -> tuple[int, int, int]:
+    """Dark blue (little) -> teal -> yellow (most), for a cell's share of the fullest cell (sqrt scale)."""
+    a = float(np.clip(fraction, 0.0, 1.0)) ** 0.5
+    stops = np.array([(30, 40, 90), (30, 140, 140), (240, 220, 80)], np.float64)
+    t = a * 2.0
+    k = min(int(t), 1)
+    c = stops[k] + (stops[k + 1] - stops[k]) * (t - k)
+    return tuple(int(round(v)) for v in c)
+
+
+def _font(d, size: int = 13):
+    from PIL import ImageFont
+
+    try:  # pillow's scalable font (10.1+); the old bitmap one squeezes spaces away
+        return ImageFont.load_default(size=size)
+    except TypeError:  # pragma: no cover - older pillow
+        return ImageFont.load_default()
+
+
+def _draw_map(d, cov: Coverage, box, font) -> None:
+    x0, y0, x1, y1 = box
+    d.rectangle(box, fill=PANEL)
+    ratio = cov.pca.variance_ratio
+    d.text((x0 + 8, y0 + 6), f"feature space map (PCA of the normalised, weighted features): "
+                             f"PC1 {100 * ratio[0]:.0f}%, PC2 {100 * ratio[1]:.0f}% of the variance", fill=TEXT, font=font)
+    px0, py0, px1, py1 = x0 + 40, y0 + 30, x1 - 130, y1 - 30
+    xy = cov.map_xy
+    lo, hi = xy.min(axis=0), xy.max(axis=0)
+    span = np.maximum(hi - lo, 1e-9)
+    idx = subsample(len(xy), MAP_POINTS)
+    u = px0 + (xy[idx, 0] - lo[0]) / span[0] * (px1 - px0)
+    v = py1 - (xy[idx, 1] - lo[1]) / span[1] * (py1 - py0)
+    cat = cov.frame_tag[idx]
+    # rarest categories last, so they stay visible on top of the common ones
+    order = np.argsort(-np.bincount(cat, minlength=len(cov.tag_names))[cat], kind="stable")
+    for k in order:
+        c = palette(int(cat[k]))
+        d.point((float(u[k]), float(v[k])), fill=c)
+        d.point((float(u[k]) + 1, float(v[k])), fill=c)
+    d.text((px0, py1 + 8), "PC1", fill=DIM_TEXT, font=font)
+    d.text((x0 + 8, py0), "PC2", fill=DIM_TEXT, font=font)
+    for i, name in enumerate(cov.tag_names):
+        ly = py0 + 18 * i
+        d.rectangle([px1 + 20, ly + 3, px1 + 30, ly + 13], fill=palette(i))
+        d.text((px1 + 36, ly), name, fill=TEXT, font=font)
+
+
+def _draw_heatmap(d, cov: Coverage, box, font) -> None:
+    x0, y0, x1, y1 = box
+    d.rectangle(box, fill=PANEL)
+    hm = cov.heatmap
+    d.text((x0 + 8, y0 + 6), f"seconds of motion by root speed x turning rate (over the next {hm.horizon_frames} "
+                             f"frames); dark red: none", fill=TEXT, font=font)
+    rows, cols = hm.seconds.shape
+    gx0, gy0, gx1, gy1 = x0 + 60, y0 + 30, x1 - 12, y1 - 40
+    cw, ch = (gx1 - gx0) / cols, (gy1 - gy0) / rows
+    peak = max(float(hm.seconds.max()), 1e-9)
+    for i in range(rows):
+        y = gy1 - (i + 1) * ch             # faster rows on top
+        for j in range(cols):
+            v = float(hm.seconds[i, j])
+            color = heat_color(v / peak) if v > 0 else EMPTY_CELL
+            d.rectangle([gx0 + j * cw, y, gx0 + (j + 1) * cw - 1, y + ch - 1], fill=color)
+    se, te = hm.speed_edges_m_s, hm.turn_edges_deg_s
+    for i in range(0, rows, 4):
+        d.text((x0 + 8, gy1 - i * ch - 7), f"{se[i]:g}", fill=DIM_TEXT, font=font)
+    for j in range(0, cols + 1, 4):
+        d.text((gx0 + j * cw - 12, gy1 + 4), f"{te[j]:g}", fill=DIM_TEXT, font=font)
+    d.text((x0 + 8, gy0 - 2), "speed", fill=DIM_TEXT, font=font)
+    d.text((x0 + 8, gy0 + 12), "(m/s)", fill=DIM_TEXT, font=font)
+    d.text((gx0 + (gx1 - gx0) / 2 - 60, gy1 + 20), "turning rate (deg/s)", fill=DIM_TEXT, font=font)
+
+
+def _draw_histograms(d, cov: Coverage, box, font) -> None:
+    x0, y0, x1, y1 = box
+    d.text((x0 + 8, y0), "per-channel histograms of the database's raw feature values (one line per dimension)",
+           fill=TEXT, font=font)
+    hists = cov.histograms
+    ncols = 4
+    nrows = max((len(hists) + ncols - 1) // ncols, 1)
+    w = (x1 - x0) / ncols
+    h = (y1 - y0 - 20) / nrows
+    for k, hist in enumerate(hists):
+        cx0 = x0 + (k % ncols) * w + 4
+        cy0 = y0 + 20 + (k // ncols) * h + 4
+        cx1, cy1 = cx0 + w - 8, cy0 + h - 8
+        d.rectangle([cx0, cy0, cx1, cy1], fill=PANEL)
+        unit = f" ({hist.unit})" if hist.unit else ""
+        d.text((cx0 + 6, cy0 + 4), hist.name + unit, fill=TEXT, font=font)
+        px0, py0, px1, py1 = cx0 + 8, cy0 + 24, cx1 - 8, cy1 - 20
+        lo, hi = float(hist.edges[:, 0].min()), float(hist.edges[:, -1].max())
+        span = max(hi - lo, 1e-9)
+        peak = max(float(hist.counts.max()), 1.0)
+        for di in range(len(hist.dims)):
+            e, c = hist.edges[di], hist.counts[di]
+            centres = (e[:-1] + e[1:]) / 2
+            pts = [(px0 + (x - lo) / span * (px1 - px0), py1 - n / peak * (py1 - py0)) for x, n in zip(centres, c)]
+            d.line(pts, fill=palette(di), width=2)
+        d.text((px0, py1 + 4), f"{lo:.2f}", fill=DIM_TEXT, font=font)
+        d.text((px1 - 40, py1 + 4), f"{hi:.2f}", fill=DIM_TEXT, font=font)
+        lx = px0 + 60
+        for di, label in enumerate(hist.dims):  # each dimension's label in its line's colour
+            d.text((lx, py1 + 4), label, fill=palette(di), font=font)
+            lx += 7 * len(label) + 8
+
+
+def draw_coverage_png(cov: Coverage, path, title: str = "") -> Path:
+    """Map, heat map and histograms in one PNG at ``path`` (written atomically)."""
+    from PIL import Image, ImageDraw
+
+    from lmm.data.atomic import atomic_write
+
+    width, height = 1500, 1120
+    img = Image.new("RGB", (width, height), BACKGROUND)
+    d = ImageDraw.Draw(img)
+    font = _font(d, 13)
+    d.text((12, 8), f"coverage of {title or 'the database'}: {cov.n_frames} frames, {cov.n_frames / cov.fps:.0f} s",
+           fill=TEXT, font=font)
+    _draw_map(d, cov, (10, 30, 800, 560), font)
+    _draw_heatmap(d, cov, (810, 30, width - 10, 560), font)
+    _draw_histograms(d, cov, (10, 575, width - 10, height - 10), font)
+    path = Path(path)
+    with atomic_write(path) as f:
+        img.save(f, format="PNG")
+    return path
