@@ -27,7 +27,8 @@ class Script:
     ``key_down`` / ``key_up`` (key); ``record_start`` (path[, which]) / ``record_stop``; ``layout``
     (name or path); ``pause`` / ``resume`` / ``live`` / ``scrub`` (tick, or back: n ticks) / ``step`` (n);
     ``open`` (kind: a file dialog kind, path); ``inspect`` (controller); ``capture`` (label);
-    ``screenshot`` (path); ``sort`` (key[, descending]); ``help`` (Help > Keys and mouse); ``quit``;
+    ``screenshot`` (path); ``sort`` (key[, descending]); ``coverage`` (mode: tag or speed, channel: a
+    feature channel's name); ``help`` (Help > Keys and mouse); ``quit``;
     ``quit_when_exists`` (path: quit on the first frame that file exists); ``write_rects`` (path, items:
     write the screen rectangles of those items as JSON, for tests that click them with xdotool).
     """
@@ -83,6 +84,11 @@ class Script:
             s.request_screenshot(a["path"])
         elif do == "sort":
             s.panels["candidates"].set_sort(a["key"], bool(a.get("descending", False)))
+        elif do == "coverage":
+            if "mode" in a:
+                s.panels["coverage"].set_mode(a["mode"])
+            if "channel" in a:
+                s.panels["coverage"].set_channel(a["channel"])
         elif do == "quit_when_exists":  # external tests (real key presses) end the run by creating a file
             self.quit_files.append(Path(a["path"]))
         elif do == "write_rects":

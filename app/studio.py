@@ -95,6 +95,7 @@ class Studio(SessionActions):
 
     def build_ui(self) -> None:
         dpg = self.dpg
+        from .panels.coverage import CoveragePanel
         from .panels.features import FeaturesPanel
         from .panels.latent import LatentPanel
         from .panels.menu import MenuBar
@@ -119,7 +120,7 @@ class Studio(SessionActions):
                                       render_scale=float(min(max(self.opts.render_scale, 0.25), 1.0)))
         self.panels = {"viewport": self.viewport}
         for cls in (FeaturesPanel, LatentPanel, SearchPanel, CandidatesPanel, TuningPanel, StatsPanel,
-                    TimelinePanel, RecordingPanel):
+                    TimelinePanel, RecordingPanel, CoveragePanel):
             self.panels[cls.key] = cls(ctx)
         self.menu.build()
         for key, panel in self.panels.items():

@@ -13,9 +13,10 @@ PANEL = (34, 34, 40)
 TEXT = (230, 230, 230)
 DIM_TEXT = (165, 165, 170)
 EMPTY_CELL = (60, 22, 22)
-#: category colours (tags, speed classes, histogram dimensions), distinguishable on a dark background
-PALETTE = ((0.30, 0.69, 0.95), (0.96, 0.56, 0.16), (0.40, 0.80, 0.40), (0.90, 0.33, 0.40), (0.70, 0.55, 0.95),
-           (0.95, 0.85, 0.30), (0.35, 0.85, 0.80), (0.95, 0.55, 0.80), (0.65, 0.65, 0.65), (0.60, 0.45, 0.30))
+#: category colours (tags, speed classes, histogram dimensions), distinguishable on a dark background;
+#: the studio's character colours (orange, blue) come last, so the first eight never look like a character
+PALETTE = ((0.40, 0.80, 0.40), (0.90, 0.33, 0.40), (0.70, 0.55, 0.95), (0.95, 0.85, 0.30), (0.35, 0.85, 0.80),
+           (0.95, 0.55, 0.80), (0.65, 0.65, 0.65), (0.60, 0.45, 0.30), (0.30, 0.69, 0.95), (0.96, 0.56, 0.16))
 MAP_POINTS = 12000
 
 
@@ -24,14 +25,16 @@ def palette(i: int) -> tuple[int, int, int]:
     return int(c[0] * 255), int(c[1] * 255), int(c[2] * 255)
 
 
-def heat_color(fraction: float) -> tuple[int, int, int]:
-    """Dark blue (little) -> teal -> yellow (most), for a cell's share of the fullest cell (sqrt scale)."""
-    a = float(np.clip(fraction, 0.0, 1.0)) ** 0.5
+def heat_colors(fraction) -> np.ndarray:
+    """(..., 3) uint8 colours for cells' shares of the fullest cell (sqrt scale): dark blue (little)
+    -> teal -> yellow (most); cells holding nothing (share 0) are dark red."""
+    a = np.sqrt(np.clip(np.asarray(fraction, np.float64), 0.0, 1.0))
     stops = np.array([(30, 40, 90), (30, 140, 140), (240, 220, 80)], np.float64)
     t = a * 2.0
-    k = min(int(t), 1)
-    c = stops[k] + (stops[k + 1] - stops[k]) * (t - k)
-    return tuple(int(round(v)) for v in c)
+    k = np.minimum(t.astype(np.int64), 1)
+    c = stops[k] + (stops[k + 1] - stops[k]) * (t - k)[..., None]
+    c[a <= 0] = EMPTY_CELL
+    return np.round(c).astype(np.uint8)
 
 
 def _font(d, size: int = 13):
@@ -80,12 +83,11 @@ def _draw_heatmap(d, cov: Coverage, box, font) -> None:
     rows, cols = hm.seconds.shape
     gx0, gy0, gx1, gy1 = x0 + 60, y0 + 30, x1 - 12, y1 - 40
     cw, ch = (gx1 - gx0) / cols, (gy1 - gy0) / rows
-    peak = max(float(hm.seconds.max()), 1e-9)
+    colors = heat_colors(hm.seconds / max(float(hm.seconds.max()), 1e-9))
     for i in range(rows):
         y = gy1 - (i + 1) * ch             # faster rows on top
         for j in range(cols):
-            v = float(hm.seconds[i, j])
-            color = heat_color(v / peak) if v > 0 else EMPTY_CELL
+            color = tuple(int(v) for v in colors[i, j])
             d.rectangle([gx0 + j * cw, y, gx0 + (j + 1) * cw - 1, y + ch - 1], fill=color)
     se, te = hm.speed_edges_m_s, hm.turn_edges_deg_s
     for i in range(0, rows, 4):
