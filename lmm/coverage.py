@@ -269,23 +269,29 @@ def subsample(n: int, max_points: int) -> np.ndarray:
 # ---------------------------------------------------------------------------------------------------
 
 class DataDistance:
-    """Nearest database frame to a normalised query, cost in search units (``sum (q - x)^2``)."""
+    """Nearest database frame to a normalised query, cost in search units (``sum (q - x)^2``, as
+    :func:`lmm.search.frame_costs` computes it): every frame is a candidate, no transition bias.
+
+    Exact, through the search's own bounding-box index (:class:`lmm.search.SearchIndex`), seeded with
+    the previous answer; one instance must not be used from two threads at once."""
 
     def __init__(self, normalized):
-        self.points = np.ascontiguousarray(normalized, np.float32)
-        self.sq_norms = np.einsum("ij,ij->i", self.points, self.points)
+        from lmm.search import SearchIndex
 
-    def nearest(self, query, shortlist: int = 16) -> tuple[int, float]:
-        """(frame, cost): a float32 shortlist by ``|x|^2 - 2 x.q``, then exact costs of the shortlist."""
+        points = np.ascontiguousarray(normalized, np.float32)
+        self.n_frames = len(points)
+        self.index = SearchIndex(points) if self.n_frames else None
+        self.mask = np.ones(self.n_frames, dtype=bool)
+        self._hint: np.ndarray | None = None
+
+    def nearest(self, query) -> tuple[int, float]:
+        """(frame, cost); (-1, nan) for a query that is not finite or an empty database."""
         q = np.asarray(query, np.float32)
-        if not np.all(np.isfinite(q)) or not len(self.points):
+        if self.index is None or not np.all(np.isfinite(q)):
             return -1, float("nan")
-        d = self.sq_norms - 2.0 * (self.points @ q)
-        k = min(shortlist, len(d))
-        cand = np.argpartition(d, k - 1)[:k]
-        exact = ((self.points[cand].astype(np.float64) - q.astype(np.float64)) ** 2).sum(axis=1)
-        best = int(np.argmin(exact))
-        return int(cand[best]), float(exact[best])
+        r = self.index.search(q, self.mask, top_k=1, hint=self._hint)
+        self._hint = r.frames[:1].copy()
+        return r.best_frame, r.best_cost
 
 
 # ---------------------------------------------------------------------------------------------------

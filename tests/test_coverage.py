@@ -144,9 +144,10 @@ def test_distance_to_data_is_the_exact_nearest_frame_in_search_cost_units():
         q = rng.normal(size=27) * 1.5
         costs = ((points.astype(np.float64) - q) ** 2).sum(axis=1)
         frame, cost = dd.nearest(q)
-        assert frame == int(np.argmin(costs)) and cost == pytest.approx(costs.min(), rel=1e-6)
+        assert frame == int(np.argmin(costs)) and cost == pytest.approx(costs.min(), rel=1e-5)
     assert dd.nearest(points[123]) == (123, pytest.approx(0.0, abs=1e-6))
     assert dd.nearest(np.full(27, np.nan))[0] == -1
+    assert DataDistance(np.zeros((0, 27))).nearest(np.zeros(27))[0] == -1
 
 
 def test_layouts_without_trajectory_channels_are_refused_in_one_line():

@@ -1,7 +1,8 @@
 """Coverage: where the database holds motion, and where the characters ask for motion it lacks.
 
 * the 2D map of the database's feature space (:mod:`lmm.coverage`: PCA of the normalised, weighted
-  feature vectors; a subsample of the frames, coloured by tag or root speed), with each character's
+  feature vectors; every frame drawn into one image, coloured by tag or root speed, with each class's
+  median position marked), with each character's
   query of the displayed tick (its colour, a large dot) and a short trail of its queries before it;
 * the root speed x turning-rate heat map of the database (seconds per cell; dark red: none) with each
   character's asked-for speed and turning rate marked;
@@ -16,13 +17,13 @@ from __future__ import annotations
 import numpy as np
 
 from lmm.coverage import Coverage, DataDistance, build_coverage, first_trajectory_dims, query_speed_turn, \
-    speed_categories, subsample
+    speed_categories
 from lmm.coverage_png import PALETTE, heat_colors
 
 from .base import Panel, View
 from .common import COLORS, SHORT, fmt_num, short_channel_name
 
-MAP_POINTS = 4000           # frames drawn on the map (evenly spaced through the database)
+MAP_TEXELS = 200            # the map image's side: every database frame is drawn into it
 TRAIL_S = 2.0               # seconds of queries behind the current one
 TRAIL_POINTS = 40
 MAX_CATEGORIES = 8          # map colour classes (beyond that, the last one holds the rest)
@@ -33,21 +34,55 @@ CONTROLLERS = ("mm", "lmm")
 MODES = ("tag", "speed")
 
 
-def map_series(cov: Coverage, mode: str, max_points: int = MAP_POINTS) -> list[tuple[str, np.ndarray, np.ndarray]]:
-    """The map's data points by category (pure, for tests): ``[(label, x, y), ...]`` for ``mode``
-    ``tag`` (each frame's most specific tag) or ``speed`` (root speed classes)."""
-    idx = subsample(cov.n_frames, max_points)
+def map_categories(cov: Coverage, mode: str) -> tuple[list[str], np.ndarray]:
+    """Labels and each frame's class on the map (pure, for tests): ``tag`` (each frame's most specific
+    tag) or ``speed`` (root speed classes); beyond ``MAX_CATEGORIES`` the last class holds the rest."""
     if mode == "speed":
         labels, cat = speed_categories(cov.speed_m_s)
     else:
         labels, cat = cov.tag_names, cov.frame_tag
-    cat = cat[idx]
     labels = list(labels)
-    if len(labels) > MAX_CATEGORIES:   # the rest share the last series
+    if len(labels) > MAX_CATEGORIES:
         labels = labels[:MAX_CATEGORIES - 1] + [f"{len(labels) - MAX_CATEGORIES + 1} more"]
         cat = np.minimum(cat, MAX_CATEGORIES - 1)
-    xy = cov.map_xy[idx]
-    return [(label, xy[cat == i, 0], xy[cat == i, 1]) for i, label in enumerate(labels)]
+    return labels, np.asarray(cat, np.int64)
+
+
+def map_bounds(cov: Coverage, margin: float = 0.03) -> tuple[np.ndarray, np.ndarray]:
+    """(lo, hi) corners of the map's image: every frame inside, with a small margin."""
+    lo, hi = cov.map_xy.min(axis=0), cov.map_xy.max(axis=0)
+    pad = np.maximum(hi - lo, 1e-6) * margin
+    return lo - pad, hi + pad
+
+
+def map_image(cov: Coverage, cat: np.ndarray, texels: int = MAP_TEXELS) -> np.ndarray:
+    """(texels, texels, 4) float32 RGBA image of every frame on the map, highest PC2 first (a plot
+    image shows the first row at the top): each texel in the colour of the class most of its frames
+    belong to, brighter where more frames are, transparent where none is. One textured quad is far
+    cheaper to draw than tens of thousands of markers."""
+    lo, hi = map_bounds(cov)
+    ij = np.floor((cov.map_xy - lo) / (hi - lo) * texels).astype(np.int64)
+    ij = np.clip(ij, 0, texels - 1)
+    row = texels - 1 - ij[:, 1]
+    n_cat = int(cat.max()) + 1 if len(cat) else 1
+    counts = np.bincount((row * texels + ij[:, 0]) * n_cat + cat, minlength=texels * texels * n_cat)
+    counts = counts.reshape(texels * texels, n_cat)
+    total = counts.sum(axis=1)
+    colors = np.array([PALETTE[i % len(PALETTE)] for i in range(n_cat)], np.float32)
+    rgb = colors[np.argmax(counts, axis=1)]
+    shade = np.where(total > 0, 0.7 + 0.3 * np.log1p(total) / np.log1p(max(int(total.max()), 1)), 0.0)
+    img = np.concatenate([rgb * shade[:, None], (total > 0).astype(np.float32)[:, None]], axis=1)
+    return np.ascontiguousarray(img.reshape(texels, texels, 4).astype(np.float32))
+
+
+def category_centres(cov: Coverage, cat: np.ndarray, n: int) -> np.ndarray:
+    """(n, 2) median map position of each class's frames (nan for a class without frames)."""
+    out = np.full((n, 2), np.nan)
+    for i in range(n):
+        sel = cat == i
+        if sel.any():
+            out[i] = np.median(cov.map_xy[sel], axis=0)
+    return out
 
 
 def heat_texture(cov: Coverage, upscale: int = HEAT_UPSCALE) -> np.ndarray:
@@ -127,7 +162,7 @@ class CoveragePanel(Panel):
                         dpg.add_plot_axis(dpg.mvXAxis, tag="cov_map_x", label="PC1", auto_fit=True)
                         with dpg.plot_axis(dpg.mvYAxis, tag="cov_map_y", label="PC2", auto_fit=True):
                             z = [0.0]
-                            for i in range(MAX_CATEGORIES):
+                            for i in range(MAX_CATEGORIES):   # each class's median position (and the legend)
                                 dpg.add_scatter_series(z, z, tag=f"cov_cat_{i}", label=f"{i}", show=False)
                             for name in CONTROLLERS:
                                 dpg.add_line_series(z, z, tag=f"cov_trail_{name}", show=False)
@@ -155,7 +190,7 @@ class CoveragePanel(Panel):
                                                 show=False)
         theme = self.ctx.theme
         for i in range(MAX_CATEGORIES):
-            theme.series(f"cov_cat_{i}", PALETTE[i % len(PALETTE)], marker=True, marker_size=1.6)
+            theme.series(f"cov_cat_{i}", PALETTE[i % len(PALETTE)], marker=True, marker_size=6.0)
         for d in range(MAX_DIMS):
             theme.series(f"cov_hist_{d}", DIM_COLORS[d % len(DIM_COLORS)], weight=1.5)
         for name in CONTROLLERS:
@@ -200,6 +235,12 @@ class CoveragePanel(Panel):
                              tag="cov_heat_img", parent="cov_heat_y", before=f"cov_hq_{CONTROLLERS[0]}")
         dpg.set_axis_limits("cov_heat_x", float(te[0]), float(te[-1]))
         dpg.set_axis_limits("cov_heat_y", float(se[0]), float(se[-1]))
+        lo, hi = map_bounds(cov)
+        self.map_tex = np.zeros((MAP_TEXELS, MAP_TEXELS, 4), np.float32)
+        dpg.add_raw_texture(MAP_TEXELS, MAP_TEXELS, self.map_tex, format=dpg.mvFormat_Float_rgba, tag="cov_map_tex",
+                            parent="texture_registry")
+        dpg.add_image_series("cov_map_tex", (float(lo[0]), float(lo[1])), (float(hi[0]), float(hi[1])),
+                             tag="cov_map_img", parent="cov_map_y", before="cov_cat_0")
         ratio = cov.pca.variance_ratio
         dpg.configure_item("cov_map_x", label=f"PC1 ({100 * ratio[0]:.0f}%)")
         dpg.configure_item("cov_map_y", label=f"PC2 ({100 * ratio[1]:.0f}%)")
@@ -227,18 +268,19 @@ class CoveragePanel(Panel):
 
     def _draw_map_data(self) -> None:
         dpg = self.dpg
-        series = map_series(self.cov, self.mode)
+        labels, cat = map_categories(self.cov, self.mode)
+        self.map_tex[...] = map_image(self.cov, cat)          # in place: the texture shows it
+        centres = category_centres(self.cov, cat, len(labels))
         for i in range(MAX_CATEGORIES):
             tag = f"cov_cat_{i}"
-            if i < len(series) and len(series[i][1]):
-                label, x, y = series[i]
-                dpg.set_value(tag, [x, y])
-                dpg.configure_item(tag, label=label, show=True)
+            if i < len(labels) and np.isfinite(centres[i]).all():
+                dpg.set_value(tag, [[float(centres[i, 0])], [float(centres[i, 1])]])
+                dpg.configure_item(tag, label=labels[i], show=True)
             else:
                 dpg.configure_item(tag, show=False)
         self._mode_shown = self.mode
-        self.last["categories"] = [s[0] for s in series]
-        self.last["points"] = int(sum(len(s[1]) for s in series))
+        self.last["categories"] = labels
+        self.last["frames_drawn"] = int(len(cat))
 
     def update(self, view: View) -> None:
         if not self._ensure_coverage():

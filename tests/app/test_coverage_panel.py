@@ -5,7 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from app.panels.coverage import MAX_CATEGORIES, heat_texture, map_series, percentile_in
+from app.panels.coverage import (MAX_CATEGORIES, category_centres, heat_texture, map_bounds, map_categories,
+                                 map_image, percentile_in)
+from lmm.coverage_png import PALETTE
 from lmm.coverage import build_coverage, fit_pca
 
 LAYOUT = """[Window][###10001]
@@ -35,25 +37,38 @@ def cov(db, features):
     return build_coverage(db, features)
 
 
-def test_map_series_split_the_subsample_by_tag_or_speed(cov):
-    for mode in ("tag", "speed"):
-        series = map_series(cov, mode, max_points=3000)
-        assert sum(len(x) for _, x, _ in series) == 3000
-        assert len(series) <= MAX_CATEGORIES
-    labels = [s[0] for s in map_series(cov, "tag")]
-    assert labels == cov.tag_names
-    fast = dict((s[0], s) for s in map_series(cov, "speed"))["3-4 m/s"]
-    # the fast frames' points are frames whose root speed is 3-4 m/s
-    idx = np.flatnonzero((cov.speed_m_s >= 3) & (cov.speed_m_s < 4))
-    assert np.isin(fast[1], cov.map_xy[idx, 0]).all()
+def test_map_image_draws_every_frame_in_its_class_colour(cov):
+    labels, cat = map_categories(cov, "tag")
+    assert labels == cov.tag_names and len(cat) == cov.n_frames
+    img = map_image(cov, cat, texels=64)
+    assert img.shape == (64, 64, 4) and img.dtype == np.float32
+    # a texel holding only frames of one class is that class's colour (shaded); empty texels are clear
+    lo, hi = map_bounds(cov)
+    i = int(np.argmin(cov.map_xy[:, 0]))                   # the leftmost frame: alone at the left edge
+    col = int(np.floor((cov.map_xy[i, 0] - lo[0]) / (hi[0] - lo[0]) * 64))
+    row = 63 - int(np.floor((cov.map_xy[i, 1] - lo[1]) / (hi[1] - lo[1]) * 64))
+    assert img[row, col, 3] == 1.0
+    rgb = img[row, col, :3]
+    assert np.allclose(rgb / rgb.max(), np.array(PALETTE[cat[i]]) / max(PALETTE[cat[i]]), atol=1e-5)
+    occupied = img[..., 3] > 0
+    assert 0 < occupied.mean() < 1
+    assert np.all(img[~occupied, :3] == 0)
+    # speed classes: the labels are speeds, the image differs
+    speed_labels, speed_cat = map_categories(cov, "speed")
+    assert speed_labels[0].endswith("m/s")
+    assert not np.allclose(map_image(cov, speed_cat, texels=64), img)
+    centres = category_centres(cov, speed_cat, len(speed_labels))
+    fast = speed_labels.index("3-4 m/s")
+    sel = (cov.speed_m_s >= 3) & (cov.speed_m_s < 4)
+    assert np.allclose(centres[fast], np.median(cov.map_xy[sel], axis=0))
 
 
-def test_more_tags_than_colours_share_the_last_series(cov):
+def test_more_tags_than_colours_share_the_last_class(cov):
     many = type(cov)(**{**cov.__dict__, "tag_names": [f"t{i}" for i in range(12)],
                         "frame_tag": np.arange(cov.n_frames) % 12})
-    series = map_series(many, "tag", max_points=1200)
-    assert len(series) == MAX_CATEGORIES and series[-1][0] == "5 more"
-    assert sum(len(x) for _, x, _ in series) == 1200
+    labels, cat = map_categories(many, "tag")
+    assert len(labels) == MAX_CATEGORIES and labels[-1] == "5 more"
+    assert cat.max() == MAX_CATEGORIES - 1 and (cat == MAX_CATEGORIES - 1).sum() == (many.frame_tag >= 7).sum()
 
 
 def test_heat_texture_puts_the_fastest_row_first_and_empty_cells_dark_red(cov):
