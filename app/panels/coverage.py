@@ -135,7 +135,7 @@ class CoveragePanel(Panel):
         self.channel = 0
         self.trail = True
         self.cov: Coverage | None = None
-        self._distance: dict[str, tuple[int, DataDistance]] = {}
+        self._distance: dict[str, tuple[np.ndarray, DataDistance]] = {}
         self._shown_for = None
         self._mode_shown = None
         self.error = ""
@@ -250,10 +250,9 @@ class CoveragePanel(Panel):
         """The nearest-frame search over the controller's features as they are normalised now (weights
         change with the sliders), rebuilt when they change."""
         features = self.ctx.engine.features_of(name)
-        key = id(features.normalized)
         have = self._distance.get(name)
-        if have is None or have[0] != key:
-            have = self._distance[name] = (key, DataDistance(features.normalized))
+        if have is None or have[0] is not features.normalized:   # the array itself: a weight change replaces it
+            have = self._distance[name] = (features.normalized, DataDistance(features.normalized))
         return have[1]
 
     # -- every frame ---------------------------------------------------------------------------

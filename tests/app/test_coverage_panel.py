@@ -109,8 +109,11 @@ def test_coverage_panel_shows_the_live_and_the_picked_tick(run_studio, tmp_path,
               {"frame": 124, "do": "capture", "label": "scrubbed"},
               {"frame": 125, "do": "coverage", "mode": "speed", "channel": "trajectory_position"},
               {"frame": 128, "do": "capture", "label": "speed"},
-              {"frame": 129, "do": "screenshot", "path": str(tmp_path / "coverage.png")}]
-    args = ["--frames", 135, "--input", "builtin:circle", "--layout", layout]
+              {"frame": 129, "do": "screenshot", "path": str(tmp_path / "coverage.png")},
+              {"frame": 130, "do": "live"},
+              {"frame": 131, "do": "set_tuning", "field": "feature_weights", "channel": "hip_velocity", "value": 2.0},
+              {"frame": 140, "do": "capture", "label": "reweighted"}]
+    args = ["--frames", 145, "--input", "builtin:circle", "--layout", layout]
     args += ["--weights", lmm_weights] if lmm_weights else ["--no-lmm"]
     r = run_studio(*args, script=script)
     assert r.rc == 0, r.stderr[-3000:]
@@ -139,6 +142,20 @@ def test_coverage_panel_shows_the_live_and_the_picked_tick(run_studio, tmp_path,
     assert speed["mode"] == "speed" and speed["channel"] == "trajectory_position"
     assert speed["categories"][0].endswith("m/s") and speed["tick"] == old["displayed_tick"]
     assert len(speed["percentiles"]["mm"]) == 6
+    # a weight slider moved: the map stays, the query is re-expressed in its units, the distance is
+    # measured as the search now measures it
+    import copy
+
+    from lmm.coverage import rescale_query
+
+    rew = d["labels"]["reweighted"]
+    q = np.asarray(rew["snapshot_query"]["mm"])
+    now = copy.deepcopy(features)
+    now.set_weights({"hip_velocity": 2.0})
+    shown = rew["panels"]["coverage"]["queries"]["mm"]
+    assert np.allclose(shown["xy"], pca.project(rescale_query(q, now.inv_scale, features.inv_scale)), atol=1e-4)
+    costs = ((now.normalized.astype(np.float64) - q) ** 2).sum(axis=1)
+    assert shown["cost"] == pytest.approx(costs.min(), rel=1e-4, abs=1e-6)
     # the window is drawn: the map, the heat map and the histograms make a busy picture
     img = np.asarray(Image.open(tmp_path / "coverage.png").convert("RGB"), np.float32)
     x, y, w, h = COVERAGE_RECT
