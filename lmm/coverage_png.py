@@ -1,12 +1,13 @@
-"""The coverage of a database as one PNG (pillow only): the 2D feature map coloured by tag, the root
-speed x turning-rate heat map and the per-channel histograms. Numbers: :mod:`lmm.coverage`."""
+"""Pictures of a database's coverage: the colours and images (numpy; the studio's Coverage panel uses
+them too) and one PNG (pillow) with the 2D feature map coloured by tag, the root speed x turning-rate
+heat map and the per-channel histograms. Numbers: :mod:`lmm.coverage`."""
 from __future__ import annotations
 
 from pathlib import Path
 
 import numpy as np
 
-from lmm.coverage import Coverage, subsample
+from lmm.coverage import Coverage, speed_categories
 
 BACKGROUND = (24, 24, 28)
 PANEL = (34, 34, 40)
@@ -17,7 +18,6 @@ EMPTY_CELL = (60, 22, 22)
 #: the studio's character colours (orange, blue) come last, so the first eight never look like a character
 PALETTE = ((0.40, 0.80, 0.40), (0.90, 0.33, 0.40), (0.70, 0.55, 0.95), (0.95, 0.85, 0.30), (0.35, 0.85, 0.80),
            (0.95, 0.55, 0.80), (0.65, 0.65, 0.65), (0.60, 0.45, 0.30), (0.30, 0.69, 0.95), (0.96, 0.56, 0.16))
-MAP_POINTS = 12000
 
 
 def palette(i: int) -> tuple[int, int, int]:
@@ -37,6 +37,57 @@ def heat_colors(fraction) -> np.ndarray:
     return np.round(c).astype(np.uint8)
 
 
+def map_categories(cov: Coverage, mode: str, max_classes: int = 8) -> tuple[list[str], np.ndarray]:
+    """Labels and each frame's class on the map: ``tag`` (each frame's most specific tag) or ``speed``
+    (root speed classes); beyond ``max_classes`` the last class holds the rest."""
+    if mode == "speed":
+        labels, cat = speed_categories(cov.speed_m_s)
+    else:
+        labels, cat = cov.tag_names, cov.frame_tag
+    labels = list(labels)
+    if len(labels) > max_classes:
+        labels = labels[:max_classes - 1] + [f"{len(labels) - max_classes + 1} more"]
+        cat = np.minimum(cat, max_classes - 1)
+    return labels, np.asarray(cat, np.int64)
+
+
+def map_bounds(cov: Coverage, margin: float = 0.03) -> tuple[np.ndarray, np.ndarray]:
+    """(lo, hi) corners of the map's image: every frame inside, with a small margin."""
+    lo, hi = cov.map_xy.min(axis=0), cov.map_xy.max(axis=0)
+    pad = np.maximum(hi - lo, 1e-6) * margin
+    return lo - pad, hi + pad
+
+
+def map_image(cov: Coverage, cat: np.ndarray, width: int, height: int) -> np.ndarray:
+    """(height, width, 4) float32 RGBA image of every frame on the map (within :func:`map_bounds`),
+    highest PC2 first: each texel in the colour of the class most of its frames belong to, brighter
+    where more frames are, transparent (and black) where none is. The studio draws it as one textured
+    quad, far cheaper than tens of thousands of markers; the PNG pastes it."""
+    lo, hi = map_bounds(cov)
+    size = np.array([width, height])
+    ij = np.clip(np.floor((cov.map_xy - lo) / (hi - lo) * size).astype(np.int64), 0, size - 1)
+    row = height - 1 - ij[:, 1]
+    n_cat = int(cat.max()) + 1 if len(cat) else 1
+    counts = np.bincount((row * width + ij[:, 0]) * n_cat + cat, minlength=width * height * n_cat)
+    counts = counts.reshape(width * height, n_cat)
+    total = counts.sum(axis=1)
+    colors = np.array([PALETTE[i % len(PALETTE)] for i in range(n_cat)], np.float32)
+    rgb = colors[np.argmax(counts, axis=1)]
+    shade = np.where(total > 0, 0.7 + 0.3 * np.log1p(total) / np.log1p(max(int(total.max()), 1)), 0.0)
+    img = np.concatenate([rgb * shade[:, None], (total > 0).astype(np.float32)[:, None]], axis=1)
+    return np.ascontiguousarray(img.reshape(height, width, 4).astype(np.float32))
+
+
+def category_centres(cov: Coverage, cat: np.ndarray, n: int) -> np.ndarray:
+    """(n, 2) median map position of each class's frames (nan for a class without frames)."""
+    out = np.full((n, 2), np.nan)
+    for i in range(n):
+        sel = cat == i
+        if sel.any():
+            out[i] = np.median(cov.map_xy[sel], axis=0)
+    return out
+
+
 def _font(d, size: int = 13):
     from PIL import ImageFont
 
@@ -46,29 +97,23 @@ def _font(d, size: int = 13):
         return ImageFont.load_default()
 
 
-def _draw_map(d, cov: Coverage, box, font) -> None:
+def _draw_map(canvas, d, cov: Coverage, box, font) -> None:
+    from PIL import Image
+
     x0, y0, x1, y1 = box
     d.rectangle(box, fill=PANEL)
     ratio = cov.pca.variance_ratio
     d.text((x0 + 8, y0 + 6), f"feature space map (PCA of the normalised, weighted features): "
                              f"PC1 {100 * ratio[0]:.0f}%, PC2 {100 * ratio[1]:.0f}% of the variance", fill=TEXT, font=font)
     px0, py0, px1, py1 = x0 + 40, y0 + 30, x1 - 130, y1 - 30
-    xy = cov.map_xy
-    lo, hi = xy.min(axis=0), xy.max(axis=0)
-    span = np.maximum(hi - lo, 1e-9)
-    idx = subsample(len(xy), MAP_POINTS)
-    u = px0 + (xy[idx, 0] - lo[0]) / span[0] * (px1 - px0)
-    v = py1 - (xy[idx, 1] - lo[1]) / span[1] * (py1 - py0)
-    cat = cov.frame_tag[idx]
-    # rarest categories last, so they stay visible on top of the common ones
-    order = np.argsort(-np.bincount(cat, minlength=len(cov.tag_names))[cat], kind="stable")
-    for k in order:
-        c = palette(int(cat[k]))
-        d.point((float(u[k]), float(v[k])), fill=c)
-        d.point((float(u[k]) + 1, float(v[k])), fill=c)
+    labels, cat = map_categories(cov, "tag", len(PALETTE))
+    img = map_image(cov, cat, int(px1 - px0), int(py1 - py0))
+    rgb = (np.clip(img[..., :3], 0, 1) * 255).astype(np.uint8)
+    rgb[img[..., 3] == 0] = PANEL
+    canvas.paste(Image.fromarray(rgb, "RGB"), (int(px0), int(py0)))
     d.text((px0, py1 + 8), "PC1", fill=DIM_TEXT, font=font)
     d.text((x0 + 8, py0), "PC2", fill=DIM_TEXT, font=font)
-    for i, name in enumerate(cov.tag_names):
+    for i, name in enumerate(labels):
         ly = py0 + 18 * i
         d.rectangle([px1 + 20, ly + 3, px1 + 30, ly + 13], fill=palette(i))
         d.text((px1 + 36, ly), name, fill=TEXT, font=font)
@@ -144,7 +189,7 @@ def draw_coverage_png(cov: Coverage, path, title: str = "") -> Path:
     font = _font(d, 13)
     d.text((12, 8), f"coverage of {title or 'the database'}: {cov.n_frames} frames, {cov.n_frames / cov.fps:.0f} s",
            fill=TEXT, font=font)
-    _draw_map(d, cov, (10, 30, 800, 560), font)
+    _draw_map(img, d, cov, (10, 30, 800, 560), font)
     _draw_heatmap(d, cov, (810, 30, width - 10, 560), font)
     _draw_histograms(d, cov, (10, 575, width - 10, height - 10), font)
     path = Path(path)

@@ -16,9 +16,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from lmm.coverage import Coverage, DataDistance, build_coverage, first_trajectory_dims, query_speed_turn, \
-    speed_categories
-from lmm.coverage_png import PALETTE, heat_colors
+from lmm.coverage import Coverage, DataDistance, build_coverage, first_trajectory_dims, query_speed_turn
+from lmm.coverage_png import PALETTE, category_centres, heat_colors, map_bounds, map_categories, map_image
 
 from .base import Panel, View
 from .common import COLORS, SHORT, fmt_num, short_channel_name
@@ -32,57 +31,6 @@ DIM_COLORS = PALETTE[:MAX_CATEGORIES - 2]   # histogram dimensions: not the char
 MAX_DIMS = 6                # most dimensions in one channel (trajectory channels: 3 offsets x 2)
 CONTROLLERS = ("mm", "lmm")
 MODES = ("tag", "speed")
-
-
-def map_categories(cov: Coverage, mode: str) -> tuple[list[str], np.ndarray]:
-    """Labels and each frame's class on the map (pure, for tests): ``tag`` (each frame's most specific
-    tag) or ``speed`` (root speed classes); beyond ``MAX_CATEGORIES`` the last class holds the rest."""
-    if mode == "speed":
-        labels, cat = speed_categories(cov.speed_m_s)
-    else:
-        labels, cat = cov.tag_names, cov.frame_tag
-    labels = list(labels)
-    if len(labels) > MAX_CATEGORIES:
-        labels = labels[:MAX_CATEGORIES - 1] + [f"{len(labels) - MAX_CATEGORIES + 1} more"]
-        cat = np.minimum(cat, MAX_CATEGORIES - 1)
-    return labels, np.asarray(cat, np.int64)
-
-
-def map_bounds(cov: Coverage, margin: float = 0.03) -> tuple[np.ndarray, np.ndarray]:
-    """(lo, hi) corners of the map's image: every frame inside, with a small margin."""
-    lo, hi = cov.map_xy.min(axis=0), cov.map_xy.max(axis=0)
-    pad = np.maximum(hi - lo, 1e-6) * margin
-    return lo - pad, hi + pad
-
-
-def map_image(cov: Coverage, cat: np.ndarray, texels: int = MAP_TEXELS) -> np.ndarray:
-    """(texels, texels, 4) float32 RGBA image of every frame on the map, highest PC2 first (a plot
-    image shows the first row at the top): each texel in the colour of the class most of its frames
-    belong to, brighter where more frames are, transparent where none is. One textured quad is far
-    cheaper to draw than tens of thousands of markers."""
-    lo, hi = map_bounds(cov)
-    ij = np.floor((cov.map_xy - lo) / (hi - lo) * texels).astype(np.int64)
-    ij = np.clip(ij, 0, texels - 1)
-    row = texels - 1 - ij[:, 1]
-    n_cat = int(cat.max()) + 1 if len(cat) else 1
-    counts = np.bincount((row * texels + ij[:, 0]) * n_cat + cat, minlength=texels * texels * n_cat)
-    counts = counts.reshape(texels * texels, n_cat)
-    total = counts.sum(axis=1)
-    colors = np.array([PALETTE[i % len(PALETTE)] for i in range(n_cat)], np.float32)
-    rgb = colors[np.argmax(counts, axis=1)]
-    shade = np.where(total > 0, 0.7 + 0.3 * np.log1p(total) / np.log1p(max(int(total.max()), 1)), 0.0)
-    img = np.concatenate([rgb * shade[:, None], (total > 0).astype(np.float32)[:, None]], axis=1)
-    return np.ascontiguousarray(img.reshape(texels, texels, 4).astype(np.float32))
-
-
-def category_centres(cov: Coverage, cat: np.ndarray, n: int) -> np.ndarray:
-    """(n, 2) median map position of each class's frames (nan for a class without frames)."""
-    out = np.full((n, 2), np.nan)
-    for i in range(n):
-        sel = cat == i
-        if sel.any():
-            out[i] = np.median(cov.map_xy[sel], axis=0)
-    return out
 
 
 def heat_texture(cov: Coverage, upscale: int = HEAT_UPSCALE) -> np.ndarray:
@@ -267,8 +215,8 @@ class CoveragePanel(Panel):
 
     def _draw_map_data(self) -> None:
         dpg = self.dpg
-        labels, cat = map_categories(self.cov, self.mode)
-        self.map_tex[...] = map_image(self.cov, cat)          # in place: the texture shows it
+        labels, cat = map_categories(self.cov, self.mode, MAX_CATEGORIES)
+        self.map_tex[...] = map_image(self.cov, cat, MAP_TEXELS, MAP_TEXELS)   # in place: the texture shows it
         centres = category_centres(self.cov, cat, len(labels))
         for i in range(MAX_CATEGORIES):
             tag = f"cov_cat_{i}"

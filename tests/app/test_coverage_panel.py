@@ -5,9 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from app.panels.coverage import (MAX_CATEGORIES, category_centres, heat_texture, map_bounds, map_categories,
-                                 map_image, percentile_in)
-from lmm.coverage_png import PALETTE
+from app.panels.coverage import MAX_CATEGORIES, heat_texture, percentile_in
+from lmm.coverage_png import PALETTE, category_centres, map_bounds, map_categories, map_image
 from lmm.coverage import build_coverage, fit_pca
 
 LAYOUT = """[Window][###10001]
@@ -38,10 +37,11 @@ def cov(db, features):
 
 
 def test_map_image_draws_every_frame_in_its_class_colour(cov):
-    labels, cat = map_categories(cov, "tag")
+    labels, cat = map_categories(cov, "tag", MAX_CATEGORIES)
     assert labels == cov.tag_names and len(cat) == cov.n_frames
-    img = map_image(cov, cat, texels=64)
+    img = map_image(cov, cat, 64, 64)
     assert img.shape == (64, 64, 4) and img.dtype == np.float32
+    assert map_image(cov, cat, 80, 50).shape == (50, 80, 4)
     # a texel holding only frames of one class is that class's colour (shaded); empty texels are clear
     lo, hi = map_bounds(cov)
     i = int(np.argmin(cov.map_xy[:, 0]))                   # the leftmost frame: alone at the left edge
@@ -54,9 +54,9 @@ def test_map_image_draws_every_frame_in_its_class_colour(cov):
     assert 0 < occupied.mean() < 1
     assert np.all(img[~occupied, :3] == 0)
     # speed classes: the labels are speeds, the image differs
-    speed_labels, speed_cat = map_categories(cov, "speed")
+    speed_labels, speed_cat = map_categories(cov, "speed", MAX_CATEGORIES)
     assert speed_labels[0].endswith("m/s")
-    assert not np.allclose(map_image(cov, speed_cat, texels=64), img)
+    assert not np.allclose(map_image(cov, speed_cat, 64, 64), img)
     centres = category_centres(cov, speed_cat, len(speed_labels))
     fast = speed_labels.index("3-4 m/s")
     sel = (cov.speed_m_s >= 3) & (cov.speed_m_s < 4)
@@ -66,7 +66,7 @@ def test_map_image_draws_every_frame_in_its_class_colour(cov):
 def test_more_tags_than_colours_share_the_last_class(cov):
     many = type(cov)(**{**cov.__dict__, "tag_names": [f"t{i}" for i in range(12)],
                         "frame_tag": np.arange(cov.n_frames) % 12})
-    labels, cat = map_categories(many, "tag")
+    labels, cat = map_categories(many, "tag", MAX_CATEGORIES)
     assert len(labels) == MAX_CATEGORIES and labels[-1] == "5 more"
     assert cat.max() == MAX_CATEGORIES - 1 and (cat == MAX_CATEGORIES - 1).sum() == (many.frame_tag >= 7).sum()
 
