@@ -160,8 +160,9 @@ class Heatmap:
 
     def cell(self, speed: float, turn: float) -> tuple[int, int]:
         """The (row, column) a speed and turning rate fall in (clamped to the outermost cells)."""
-        i = int(np.clip(np.searchsorted(self.speed_edges_m_s, speed, side="right") - 1, 0, len(self.speed_edges_m_s) - 2))
-        j = int(np.clip(np.searchsorted(self.turn_edges_deg_s, turn, side="right") - 1, 0, len(self.turn_edges_deg_s) - 2))
+        se, te = self.speed_edges_m_s, self.turn_edges_deg_s
+        i = int(np.clip(np.searchsorted(se, speed, side="right") - 1, 0, len(se) - 2))
+        j = int(np.clip(np.searchsorted(te, turn, side="right") - 1, 0, len(te) - 2))
         return i, j
 
     def seconds_at(self, speed: float, turn: float) -> float:
@@ -252,7 +253,8 @@ def frame_tag_categories(db) -> tuple[list[str], np.ndarray]:
 def speed_categories(speed, edges=SPEED_CLASS_EDGES_M_S) -> tuple[list[str], np.ndarray]:
     """Speed classes: the labels (``0-0.3 m/s`` ... ``4+ m/s``) and each frame's class index."""
     e = np.asarray(edges, np.float64)
-    labels = [f"{e[i]:g}+ m/s" if not np.isfinite(e[i + 1]) else f"{e[i]:g}-{e[i + 1]:g} m/s" for i in range(len(e) - 1)]
+    labels = [f"{e[i]:g}+ m/s" if not np.isfinite(e[i + 1]) else f"{e[i]:g}-{e[i + 1]:g} m/s"
+              for i in range(len(e) - 1)]
     idx = np.clip(np.searchsorted(e, np.asarray(speed, np.float64), side="right") - 1, 0, len(labels) - 1)
     return labels, idx.astype(np.int64)
 

@@ -104,7 +104,8 @@ def _draw_map(canvas, d, cov: Coverage, box, font) -> None:
     d.rectangle(box, fill=PANEL)
     ratio = cov.pca.variance_ratio
     d.text((x0 + 8, y0 + 6), f"feature space map (PCA of the normalised, weighted features): "
-                             f"PC1 {100 * ratio[0]:.0f}%, PC2 {100 * ratio[1]:.0f}% of the variance", fill=TEXT, font=font)
+                             f"PC1 {100 * ratio[0]:.0f}%, PC2 {100 * ratio[1]:.0f}% of the variance",
+           fill=TEXT, font=font)
     px0, py0, px1, py1 = x0 + 40, y0 + 30, x1 - 130, y1 - 30
     labels, cat = map_categories(cov, "tag", len(PALETTE))
     img = map_image(cov, cat, int(px1 - px0), int(py1 - py0))

@@ -302,7 +302,8 @@ class CoveragePanel(Panel):
         unit = f" ({hist.unit})" if hist.unit else ""
         parts = [f"{SHORT[n]} " + " ".join(f"{lab} {p:.0f}%" for lab, p in zip(hist.dims, ps))
                  for n, ps in percentiles.items()]
-        self.text.set("cov_hist_status", f"{short_channel_name(hist.name)}{unit}; query percentile: " + "; ".join(parts))
+        self.text.set("cov_hist_status",
+                      f"{short_channel_name(hist.name)}{unit}; query percentile: " + "; ".join(parts))
         dpg.configure_item("cov_hist_x", label=f"{hist.name}{unit}")
         self.last.update({"tick": view.tick_number, "mode": self.mode, "channel": hist.name,
                           "variance_ratio": cov.pca.variance_ratio.tolist(),
