@@ -28,6 +28,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "studio": ("studio", "open the studio (default when no command is given)"),
     "build-db": ("build_db", "build (or load from cache) the motion database and print its size"),
     "check-data": ("check_data", "check a manifest's takes (T-pose, climbing, sliding, outliers) and its coverage"),
+    "coverage": ("coverage", "map the database's feature space, speed x turn rate and histograms (PNG, JSON)"),
     "view": ("view", "play a BVH file in a 3D window"),
     "train": ("train", "train the learned motion matching networks (needs torch)"),
     "eval": ("eval", "quality metrics of the learned motion matching networks"),

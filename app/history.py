@@ -64,6 +64,7 @@ SERIES: dict[str, Callable] = {
     "speed": _scalar(lambda s: float(np.linalg.norm(s.simulation_velocity))),
     "desired_speed": _scalar(lambda s: float(np.linalg.norm(s.desired_velocity))),
     "root_position": _vector(_pose_root),
+    "query": _vector(lambda s: getattr(s, "query", None)),   # (D,) normalised query (the coverage trail)
     "latent": _vector(lambda s: s.latent),
     "matched_latent": _vector(lambda s: s.matched_latent),
     "search_us": _timing("search"),

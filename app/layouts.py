@@ -94,7 +94,7 @@ class LayoutManager:
         rect = self.layout.windows.get(key) or code.windows.get(key) or FALLBACK_RECT
         w, h = rect["size"] or FALLBACK_RECT["size"]
         return dict(pos=rect["pos"] or FALLBACK_RECT["pos"], width=w, height=h,
-                    show=key not in self.layout.hidden, no_collapse=False)
+                    show=key not in self.layout.hidden and key in self.layout.windows, no_collapse=False)
 
     def settle(self) -> None:
         """After the first frame: scale the start layout to the window unless dearpygui restored it.

@@ -27,7 +27,8 @@ class Script:
     ``key_down`` / ``key_up`` (key); ``record_start`` (path[, which]) / ``record_stop``; ``layout``
     (name or path); ``pause`` / ``resume`` / ``live`` / ``scrub`` (tick, or back: n ticks) / ``step`` (n);
     ``open`` (kind: a file dialog kind, path); ``inspect`` (controller); ``capture`` (label);
-    ``screenshot`` (path); ``sort`` (key[, descending]); ``help`` (Help > Keys and mouse); ``dismiss`` (OK on the message shown); ``quit``;
+    ``screenshot`` (path); ``sort`` (key[, descending]); ``coverage`` (mode: tag or speed, channel: a
+    feature channel's name); ``help`` (Help > Keys and mouse); ``dismiss`` (OK on the message shown); ``quit``;
     ``quit_when_exists`` (path: quit on the first frame that file exists); ``write_rects`` (path, items:
     write the screen rectangles of those items as JSON, for tests that click them with xdotool);
     ``show`` (window[, show]); ``click_candidate`` (row: preview a Search Candidates row); ``database`` (op: ``select`` (range),
@@ -92,6 +93,11 @@ class Script:
             s.panels["candidates"].click_row(int(a["row"]))
         elif do == "database":
             self._database(s.panels["database"], a)
+        elif do == "coverage":
+            if "mode" in a:
+                s.panels["coverage"].set_mode(a["mode"])
+            if "channel" in a:
+                s.panels["coverage"].set_channel(a["channel"])
         elif do == "quit_when_exists":  # external tests (real key presses) end the run by creating a file
             self.quit_files.append(Path(a["path"]))
         elif do == "write_rects":

@@ -109,6 +109,7 @@ class Studio(SessionActions):
 
     def build_ui(self) -> None:
         dpg = self.dpg
+        from .panels.coverage import CoveragePanel
         from .panels.database import DatabasePanel
         from .panels.features import FeaturesPanel
         from .panels.latent import LatentPanel
@@ -134,7 +135,7 @@ class Studio(SessionActions):
                                       render_scale=float(min(max(self.opts.render_scale, 0.25), 1.0)))
         self.panels = {"viewport": self.viewport}
         for cls in (FeaturesPanel, LatentPanel, SearchPanel, CandidatesPanel, TuningPanel, StatsPanel,
-                    TimelinePanel, RecordingPanel, DatabasePanel):
+                    TimelinePanel, RecordingPanel, DatabasePanel, CoveragePanel):
             self.panels[cls.key] = cls(ctx)
         self.menu.build()
         for key, panel in self.panels.items():

@@ -65,11 +65,13 @@ class Theme:
                 dpg.add_theme_color(dpg.mvThemeCol_WindowBg, WINDOW_BG)
                 dpg.add_theme_color(dpg.mvThemeCol_ChildBg, WINDOW_BG)
 
-    def series(self, item, color, weight: float | None = None, bar: bool = False, marker: bool = False) -> None:
-        """Give a plot series a colour (RGB 0..1) and optionally a line weight, bar fill or markers."""
+    def series(self, item, color, weight: float | None = None, bar: bool = False, marker: bool = False,
+               marker_size: float = 3.0) -> None:
+        """Give a plot series a colour (RGB 0..1) and optionally a line weight, bar fill or markers
+        (circles of ``marker_size`` pixels)."""
         dpg = self.dpg
         plots = dpg.mvThemeCat_Plots
-        key = (tuple(color), weight, bar, marker)
+        key = (tuple(color), weight, bar, marker, marker_size)
         theme = self._series_themes.get(key)
         if theme is None:
             rgba = tuple(int(round(c * 255)) for c in color[:3]) + (255,)
@@ -82,7 +84,7 @@ class Theme:
                         dpg.add_theme_style(dpg.mvPlotStyleVar_LineWeight, weight, category=plots)
                     if marker:
                         dpg.add_theme_style(dpg.mvPlotStyleVar_Marker, dpg.mvPlotMarker_Circle, category=plots)
-                        dpg.add_theme_style(dpg.mvPlotStyleVar_MarkerSize, 3.0, category=plots)
+                        dpg.add_theme_style(dpg.mvPlotStyleVar_MarkerSize, float(marker_size), category=plots)
             self._series_themes[key] = theme
         dpg.bind_item_theme(item, theme)
 

@@ -1,0 +1,314 @@
+"""Coverage: where the database holds motion, and where the characters ask for motion it lacks.
+
+* the 2D map of the database's feature space (:mod:`lmm.coverage`: PCA of the normalised, weighted
+  feature vectors; every frame drawn into one image, coloured by tag or root speed, with each class's
+  median position marked), with each character's
+  query of the displayed tick (its colour, a large dot) and a short trail of its queries before it;
+* the root speed x turning-rate heat map of the database (seconds per cell; dark red: none) with each
+  character's asked-for speed and turning rate marked;
+* the histogram of one feature channel's dimensions with each character's query values on it;
+* the distance from each query to the nearest database frame, in search cost units.
+
+Everything follows the displayed tick (live or picked on the timeline). The coverage itself is computed
+once, the first time the window is shown.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from lmm.coverage import Coverage, DataDistance, build_coverage, first_trajectory_dims, query_speed_turn
+from lmm.coverage_png import PALETTE, category_centres, heat_colors, map_bounds, map_categories, map_image
+
+from .base import Panel, View
+from .common import COLORS, SHORT, fmt_num, short_channel_name
+
+MAP_TEXELS = 200            # the map image's side: every database frame is drawn into it
+TRAIL_S = 2.0               # seconds of queries behind the current one
+TRAIL_POINTS = 40
+MAX_CATEGORIES = 8          # map colour classes (beyond that, the last one holds the rest)
+HEAT_UPSCALE = 8            # texels per heat map cell side
+DIM_COLORS = PALETTE[:MAX_CATEGORIES - 2]   # histogram dimensions: not the characters' orange and blue
+MAX_DIMS = 6                # most dimensions in one channel (trajectory channels: 3 offsets x 2)
+CONTROLLERS = ("mm", "lmm")
+MODES = ("tag", "speed")
+
+
+def heat_texture(cov: Coverage, upscale: int = HEAT_UPSCALE) -> np.ndarray:
+    """(S * upscale, T * upscale, 4) float32 RGBA of the speed x turn heat map, fastest row first (a
+    plot image shows the texture's first row at the top of its bounds); each cell is ``upscale``
+    texels a side so that the texture's linear filtering blurs only the cells' borders."""
+    seconds = cov.heatmap.seconds[::-1]
+    rgb = heat_colors(seconds / max(float(seconds.max()), 1e-9)).astype(np.float32) / 255.0
+    rgba = np.concatenate([rgb, np.ones(rgb.shape[:-1] + (1,), np.float32)], axis=-1)
+    return np.ascontiguousarray(np.repeat(np.repeat(rgba, upscale, axis=0), upscale, axis=1))
+
+
+def percentile_in(hist_edges: np.ndarray, hist_counts: np.ndarray, value: float) -> float:
+    """Share (0-100) of the database's values below ``value``, from one dimension's histogram."""
+    if not np.isfinite(value):
+        return float("nan")
+    cum = np.concatenate([[0.0], np.cumsum(hist_counts, dtype=np.float64)])
+    return float(100.0 * np.interp(value, hist_edges, cum) / max(cum[-1], 1.0))
+
+
+class QueryReport:
+    """What the panel shows about one controller's query at the displayed tick (plain data)."""
+
+    def __init__(self, cov: Coverage, distance: DataDistance, features, snap, trail_queries: np.ndarray,
+                 horizon: int, fps: float):
+        q = np.asarray(snap.query, np.float64)
+        self.xy = cov.project_query(q, features.inv_scale)
+        trail = trail_queries[np.all(np.isfinite(trail_queries), axis=1)] if trail_queries.ndim == 2 else q[None]
+        self.trail = cov.project_query(trail, features.inv_scale) if len(trail) else self.xy[None]
+        self.nearest_frame, self.cost = distance.nearest(q)
+        self.speed, self.turn = query_speed_turn(snap.trajectory_positions, snap.trajectory_rotations,
+                                                 snap.trajectory_offsets, snap.pose.global_positions[0],
+                                                 snap.pose.global_rotations[0], horizon, fps)
+        self.cell_seconds = cov.heatmap.seconds_at(self.speed, self.turn)
+        self.raw = features.denormalize(np.asarray(snap.query, np.float32)).astype(np.float64)
+
+    def to_dict(self) -> dict:
+        f = lambda v: None if v is None or not np.isfinite(v) else float(v)  # noqa: E731
+        return {"xy": self.xy.tolist(), "trail_points": int(len(self.trail)), "nearest_frame": int(self.nearest_frame),
+                "cost": f(self.cost), "speed_m_s": f(self.speed), "turn_deg_s": f(self.turn),
+                "cell_seconds": f(self.cell_seconds)}
+
+
+class CoveragePanel(Panel):
+    key = "coverage"
+
+    def __init__(self, ctx):
+        super().__init__(ctx)
+        self.mode = "tag"
+        self.channel = 0
+        self.trail = True
+        self.cov: Coverage | None = None
+        self._distance: dict[str, tuple[np.ndarray, DataDistance]] = {}
+        self._shown_for = None
+        self._mode_shown = None
+        self.error = ""
+
+    # -- build ---------------------------------------------------------------------------------
+    def build(self, window_kwargs: dict) -> None:
+        dpg = self.dpg
+        features = self.ctx.engine.features
+        with self.window(window_kwargs):
+            dpg.add_text("", tag="cov_status", wrap=0)
+            with dpg.group(horizontal=True):
+                dpg.add_text("colour by")
+                dpg.add_radio_button(MODES, tag="cov_mode", horizontal=True, default_value=self.mode,
+                                     callback=lambda s, a: self.set_mode(a))
+                dpg.add_checkbox(label="trail", tag="cov_trail", default_value=self.trail,
+                                 callback=lambda s, a: setattr(self, "trail", bool(a)))
+            with dpg.table(header_row=False, policy=dpg.mvTable_SizingStretchProp, tag="cov_top",
+                           borders_innerV=False):
+                dpg.add_table_column(init_width_or_weight=1.15)
+                dpg.add_table_column(init_width_or_weight=1.0)
+                with dpg.table_row():
+                    with dpg.plot(tag="cov_map", height=220, width=-1, no_menus=True, equal_aspects=False):
+                        dpg.add_plot_legend(location=dpg.mvPlot_Location_NorthEast, outside=False)
+                        dpg.add_plot_axis(dpg.mvXAxis, tag="cov_map_x", label="PC1", auto_fit=True)
+                        with dpg.plot_axis(dpg.mvYAxis, tag="cov_map_y", label="PC2", auto_fit=True):
+                            z = [0.0]
+                            for i in range(MAX_CATEGORIES):   # each class's median position (and the legend)
+                                dpg.add_scatter_series(z, z, tag=f"cov_cat_{i}", label=f"{i}", show=False)
+                            for name in CONTROLLERS:
+                                dpg.add_line_series(z, z, tag=f"cov_trail_{name}", show=False)
+                                dpg.add_scatter_series(z, z, tag=f"cov_q_{name}", label=SHORT[name], show=False)
+                    with dpg.plot(tag="cov_heat", height=220, width=-1, no_menus=True, no_mouse_pos=True):
+                        dpg.add_plot_axis(dpg.mvXAxis, tag="cov_heat_x", label="turning rate (deg/s)")
+                        with dpg.plot_axis(dpg.mvYAxis, tag="cov_heat_y", label="speed (m/s)"):
+                            for name in CONTROLLERS:
+                                dpg.add_scatter_series([0.0], [0.0], tag=f"cov_hq_{name}", label=SHORT[name],
+                                                       show=False)
+            with dpg.group(horizontal=True):
+                dpg.add_text("channel")
+                dpg.add_combo([ch.name for ch in features.layout], tag="cov_channel", width=180,
+                              default_value=features.layout[0].name,
+                              callback=lambda s, a: self.set_channel(a))
+            dpg.add_text("", tag="cov_hist_status", color=(190, 190, 200), wrap=0)
+            with dpg.plot(tag="cov_hist", height=-1, width=-1, no_menus=True, no_mouse_pos=True):
+                dpg.add_plot_legend(location=dpg.mvPlot_Location_NorthEast, horizontal=True, outside=False)
+                dpg.add_plot_axis(dpg.mvXAxis, tag="cov_hist_x", auto_fit=True)
+                with dpg.plot_axis(dpg.mvYAxis, tag="cov_hist_y", label="frames", auto_fit=True):
+                    for d in range(MAX_DIMS):
+                        dpg.add_line_series([0.0], [0.0], tag=f"cov_hist_{d}", label=f"{d}", show=False)
+                    for name in CONTROLLERS:
+                        dpg.add_inf_line_series([0.0], tag=f"cov_hq_line_{name}", label=f"{SHORT[name]} query",
+                                                show=False)
+        theme = self.ctx.theme
+        for i in range(MAX_CATEGORIES):
+            theme.series(f"cov_cat_{i}", PALETTE[i % len(PALETTE)], marker=True, marker_size=6.0)
+        for d in range(MAX_DIMS):
+            theme.series(f"cov_hist_{d}", DIM_COLORS[d % len(DIM_COLORS)], weight=1.5)
+        for name in CONTROLLERS:
+            theme.series(f"cov_trail_{name}", COLORS[name], weight=2.0)
+            theme.series(f"cov_q_{name}", COLORS[name], marker=True, marker_size=7.0)
+            theme.series(f"cov_hq_{name}", COLORS[name], marker=True, marker_size=7.0)
+            theme.series(f"cov_hq_line_{name}", COLORS[name], weight=2.0)
+
+    # -- controls ------------------------------------------------------------------------------
+    def set_mode(self, mode: str) -> None:
+        """Colour the map by ``tag`` or ``speed`` (the radio buttons, or a script)."""
+        self.mode = mode if mode in MODES else "tag"
+        self.dpg.set_value("cov_mode", self.mode)
+        self._shown_for = None
+
+    def set_channel(self, name: str) -> None:
+        """Show the histograms of the feature channel ``name`` (the combo, or a script)."""
+        names = self.ctx.engine.features.names
+        self.channel = names.index(name) if name in names else 0
+        self.dpg.set_value("cov_channel", names[self.channel])
+        self._shown_for = None
+
+    # -- the coverage (computed once) ----------------------------------------------------------
+    def _ensure_coverage(self) -> bool:
+        if self.cov is not None or self.error:
+            return self.cov is not None
+        dpg = self.dpg
+        engine = self.ctx.engine
+        try:
+            self.cov = build_coverage(engine.db, engine.features)
+            self.horizon = first_trajectory_dims(engine.features.layout)[2]
+        except Exception as e:  # noqa: BLE001 - a layout without trajectory channels: say so, keep running
+            self.error = f"no coverage: {e}"
+            self.text.set("cov_status", self.error)
+            return False
+        cov = self.cov
+        tex = heat_texture(cov)
+        rows, cols = tex.shape[:2]
+        dpg.add_static_texture(cols, rows, tex.ravel(), tag="cov_heat_tex", parent="texture_registry")
+        se, te = cov.heatmap.speed_edges_m_s, cov.heatmap.turn_edges_deg_s
+        dpg.add_image_series("cov_heat_tex", (float(te[0]), float(se[0])), (float(te[-1]), float(se[-1])),
+                             tag="cov_heat_img", parent="cov_heat_y", before=f"cov_hq_{CONTROLLERS[0]}")
+        dpg.set_axis_limits("cov_heat_x", float(te[0]), float(te[-1]))
+        dpg.set_axis_limits("cov_heat_y", float(se[0]), float(se[-1]))
+        lo, hi = map_bounds(cov)
+        self.map_tex = np.zeros((MAP_TEXELS, MAP_TEXELS, 4), np.float32)
+        dpg.add_raw_texture(MAP_TEXELS, MAP_TEXELS, self.map_tex, format=dpg.mvFormat_Float_rgba, tag="cov_map_tex",
+                            parent="texture_registry")
+        dpg.add_image_series("cov_map_tex", (float(lo[0]), float(lo[1])), (float(hi[0]), float(hi[1])),
+                             tag="cov_map_img", parent="cov_map_y", before="cov_cat_0")
+        ratio = cov.pca.variance_ratio
+        dpg.configure_item("cov_map_x", label=f"PC1 ({100 * ratio[0]:.0f}%)")
+        dpg.configure_item("cov_map_y", label=f"PC2 ({100 * ratio[1]:.0f}%)")
+        return True
+
+    def _data_distance(self, name: str) -> DataDistance:
+        """The nearest-frame search over the controller's features as they are normalised now (weights
+        change with the sliders), rebuilt when they change."""
+        features = self.ctx.engine.features_of(name)
+        have = self._distance.get(name)
+        if have is None or have[0] is not features.normalized:   # the array itself: a weight change replaces it
+            have = self._distance[name] = (features.normalized, DataDistance(features.normalized))
+        return have[1]
+
+    # -- every frame ---------------------------------------------------------------------------
+    def _layout_heights(self) -> None:
+        dpg = self.dpg
+        _, h = dpg.get_item_rect_size(self.tag)
+        top = int(max(140, (h - 120) * 0.58))
+        if top != self.text.get("__top_height"):
+            self.text.values["__top_height"] = top
+            dpg.configure_item("cov_map", height=top)
+            dpg.configure_item("cov_heat", height=top)
+
+    def _draw_map_data(self) -> None:
+        dpg = self.dpg
+        labels, cat = map_categories(self.cov, self.mode, MAX_CATEGORIES)
+        self.map_tex[...] = map_image(self.cov, cat, MAP_TEXELS, MAP_TEXELS)   # in place: the texture shows it
+        centres = category_centres(self.cov, cat, len(labels))
+        for i in range(MAX_CATEGORIES):
+            tag = f"cov_cat_{i}"
+            if i < len(labels) and np.isfinite(centres[i]).all():
+                dpg.set_value(tag, [[float(centres[i, 0])], [float(centres[i, 1])]])
+                dpg.configure_item(tag, label=labels[i], show=True)
+            else:
+                dpg.configure_item(tag, show=False)
+        self._mode_shown = self.mode
+        self.last["categories"] = labels
+        self.last["frames_drawn"] = int(len(cat))
+
+    def update(self, view: View) -> None:
+        if not self._ensure_coverage():
+            return
+        dpg = self.dpg
+        self._layout_heights()
+        if self._mode_shown != self.mode:
+            self._draw_map_data()
+        key = (view.tick_number, self.mode, self.channel, self.trail, tuple(view.tick.snapshots) if view.tick else ())
+        if key == self._shown_for:
+            return
+        self._shown_for = key
+        cov = self.cov
+        engine = self.ctx.engine
+        n_trail = max(int(TRAIL_S / engine.dt), 1)
+        reports: dict[str, QueryReport] = {}
+        for name in CONTROLLERS:
+            snap = view.snap_of(name)
+            if snap is None:
+                continue
+            trail = view.history.window(name, "query", view.tick_number, n_trail)
+            if trail.ndim == 2:
+                trail = trail[np.linspace(0, len(trail) - 1, min(TRAIL_POINTS, len(trail))).round().astype(int)]
+            reports[name] = QueryReport(cov, self._data_distance(name), engine.features_of(name), snap, trail,
+                                        self.horizon, engine.db.fps)
+        # the map and the heat map: each character's query
+        for name in CONTROLLERS:
+            r = reports.get(name)
+            dpg.configure_item(f"cov_q_{name}", show=r is not None)
+            dpg.configure_item(f"cov_trail_{name}", show=r is not None and self.trail)
+            dpg.configure_item(f"cov_hq_{name}", show=bool(r is not None and np.isfinite(r.speed)))
+            if r is None:
+                continue
+            dpg.set_value(f"cov_q_{name}", [[float(r.xy[0])], [float(r.xy[1])]])
+            dpg.set_value(f"cov_trail_{name}", [r.trail[:, 0].tolist(), r.trail[:, 1].tolist()])
+            if np.isfinite(r.speed):
+                se, te = cov.heatmap.speed_edges_m_s, cov.heatmap.turn_edges_deg_s
+                dpg.set_value(f"cov_hq_{name}", [[float(np.clip(r.turn, te[0], te[-1]))],
+                                                 [float(np.clip(r.speed, se[0], se[-1]))]])
+        # the status: distance to the data and the heat map cell of each query
+        lines = []
+        for name in CONTROLLERS:
+            r = reports.get(name)
+            if r is None:
+                continue
+            tags = engine.db.tags_of(r.nearest_frame)
+            lines.append(f"{SHORT[name]}: nearest frame {r.nearest_frame}" + (f" [{', '.join(tags)}]" if tags else "")
+                         + f", cost {fmt_num(r.cost)} | {fmt_num(r.speed, 2)} m/s, {fmt_num(r.turn, 0)} deg/s: "
+                         + f"{fmt_num(r.cell_seconds, 1)} s of data there")
+        self.text.set("cov_status", "\n".join(lines) if lines else "no query yet")
+        # the chosen channel's histogram with the query values
+        hist = cov.histograms[self.channel]
+        s = engine.features.slices[self.channel]
+        for d in range(MAX_DIMS):
+            tag = f"cov_hist_{d}"
+            if d < len(hist.dims):
+                centres = (hist.edges[d, :-1] + hist.edges[d, 1:]) / 2
+                dpg.set_value(tag, [centres, hist.counts[d].astype(np.float64)])
+                dpg.configure_item(tag, label=hist.dims[d], show=True)
+            else:
+                dpg.configure_item(tag, show=False)
+        percentiles = {}
+        for name in CONTROLLERS:
+            r = reports.get(name)
+            tag = f"cov_hq_line_{name}"
+            dpg.configure_item(tag, show=r is not None)
+            if r is None:
+                continue
+            values = r.raw[s]
+            dpg.set_value(tag, [values.tolist()])
+            percentiles[name] = [percentile_in(hist.edges[d], hist.counts[d], float(v)) for d, v in enumerate(values)]
+        unit = f" ({hist.unit})" if hist.unit else ""
+        parts = [f"{SHORT[n]} " + " ".join(f"{lab} {p:.0f}%" for lab, p in zip(hist.dims, ps))
+                 for n, ps in percentiles.items()]
+        self.text.set("cov_hist_status",
+                      f"{short_channel_name(hist.name)}{unit}; query percentile: " + "; ".join(parts))
+        dpg.configure_item("cov_hist_x", label=f"{hist.name}{unit}")
+        self.last.update({"tick": view.tick_number, "mode": self.mode, "channel": hist.name,
+                          "variance_ratio": cov.pca.variance_ratio.tolist(),
+                          "queries": {n: r.to_dict() for n, r in reports.items()},
+                          "percentiles": percentiles, "error": self.error})
+
+    def state(self) -> dict:
+        return dict(self.last)
