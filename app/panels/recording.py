@@ -64,7 +64,7 @@ class RecordingPanel(Panel):
             dpg.add_text("", tag="ref_error", wrap=0)
             with dpg.plot(tag="ref_plot", height=140, width=-1, no_menus=True, no_mouse_pos=True, no_title=True,
                           no_box_select=True):
-                dpg.add_plot_legend(horizontal=True)
+                dpg.add_plot_legend(horizontal=True, outside=True, location=dpg.mvPlot_Location_North)
                 dpg.add_plot_axis(dpg.mvXAxis, tag="ref_x")
                 with dpg.plot_axis(dpg.mvYAxis, tag="ref_y", label="pose error, rad"):
                     z = [0.0]
@@ -129,8 +129,10 @@ class RecordingPanel(Panel):
             for name in COLORS:
                 if (name, "reference_error") in tick.series:
                     now[name] = (tick.series[(name, "reference_error")], int(tick.series[(name, "reference_frame")]))
-        line = "  ".join(f"{SHORT[n]} {e:.3f} rad (frame {f})" if np.isfinite(e) else f"{SHORT[n]} - (past the end)"
-                         for n, (e, f) in now.items())
+        line = "  ".join(f"{SHORT[n]} {e:.3f}" if np.isfinite(e) else f"{SHORT[n]} -" for n, (e, _) in now.items())
+        if now:
+            frames = ", ".join(str(f) for _, f in now.values())
+            line += f" rad at frame {frames}" if any(np.isfinite(e) for e, _ in now.values()) else " (past the end)"
         self.text.set("ref_error", line if view.following else
                       ("not following (tick Follow reference)" if view.reference else ""))
         n = h.capacity
@@ -146,7 +148,8 @@ class RecordingPanel(Panel):
                 top = max(top, float(v.max()))
         cursor = (view.tick_number - newest) * dt if newest >= 0 else 0.0
         dpg.set_value("ref_cursor", [[cursor]])
-        dpg.set_axis_limits("ref_x", float(t[0]), 0.0)
+        held = (newest - h.oldest_tick + 1) * dt if newest >= 0 else 0.0      # the ticks since the reset
+        dpg.set_axis_limits("ref_x", -max(min(held, n * dt), 2.0), 0.0)
         dpg.set_axis_limits("ref_y", 0.0, max(0.5, 1.15 * top))
         return {"following": view.following, "now": {k: {"error_rad": e, "frame": f} for k, (e, f) in now.items()},
                 "cursor_s": cursor, "line": line}
