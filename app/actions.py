@@ -1,4 +1,4 @@
-"""What the user (menus, panels, test scripts) can do to the simulation: replay input, open a
+"""What the user (menus, panels, test scripts) can do to the simulation: replay input, open and follow a
 reference clip, load presets and weights, reset, inspect a controller, record.
 
 :class:`SessionActions` is a part of :class:`app.studio.Studio`; it uses the studio's ``session``,
@@ -18,6 +18,7 @@ class SessionActions:
     inspected = "mm"
     lmm_problem: str | None = None
     last_recording = ""            # what the last finished recording wrote, or why it wrote nothing
+    reference_path: str | None = None   # the reference BVH drawn beside the characters
 
     def open_input(self, spec: str) -> bool:
         from lmm.data.inputs import InputError, open_input
@@ -28,11 +29,17 @@ class SessionActions:
             self.errors.show("Input", str(e))
             return False
         self.session.replay(log)
+        self._draw_followed(None)
         self.playback.go_live()
         return True
 
     def live_input(self) -> None:
         self.session.stop_replay()
+        self._draw_followed(None)
+
+    def _draw_followed(self, take) -> None:
+        if getattr(self, "viewport", None) is not None:     # None before the UI is built (--input)
+            self.viewport.set_followed(take)
 
     def reset_characters(self) -> None:
         self.session.reset()
@@ -49,8 +56,50 @@ class SessionActions:
         except Exception as e:
             self.errors.show("Reference BVH", f"{path}: cannot load: {type(e).__name__}: {e}")
             return False
+        following = self.session.following is not None
         self.viewport.set_reference(clip)
+        self.reference_path = str(path)
+        if following:                 # follow the new reference instead of the old one
+            self.follow_reference(True)
         return True
+
+    def follow_reference(self, on: bool = True) -> bool:
+        """Drive the characters by the reference's derived input from a reset, draw the reference aligned
+        with them and judge their poses against it (:mod:`lmm.follow`); off: back to live input. A
+        reference that cannot be followed is reported in one line and stays drawn."""
+        from lmm.data.bvh import BVHError
+        from lmm.errors import InputError
+        from lmm.follow import follow_take
+
+        s = self.session
+        if not on:
+            if s.following is not None:
+                s.stop_replay()
+            self._draw_followed(None)
+            return True
+        if self.reference_path is None:
+            self.errors.show("Follow reference", "no reference BVH is loaded: open one first (Reference BVH...)")
+            return False
+        path = self.reference_path
+        manifest = self._manifest()
+        if manifest is None:
+            self.errors.show("Follow reference", f"{path}: cannot follow: the database's manifest cannot be read")
+            return False
+        try:
+            from lmm.data import bvh
+
+            take = follow_take(bvh.load(path), manifest, s.db.names, s.tuning, s.dt, path)
+        except (BVHError, InputError, OSError, EOFError, ValueError) as e:
+            self.errors.show("Follow reference", str(e) if str(path) in str(e) else f"{path}: {e}")
+            return False
+        s.follow(take)
+        self._draw_followed(take)
+        self.playback.go_live()
+        return True
+
+    def set_reference_overlay(self, overlay: bool) -> None:
+        """Draw the reference over the inspected character (else to the left of the characters)."""
+        self.viewport.reference_overlay = bool(overlay)
 
     def load_preset(self, path: str) -> bool:
         from lmm.tuning import TuningError

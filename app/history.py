@@ -79,6 +79,9 @@ class Tick:
     time_s: float
     snapshots: dict            # controller name -> DebugSnapshot
     extra: dict = field(default_factory=dict)  # studio-side per-tick data (e.g. the input); never plotted
+    # studio-side numbers of this tick kept as series like the snapshots' (e.g. the pose error against a
+    # followed reference): (controller, key) -> value; a series a tick does not give is NaN for it
+    series: dict = field(default_factory=dict)
 
 
 class History:
@@ -93,6 +96,7 @@ class History:
         self._times = np.full(self.capacity, np.nan)
         self._series: dict[tuple[str, str], np.ndarray] = {}
         self._dims: dict[tuple[str, str], int] = {}
+        self._tick_series: set[tuple[str, str]] = set()     # keys that came from Tick.series
         self.count = 0          # ticks appended in total
         self.newest_tick = -1
 
@@ -114,6 +118,11 @@ class History:
         for name, snap in tick.snapshots.items():
             for key, get in SERIES.items():
                 self._store(name, key, slot, get(snap))
+        for k in self._tick_series - tick.series.keys():
+            self._series[k][slot] = np.nan
+        for (name, key), value in tick.series.items():
+            self._store(name, key, slot, value)
+            self._tick_series.add((name, key))
         self.count += 1
         self.newest_tick = tick.tick
 

@@ -25,7 +25,7 @@ class Script:
 
     Actions: ``set_tuning`` (field, value[, channel]) sets the slider and fires its callback;
     ``key_down`` / ``key_up`` (key); ``record_start`` (path[, which]) / ``record_stop``; ``layout``
-    (name or path); ``pause`` / ``resume`` / ``live`` / ``scrub`` (tick, or back: n ticks) / ``step`` (n);
+    (name or path); ``follow`` (on[, overlay]: follow the loaded reference BVH); ``pause`` / ``resume`` / ``live`` / ``scrub`` (tick, or back: n ticks) / ``step`` (n);
     ``open`` (kind: a file dialog kind, path); ``inspect`` (controller); ``capture`` (label);
     ``screenshot`` (path); ``sort`` (key[, descending]); ``coverage`` (mode: tag or speed, channel: a
     feature channel's name); ``help`` (Help > Keys and mouse); ``dismiss`` (OK on the message shown); ``quit``;
@@ -79,6 +79,10 @@ class Script:
             p.step(int(a.get("n", 1)))
         elif do == "open":
             s.dialogs.handle(a["kind"], a["path"])
+        elif do == "follow":
+            s.follow_reference(bool(a.get("on", True)))
+            if "overlay" in a:
+                s.panels["recording"].set_overlay(bool(a["overlay"]))
         elif do == "inspect":
             s.set_inspected(a["controller"])
         elif do == "capture":

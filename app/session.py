@@ -119,6 +119,8 @@ class Session:
         self.tick = 0
         self.input_log = None          # an lmm.data.inputs.InputLog being replayed, or None (live input)
         self.input_log_start_tick = 0
+        self.following = None         # an lmm.follow.FollowedTake whose input is replayed, or None
+        self._trackers: dict = {}      # controller name -> lmm.follow.FrameTracker
         self.recording: Recording | None = None
         self.recording_error = ""           # one line: why the recording stopped by itself ("" = it did not)
         self._failed_recording: Recording | None = None
@@ -189,6 +191,8 @@ class Session:
         """Both characters back to the start; the history is cleared."""
         for c in self.controllers.values():
             c.reset()
+        for t in self._trackers.values():
+            t.reset()
         self.history.clear()
         self.tick = 0
 
@@ -198,9 +202,39 @@ class Session:
         self.reset()
         self.input_log = log
         self.input_log_start_tick = 0
+        self.following = None
 
     def stop_replay(self) -> None:
         self.input_log = None
+        self.following = None
+
+    def follow(self, take) -> None:
+        """Follow a reference take (:mod:`lmm.follow`): its derived input drives every controller from a
+        reset, and each tick carries, per controller, the aligned take frame and the pose error
+        (history series ``reference_frame`` and ``reference_error``, radians)."""
+        from lmm.follow import FrameTracker
+
+        self.replay(take.input_log())
+        self.following = take
+        self._trackers = {name: FrameTracker(take) for name in self.controllers}
+
+    def follow_series(self, tick: Tick) -> dict:
+        """``(controller, key) -> value`` of the followed take for a stepped tick (see :meth:`follow`)."""
+        from lmm.follow import FrameTracker, pose_rotations
+
+        take = self.following
+        time_s = (tick.tick - self.input_log_start_tick) * self.dt
+        out = {}
+        for name, snap in tick.snapshots.items():
+            tracker = self._trackers.get(name)
+            if tracker is None:                # a controller that appeared since (LMM weights loaded)
+                tracker = self._trackers[name] = FrameTracker(take)
+            rot = pose_rotations(snap.pose.local_rotations, snap.pose.global_rotations, self.db.names,
+                                 take.hips_forward_axis)
+            frame, error = tracker.track(time_s, rot)
+            out[(name, "reference_frame")] = float(frame)
+            out[(name, "reference_error")] = error
+        return out
 
     def replay_time(self) -> float:
         return (self.tick - self.input_log_start_tick) * self.dt
@@ -220,6 +254,8 @@ class Session:
         _, snaps, self.step_ms = step_controllers(self.controllers, inp, self.dt)
         tick = Tick(self.tick + 1, (self.tick + 1) * self.dt, snaps, dict(extra or {}))
         tick.extra.setdefault("input", inp)
+        if self.following is not None:
+            tick.series.update(self.follow_series(tick))
         if self.recording is not None:
             self._record(tick, inp)
         self.history.append(tick)

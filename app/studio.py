@@ -93,7 +93,8 @@ class Studio(SessionActions):
                           orbit_camera=self.orbit_camera, show_error=self.errors.show,
                           show_info=self.errors.inform, quit=self.quit,
                           set_preview=lambda owner, poses: self.viewport.set_preview(owner, poses),
-                          preview_database_frame=self.preview_database_frame)
+                          preview_database_frame=self.preview_database_frame,
+                          follow_reference=self.follow_reference, set_reference_overlay=self.set_reference_overlay)
         return PanelContext(dpg=self.dpg, tuning=s.tuning, actions=actions, theme=self.theme, engine=engine)
 
     def _manifest(self):
@@ -248,6 +249,7 @@ class Studio(SessionActions):
                     last_recording=self.last_recording, input_name=s.input_log.name if s.input_log else "",
                     replay_line=replay, devices=tuple(self.gamepad_names()),
                     reference=ref.name if ref is not None else "", layout=self.layouts.name,
+                    following=s.following.name if s.following is not None else "",
                     hidden_windows=self._hidden)
 
     def frame(self) -> None:

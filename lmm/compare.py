@@ -125,9 +125,9 @@ class Motion:
 
 
 def _heading(q_hips: np.ndarray, forward_axis) -> np.ndarray:
-    """Yaw rotations ``(F, 4)`` of the hips' forward axis projected on the ground."""
+    """Yaw rotations ``(..., 4)`` of the hips' forward axis projected on the ground."""
     f = quat.mul_vec(q_hips, np.asarray(forward_axis, np.float64))
-    return quat.from_axis_angle(np.array([0.0, 1.0, 0.0]), np.arctan2(f[:, 0], f[:, 2]))
+    return quat.from_axis_angle(np.array([0.0, 1.0, 0.0]), np.arctan2(f[..., 0], f[..., 2]))
 
 
 def motion_from_animation(anim, name: str, cm_per_unit: float = 1.0, frames=None,
@@ -151,13 +151,20 @@ def motion_from_arrays(name: str, names: list[str], local_rot, global_rot, globa
     keep = slice(first, None)
     g_rot = np.asarray(global_rot, np.float64)[:, keep]
     g_pos = np.asarray(global_pos_cm, np.float64)[:, keep]
-    l_rot = np.asarray(local_rot, np.float64)[:, keep]
-    heading = _heading(g_rot[:, 0], hips_forward_axis)
-    rot = l_rot.copy()
-    rot[:, 0] = quat.normalize(quat.inv_mul(heading, g_rot[:, 0]))     # hips without the facing
+    rot, heading = error_rotations(np.asarray(local_rot, np.float64)[:, keep], g_rot, hips_forward_axis)
     rel = g_pos - g_pos[:, :1] * np.array([1.0, 0.0, 1.0])
     local = quat.inv_mul_vec(heading[:, None, :], rel)
-    return Motion(name, list(names[first:]), quat.normalize(rot), g_pos, local, float(fps))
+    return Motion(name, list(names[first:]), rot, g_pos, local, float(fps))
+
+
+def error_rotations(local_rot: np.ndarray, global_rot: np.ndarray, hips_forward_axis=(0.0, 0.0, 1.0)):
+    """The rotations the rotation error compares, ``(..., J, 4)``, of poses whose first joint is the hips
+    (no simulation bone): the local rotations, with the hips' one replaced by its global rotation without
+    the facing; and the facing ``(..., 4)``."""
+    heading = _heading(global_rot[..., 0, :], hips_forward_axis)
+    rot = np.array(local_rot, np.float64)
+    rot[..., 0, :] = quat.normalize(quat.inv_mul(heading, global_rot[..., 0, :]))   # hips without the facing
+    return quat.normalize(rot), heading
 
 
 def rotation_cost_rows(a: Motion, b: Motion):

@@ -49,6 +49,8 @@ class Actions:
     # preview ghosts in the 3D view: owner (a panel key) -> its poses (an empty tuple clears them)
     set_preview: Callable[[str, tuple], None] = lambda owner, poses: None
     preview_database_frame: Callable[[int], None] = lambda frame: None   # show a database frame (Database panel)
+    follow_reference: Callable[[bool], bool] = lambda on: False         # the reference drives the characters
+    set_reference_overlay: Callable[[bool], None] = lambda overlay: None  # draw it over them (else beside)
 
 
 @dataclass(frozen=True)
@@ -120,6 +122,7 @@ class View:
     replay_line: str = ""                               # replay progress
     devices: tuple[str, ...] = ()                       # connected gamepads
     reference: str = ""                                 # reference BVH shown beside the characters
+    following: str = ""                                 # the reference the characters follow ("" = none)
     layout: str = ""
     hidden_windows: tuple[str, ...] = ()                # window keys the layout hides
 

@@ -64,6 +64,8 @@ class ViewportPanel(Panel):
         self.camera = None
         self.drawings: dict[str, CharacterDrawing] = {}
         self.reference = None
+        self.followed = None               # the lmm.follow.FollowedTake the characters follow, or None
+        self.reference_overlay = False     # followed reference drawn over the inspected character
         self.size = (0, 0)
         self.texture = None
         self.tex_array = None
@@ -203,6 +205,26 @@ class ViewportPanel(Panel):
                                                            joint_radius=0.024, bone_radius=0.016)
             self.scene.add(self.reference_skeleton)
 
+    def set_followed(self, take) -> None:
+        """The reference the characters follow (drawn aligned with them at each tick's aligned frame), or
+        None (the reference plays by time, to the left)."""
+        self.followed = take
+
+    def reference_pose(self, view: View):
+        """Where the reference is drawn for the displayed tick: ``(positions (J, 3), offset (3,), frame)``;
+        frame -1 when it plays by time (not followed, or before the first tick)."""
+        tick = view.tick
+        take = self.followed
+        if take is not None and tick is not None:
+            name = view.inspected if (view.inspected, "reference_frame") in tick.series else \
+                next((n for n, k in tick.series if k == "reference_frame"), None)
+            if name is not None:
+                frame = int(tick.series[(name, "reference_frame")])
+                off = self.offset_of(name) if self.reference_overlay else np.array([-SIDE_OFFSET_M, 0.0, 0.0])
+                return take.positions[frame], off, frame
+        t = tick.time_s if tick is not None else 0.0
+        return self.reference.at(t), np.array([-SIDE_OFFSET_M, 0.0, 0.0]), -1
+
     def _ensure_size(self) -> None:
         dpg = self.dpg
         avail = dpg.get_item_rect_size(self.tag)
@@ -322,8 +344,13 @@ class ViewportPanel(Panel):
             self.drawn["roots"][name] = [float(x) for x in snap.pose.global_positions[0]]
             self.drawn["offsets"][name] = [float(x) for x in off]
         if self.reference is not None and self.reference_skeleton is not None:
-            t = tick.time_s if tick is not None else 0.0
-            self.reference_skeleton.update(self.reference.at(t) + np.array([-SIDE_OFFSET_M, 0.0, 0.0]))
+            positions, off, frame = self.reference_pose(view)
+            self.reference_skeleton.update(positions + off)
+            self.drawn["reference"] = {"frame": frame, "root": [float(x) for x in positions[0]],
+                                       "offset": [float(x) for x in off]}
+            if frame >= 0:       # the camera keeps the reference in view with the characters
+                self.drawn["reference"]["root_path"] = [float(x) for x in self.followed.root_at(view.tick_number)]
+                roots.append(np.asarray(positions[0], np.float64) + off)
         self._update_previews(view, roots)
         self.batch.flush()
         if roots and self.follow:
