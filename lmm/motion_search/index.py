@@ -35,10 +35,10 @@ import numpy as np
 from lmm.errors import InputError
 from lmm.motion_search.dtw import dtw_distances
 from lmm.motion_search.embed import FeatureEmbedder, knn
-from lmm.motion_search.windows import (FRAME_DIM, KEY_JOINTS, WINDOW_FPS, WINDOW_FRAMES, frame_features, match_key_joints,
+from lmm.motion_search.windows import (FRAME_DIM, KEY_JOINTS, frame_ratio, WINDOW_FPS, WINDOW_FRAMES, frame_features, match_key_joints,
                                        resample, take_frames, windows)
 
-INDEX_VERSION = 1
+INDEX_VERSION = 2
 MIN_QUERY_FRAMES = 8                      # at 30 fps: 0.27 s, about one foot contact
 SINGLE_WINDOW_MAX_FRAMES = 48             # longer queries are cut into overlapping windows
 MAX_QUERY_WINDOWS = 8
@@ -133,17 +133,23 @@ def _check_query(frames: np.ndarray, where: str) -> np.ndarray:
 
 
 def query_from_bvh(path, frames: tuple[int, int] | None = None) -> np.ndarray:
-    """Key-joint frames of file frames ``[a, b)`` of a BVH file (the whole take when ``frames`` is None)."""
+    """Key-joint frames of file frames ``[a, b)`` of a BVH file (the whole take when ``frames`` is None).
+
+    The features are computed over the whole take and then cut, so that velocities at the range's ends
+    and the size reference are the take's (a range cut from an indexed take is exactly its frames)."""
     from lmm.data import bvh
 
     anim = bvh.load(path)
-    if frames is not None and frames[0] >= frames[1]:
-        raise SearchError(f"{path}: frames {frames[0]}:{frames[1]} are an empty range")
-    if frames is not None and frames[1] > anim.n_frames:
-        raise SearchError(f"{path}: frames {frames[0]}:{frames[1]} go past the end of the take "
-                          f"({anim.n_frames} frames, 0:{anim.n_frames})")
-    tf = take_frames(anim, str(path), frames)
-    return _check_query(tf.frames, str(path))
+    n = anim.n_frames
+    a, b = (0, n) if frames is None else (int(frames[0]), int(frames[1]))
+    if a >= b:
+        raise SearchError(f"{path}: frames {a}:{b} are an empty range")
+    if b > n:
+        raise SearchError(f"{path}: frames {a}:{b} go past the end of the take ({n} frames, 0:{n})")
+    tf = take_frames(anim, str(path))
+    ratio = frame_ratio(tf.file_fps)
+    i0, i1 = (math.ceil(a / ratio - 1e-9), math.ceil(b / ratio - 1e-9))
+    return _check_query(tf.frames[i0:i1], f"{path} frames {a}:{b}")
 
 
 def query_from_manifest_range(manifest, clip: int, range_index: int = 0) -> np.ndarray:
@@ -283,8 +289,9 @@ class MotionIndex:
     # -- building --
     @classmethod
     def build(cls, sources: list[Source], embedder=None, cache_dir=None, use_cache: bool = True,
-              progress=None) -> "MotionIndex":
-        """The index of ``sources`` (from the cache when its files, embedder and settings are unchanged).
+              rebuild: bool = False, progress=None) -> "MotionIndex":
+        """The index of ``sources`` (from the cache when its files, embedder and settings are unchanged;
+        ``rebuild``: computed again and stored; ``use_cache`` False: neither read nor written).
         ``embedder`` None: :func:`default_embedder`, else the features baseline fitted on the index.
         ``progress(done, total, label)`` is called per file while building."""
         t0 = time.perf_counter()
@@ -300,7 +307,7 @@ class MotionIndex:
         digest = hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()[:24]
         folder = Path(cache_dir) if cache_dir is not None else default_cache_folder()
         path = folder / f"index-{digest}.npz"
-        if use_cache and path.is_file():
+        if use_cache and not rebuild and path.is_file():
             loaded = cls._load(path, sources, embedder, fitted_features)
             if loaded is not None:
                 loaded.build_seconds = time.perf_counter() - t0
@@ -390,7 +397,7 @@ class MotionIndex:
         return self.frames[self.take_offsets[t]:self.take_offsets[t + 1]]
 
     def file_frame(self, t: int, resampled) -> int:
-        return int(round(float(resampled) * self.file_fps[t] / WINDOW_FPS))
+        return int(round(float(resampled) * frame_ratio(self.file_fps[t])))
 
     def nearest_windows(self, vectors: np.ndarray, k: int):
         """``(indices, distances)`` of the ``k`` nearest window embeddings of each of ``vectors``, exact.
@@ -436,8 +443,9 @@ class MotionIndex:
         if rerank <= 0 or not cand:
             return [self._match(t, s, L, d, d) for t, s, d in cand[:top]]
         reranked = self._rerank(q, cand[:rerank], dtw_backend)
+        # after re-ranking a start may move by a tenth of the query: suppress within half the query
         final = _suppress(np.array([r[0] for r in reranked]), np.array([r[1] for r in reranked]),
-                          np.array([r[3] for r in reranked]), top, WINDOW_FRAMES // 2, exclude,
+                          np.array([r[3] for r in reranked]), top, max(WINDOW_FRAMES, L) // 2, exclude,
                           np.array([r[2] for r in reranked]))
         by_key = {(r[0], r[1]): r for r in reranked}
         return [self._match(t, s, by_key[(t, s)][2], d, by_key[(t, s)][4]) for t, s, d in final]
