@@ -45,6 +45,11 @@ def main(args) -> int:
     from lmm.motion_search.index import RERANK_TOP, MotionIndex, query_from_bvh, sources_from
     from lmm.progress import Progress
 
+    if not args.quiet:
+        from app.commands.extras import suggest
+        from lmm.motion_search.dtw import have_dtaidistance
+
+        suggest("find", "dtaidistance", "re-ranks by DTW in numpy (about 7x slower)", have_dtaidistance())
     if args.json:
         from lmm.data.atomic import check_writable
 
