@@ -189,3 +189,12 @@ def test_bad_sources_are_one_line_errors_naming_the_file(tmp_path):
     bvh.save(folder / "robot.bvh", anim)
     with pytest.raises(W.SkeletonMatchError, match=r"robot\.bvh: cannot match the key joints left_hand, right_hand"):
         I.MotionIndex.build(I.sources_from(folder), cache_dir=tmp_path / "cache")
+
+
+def test_a_range_of_an_indexed_take_is_cut_from_the_index_exactly_as_read_from_the_file(shipped):
+    index, _ = shipped
+    s = index.sources[1]
+    assert index.source_of(s.path) == 1 and index.source_of("elsewhere.bvh") is None
+    np.testing.assert_array_equal(index.query_range(1, (250, 330)), I.query_from_bvh(s.path, (250, 330)))
+    with pytest.raises(I.SearchError, match="go past the end"):
+        index.query_range(1, (0, int(index.n_file_frames[1]) + 1))

@@ -11,6 +11,7 @@ distance); ``--json`` writes ``{"results": [{"file", "start_frame", "end_frame",
 from __future__ import annotations
 
 import argparse
+import os
 import re
 import time
 
@@ -42,7 +43,7 @@ def add_arguments(p) -> None:
 
 def main(args) -> int:
     from lmm import DEFAULT_MANIFEST
-    from lmm.motion_search.index import RERANK_TOP, MotionIndex, query_from_bvh, sources_from
+    from lmm.motion_search.index import RERANK_TOP, MotionIndex, SearchError, query_from_bvh, sources_from
     from lmm.progress import Progress
 
     if not args.quiet:
@@ -54,8 +55,13 @@ def main(args) -> int:
         from lmm.data.atomic import check_writable
 
         check_writable(args.json)  # before the work, not after it
-    query = query_from_bvh(args.query, args.frames)
+    a, b = args.frames
+    if a >= b:
+        raise SearchError(f"{args.query}: frames {a}:{b} are an empty range")
     sources = sources_from(args.where or DEFAULT_MANIFEST)
+    # a query from a file the index holds is cut from the index (no second read of the file)
+    indexed = {os.path.realpath(s.path) for s in sources}
+    query = None if os.path.realpath(args.query) in indexed else query_from_bvh(args.query, args.frames)
     bar = None
 
     def progress(done, total, label):
@@ -72,6 +78,8 @@ def main(args) -> int:
     finally:
         if bar is not None:
             bar.close()
+    if query is None:
+        query = index.query_range(index.source_of(args.query), args.frames, args.query)
     t0 = time.perf_counter()
     matches = index.search(query, top=args.top, rerank=0 if args.no_rerank else RERANK_TOP)
     search_ms = (time.perf_counter() - t0) * 1000.0

@@ -396,6 +396,28 @@ class MotionIndex:
         """Resampled key-joint frames of take ``t``."""
         return self.frames[self.take_offsets[t]:self.take_offsets[t + 1]]
 
+    def source_of(self, path) -> int | None:
+        """The index of the take read from ``path`` (same file on disk), or None."""
+        try:
+            real = os.path.realpath(path)
+        except (OSError, ValueError):
+            return None
+        return next((i for i, s in enumerate(self.sources) if os.path.realpath(s.path) == real), None)
+
+    def query_range(self, t: int, frames: tuple[int, int] | None, where: str | None = None) -> np.ndarray:
+        """Key-joint frames of file frames ``[a, b)`` of indexed take ``t``: what :func:`query_from_bvh`
+        gives for that file, without reading it again."""
+        where = where or self.sources[t].label
+        n = int(self.n_file_frames[t])
+        a, b = (0, n) if frames is None else (int(frames[0]), int(frames[1]))
+        if a >= b:
+            raise SearchError(f"{where}: frames {a}:{b} are an empty range")
+        if b > n:
+            raise SearchError(f"{where}: frames {a}:{b} go past the end of the take ({n} frames, 0:{n})")
+        ratio = frame_ratio(self.file_fps[t])
+        i0, i1 = (math.ceil(a / ratio - 1e-9), math.ceil(b / ratio - 1e-9))
+        return _check_query(self.take(t)[i0:i1], f"{where} frames {a}:{b}")
+
     def file_frame(self, t: int, resampled) -> int:
         return int(round(float(resampled) * frame_ratio(self.file_fps[t])))
 
