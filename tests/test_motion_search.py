@@ -198,3 +198,62 @@ def test_a_range_of_an_indexed_take_is_cut_from_the_index_exactly_as_read_from_t
     np.testing.assert_array_equal(index.query_range(1, (250, 330)), I.query_from_bvh(s.path, (250, 330)))
     with pytest.raises(I.SearchError, match="go past the end"):
         index.query_range(1, (0, int(index.n_file_frames[1]) + 1))
+
+
+def test_queries_from_a_manifest_range_and_from_a_skeletons_history_equal_the_file_range(shipped):
+    from lmm import DEFAULT_MANIFEST
+    from lmm.data.manifest import load_manifest
+
+    index, anims = shipped
+    manifest = load_manifest(DEFAULT_MANIFEST)
+    clip = next(k for k, c in enumerate(manifest.clips) if c.ranges)
+    a, b = manifest.clips[clip].ranges[0]
+    t = index.source_of(manifest.clips[clip].file)
+    np.testing.assert_array_equal(I.query_from_manifest_range(manifest, clip, 0), index.query_range(t, (a, b)))
+    # the studio's history: every joint of the skeleton, names matched, the character's own size
+    anim = anims[t]
+    g = anim.global_positions()
+    keys = W.match_key_joints(anim.names)
+    ref = W.reference_height(g[:, keys["hips"], 1])
+    q = I.query_from_skeleton(anim.names, g[a:b] * 0.01, 1.0 / anim.frame_time, ref * 0.01)
+    assert q.shape == (b - a, W.FRAME_DIM)
+    best = index.search(q, top=1)[0]
+    assert (best.take, abs(best.start_frame - a) <= 2) == (t, True)
+    with pytest.raises(W.SkeletonMatchError, match="the character: cannot match the key joints head"):
+        I.query_from_skeleton([n.replace("Head", "Top") for n in anim.names], g[a:b], 30.0)
+
+
+class _StubEncoder:
+    name = "stub-encoder"
+
+    def __init__(self):
+        self.weights = np.arange(6, dtype=np.float32)
+
+    def embed(self, windows):
+        w = np.asarray(windows, np.float32)
+        return np.ascontiguousarray(w.mean(axis=1)[:, :6] * self.weights)
+
+
+def test_the_shipped_encoder_is_the_default_embedder_when_its_weights_exist(tmp_path, monkeypatch):
+    import sys
+    import types
+
+    sources = I.sources_from(_small_folder(tmp_path / "takes"))
+    monkeypatch.setattr(I, "default_encoder_path", lambda: tmp_path / "absent.npz")
+    plain = I.MotionIndex.build(sources, cache_dir=tmp_path / "cache")
+    assert plain.embedder.name == "features"
+    weights = tmp_path / "search_encoder.npz"
+    weights.write_bytes(b"stub")
+    module = types.ModuleType("lmm.motion_search.encoder")
+    module.load_default = _StubEncoder
+    monkeypatch.setitem(sys.modules, "lmm.motion_search.encoder", module)
+    monkeypatch.setattr(I, "default_encoder_path", lambda: weights)
+    learned = I.MotionIndex.build(sources, cache_dir=tmp_path / "cache")
+    assert learned.embedder.name == "stub-encoder" and not learned.from_cache
+    assert learned.embeddings.shape == (plain.n_windows, 6)
+    assert I.MotionIndex.build(sources, cache_dir=tmp_path / "cache").from_cache
+    # other weights: another cache entry
+    changed = _StubEncoder()
+    changed.weights = changed.weights + 1.0
+    module.load_default = lambda: changed
+    assert not I.MotionIndex.build(sources, cache_dir=tmp_path / "cache").from_cache
