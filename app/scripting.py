@@ -29,7 +29,8 @@ class Script:
     ``open`` (kind: a file dialog kind, path); ``inspect`` (controller); ``capture`` (label);
     ``screenshot`` (path); ``sort`` (key[, descending]); ``help`` (Help > Keys and mouse); ``quit``;
     ``quit_when_exists`` (path: quit on the first frame that file exists); ``write_rects`` (path, items:
-    write the screen rectangles of those items as JSON, for tests that click them with xdotool).
+    write the screen rectangles of those items as JSON, for tests that click them with xdotool);
+    ``motion_search`` (source: timeline or file, seconds, file, frames, in, top: runs that search).
     """
 
     def __init__(self, actions: list[dict]):
@@ -81,6 +82,8 @@ class Script:
             self.captures.append(a["label"])
         elif do == "screenshot":
             s.request_screenshot(a["path"])
+        elif do == "motion_search":
+            s.panels["motion_search"].run_script(a)
         elif do == "sort":
             s.panels["candidates"].set_sort(a["key"], bool(a.get("descending", False)))
         elif do == "quit_when_exists":  # external tests (real key presses) end the run by creating a file

@@ -257,3 +257,27 @@ def test_the_shipped_encoder_is_the_default_embedder_when_its_weights_exist(tmp_
     changed.weights = changed.weights + 1.0
     module.load_default = lambda: changed
     assert not I.MotionIndex.build(sources, cache_dir=tmp_path / "cache").from_cache
+
+
+def test_a_match_as_a_ghost_starts_at_the_origin_facing_forward_at_the_characters_size(shipped):
+    from lmm.motion_search.ghost import segment_positions
+
+    index, anims = shipped
+    anim = anims[0]
+    keys = W.match_key_joints(anim.names)
+    g = anim.global_positions()
+    hips_ref = W.reference_height(g[:, keys["hips"], 1])
+    # a stretch where the take moves: the one with the largest hips travel over 60 frames
+    travel = np.linalg.norm(g[60:, keys["hips"], [0, 2]] - g[:-60, keys["hips"], [0, 2]], axis=1)
+    a = int(np.argmax(travel))
+    p = segment_positions(anim, a, a + 60, hips_height=0.9)
+    assert p.shape == (60, len(anim.names), 3)
+    np.testing.assert_allclose(p[0, keys["hips"], [0, 2]], 0.0, atol=1e-5)
+    np.testing.assert_allclose(p[0, keys["hips"], 1], g[a, keys["hips"], 1] * 0.9 / hips_ref, rtol=1e-5)
+    # facing +Z: the left hand and foot (mean over the first frames) are on +X, the right ones on -X
+    k = [keys[j] for j in ("left_hand", "right_hand", "left_foot", "right_foot")]
+    across = ((p[:5, k[0]] - p[:5, k[1]]) + (p[:5, k[2]] - p[:5, k[3]])).mean(axis=0)
+    assert across[0] > 0.1 and abs(across[2]) < 1e-4 * across[0] + 1e-5, across
+    # the shape is the take's, only moved, turned and scaled
+    d_take = np.linalg.norm(g[a + 10, keys["head"]] - g[a + 10, keys["left_foot"]]) * 0.9 / hips_ref
+    assert abs(np.linalg.norm(p[10, keys["head"]] - p[10, keys["left_foot"]]) - d_take) < 1e-4

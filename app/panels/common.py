@@ -15,6 +15,7 @@ WINDOWS: dict[str, tuple[int, str]] = {
     "stats": (10007, "Stats"),
     "timeline": (10008, "Timeline"),
     "recording": (10009, "Recording & Input"),
+    "motion_search": (10012, "Motion Search"),
 }
 
 
