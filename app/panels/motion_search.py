@@ -50,6 +50,7 @@ class MotionSearchPanel(Panel):
         self._parents = None
         self._names = None
         self._ghost_fps = 30.0
+        self._pending_search = False
         self._view: View | None = None
         self._anims = {}           # path -> loaded Animation (previewed results)
         self._index = None
@@ -153,16 +154,18 @@ class MotionSearchPanel(Panel):
                 dpg.add_text(str(m.end_frame))
                 dpg.add_text(f"{m.distance:.3f}")
 
-    def run_script(self, action: dict) -> bool:
+    def run_script(self, action: dict) -> None:
         """A scripted search (tests, demos): the fields ``source`` ("timeline" or "file"), ``seconds``,
-        ``file``, ``frames``, ``in``, ``top`` set the panel's inputs, then :meth:`search` runs."""
+        ``file``, ``frames``, ``in``, ``top`` set the panel's inputs; the window is shown and :meth:`search`
+        runs on its next update (with the tick the studio shows then, as a click would)."""
         dpg = self.dpg
+        self.ctx.actions.show_window(self.key, True)
         dpg.set_value("ms_source", SOURCES[1] if action.get("source") == "file" else SOURCES[0])
         for key, tag in (("seconds", "ms_seconds"), ("file", "ms_file"), ("frames", "ms_frames"), ("in", "ms_in"),
                          ("top", "ms_top")):
             if key in action:
                 dpg.set_value(tag, type(dpg.get_value(tag))(action[key]))
-        return self.search()
+        self._pending_search = True
 
     # --- previewing ------------------------------------------------------------------------------
     def select(self, i: int) -> None:
@@ -213,6 +216,9 @@ class MotionSearchPanel(Panel):
 
     def update(self, view: View) -> None:
         self._view = view
+        if self._pending_search:
+            self._pending_search = False
+            self.search()
         if self._ghost is None or not len(self._ghost):
             return
         try:
