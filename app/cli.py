@@ -35,6 +35,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "export-onnx": ("export_onnx", "export the decompressor, stepper and projector as ONNX"),
     "run": ("run", "drive a controller headless from an input log or built-in scenario (record, metrics)"),
     "bench": ("bench", "runtime benchmarks (search, frame) as a table and nested JSON"),
+    "find": ("find", "motion search by example: the windows of a manifest or folder most like a BVH frame range"),
     "compare": ("compare", "DTW-aligned rotation and position error between two motions of one skeleton"),
     "input-from": ("input_from", "derive the controller input that follows a take's root path (an input log)"),
 }

@@ -33,7 +33,8 @@ class Script:
     write the screen rectangles of those items as JSON, for tests that click them with xdotool);
     ``show`` (window[, show]); ``click_candidate`` (row: preview a Search Candidates row); ``database`` (op: ``select`` (range),
     ``frame`` (db_frame), ``play``, ``pause``, ``scrub`` (source_frame), ``selection`` (start, stop),
-    ``mark`` (end: in/out), ``copy``) drives the Database panel.
+    ``mark`` (end: in/out), ``copy``) drives the Database panel;
+    ``motion_search`` (source: timeline or file, seconds, file, frames, in, top: runs that search).
     """
 
     def __init__(self, actions: list[dict]):
@@ -89,6 +90,8 @@ class Script:
             self.captures.append(a["label"])
         elif do == "screenshot":
             s.request_screenshot(a["path"])
+        elif do == "motion_search":
+            s.panels["motion_search"].run_script(a)
         elif do == "sort":
             s.panels["candidates"].set_sort(a["key"], bool(a.get("descending", False)))
         elif do == "show":

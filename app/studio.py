@@ -115,6 +115,7 @@ class Studio(SessionActions):
         from .panels.features import FeaturesPanel
         from .panels.latent import LatentPanel
         from .panels.menu import MenuBar
+        from .panels.motion_search import MotionSearchPanel
         from .panels.recording import RecordingPanel
         from .panels.search import CandidatesPanel, SearchPanel
         from .panels.stats import StatsPanel
@@ -136,7 +137,8 @@ class Studio(SessionActions):
                                       render_scale=float(min(max(self.opts.render_scale, 0.25), 1.0)))
         self.panels = {"viewport": self.viewport}
         for cls in (FeaturesPanel, LatentPanel, SearchPanel, CandidatesPanel, TuningPanel, StatsPanel,
-                    TimelinePanel, RecordingPanel, DatabasePanel, CoveragePanel):
+                    TimelinePanel, RecordingPanel, DatabasePanel, CoveragePanel,
+                    MotionSearchPanel):
             self.panels[cls.key] = cls(ctx)
         self.menu.build()
         for key, panel in self.panels.items():

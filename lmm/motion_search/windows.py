@@ -31,6 +31,9 @@ WINDOW_FPS = 30.0
 WINDOW_FRAMES = 32                      # 1.07 s: a step cycle of a walk, two of a run
 FRAME_DIM = 3 * len(LIMB_JOINTS) + 1 + 3
 MIRROR_PERMUTATION = (0, 2, 1, 4, 3)    # head, hands and feet with left and right swapped
+# a frame time written rounded (LAFAN1: 0.033333 s, 30.0003 fps) is the target rate: resampling it would
+# drop a frame from every 60-frame query and shift every later frame by a fraction of one
+SAME_RATE_TOLERANCE = 1e-4
 
 # normalized names (lower case, letters and digits only, a namespace prefix like "mixamorig:" dropped)
 _SYNONYMS = {
@@ -114,10 +117,17 @@ def _smooth(x: np.ndarray, width: int) -> np.ndarray:
     return np.arctan2(cs[1], cs[0])
 
 
+def frame_ratio(fps: float, target_fps: float = WINDOW_FPS) -> float:
+    """File frames per resampled frame: ``fps / target_fps``, exactly 1 within :data:`SAME_RATE_TOLERANCE`."""
+    r = float(fps) / float(target_fps)
+    return 1.0 if abs(r - 1.0) < SAME_RATE_TOLERANCE else r
+
+
 def resample(features: np.ndarray, fps: float, target_fps: float = WINDOW_FPS) -> np.ndarray:
-    """Frames at ``fps`` -> frames at ``target_fps`` by linear interpolation (time 0 kept)."""
+    """Frames at ``fps`` -> frames at ``target_fps`` by linear interpolation (time 0 kept); unchanged when
+    the rates differ by less than :data:`SAME_RATE_TOLERANCE` (relative)."""
     F = len(features)
-    if F == 0 or abs(fps - target_fps) < 1e-9:
+    if F == 0 or abs(fps / target_fps - 1.0) < SAME_RATE_TOLERANCE:
         return np.asarray(features, np.float32)
     n = int(math.floor((F - 1) * target_fps / fps)) + 1
     t = np.arange(n) * (fps / target_fps)
@@ -139,7 +149,7 @@ def windows(frames: np.ndarray, length: int = WINDOW_FRAMES, stride: int = 1) ->
 
 def window_start_frames(starts: np.ndarray, file_fps: float, target_fps: float = WINDOW_FPS) -> np.ndarray:
     """Resampled window starts -> the file's own frame numbers (rounded)."""
-    return np.rint(np.asarray(starts) * (file_fps / target_fps)).astype(np.int64)
+    return np.rint(np.asarray(starts) * frame_ratio(file_fps, target_fps)).astype(np.int64)
 
 
 def mirror_frames(frames: np.ndarray) -> np.ndarray:
@@ -164,7 +174,7 @@ class TakeFrames:
     frames: np.ndarray      # (n, FRAME_DIM) at WINDOW_FPS
 
     def file_frame(self, resampled: int) -> int:
-        return int(round(resampled * self.file_fps / WINDOW_FPS))
+        return int(round(resampled * frame_ratio(self.file_fps)))
 
 
 def take_frames(anim, path: str = "", frames: tuple[int, int] | None = None) -> TakeFrames:
