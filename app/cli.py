@@ -34,6 +34,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "export-onnx": ("export_onnx", "export the decompressor, stepper and projector as ONNX"),
     "run": ("run", "drive a controller headless from an input log or built-in scenario (record, metrics)"),
     "bench": ("bench", "runtime benchmarks (search, frame) as a table and nested JSON"),
+    "eval-search": ("eval_search", "motion search by example: learned encoder vs classifier vs features on a folder"),
 }
 
 

@@ -65,13 +65,13 @@ class Take:
 
 
 def bvh_files(folder) -> list[Path]:
-    """Every ``.bvh`` file under ``folder`` (recursively), sorted; SearchDataError if none."""
+    """Every ``.bvh`` (or ``.bvh.gz``) file under ``folder`` (recursively), sorted; SearchDataError if none."""
     folder = Path(folder)
     if not folder.is_dir():
         raise SearchDataError(f"{folder}: not a folder")
-    files = sorted(p for p in folder.rglob("*") if p.suffix.lower() == ".bvh" and p.is_file())
+    files = sorted(p for p in folder.rglob("*") if p.name.lower().endswith((".bvh", ".bvh.gz")) and p.is_file())
     if not files:
-        raise SearchDataError(f"{folder}: no .bvh files in this folder")
+        raise SearchDataError(f"{folder}: no .bvh or .bvh.gz files in this folder")
     return files
 
 
