@@ -197,3 +197,16 @@ def test_eval_search_cli(tiny_folder, tmp_path, monkeypatch, capsys):
     assert main(["eval-search", "--data", str(folder), "--encoder", str(tmp_path / "none.npz"),
                  "--classifier", str(c)]) == 1
     assert "none.npz: search network file not found" in capsys.readouterr().err
+
+
+def test_contrastive_losses():
+    torch = pytest.importorskip("torch")
+    from lmm.offline.search_training import nt_xent, sup_con
+
+    torch.manual_seed(0)
+    z = torch.nn.functional.normalize(torch.randn(8, 5), dim=1)
+    # each view's only positive is its twin: supervised contrastive is NT-Xent
+    assert torch.allclose(sup_con(z, torch.tensor([0, 1, 2, 3] * 2), 0.1), nt_xent(z[:4], z[4:], 0.1))
+    # twins that are the same vector and far from the rest: a small loss; swapped twins: a large one
+    a = torch.eye(5)[:4]
+    assert nt_xent(a, a, 0.1) < 0.01 < 5 < nt_xent(a, a[[1, 0, 3, 2]], 0.1)

@@ -45,6 +45,8 @@ class SearchRecipe:
     bone_scale: float = 0.1        # limb positions scaled by U(1 - b, 1 + b), per limb
     yaw_deg: float = 10.0
     noise: float = 0.05            # x each feature's standard deviation
+    temporal: float = 0.0          # frames: a third view centred up to this far away is a positive too
+    supervised: float = 0.0        # weight of a supervised contrastive term (same action label = positive)
     convs: list = field(default_factory=lambda: [[64, 5, 2], [64, 5, 2], [128, 3, 1]])
     encoder_fcs: list = field(default_factory=lambda: [128, 64])
     classifier_hidden: int = 512
@@ -119,7 +121,7 @@ class ViewSampler:
     def __init__(self, frames: list[np.ndarray], recipe: SearchRecipe, scale: np.ndarray, rng):
         self.r, self.rng, self.scale = recipe, rng, scale.astype(np.float32)
         # room for the longest view around a centre, plus the jitter
-        self.half = 0.5 * (W.WINDOW_FRAMES - 1) * recipe.warp[1] + recipe.jitter + 1
+        self.half = 0.5 * (W.WINDOW_FRAMES - 1) * recipe.warp[1] + recipe.jitter + recipe.temporal + 1
         self.takes = [i for i, f in enumerate(frames) if len(f) > 2 * self.half + 1]
         if not self.takes:
             raise data.SearchDataError("no take is long enough to cut training windows from")
@@ -174,6 +176,19 @@ def nt_xent(z1: torch.Tensor, z2: torch.Tensor, temperature: float) -> torch.Ten
     return nn.functional.cross_entropy(sim, target)
 
 
+def sup_con(z: torch.Tensor, labels: torch.Tensor, temperature: float) -> torch.Tensor:
+    """Supervised contrastive loss (Khosla et al. 2020): every other view with the same label is a
+    positive; the mean over each anchor's positives of -log softmax."""
+    sim = z @ z.T / temperature
+    eye = torch.eye(len(z), dtype=torch.bool)
+    sim = sim.masked_fill(eye, float("-inf"))
+    logp = sim - torch.logsumexp(sim, dim=1, keepdim=True)
+    pos = (labels[:, None] == labels[None, :]) & ~eye
+    n_pos = pos.sum(dim=1)
+    per_anchor = -(logp.masked_fill(~pos, 0.0)).sum(dim=1) / n_pos.clamp(min=1)
+    return per_anchor[n_pos > 0].mean()
+
+
 def _schedule(opt, step: int, steps: int, lr: float) -> None:
     warm = max(1, steps // 50)
     f = step / warm if step < warm else 0.5 * (1 + math.cos(math.pi * (step - warm) / max(1, steps - warm)))
@@ -197,11 +212,11 @@ def train(takes: list[data.Take], kind: str, recipe: SearchRecipe | None = None,
     mean, std = normalisation(frames)
     sampler = ViewSampler(frames, r, std, rng)
     labels = data.labels_of(takes)
+    take_label = np.array([labels.index(t.label) for t in takes])
     if kind == "encoder":
         net = TorchConvNet("encoder", r.convs, r.encoder_fcs, len(r.encoder_fcs), True, mean, std)
     elif kind == "classifier":
         net = TorchConvNet("classifier", r.convs, [r.classifier_hidden, len(labels)], 1, False, mean, std, labels)
-        take_label = np.array([labels.index(t.label) for t in takes])
         counts = np.bincount(take_label, weights=[len(f) for f in frames], minlength=len(labels))
         class_w = torch.as_tensor(counts.sum() / np.maximum(counts, 1) / len(labels), dtype=torch.float32)
     else:
@@ -212,9 +227,17 @@ def train(takes: list[data.Take], kind: str, recipe: SearchRecipe | None = None,
         _schedule(opt, step, r.steps, r.lr)
         tk, c = sampler.centres(r.batch)
         if kind == "encoder":
-            v1 = torch.from_numpy(sampler.views(tk, c))
-            v2 = torch.from_numpy(sampler.views(tk, c))
-            loss = nt_xent(net.embed(v1), net.embed(v2), r.temperature)
+            z1 = net.embed(torch.from_numpy(sampler.views(tk, c)))
+            z2 = net.embed(torch.from_numpy(sampler.views(tk, c)))
+            loss = nt_xent(z1, z2, r.temperature)
+            zs = [z1, z2]
+            if r.temporal > 0:
+                z3 = net.embed(torch.from_numpy(sampler.views(tk, c + rng.uniform(-r.temporal, r.temporal, len(c)))))
+                loss = loss + nt_xent(z1, z3, r.temperature)
+                zs.append(z3)
+            if r.supervised > 0:
+                lab = torch.as_tensor(np.tile(take_label[tk], len(zs)))
+                loss = loss + r.supervised * sup_con(torch.cat(zs), lab, r.temperature)
         else:
             v = torch.from_numpy(sampler.views(tk, c))
             loss = nn.functional.cross_entropy(net.logits(v), torch.as_tensor(take_label[tk]), weight=class_w)
@@ -243,9 +266,12 @@ def main(argv=None) -> int:
     p.add_argument("--steps", type=int, default=SearchRecipe.steps)
     p.add_argument("--threads", type=int, default=SearchRecipe.threads)
     p.add_argument("--only", choices=["encoder", "classifier"])
+    p.add_argument("--temporal", type=float, default=SearchRecipe.temporal)
+    p.add_argument("--supervised", type=float, default=SearchRecipe.supervised)
     args = p.parse_args(argv)
     takes = data.load_takes(args.data)
-    recipe = SearchRecipe(steps=args.steps, threads=args.threads)
+    recipe = SearchRecipe(steps=args.steps, threads=args.threads, temporal=args.temporal,
+                          supervised=args.supervised)
     out = Path(args.out)
     for kind in (args.only,) if args.only else ("encoder", "classifier"):
         net, record = train(takes, kind, recipe)
