@@ -68,7 +68,8 @@ def bvh_files(folder) -> list[Path]:
     """Every ``.bvh`` (or ``.bvh.gz``) file under ``folder`` (recursively), sorted; SearchDataError if none."""
     folder = Path(folder)
     if not folder.is_dir():
-        raise SearchDataError(f"{folder}: not a folder")
+        raise SearchDataError(f"{folder}: not a folder" + (" (the shared LAFAN1 takes are expected beside the "
+                              "repository; name a folder of BVH takes with --data)" if folder == DEFAULT_DATA_DIR else ""))
     files = sorted(p for p in folder.rglob("*") if p.name.lower().endswith((".bvh", ".bvh.gz")) and p.is_file())
     if not files:
         raise SearchDataError(f"{folder}: no .bvh or .bvh.gz files in this folder")

@@ -34,7 +34,7 @@ from lmm.offline import search_data as data
 
 @dataclass
 class SearchRecipe:
-    steps: int = 1500
+    steps: int = 1000
     batch: int = 256
     lr: float = 2e-3
     weight_decay: float = 1e-4
@@ -45,8 +45,8 @@ class SearchRecipe:
     bone_scale: float = 0.1        # limb positions scaled by U(1 - b, 1 + b), per limb
     yaw_deg: float = 10.0
     noise: float = 0.05            # x each feature's standard deviation
-    temporal: float = 0.0          # frames: a third view centred up to this far away is a positive too
-    supervised: float = 0.0        # weight of a supervised contrastive term (same action label = positive)
+    temporal: float = 45.0         # frames: a third view centred up to this far away is a positive too
+    supervised: float = 0.5        # weight of a supervised contrastive term (same action label = positive)
     convs: list = field(default_factory=lambda: [[64, 5, 2], [64, 5, 2], [128, 3, 1]])
     encoder_fcs: list = field(default_factory=lambda: [128, 64])
     classifier_hidden: int = 512
