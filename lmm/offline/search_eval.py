@@ -15,6 +15,9 @@ trained on these frames, but the searched database holds them, as a user's datab
   (same take, start within ``tolerance`` frames) is among the first 5 results; ``recall@5_plain`` is the
   same for the query as cut (a sanity check).
 * ``latency_ms``: the median time to embed one query window and search the whole database (k = 10).
+
+On another folder the shipped networks (trained on LAFAN1) have seen none of it; to train on it too:
+``python -m lmm.offline.search_training --data DIR --out NETS`` and ``--encoder``/``--classifier`` from NETS.
 """
 from __future__ import annotations
 

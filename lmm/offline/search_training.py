@@ -46,6 +46,7 @@ class SearchRecipe:
     yaw_deg: float = 10.0
     noise: float = 0.05            # x each feature's standard deviation
     temporal: float = 45.0         # frames: a third view centred up to this far away is a positive too
+    augment: bool = True           # False: plain windows (speed 1, no mirror, scale, yaw or noise)
     supervised: float = 0.5        # weight of a supervised contrastive term (same action label = positive)
     convs: list = field(default_factory=lambda: [[64, 5, 2], [64, 5, 2], [128, 3, 1]])
     encoder_fcs: list = field(default_factory=lambda: [128, 64])
@@ -138,14 +139,17 @@ class ViewSampler:
 
     def views(self, takes: np.ndarray, centres: np.ndarray) -> np.ndarray:
         r, rng, n = self.r, self.rng, len(takes)
-        speeds = np.exp(rng.uniform(math.log(r.warp[0]), math.log(r.warp[1]), n))
-        c = centres + rng.uniform(-r.jitter, r.jitter, n)
+        if not r.augment:
+            speeds, c = np.ones(n), np.round(centres)
+        else:
+            speeds = np.exp(rng.uniform(math.log(r.warp[0]), math.log(r.warp[1]), n))
+            c = centres + rng.uniform(-r.jitter, r.jitter, n)
         starts = c - 0.5 * (W.WINDOW_FRAMES - 1) * speeds
         out = np.empty((n, W.WINDOW_FRAMES, W.FRAME_DIM), np.float32)
         for t in np.unique(takes):
             sel = takes == t
             out[sel] = data.warped_segments(self.frames[t], starts[sel], speeds[sel])
-        return self.augment(out)
+        return self.augment(out) if r.augment else out
 
     def augment(self, x: np.ndarray) -> np.ndarray:
         r, rng, n = self.r, self.rng, len(x)
@@ -268,10 +272,11 @@ def main(argv=None) -> int:
     p.add_argument("--only", choices=["encoder", "classifier"])
     p.add_argument("--temporal", type=float, default=SearchRecipe.temporal)
     p.add_argument("--supervised", type=float, default=SearchRecipe.supervised)
+    p.add_argument("--no-augment", dest="augment", action="store_false", help="train on plain windows")
     args = p.parse_args(argv)
     takes = data.load_takes(args.data)
     recipe = SearchRecipe(steps=args.steps, threads=args.threads, temporal=args.temporal,
-                          supervised=args.supervised)
+                          supervised=args.supervised, augment=args.augment)
     out = Path(args.out)
     for kind in (args.only,) if args.only else ("encoder", "classifier"):
         net, record = train(takes, kind, recipe)
