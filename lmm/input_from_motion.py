@@ -158,6 +158,19 @@ def _stick_for(velocity_world, sim_rotation, walk: bool, tuning: Tuning) -> tupl
     return x * raw / m, y * raw / m, clamped
 
 
+def input_step(sim: SimulationState, desired_rot, inp: InputState, tuning: Tuning, dt: float):
+    """Exactly the controller's input step (:meth:`lmm.character.CharacterController.step`): the stick
+    through the deadzone and the camera to a desired velocity and rotation, then one spring step.
+    Returns the new simulation object and desired rotation."""
+    left = stick_to_world(stick_with_deadzone(inp.left_x, inp.left_y, tuning.stick_deadzone), inp.camera_azimuth)
+    right = stick_to_world(stick_with_deadzone(inp.right_x, inp.right_y, tuning.stick_deadzone), inp.camera_azimuth)
+    des_vel = desired_velocity(left, sim.rotation, inp.walk, tuning)
+    desired_rot = desired_rotation(left, right, des_vel, desired_rot, inp.strafe, inp.camera_azimuth)
+    sim = simulation_update(sim, des_vel, desired_rot, tuning.simulation_velocity_halflife_s,
+                            tuning.simulation_rotation_halflife_s, dt)
+    return sim, desired_rot
+
+
 def derive_input(root: RootPath, tuning: Tuning | None = None, dt: float = 1.0 / 60.0) -> DerivedInput:
     """Derive the input log for ``root`` (aligned to start at the origin facing +Z), tick by tick."""
     tuning = tuning if tuning is not None else Tuning()
@@ -206,13 +219,7 @@ def derive_input(root: RootPath, tuning: Tuning | None = None, dt: float = 1.0 /
             # the right stick points where the facing should aim: world (sin, 0, cos) = (-x, 0, y)
             rx, ry = -math.sin(aim), math.cos(aim)
         inp = InputState(lx, ly, rx, ry, walk, strafe, 0.0)
-        # exactly the controller's input step (lmm.character.CharacterController.step)
-        left = stick_to_world(stick_with_deadzone(inp.left_x, inp.left_y, tuning.stick_deadzone), inp.camera_azimuth)
-        right = stick_to_world(stick_with_deadzone(inp.right_x, inp.right_y, tuning.stick_deadzone), inp.camera_azimuth)
-        des_vel = desired_velocity(left, sim.rotation, inp.walk, tuning)
-        des_rot = desired_rotation(left, right, des_vel, des_rot, inp.strafe, inp.camera_azimuth)
-        sim = simulation_update(sim, des_vel, des_rot, tuning.simulation_velocity_halflife_s,
-                                tuning.simulation_rotation_halflife_s, dt)
+        sim, des_rot = input_step(sim, des_rot, inp, tuning, dt)
         inputs.append(inp)
         rep_pos[i] = sim.position
         rep_yaw[i] = _yaw_of(sim.rotation)
@@ -227,12 +234,7 @@ def replay(inputs, tuning: Tuning | None = None, dt: float = 1.0 / 60.0) -> tupl
     des_rot = np.array([1.0, 0.0, 0.0, 0.0])
     pos, yaw = [], []
     for inp in inputs:
-        left = stick_to_world(stick_with_deadzone(inp.left_x, inp.left_y, tuning.stick_deadzone), inp.camera_azimuth)
-        right = stick_to_world(stick_with_deadzone(inp.right_x, inp.right_y, tuning.stick_deadzone), inp.camera_azimuth)
-        des_vel = desired_velocity(left, sim.rotation, inp.walk, tuning)
-        des_rot = desired_rotation(left, right, des_vel, des_rot, inp.strafe, inp.camera_azimuth)
-        sim = simulation_update(sim, des_vel, des_rot, tuning.simulation_velocity_halflife_s,
-                                tuning.simulation_rotation_halflife_s, dt)
+        sim, des_rot = input_step(sim, des_rot, inp, tuning, dt)
         pos.append(sim.position.copy())
         yaw.append(_yaw_of(sim.rotation))
     return np.array(pos), np.array(yaw)

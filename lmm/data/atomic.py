@@ -27,6 +27,8 @@ def atomic_write(path, mode: str = "wb", encoding: str | None = None):
         binary = mode == "wb"
         with open(tmp, "xb" if binary else "x", encoding=None if binary else (encoding or "utf-8")) as f:
             yield f
+            f.flush()
+            os.fsync(f.fileno())   # the data is on disk before the name points at it (a crash keeps the old file)
         os.replace(tmp, path)
     except BaseException as e:
         try:
