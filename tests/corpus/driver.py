@@ -144,7 +144,7 @@ def main() -> int:
                 f.seek(0)
                 out[fd] = f.read(OUTPUT_LIMIT).decode("utf-8", errors="replace")
                 f.close()
-            maxrss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+            maxrss = peak_rss_bytes()
             result = {"id": case["id"], "argv": case.get("argv") or case.get("path"), "rc": rc, "stdout": out[1], "stderr": out[2], "uncaught": uncaught,
                       "seconds": seconds, "maxrss": maxrss, **extra}
             if sandbox:
@@ -155,6 +155,20 @@ def main() -> int:
             if maxrss > stop_above:
                 return 3
     return 0
+
+
+def peak_rss_bytes() -> int:
+    """This process's own resident high-water mark: ``VmHWM`` of /proc/self/status. Not ``ru_maxrss``:
+    Linux carries that across fork and exec, so a driver started by a large pytest process would report
+    the parent's memory (1.2 GB in a full suite run) before doing anything."""
+    try:
+        with open("/proc/self/status", "rb") as f:
+            for line in f:
+                if line.startswith(b"VmHWM:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
 
 
 if __name__ == "__main__":
