@@ -76,6 +76,10 @@ class ImitationEnv:
             self.model.dof_damping[self.body.dof_adr[j]:self.body.dof_adr[j] + 3] = kd * gain[k]
         self.frame = 0
         self.stop = 0
+        self._ref_start, self._ref = 0, np.zeros((0, self.model.nq))
+        self._ref_data = mujoco.MjData(self.model)
+        self._quat_idx = self.body.qpos_adr[self.ball][:, None] + np.arange(4)
+        self._dof_idx = self.body.dof_adr[self.ball][:, None] + np.arange(3)
         b = self.body
         self.effectors = [b.key_joints[k] for k in ("left_hand", "right_hand", "left_foot", "right_foot")]
 
@@ -90,6 +94,9 @@ class ImitationEnv:
 
     # -- reference --------------------------------------------------------------------------------
     def reference_qpos(self, frame: int) -> np.ndarray:
+        """``qpos`` of database ``frame`` (from the episode's range, computed once at reset)."""
+        if self._ref_start <= frame < self._ref_start + len(self._ref):
+            return self._ref[frame - self._ref_start]
         rot, pos = self.db.global_transforms(slice(frame, frame + 1))
         return self.body.qpos_from_pose(pos[0], rot[0])
 
@@ -109,7 +116,10 @@ class ImitationEnv:
             start, stop = int(db.range_starts[r]), int(db.range_stops[r])
             frame = int(self.rng.integers(start, max(start + 1, stop - 2)))
         r = int(np.searchsorted(db.range_stops, frame, side="right"))
-        self.frame, self.stop = int(frame), int(db.range_stops[min(r, db.n_ranges - 1)])
+        r = min(r, db.n_ranges - 1)
+        self.frame, self.stop = int(frame), int(db.range_stops[r])
+        rot, pos = db.global_transforms(slice(int(db.range_starts[r]), self.stop))
+        self._ref_start, self._ref = int(db.range_starts[r]), self.body.qpos_from_pose(pos, rot)
         self._mj.mj_resetData(self.model, self.data)
         self.data.qpos[:] = self.reference_qpos(self.frame)
         rot, pos = self.db.global_transforms(slice(self.frame, self.frame + 1))
@@ -136,15 +146,12 @@ class ImitationEnv:
         b, d, m = self.body, self.data, self.model
         self.frame = min(self.frame + 1, self.stop - 1)
         ref = self.reference_qpos(self.frame)
-        targets = [quat.mul(ref[b.qpos_adr[j]:b.qpos_adr[j] + 4], quat.from_scaled_angle_axis(action[k]))
-                   for k, j in enumerate(self.ball)]
+        qa = self._quat_idx                                        # (B-1, 4) qpos indices of the ball joints
+        targets = quat.mul(ref[qa], quat.from_scaled_angle_axis(action))
         for _ in range(self.substeps):
+            err = quat.to_scaled_angle_axis(quat.abs_(quat.inv_mul(d.qpos[qa], targets)))   # joint frames
             d.qfrc_applied[:] = 0.0
-            for k, j in enumerate(self.ball):
-                q = d.qpos[b.qpos_adr[j]:b.qpos_adr[j] + 4]
-                err = quat.to_scaled_angle_axis(quat.abs_(quat.inv_mul(q, targets[k])))   # in the joint's frame
-                dof = b.dof_adr[j]
-                d.qfrc_applied[dof:dof + 3] = self.kp[k] * err
+            d.qfrc_applied[self._dof_idx] = self.kp[:, None] * err
             self._mj.mj_step(m, d)
         terms = self.reward_terms(ref)
         head_y = d.xpos[b.body_id[b.key_joints["head"]], 1]
@@ -158,7 +165,7 @@ class ImitationEnv:
         for j in self.ball:
             a = b.qpos_adr[j]
             pose_err += float(np.sum(quat.to_scaled_angle_axis(quat.abs_(quat.inv_mul(d.qpos[a:a + 4], ref_qpos[a:a + 4]))) ** 2))
-        ref_data = self._mj.MjData(m)
+        ref_data = self._ref_data
         ref_data.qpos[:] = ref_qpos
         self._mj.mj_kinematics(m, ref_data)
         root = b.body_id[b.root]
