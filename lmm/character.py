@@ -131,6 +131,43 @@ def forward_kinematics_pose(local_rot: np.ndarray, local_pos: np.ndarray, parent
     return np.array(g), np.array(p)
 
 
+def subtree_joints(parents, joints) -> list[int]:
+    """``joints`` and all their descendants, in topological (index) order."""
+    inside = set(int(j) for j in joints)
+    for j, pj in enumerate(parents):
+        if pj in inside:
+            inside.add(j)
+    return sorted(inside)
+
+
+def forward_kinematics_update(global_rot: np.ndarray, global_pos: np.ndarray, local_rot: np.ndarray,
+                              local_pos: np.ndarray, parents, joints) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`forward_kinematics_pose` recomputed only for ``joints`` (a topologically ordered list that
+    holds every descendant of each of its joints, see :func:`subtree_joints`); the other joints are taken
+    from ``global_rot``/``global_pos``. The same float operations per joint, so the result is bit for bit
+    the full pass's (after IK only the legs change: a few joints instead of the whole skeleton)."""
+    g = global_rot.tolist()
+    p = global_pos.tolist()
+    for j in joints:
+        w, x, y, z = local_rot[j].tolist()
+        px, py, pz = local_pos[j].tolist()
+        pj = parents[j]
+        if pj < 0:
+            g[j] = [w, x, y, z]
+            p[j] = [px, py, pz]
+            continue
+        aw, ax, ay, az = g[pj]
+        g[j] = [aw * w - ax * x - ay * y - az * z, aw * x + ax * w + ay * z - az * y,
+                aw * y - ax * z + ay * w + az * x, aw * z + ax * y - ay * x + az * w]
+        tx = 2.0 * (ay * pz - az * py)
+        ty = 2.0 * (az * px - ax * pz)
+        tz = 2.0 * (ax * py - ay * px)
+        qx, qy, qz = p[pj]
+        p[j] = [qx + px + aw * tx + (ay * tz - az * ty), qy + py + aw * ty + (az * tx - ax * tz),
+                qz + pz + aw * tz + (ax * ty - ay * tx)]
+    return np.array(g), np.array(p)
+
+
 def bone_heights(db, bones) -> np.ndarray:
     """World heights (F, len(bones)) of the given bones in every database frame: forward kinematics along
     each bone's chain only (a handful of bones, not the whole skeleton)."""
@@ -216,6 +253,7 @@ class CharacterController(Controller):
             self.leg_chains.append((hip, knee, f, t))
             axis = db.positions[0, t].astype(np.float64)
             self.toe_axes.append(axis / max(_norm(axis), 1e-9))
+        self._subtrees: dict[tuple, list[int]] = {}  # changed joints -> their subtrees (leg-only FK)
         self.hips_bone = 1  # the child of the simulation bone; its height is the pose's height
         self._range_contact_height = range_contact_heights(db, self.toe_bones)
         self.reset()
@@ -396,22 +434,31 @@ class CharacterController(Controller):
                 new_global.update(solve_leg(g_pos, g_rot, chain, targets[i], self.toe_axes[i],
                                             tun.ik_toe_length_m, ground))
             if new_global:
-                for j in sorted(new_global):
+                changed = sorted(new_global)
+                for j in changed:
                     g_rot[j] = new_global[j]
-                for j, q in local_rotations_from_global(g_rot, self.parents, sorted(new_global)).items():
+                for j, q in local_rotations_from_global(g_rot, self.parents, changed).items():
                     local_rot[j] = q
-                g_rot, g_pos = forward_kinematics_pose(local_rot, local_pos, self.parents)
+                # only the legs changed: forward kinematics of their subtrees, not of the whole skeleton
+                joints = self._subtrees.get(tuple(changed))
+                if joints is None:
+                    joints = self._subtrees[tuple(changed)] = subtree_joints(self.parents, changed)
+                g_rot, g_pos = forward_kinematics_update(g_rot, g_pos, local_rot, local_pos, self.parents, joints)
         else:
             self.foot_lock = FootLockState()
         self._prev_toe = toe_now
         timings["pose"] = (time.perf_counter() - t0) * 1e6
 
-        # ghost: the source pose without offsets, placed at the character root
+        # ghost: the source pose without offsets, placed at the character root; debug only, so its forward
+        # kinematics runs when a reader of the snapshot asks for it (never in headless runs)
         ghost_rot = src.rotations.copy()
         ghost_pos = src.positions.copy()
         ghost_rot[0] = self.root_rotation
         ghost_pos[0] = self.root_position
-        _, ghost = forward_kinematics_pose(ghost_rot, ghost_pos, self.parents)
+        parents = self.parents
+
+        def ghost():
+            return forward_kinematics_pose(ghost_rot, ghost_pos, parents)[1].astype(np.float32)
 
         pose = Pose(local_positions=local_pos.astype(np.float32), local_rotations=local_rot.astype(np.float32),
                     global_positions=g_pos.astype(np.float32), global_rotations=g_rot.astype(np.float32),
@@ -431,7 +478,7 @@ class CharacterController(Controller):
             matched_features=(self.features.normalized[frame].copy() if frame >= 0 else current_norm),
             candidates=self._last_candidates, searched=searched, forced_search=bool(searched and (forced or must)),
             transitioned=transitioned, best_cost=float(self._last_best_cost), pose=pose,
-            matched_pose_positions=ghost.astype(np.float32), foot_contacts=pose.contacts.copy(),
+            matched_pose_positions=ghost, foot_contacts=pose.contacts.copy(),
             foot_locked=locked, timings_us=timings, current_cost=float(np.sum((query - current_norm) ** 2)),
             **self._snapshot_extras())
         return pose, snap
