@@ -44,6 +44,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from lmm import quat
+from lmm import quat_scalar as qs
 from lmm.controller import Candidates, Controller, DebugSnapshot, InputState, Pose
 from lmm.features import build_query
 from lmm.ik import FootLockState, foot_lock_update, local_rotations_from_global, solve_leg
@@ -398,12 +399,13 @@ class CharacterController(Controller):
                                                src.angular_velocities)
         self.shown = (pos, vel, rot, ang)
 
-        # root integration (character space velocities -> world)
-        root_vel_world = quat.mul_vec(self.root_rotation, vel[0])
-        root_ang_world = quat.mul_vec(self.root_rotation, ang[0])
-        self.root_position = self.root_position + root_vel_world * dt
-        self.root_rotation = quat.normalize(quat.mul(quat.from_scaled_angle_axis(root_ang_world * dt),
-                                                     self.root_rotation))
+        # root integration (character space velocities -> world), in plain floats (one 3-vector/quaternion)
+        root_rot = tuple(self.root_rotation.tolist())
+        root_vel_world = qs.mul_vec(root_rot, vel[0].tolist())
+        root_ang_world = qs.mul_vec(root_rot, ang[0].tolist())
+        self.root_position = np.array([p + v * dt for p, v in zip(self.root_position.tolist(), root_vel_world)])
+        self.root_rotation = np.array(qs.normalize(qs.mul(qs.from_scaled_angle_axis(
+            [w * dt for w in root_ang_world]), root_rot)))
         integrated = (self.root_position.copy(), self.root_rotation.copy())
         self._synchronize(root_vel_world, root_ang_world, dt)
 
@@ -493,8 +495,8 @@ class CharacterController(Controller):
             return False
         threshold = self.tuning.forced_search_threshold
         vel_rate = float(_norm(des_vel - self.desired_velocity)) / dt
-        rot_rate = float(_norm(quat.to_scaled_angle_axis(
-            quat.abs_(quat.mul_inv(des_rot, self.desired_rotation))))) / dt
+        rot_rate = qs.norm(qs.to_scaled_angle_axis(qs.abs_(qs.mul_inv(
+            des_rot.tolist(), self.desired_rotation.tolist())))) / dt
         forced = False
         if vel_rate > threshold:
             self._velocity_change_high = True
@@ -539,33 +541,39 @@ class CharacterController(Controller):
         self._ground_offset_velocity = e * (v - j1 * y * dt)
 
     def _synchronize(self, root_vel_world, root_ang_world, dt) -> None:
-        """Adjustment (pull the character root towards the simulation object) and clamping."""
+        """Adjustment (pull the character root towards the simulation object) and clamping. Plain floats
+        (one position and one quaternion): the same operations as the numpy form, a fraction of the time."""
         tun = self.tuning
-        sim_pos, sim_rot = self.sim.position, self.sim.rotation
+        sim_pos, sim_rot = self.sim.position.tolist(), tuple(self.sim.rotation.tolist())
+        root_pos, root_rot = self.root_position.tolist(), tuple(self.root_rotation.tolist())
         if tun.adjustment_enabled and dt > 0:
-            delta = (sim_pos - self.root_position) * _damper_factor(tun.adjustment_position_halflife_s, dt)
+            factor = _damper_factor(tun.adjustment_position_halflife_s, dt)
+            delta = [(s - r) * factor for s, r in zip(sim_pos, root_pos)]
             if tun.adjustment_by_velocity:
-                cap = tun.adjustment_max_speed_ratio * float(_norm(root_vel_world)) * dt
-                length = float(_norm(delta))
+                cap = tun.adjustment_max_speed_ratio * qs.norm(root_vel_world) * dt
+                length = qs.norm(delta)
                 if length > cap:
-                    delta = delta * (cap / length)
-            self.root_position = self.root_position + delta
-            diff = quat.to_scaled_angle_axis(quat.abs_(quat.mul_inv(sim_rot, self.root_rotation)))
-            step = diff * _damper_factor(tun.adjustment_rotation_halflife_s, dt)
+                    delta = [d * (cap / length) for d in delta]
+            root_pos = [r + d for r, d in zip(root_pos, delta)]
+            diff = qs.to_scaled_angle_axis(qs.abs_(qs.mul_inv(sim_rot, root_rot)))
+            factor = _damper_factor(tun.adjustment_rotation_halflife_s, dt)
+            step = [d * factor for d in diff]
             if tun.adjustment_by_velocity:
-                cap = tun.adjustment_max_speed_ratio * float(_norm(root_ang_world)) * dt
-                length = float(_norm(step))
+                cap = tun.adjustment_max_speed_ratio * qs.norm(root_ang_world) * dt
+                length = qs.norm(step)
                 if length > cap:
-                    step = step * (cap / length)
-            self.root_rotation = quat.normalize(quat.mul(quat.from_scaled_angle_axis(step), self.root_rotation))
+                    step = [d * (cap / length) for d in step]
+            root_rot = qs.normalize(qs.mul(qs.from_scaled_angle_axis(step), root_rot))
         if tun.clamping_enabled:
-            offset = self.root_position - sim_pos
-            dist = float(_norm(offset))
+            offset = [r - s for r, s in zip(root_pos, sim_pos)]
+            dist = qs.norm(offset)
             if dist > tun.clamp_max_distance_m:
-                self.root_position = sim_pos + offset * (tun.clamp_max_distance_m / dist)
-            diff = quat.to_scaled_angle_axis(quat.abs_(quat.mul_inv(self.root_rotation, sim_rot)))
-            angle = float(_norm(diff))
-            max_angle = np.radians(tun.clamp_max_angle_deg)
+                root_pos = [s + o * (tun.clamp_max_distance_m / dist) for s, o in zip(sim_pos, offset)]
+            diff = qs.to_scaled_angle_axis(qs.abs_(qs.mul_inv(root_rot, sim_rot)))
+            angle = qs.norm(diff)
+            max_angle = float(np.radians(tun.clamp_max_angle_deg))
             if angle > max_angle:
-                self.root_rotation = quat.normalize(quat.mul(quat.from_scaled_angle_axis(diff * (max_angle / angle)),
-                                                             sim_rot))
+                root_rot = qs.normalize(qs.mul(qs.from_scaled_angle_axis([d * (max_angle / angle) for d in diff]),
+                                               sim_rot))
+        self.root_position = np.array(root_pos, dtype=np.float64)
+        self.root_rotation = np.array(root_rot, dtype=np.float64)
