@@ -66,3 +66,21 @@ def test_ghost_is_computed_on_first_read_and_matches_the_source_pose(db, feature
     assert np.array_equal(ghost, forward_kinematics_pose(rot, pos, c.parents)[1].astype(np.float32))
     _, snap2 = c.step(InputState(), DT)
     assert snap.matched_pose_positions is ghost  # a later tick does not touch an earlier snapshot
+
+
+def test_one_rotation_spring_is_bit_identical_to_the_vectorised_form():
+    """The plain-float path of simple_spring_damper_exact_quat (one rotation, scalar dt or a few horizons)
+    against the numpy path it replaces, on the same arguments."""
+    from lmm.springs import _spring_damper_exact_quat_arrays, simple_spring_damper_exact_quat
+
+    rng = np.random.default_rng(7)
+    for i in range(300):
+        q = quat.normalize(rng.normal(size=4))
+        goal = quat.normalize(rng.normal(size=4)) if i % 5 else q.copy()
+        w = rng.normal(size=3) * (0.0 if i % 7 == 0 else 3.0)
+        halflife = float(rng.uniform(0.0, 0.5))
+        for dt in (1 / 60, float(rng.uniform(0, 2)), np.array([20, 40, 60]) / 60.0):
+            got_q, got_w = simple_spring_damper_exact_quat(q, w, goal, halflife, dt)
+            want_q, want_w = _spring_damper_exact_quat_arrays(q, w, goal, halflife, dt)
+            assert got_q.shape == want_q.shape and np.array_equal(got_q, want_q)
+            assert got_w.shape == want_w.shape and np.array_equal(got_w, want_w)
