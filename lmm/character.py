@@ -44,6 +44,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from lmm import quat
+from lmm import quat_scalar as qs
 from lmm.controller import Candidates, Controller, DebugSnapshot, InputState, Pose
 from lmm.features import build_query
 from lmm.ik import FootLockState, foot_lock_update, local_rotations_from_global, solve_leg
@@ -128,6 +129,43 @@ def forward_kinematics_pose(local_rot: np.ndarray, local_pos: np.ndarray, parent
         qx, qy, qz = p[pj]
         p[j] = (qx + px + aw * tx + (ay * tz - az * ty), qy + py + aw * ty + (az * tx - ax * tz),
                 qz + pz + aw * tz + (ax * ty - ay * tx))
+    return np.array(g), np.array(p)
+
+
+def subtree_joints(parents, joints) -> list[int]:
+    """``joints`` and all their descendants, in topological (index) order."""
+    inside = set(int(j) for j in joints)
+    for j, pj in enumerate(parents):
+        if pj in inside:
+            inside.add(j)
+    return sorted(inside)
+
+
+def forward_kinematics_update(global_rot: np.ndarray, global_pos: np.ndarray, local_rot: np.ndarray,
+                              local_pos: np.ndarray, parents, joints) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`forward_kinematics_pose` recomputed only for ``joints`` (a topologically ordered list that
+    holds every descendant of each of its joints, see :func:`subtree_joints`); the other joints are taken
+    from ``global_rot``/``global_pos``. The same float operations per joint, so the result is bit for bit
+    the full pass's (after IK only the legs change: a few joints instead of the whole skeleton)."""
+    g = global_rot.tolist()
+    p = global_pos.tolist()
+    for j in joints:
+        w, x, y, z = local_rot[j].tolist()
+        px, py, pz = local_pos[j].tolist()
+        pj = parents[j]
+        if pj < 0:
+            g[j] = [w, x, y, z]
+            p[j] = [px, py, pz]
+            continue
+        aw, ax, ay, az = g[pj]
+        g[j] = [aw * w - ax * x - ay * y - az * z, aw * x + ax * w + ay * z - az * y,
+                aw * y - ax * z + ay * w + az * x, aw * z + ax * y - ay * x + az * w]
+        tx = 2.0 * (ay * pz - az * py)
+        ty = 2.0 * (az * px - ax * pz)
+        tz = 2.0 * (ax * py - ay * px)
+        qx, qy, qz = p[pj]
+        p[j] = [qx + px + aw * tx + (ay * tz - az * ty), qy + py + aw * ty + (az * tx - ax * tz),
+                qz + pz + aw * tz + (ax * ty - ay * tx)]
     return np.array(g), np.array(p)
 
 
@@ -216,6 +254,7 @@ class CharacterController(Controller):
             self.leg_chains.append((hip, knee, f, t))
             axis = db.positions[0, t].astype(np.float64)
             self.toe_axes.append(axis / max(_norm(axis), 1e-9))
+        self._subtrees: dict[tuple, list[int]] = {}  # changed joints -> their subtrees (leg-only FK)
         self.hips_bone = 1  # the child of the simulation bone; its height is the pose's height
         self._range_contact_height = range_contact_heights(db, self.toe_bones)
         self.reset()
@@ -360,12 +399,13 @@ class CharacterController(Controller):
                                                src.angular_velocities)
         self.shown = (pos, vel, rot, ang)
 
-        # root integration (character space velocities -> world)
-        root_vel_world = quat.mul_vec(self.root_rotation, vel[0])
-        root_ang_world = quat.mul_vec(self.root_rotation, ang[0])
-        self.root_position = self.root_position + root_vel_world * dt
-        self.root_rotation = quat.normalize(quat.mul(quat.from_scaled_angle_axis(root_ang_world * dt),
-                                                     self.root_rotation))
+        # root integration (character space velocities -> world), in plain floats (one 3-vector/quaternion)
+        root_rot = tuple(self.root_rotation.tolist())
+        root_vel_world = qs.mul_vec(root_rot, vel[0].tolist())
+        root_ang_world = qs.mul_vec(root_rot, ang[0].tolist())
+        self.root_position = np.array([p + v * dt for p, v in zip(self.root_position.tolist(), root_vel_world)])
+        self.root_rotation = np.array(qs.normalize(qs.mul(qs.from_scaled_angle_axis(
+            [w * dt for w in root_ang_world]), root_rot)))
         integrated = (self.root_position.copy(), self.root_rotation.copy())
         self._synchronize(root_vel_world, root_ang_world, dt)
 
@@ -396,22 +436,31 @@ class CharacterController(Controller):
                 new_global.update(solve_leg(g_pos, g_rot, chain, targets[i], self.toe_axes[i],
                                             tun.ik_toe_length_m, ground))
             if new_global:
-                for j in sorted(new_global):
+                changed = sorted(new_global)
+                for j in changed:
                     g_rot[j] = new_global[j]
-                for j, q in local_rotations_from_global(g_rot, self.parents, sorted(new_global)).items():
+                for j, q in local_rotations_from_global(g_rot, self.parents, changed).items():
                     local_rot[j] = q
-                g_rot, g_pos = forward_kinematics_pose(local_rot, local_pos, self.parents)
+                # only the legs changed: forward kinematics of their subtrees, not of the whole skeleton
+                joints = self._subtrees.get(tuple(changed))
+                if joints is None:
+                    joints = self._subtrees[tuple(changed)] = subtree_joints(self.parents, changed)
+                g_rot, g_pos = forward_kinematics_update(g_rot, g_pos, local_rot, local_pos, self.parents, joints)
         else:
             self.foot_lock = FootLockState()
         self._prev_toe = toe_now
         timings["pose"] = (time.perf_counter() - t0) * 1e6
 
-        # ghost: the source pose without offsets, placed at the character root
+        # ghost: the source pose without offsets, placed at the character root; debug only, so its forward
+        # kinematics runs when a reader of the snapshot asks for it (never in headless runs)
         ghost_rot = src.rotations.copy()
         ghost_pos = src.positions.copy()
         ghost_rot[0] = self.root_rotation
         ghost_pos[0] = self.root_position
-        _, ghost = forward_kinematics_pose(ghost_rot, ghost_pos, self.parents)
+        parents = self.parents
+
+        def ghost():
+            return forward_kinematics_pose(ghost_rot, ghost_pos, parents)[1].astype(np.float32)
 
         pose = Pose(local_positions=local_pos.astype(np.float32), local_rotations=local_rot.astype(np.float32),
                     global_positions=g_pos.astype(np.float32), global_rotations=g_rot.astype(np.float32),
@@ -431,7 +480,7 @@ class CharacterController(Controller):
             matched_features=(self.features.normalized[frame].copy() if frame >= 0 else current_norm),
             candidates=self._last_candidates, searched=searched, forced_search=bool(searched and (forced or must)),
             transitioned=transitioned, best_cost=float(self._last_best_cost), pose=pose,
-            matched_pose_positions=ghost.astype(np.float32), foot_contacts=pose.contacts.copy(),
+            matched_pose_positions=ghost, foot_contacts=pose.contacts.copy(),
             foot_locked=locked, timings_us=timings, current_cost=float(np.sum((query - current_norm) ** 2)),
             **self._snapshot_extras())
         return pose, snap
@@ -446,8 +495,8 @@ class CharacterController(Controller):
             return False
         threshold = self.tuning.forced_search_threshold
         vel_rate = float(_norm(des_vel - self.desired_velocity)) / dt
-        rot_rate = float(_norm(quat.to_scaled_angle_axis(
-            quat.abs_(quat.mul_inv(des_rot, self.desired_rotation))))) / dt
+        rot_rate = qs.norm(qs.to_scaled_angle_axis(qs.abs_(qs.mul_inv(
+            des_rot.tolist(), self.desired_rotation.tolist())))) / dt
         forced = False
         if vel_rate > threshold:
             self._velocity_change_high = True
@@ -492,33 +541,39 @@ class CharacterController(Controller):
         self._ground_offset_velocity = e * (v - j1 * y * dt)
 
     def _synchronize(self, root_vel_world, root_ang_world, dt) -> None:
-        """Adjustment (pull the character root towards the simulation object) and clamping."""
+        """Adjustment (pull the character root towards the simulation object) and clamping. Plain floats
+        (one position and one quaternion): the same operations as the numpy form, a fraction of the time."""
         tun = self.tuning
-        sim_pos, sim_rot = self.sim.position, self.sim.rotation
+        sim_pos, sim_rot = self.sim.position.tolist(), tuple(self.sim.rotation.tolist())
+        root_pos, root_rot = self.root_position.tolist(), tuple(self.root_rotation.tolist())
         if tun.adjustment_enabled and dt > 0:
-            delta = (sim_pos - self.root_position) * _damper_factor(tun.adjustment_position_halflife_s, dt)
+            factor = _damper_factor(tun.adjustment_position_halflife_s, dt)
+            delta = [(s - r) * factor for s, r in zip(sim_pos, root_pos)]
             if tun.adjustment_by_velocity:
-                cap = tun.adjustment_max_speed_ratio * float(_norm(root_vel_world)) * dt
-                length = float(_norm(delta))
+                cap = tun.adjustment_max_speed_ratio * qs.norm(root_vel_world) * dt
+                length = qs.norm(delta)
                 if length > cap:
-                    delta = delta * (cap / length)
-            self.root_position = self.root_position + delta
-            diff = quat.to_scaled_angle_axis(quat.abs_(quat.mul_inv(sim_rot, self.root_rotation)))
-            step = diff * _damper_factor(tun.adjustment_rotation_halflife_s, dt)
+                    delta = [d * (cap / length) for d in delta]
+            root_pos = [r + d for r, d in zip(root_pos, delta)]
+            diff = qs.to_scaled_angle_axis(qs.abs_(qs.mul_inv(sim_rot, root_rot)))
+            factor = _damper_factor(tun.adjustment_rotation_halflife_s, dt)
+            step = [d * factor for d in diff]
             if tun.adjustment_by_velocity:
-                cap = tun.adjustment_max_speed_ratio * float(_norm(root_ang_world)) * dt
-                length = float(_norm(step))
+                cap = tun.adjustment_max_speed_ratio * qs.norm(root_ang_world) * dt
+                length = qs.norm(step)
                 if length > cap:
-                    step = step * (cap / length)
-            self.root_rotation = quat.normalize(quat.mul(quat.from_scaled_angle_axis(step), self.root_rotation))
+                    step = [d * (cap / length) for d in step]
+            root_rot = qs.normalize(qs.mul(qs.from_scaled_angle_axis(step), root_rot))
         if tun.clamping_enabled:
-            offset = self.root_position - sim_pos
-            dist = float(_norm(offset))
+            offset = [r - s for r, s in zip(root_pos, sim_pos)]
+            dist = qs.norm(offset)
             if dist > tun.clamp_max_distance_m:
-                self.root_position = sim_pos + offset * (tun.clamp_max_distance_m / dist)
-            diff = quat.to_scaled_angle_axis(quat.abs_(quat.mul_inv(self.root_rotation, sim_rot)))
-            angle = float(_norm(diff))
-            max_angle = np.radians(tun.clamp_max_angle_deg)
+                root_pos = [s + o * (tun.clamp_max_distance_m / dist) for s, o in zip(sim_pos, offset)]
+            diff = qs.to_scaled_angle_axis(qs.abs_(qs.mul_inv(root_rot, sim_rot)))
+            angle = qs.norm(diff)
+            max_angle = float(np.radians(tun.clamp_max_angle_deg))
             if angle > max_angle:
-                self.root_rotation = quat.normalize(quat.mul(quat.from_scaled_angle_axis(diff * (max_angle / angle)),
-                                                             sim_rot))
+                root_rot = qs.normalize(qs.mul(qs.from_scaled_angle_axis([d * (max_angle / angle) for d in diff]),
+                                               sim_rot))
+        self.root_position = np.array(root_pos, dtype=np.float64)
+        self.root_rotation = np.array(root_rot, dtype=np.float64)

@@ -57,6 +57,26 @@ class Candidates:
                    np.zeros(0, np.float32), list(channel_names or []))
 
 
+class LazyField:
+    """A dataclass field whose value may be given as a zero-argument function, called (once) on the
+    first read: debug-only data that costs time to compute (the ghost pose's forward kinematics) is
+    computed only when a reader (the studio's viewport) asks for it, never in headless runs."""
+
+    def __set_name__(self, owner, name):
+        self._key = "_lazy_" + name
+
+    def __get__(self, obj, objtype=None):
+        if obj is None:
+            raise AttributeError(self._key)  # no class-level default: the field stays required
+        value = obj.__dict__[self._key]
+        if callable(value):
+            value = obj.__dict__[self._key] = value()
+        return value
+
+    def __set__(self, obj, value):
+        obj.__dict__[self._key] = value
+
+
 @dataclass
 class DebugSnapshot:
     """Everything the studio draws for one tick of one controller. Plain arrays: cheap to keep in a ring buffer."""
@@ -85,7 +105,8 @@ class DebugSnapshot:
     best_cost: float
     # pose, ghost and contacts
     pose: Pose
-    matched_pose_positions: np.ndarray   # (J, 3) the matched frame's pose placed at the character root (ghost)
+    matched_pose_positions: np.ndarray = LazyField()  # (J, 3) the matched frame's pose placed at the character
+                                         # root (ghost); a function returning it may be given (computed on first read)
     foot_contacts: np.ndarray            # (2,) bool
     foot_locked: np.ndarray              # (2,) bool
     timings_us: dict[str, float] = field(default_factory=dict)

@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from lmm import quat
+from lmm import quat_scalar as qs
 
 LN2 = float(np.log(2.0))
 EPS = 1e-5
@@ -65,6 +66,12 @@ def simple_spring_damper_exact_quat(q, w, goal, halflife, dt, eps: float = EPS):
 
     The spring runs on the rotation vector of q * goal^-1, so it takes the shortest way round.
     """
+    if np.ndim(q) == 1 and np.ndim(w) == 1 and np.ndim(goal) == 1 and np.ndim(halflife) == 0 and np.ndim(dt) <= 1:
+        return _spring_damper_exact_quat_one(q, w, goal, halflife, dt, eps)
+    return _spring_damper_exact_quat_arrays(q, w, goal, halflife, dt, eps)
+
+
+def _spring_damper_exact_quat_arrays(q, w, goal, halflife, dt, eps: float = EPS):
     y = halflife_to_damping(halflife, eps) / 2.0
     dt = np.asarray(dt)
     j0 = quat.to_scaled_angle_axis(quat.abs_(quat.mul_inv(q, goal)))
@@ -73,6 +80,29 @@ def simple_spring_damper_exact_quat(q, w, goal, halflife, dt, eps: float = EPS):
     dt_ = dt[..., None] if np.ndim(dt) else dt
     q_new = quat.mul(quat.from_scaled_angle_axis(e * (j0 + j1 * dt_)), goal)
     return q_new, e * (w - j1 * y * dt_)
+
+
+def _spring_damper_exact_quat_one(q, w, goal, halflife, dt, eps: float = EPS):
+    """:func:`simple_spring_damper_exact_quat` for one rotation (and a scalar ``dt`` or a few horizons) in
+    plain floats: the same float operations (bit for bit, tested), without numpy's per-call overhead on
+    4-element arrays. ``np.exp`` stays numpy's (its kernel differs from ``math.exp`` in the last bit)."""
+    y = float(halflife_to_damping(halflife, eps)) / 2.0
+    goal_t = tuple(np.asarray(goal, dtype=np.float64).tolist())
+    w_t = np.asarray(w, dtype=np.float64).tolist()
+    j0 = qs.to_scaled_angle_axis(qs.abs_(qs.mul_inv(np.asarray(q, dtype=np.float64).tolist(), goal_t)))
+    j1 = [wi + j * y for wi, j in zip(w_t, j0)]
+    dts = np.asarray(dt, dtype=np.float64)
+    es = np.exp(-y * dts)
+    if dts.ndim == 0:
+        e, d = float(es), float(dts)
+        q_new = qs.mul(qs.from_scaled_angle_axis([e * (a + b * d) for a, b in zip(j0, j1)]), goal_t)
+        return np.array(q_new), np.array([e * (wi - b * y * d) for wi, b in zip(w_t, j1)])
+    q_out = np.empty(dts.shape + (4,))
+    w_out = np.empty(dts.shape + (3,))
+    for i, (e, d) in enumerate(zip(es.tolist(), dts.tolist())):
+        q_out[i] = qs.mul(qs.from_scaled_angle_axis([e * (a + b * d) for a, b in zip(j0, j1)]), goal_t)
+        w_out[i] = [e * (wi - b * y * d) for wi, b in zip(w_t, j1)]
+    return q_out, w_out
 
 
 def decay_spring_damper_exact_quat(q, w, halflife, dt, eps: float = EPS):

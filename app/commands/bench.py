@@ -14,7 +14,14 @@ Sections (later issues add theirs to ``SECTIONS``):
             vectorised form found (``einsum``, about twice as fast as ``np.sum((X - q) ** 2, 1)``;
             both cost passes alone are reported too). Each search is timed in its own pass over the
             queries, as at run time; the accelerated one gets the hint the controller gave it.
-``frame``   ``mm_us``: median time of one motion matching controller step over the same runs.
+``frame``   ``mm_us``: median time of one motion matching controller step over the same runs;
+            ``mm_search_in_controller_us``: median time of the search as the controller makes it
+            (exclusion window, tag groups, top-K, inside a tick, caches as other per-tick work left
+            them), over the same runs, with ``..._over_bruteforce`` its ratio to ``search.bruteforce_us``;
+            ``mm_over_bruteforce`` / ``lmm_over_bruteforce``: the frame times over the brute force
+            (issue 16's target: at most 0.2); ``lmm_network_*_us`` with ``*_over_cpp``: each network per
+            call over the C++ reference demo's ``nnet.h`` time measured on the same weights
+            (``CPP_NETWORK_US``; target at most 1.3).
 
 Timings are wall-clock medians; every section also reports what it measured (counts, settings).
 """
@@ -50,7 +57,7 @@ def collect_queries(db, features, n_queries: int, scenarios=None, tuning=None):
     scenarios = scenarios or builtin_names((1, 2))
     chunk_s, dt = 10.0, 1.0 / 60.0
     controllers, logs, ticks = {}, {}, {}
-    queries, step_us = [], []
+    queries, step_us, search_us = [], [], []
     round_ = 0
     while len(queries) < n_queries:
         for name in scenarios:
@@ -61,13 +68,16 @@ def collect_queries(db, features, n_queries: int, scenarios=None, tuning=None):
                 logs[name] = builtin(name, 3600.0)
             c, log = controllers[name], logs[name]
             for _ in range(int(chunk_s / dt)):
-                _, _, ms = step_controllers({name: c}, log.at(ticks[name] * dt), dt)
+                _, snaps, ms = step_controllers({name: c}, log.at(ticks[name] * dt), dt)
                 step_us.append(ms[name] * 1e3)
+                if snaps[name].searched:
+                    search_us.append(snaps[name].timings_us["search"])
                 ticks[name] += 1
             for query, frame, hint in c.search_log:
                 queries.append((query, frame, hint, c))
             c.search_log.clear()
         round_ += 1
+    collect_queries.search_us = np.asarray(search_us)  # in-controller search times of the same runs
     return queries[:n_queries], np.asarray(step_us)
 
 
@@ -141,8 +151,16 @@ def bench_frame(db, features, n_queries: int = 2400, collected=None) -> dict:
     import numpy as np
 
     _, step_us = collected or collect_queries(db, features, n_queries)
+    search_us = getattr(collect_queries, "search_us", np.zeros(0))
     return {"mm_us": float(np.median(step_us)), "mm_p90_us": float(np.percentile(step_us, 90)),
-            "mm_steps": int(step_us.size)}
+            "mm_steps": int(step_us.size),
+            "mm_search_in_controller_us": float(np.median(search_us)) if search_us.size else float("nan"),
+            "mm_searches": int(search_us.size)}
+
+
+#: Per-call times (us) of the C++ reference demo's networks (``nnet.h``, -O3) on our weights, measured
+#: on this machine (issue 16); ``bench`` reports ours over these.
+CPP_NETWORK_US = {"decompressor": 8.5, "stepper": 12.1, "projector": 17.3}
 
 
 # name -> function(db, features, n_queries, collected) returning a dict; later issues append theirs
@@ -247,6 +265,10 @@ def bench_frame_with_lmm(db, features, n_queries: int = 2400, collected=None) ->
     fig = _lmm_figures(db, features)
     out.update({k.split(".", 1)[1]: v for k, v in fig.items() if k.startswith("frame.")})
     out.update({k.replace("network.", "lmm_network_"): v for k, v in fig.items() if k.startswith("network.")})
+    for net, cpp in CPP_NETWORK_US.items():
+        ours = out.get(f"lmm_network_{net}_us")
+        out[f"lmm_network_{net}_cpp_us"] = cpp
+        out[f"lmm_network_{net}_over_cpp"] = ours / cpp if ours is not None else None
     return out
 
 
@@ -302,6 +324,15 @@ def main(args) -> int:
     results = {}
     for name in names:
         results[name] = SECTIONS[name](db, features, args.queries, collected)
+    if "search" in results and "frame" in results:  # ratios within one run (the machine may be shared)
+        brute = results["search"]["bruteforce_us"]
+        frame = results["frame"]
+        for key in ("mm_us", "lmm_us", "mm_search_in_controller_us"):
+            if frame.get(key) is not None and brute > 0:
+                frame[key.replace("_us", "_over_bruteforce")] = frame[key] / brute
+        fast = results["search"]["accelerated_us"]
+        if fast > 0 and frame.get("mm_search_in_controller_us") is not None:
+            frame["mm_search_in_controller_over_accelerated"] = frame["mm_search_in_controller_us"] / fast
     print(format_results(results))
     if args.json_path:
         from lmm.data.jsonio import write_json
