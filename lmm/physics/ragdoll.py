@@ -54,7 +54,7 @@ class RagdollTick:
     positions: np.ndarray              # (J, 3) the ragdoll's joint positions (m), the tracked skeleton's joints
     residual_force_bw: float           # |root residual force| / body weight (0 when the residual is off)
     residual_torque_bw_m: float        # |root residual torque| / body weight (m)
-    tracking_error_cm: float           # mean joint position error against the tracked pose
+    tracking_error_cm: float           # mean joint position error against the tracked pose (raised, see lift_m)
     foot_contacts: np.ndarray          # (2,) bool: left, right foot touches the floor
     fallen: bool                       # it has fallen (and was not reset yet)
     falls: int                         # falls since the ragdoll was made (or :meth:`Ragdoll.clear_falls`)
@@ -141,11 +141,14 @@ class Ragdoll:
         ``lift_out_of_floor`` (a sole sunk into the floor would push the feet against the root's residual
         spring: kinematic poses often sink a few centimetres)."""
         q = self.body.qpos_from_pose(global_pos, global_rot)
-        if self.settings.lift_out_of_floor:
-            lowest = float(self.body.sole_points(global_pos, global_rot)[:, 1].min())
-            if lowest < 0.0:
-                q[1] -= lowest
+        q[1] += self.lift_m(global_pos, global_rot)
         return q
+
+    def lift_m(self, global_pos, global_rot) -> float:
+        """How far the tracked pose is raised (m): its lowest sole point's depth below the floor, or 0."""
+        if not self.settings.lift_out_of_floor:
+            return 0.0
+        return max(0.0, -float(self.body.sole_points(global_pos, global_rot)[:, 1].min()))
 
     def reset(self, global_pos, global_rot, velocity_qvel=None) -> None:
         """Put the ragdoll on a pose (global positions (J, 3) m and rotations (J, 4)), at rest or moving
@@ -170,7 +173,9 @@ class Ragdoll:
         mj, m, d, s = self._mj, self.model, self.data, self.settings
         pos = np.asarray(global_pos, np.float64)
         rot = np.asarray(global_rot, np.float64)
-        target = self.target_qpos(pos, rot)
+        lift = self.lift_m(pos, rot)
+        target = self.body.qpos_from_pose(pos, rot)
+        target[1] += lift
         reset = False
         if self._target is None:
             self.reset(pos, rot)
@@ -214,7 +219,8 @@ class Ragdoll:
         shift[1] = 0.0
         outside = np.setdiff1d(np.arange(len(pos)), self.joints)
         here[outside] = pos[outside] + shift
-        error = float(np.linalg.norm(here[self.joints] - pos[self.joints], axis=1).mean())
+        # the error against what it tracks (the pose raised out of the floor)
+        error = float(np.linalg.norm(here[self.joints] - pos[self.joints] - [0.0, lift, 0.0], axis=1).mean())
         head_low = here[self.head, 1] < s.fall_head_fraction * max(pos[self.head, 1], 1e-3)
         if not self.fallen and (head_low or error > s.fall_error_m):
             self.fallen = True
