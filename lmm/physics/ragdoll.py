@@ -268,3 +268,51 @@ def summarize(ticks: list[RagdollTick], seconds_per_tick_s: float = 0.0) -> Trac
                            falls=int(ticks[-1].falls) if ticks else 0, mean_residual_bw=float(res.mean()),
                            median_residual_bw=float(np.median(res)), contact_fraction=contacts.mean(0),
                            ms_per_tick=1e3 * seconds_per_tick_s)
+
+
+# ---------------------------------------------------------------------------------------------------
+# one ragdoll per controller (the studio session)
+# ---------------------------------------------------------------------------------------------------
+
+#: per-tick series a :class:`RagdollTracker` gives per controller (history keys)
+SERIES = ("ragdoll_residual_bw", "ragdoll_error_cm", "ragdoll_contact_left", "ragdoll_contact_right",
+          "ragdoll_fallen", "ragdoll_falls")
+
+
+class RagdollTracker:
+    """A ragdoll for each controller, each tracking that controller's pose every tick, so the residual
+    force, tracking error and foot contacts of MM and LMM compare side by side; ``drawn`` names the one
+    the 3D view shows. ``settings`` is shared by all of them (the residual switch acts on the next tick)."""
+
+    def __init__(self, body: Body, dt: float, settings: RagdollSettings | None = None):
+        self.body = body
+        self.dt = float(dt)
+        self.settings = settings if settings is not None else RagdollSettings()
+        self.enabled = True
+        self.drawn = "mm"
+        self.ragdolls: dict[str, Ragdoll] = {}
+
+    def reset(self) -> None:
+        """Every ragdoll goes back on its controller's next pose (and its fall count to 0)."""
+        self.ragdolls.clear()
+
+    def step(self, snapshots: dict) -> tuple[dict, dict]:
+        """Step the ragdoll of every controller in ``snapshots`` (name -> DebugSnapshot) towards its pose;
+        returns ``(series, positions)``: ``(name, key) -> value`` for :data:`SERIES` and
+        ``name -> (J, 3)`` ragdoll joint positions. Nothing when disabled."""
+        if not self.enabled:
+            return {}, {}
+        series, positions = {}, {}
+        for name, snap in snapshots.items():
+            ragdoll = self.ragdolls.get(name)
+            if ragdoll is None:
+                ragdoll = self.ragdolls[name] = Ragdoll(self.body, self.dt, self.settings)
+            t = ragdoll.step(snap.pose.global_positions, snap.pose.global_rotations)
+            positions[name] = t.positions.astype(np.float32)
+            series[(name, "ragdoll_residual_bw")] = t.residual_force_bw if self.settings.residual else np.nan
+            series[(name, "ragdoll_error_cm")] = t.tracking_error_cm
+            series[(name, "ragdoll_contact_left")] = float(t.foot_contacts[0])
+            series[(name, "ragdoll_contact_right")] = float(t.foot_contacts[1])
+            series[(name, "ragdoll_fallen")] = float(t.fallen)
+            series[(name, "ragdoll_falls")] = float(t.falls)
+        return series, positions
