@@ -377,7 +377,8 @@ class ViewportPanel(Panel):
 
     def ragdoll_pose(self, view: View):
         """The ragdoll the 3D view draws at the displayed tick: ``(controller, positions (J, 3), offset (3,))``,
-        or None. It stands beside the characters, to the right of the last one."""
+        or None. It stands beside the characters, to the left of the first one (further left when a
+        reference clip stands there)."""
         tick = view.tick
         poses = tick.extra.get("ragdoll") if tick is not None else None
         if not poses:
@@ -385,8 +386,8 @@ class ViewportPanel(Panel):
         name = view.ragdoll.get("drawn", "mm")
         if name not in poses:
             name = next(iter(poses))
-        names = list(self.drawings) or [name]
-        off = self.offset_of(names[-1]) + np.array([SIDE_OFFSET_M, 0.0, 0.0])
+        slots = 2 if self.reference is not None and self.reference_skeleton is not None else 1
+        off = np.array([-SIDE_OFFSET_M * slots, 0.0, 0.0])
         return name, np.asarray(poses[name], np.float64), off
 
     def _update_ragdoll(self, view: View, roots: list) -> None:
