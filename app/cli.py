@@ -38,6 +38,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "find": ("find", "motion search by example: the windows of a manifest or folder most like a BVH frame range"),
     "compare": ("compare", "DTW-aligned rotation and position error between two motions of one skeleton"),
     "input-from": ("input_from", "derive the controller input that follows a take's root path (an input log)"),
+    "physics": ("physics", "is this motion physically possible: root residual force, penetration, sliding (needs mujoco)"),
     "eval-search": ("eval_search", "motion search by example: learned encoder vs classifier vs features on a folder"),
 }
 

@@ -18,7 +18,10 @@ PIP_INSTALL = {
     "matplotlib": "pip install 'matplotlib>=3.8'",
     "onnx": "pip install 'onnx>=1.16'",
     "dtaidistance": "pip install 'dtaidistance>=2.3'",
+    "mujoco": "pip install 'mujoco>=3.1'",
 }
+# packages whose extra is not the train one: package -> how to install that extra
+EXTRA_SETUP = {"mujoco": "pip install -e '.[physics]'"}
 # optional speed-ups a command works without: package -> the pyproject extra that holds it
 SPEEDUP_EXTRA = {"dtaidistance": "search"}
 
@@ -30,7 +33,7 @@ def require(command: str, *packages: str, purpose: str = "") -> bool:
             importlib.import_module(name)
         except ImportError as e:
             why = "is not installed" if _missing(e, name) else f"failed to import ({e})"
-            print(f"error: lmm-studio {command} needs {name}{purpose}, which {why}: install it with {SETUP} "
+            print(f"error: lmm-studio {command} needs {name}{purpose}, which {why}: install it with {EXTRA_SETUP.get(name, SETUP)} "
                   f"(or: {PIP_INSTALL.get(name, f'pip install {name}')})", file=sys.stderr)
             return False
     return True

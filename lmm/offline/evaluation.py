@@ -160,7 +160,8 @@ def run_controllers(controllers: dict, inputs, seconds: float, dt: float = 1.0 /
     runs = {}
     for name, c in controllers.items():
         runs[name] = {"positions": np.zeros((n, c.db.n_bones, 3), np.float32), "root_position": np.zeros((n, 3)),
-                      "root_rotation": np.zeros((n, 4)), "contacts": np.zeros((n, 2), bool), "latents": [],
+                      "root_rotation": np.zeros((n, 4)),
+                      "rotations": np.zeros((n, c.db.n_bones, 4), np.float32), "contacts": np.zeros((n, 2), bool), "latents": [],
                       "queries": [], "step_us": np.zeros(n), "dt": dt}
     for i in range(n):
         poses, snaps, ms = step_controllers(controllers, inputs.at(i * dt), dt)
@@ -168,6 +169,7 @@ def run_controllers(controllers: dict, inputs, seconds: float, dt: float = 1.0 /
             pose, snap = poses[name], snaps[name]
             run["step_us"][i] = ms[name] * 1e3
             run["positions"][i] = pose.global_positions
+            run["rotations"][i] = pose.global_rotations
             run["root_position"][i] = pose.global_positions[0]
             run["root_rotation"][i] = pose.global_rotations[0]
             run["contacts"][i] = pose.contacts
@@ -210,6 +212,26 @@ def bone_length_error_m(run: dict, db) -> float:
     return float(np.max(np.abs(lengths - ref[1:]))) if lengths.size else 0.0
 
 
+def physics_of_runs(db, runs: dict) -> dict:
+    """Per controller, the plausibility summary of its run (:mod:`lmm.physics.plausibility`): root residual
+    force (body weights), penetration and sliding; ``{"available": False, "reason": ...}`` without mujoco."""
+    from lmm.physics import PhysicsUnavailable, mujoco_available
+
+    if not mujoco_available():
+        return {"available": False, "reason": str(PhysicsUnavailable(f"the physics keys need mujoco: "
+                                                                      f"pip install -e '.[physics]'"))}
+    from lmm.physics.body import body_for_database
+    from lmm.physics.plausibility import plausibility
+
+    body = body_for_database(db)
+    out: dict = {"available": True, "total_mass_kg": body.total_mass}
+    for name, run in runs.items():
+        result = plausibility(body, run["positions"].astype(np.float64), run["rotations"].astype(np.float64),
+                              1.0 / run["dt"])
+        out[name] = result.summary()
+    return out
+
+
 def evaluate(db, features, nets, compressor: MLP, inputs="builtin:random:1", seconds: float = 60.0,
              n_queries: int = 4096, log=print) -> tuple[dict, dict]:
     """All metrics. Returns (metrics, artifacts for the plots)."""
@@ -249,6 +271,10 @@ def evaluate(db, features, nets, compressor: MLP, inputs="builtin:random:1", sec
     out["ground_skating"] = {"mm": ground_skating(mm["positions"][:, toes], 1.0 / mm["dt"])["fraction"],
                              "lmm": ground_skating(lmm["positions"][:, toes], 1.0 / lmm["dt"])["fraction"],
                              "source": source_ground_skating(db)["fraction"]}
+    out["physics"] = physics_of_runs(db, runs)
+    if out["physics"].get("available"):
+        log("physics: root residual force median " + ", ".join(
+            f"{k} {out['physics'][k]['residual_force_bw_median']:.3f} BW" for k in ("mm", "lmm")))
     out["lmm_run"] = {"finite": bool(np.all(np.isfinite(lmm["positions"]))),
                       "max_bone_length_error_cm": bone_length_error_m(lmm, db) * 100.0,
                       "median_step_us": float(np.median(lmm["step_us"]))}

@@ -506,7 +506,7 @@ def _mjcf(names, parents, offsets, joints, hips, geoms, joint_limit_deg) -> tupl
             lines.append(f'{pad}  <joint name={quoteattr(_body_name(names, j))} type="ball" range="0 {joint_limit_deg:g}"/>')
         for i in by_joint.get(j, []):
             g = geoms[i]
-            attrs = f'name="{geom_names[i]}" type="{g.kind}" mass="{g.mass:.6g}"'
+            attrs = f'name="{geom_names[i]}" type="{g.kind}" mass="{g.mass:.9g}"'
             if g.kind == "capsule":
                 attrs += f' fromto="{_v(g.fromto)}" size="{_v(g.size)}"'
             elif g.kind == "sphere":
@@ -522,3 +522,49 @@ def _mjcf(names, parents, offsets, joints, hips, geoms, joint_limit_deg) -> tupl
     emit(hips, 2)
     lines += ['  </worldbody>', '</mujoco>', '']
     return "\n".join(lines), geom_names
+
+
+# ---------------------------------------------------------------------------------------------------
+# bodies of the things we hold: a BVH animation, a motion database
+# ---------------------------------------------------------------------------------------------------
+
+UNIT_SCALES = (1.0, 0.1, 0.0254, 0.01, 0.001)   # metres per file unit: m, dm, inch, cm, mm
+HUMAN_LEG_M = 0.86                                # hip-to-ankle length of a 1.75 m body
+
+
+def guess_unit_scale(names, parents, offsets, path="") -> float:
+    """Metres per file unit of a skeleton: the one of :data:`UNIT_SCALES` that makes its hip-to-ankle
+    length (thigh + shank bones) closest to a human's."""
+    try:
+        key = match_key_joints(names, path)
+    except SkeletonMatchError as e:
+        raise BodyError(str(e)) from None
+    offsets = np.asarray(offsets, dtype=np.float64)
+    parents = np.asarray(parents)
+    leg = 0.5 * sum(float(np.linalg.norm(offsets[key[f"{s}_foot"]]) +
+                          np.linalg.norm(offsets[parents[key[f"{s}_foot"]]])) for s in SIDES)
+    if leg <= 0:
+        raise BodyError(f"{path}: the legs have no length: cannot guess the file's unit")
+    return min(UNIT_SCALES, key=lambda s: abs(np.log(leg * s / HUMAN_LEG_M)))
+
+
+def body_for_animation(anim, unit_scale: float | None = None, total_mass: float = DEFAULT_TOTAL_MASS_KG):
+    """``(body, global_pos_m, global_rot, unit_scale)`` of a :class:`lmm.data.bvh.Animation`: its soles laid
+    from its own standing frames; ``unit_scale`` (metres per file unit) guessed when None."""
+    path = anim.path or "<animation>"
+    if unit_scale is None:
+        unit_scale = guess_unit_scale(anim.names, anim.parents, anim.offsets, path)
+    rot, pos = anim.global_transforms()
+    pos = pos * unit_scale
+    body = build_body(anim.names, anim.parents, anim.offsets * unit_scale, total_mass, stance=(pos, rot),
+                      end_sites_m={k: v * unit_scale for k, v in anim.end_sites.items()}, path=path)
+    return body, pos, rot, float(unit_scale)
+
+
+def body_for_database(db, total_mass: float = DEFAULT_TOTAL_MASS_KG, stance_frames: int = 4000) -> Body:
+    """The body of a :class:`lmm.data.database.Database`'s skeleton (metres; its simulation bone left out),
+    soles laid from up to ``stance_frames`` of its frames spread over the database."""
+    frames = np.unique(np.linspace(0, db.n_frames - 1, min(stance_frames, db.n_frames)).astype(np.int64))
+    rot, pos = db.global_transforms(frames)
+    return build_body(db.names, db.parents, db.positions[0].astype(np.float64), total_mass, stance=(pos, rot),
+                      path=f"database {db.name}")
