@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from lmm.physics import require_mujoco
-from lmm.physics.body import GRAVITY_M_S2, Body, build_body
+from lmm.physics.body import GRAVITY_M_S2, Body, body_for_database  # noqa: F401  (re-exported)
 
 SIDES = ("left", "right")
 
@@ -59,14 +59,6 @@ class RagdollTick:
     fallen: bool                       # it has fallen (and was not reset yet)
     falls: int                         # falls since the ragdoll was made (or :meth:`Ragdoll.clear_falls`)
     reset: bool = False                # it was put back on the tracked pose this tick
-
-
-def body_for_database(db, total_mass: float = 70.0, stance_frames: int = 2000) -> Body:
-    """The :class:`Body` of a database's skeleton, its soles laid flat from the database's own frames."""
-    offsets = np.asarray(db.positions[0], np.float64)
-    step = max(1, db.n_frames // max(stance_frames, 1))
-    rot, pos = db.global_transforms(slice(0, db.n_frames, step))
-    return build_body(db.names, db.parents, offsets, total_mass, stance=(pos, rot), path=getattr(db, "name", ""))
 
 
 class Ragdoll:
