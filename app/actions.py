@@ -45,6 +45,28 @@ class SessionActions:
         self.session.reset()
         self.playback.go_live()
 
+    def set_ragdoll(self, key: str, value) -> None:
+        """A ragdoll setting: ``enabled`` / ``residual`` (bool, from the next tick) or ``drawn`` (the
+        controller whose ragdoll the 3D view shows)."""
+        r = self.session.ragdolls
+        if r is None:
+            return
+        if key == "enabled":
+            r.enabled = bool(value)
+            if not r.enabled:
+                r.reset()          # switched on again, each ragdoll starts on its controller's pose
+        elif key == "residual":
+            r.settings.residual = bool(value)
+        elif key == "drawn":
+            r.drawn = str(value)
+        else:
+            raise ValueError(f"unknown ragdoll setting {key!r}")
+
+    def reset_ragdolls(self) -> None:
+        """Every ragdoll back on its controller's pose (a fallen one stands again); the fall counts restart."""
+        if self.session.ragdolls is not None:
+            self.session.ragdolls.reset()
+
     def open_reference(self, path: str) -> bool:
         from lmm.data.bvh import BVHError
 

@@ -31,6 +31,7 @@ class StudioOptions:
     samples: int = -1
     render_scale: float = 1.0
     cache: str | None = None
+    physics: bool = True
 
 
 def load_session(opts: StudioOptions, report_error: Callable[[str, str], None]) -> tuple[Session, str | None]:
@@ -62,4 +63,8 @@ def load_session(opts: StudioOptions, report_error: Callable[[str, str], None]) 
         lmm_problem = "LMM is off (--no-lmm)"
     session = Session(db, features, tuning, controllers)
     session.start_latent_table(opts.weights)
+    if opts.physics:
+        session.start_ragdolls()
+    else:
+        session.physics_status = "physics is off (--no-physics)"
     return session, lmm_problem

@@ -57,6 +57,7 @@ BUILTIN: dict[str, dict[str, tuple[int, int, int, int] | None]] = {
         "database": None,
         "coverage": None,
         "motion_search": None,
+        "physics": None,
     },
     "compare": {
         "viewport": (0, 22, 1040, 560),
@@ -71,6 +72,7 @@ BUILTIN: dict[str, dict[str, tuple[int, int, int, int] | None]] = {
         "database": None,
         "coverage": None,
         "motion_search": None,
+        "physics": None,
     },
     "tuning": {
         "tuning": (0, 22, 560, 878),
@@ -85,6 +87,7 @@ BUILTIN: dict[str, dict[str, tuple[int, int, int, int] | None]] = {
         "database": None,
         "coverage": None,
         "motion_search": None,
+        "physics": None,
     },
     # the data workbench: browse the database, see its coverage, search motion by example
     "data": {
@@ -100,6 +103,7 @@ BUILTIN: dict[str, dict[str, tuple[int, int, int, int] | None]] = {
         "tuning": None,
         "stats": None,
         "recording": None,
+        "physics": None,
     },
 }
 

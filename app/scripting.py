@@ -34,7 +34,8 @@ class Script:
     ``show`` (window[, show]); ``click_candidate`` (row: preview a Search Candidates row); ``database`` (op: ``select`` (range),
     ``frame`` (db_frame), ``play``, ``pause``, ``scrub`` (source_frame), ``selection`` (start, stop),
     ``mark`` (end: in/out), ``copy``) drives the Database panel;
-    ``motion_search`` (source: timeline or file, seconds, file, frames, in, top: runs that search).
+    ``motion_search`` (source: timeline or file, seconds, file, frames, in, top: runs that search);
+    ``ragdoll`` (key: enabled, residual or drawn, value; or reset: true) sets the simulated ragdolls.
     """
 
     def __init__(self, actions: list[dict]):
@@ -105,6 +106,11 @@ class Script:
                 s.panels["coverage"].set_mode(a["mode"])
             if "channel" in a:
                 s.panels["coverage"].set_channel(a["channel"])
+        elif do == "ragdoll":          # key (enabled, residual, drawn), value; or reset: true
+            if a.get("reset"):
+                s.reset_ragdolls()
+            else:
+                s.set_ragdoll(a["key"], a["value"])
         elif do == "quit_when_exists":  # external tests (real key presses) end the run by creating a file
             self.quit_files.append(Path(a["path"]))
         elif do == "write_rects":

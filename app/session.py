@@ -127,6 +127,23 @@ class Session:
         self.step_ms: dict[str, float] = {}
         self.latent_table_status = ""  # "" once MM's latent table is attached, else why not (one line)
         self._latent_job = 0
+        self.ragdolls = None           # an lmm.physics.ragdoll.RagdollTracker (see start_ragdolls), or None
+        self.physics_status = "physics off"   # one line: why there is no ragdoll ("" when there is)
+
+    # -- the simulated characters (lmm.physics.ragdoll) -------------------------------------------
+    def start_ragdolls(self) -> None:
+        """A stable-PD ragdoll tracking each controller (needs the optional mujoco package; without it
+        ``physics_status`` says how to install it and the session runs without ragdolls)."""
+        from lmm.errors import InputError
+
+        try:
+            from lmm.physics.ragdoll import RagdollTracker, body_for_database
+
+            self.ragdolls = RagdollTracker(body_for_database(self.db), self.dt)
+            self.physics_status = ""
+        except InputError as e:       # mujoco missing (PhysicsUnavailable) or a skeleton with no body
+            self.ragdolls = None
+            self.physics_status = str(e)
 
     # -- the compressor latent of every database frame (for "the latent of the frames MM plays") ----
     def start_latent_table(self, weights_path=None) -> None:
@@ -193,6 +210,8 @@ class Session:
             c.reset()
         for t in self._trackers.values():
             t.reset()
+        if self.ragdolls is not None:
+            self.ragdolls.reset()
         self.history.clear()
         self.tick = 0
 
@@ -256,6 +275,11 @@ class Session:
         tick.extra.setdefault("input", inp)
         if self.following is not None:
             tick.series.update(self.follow_series(tick))
+        if self.ragdolls is not None:
+            series, positions = self.ragdolls.step(snaps)
+            tick.series.update(series)
+            if positions:
+                tick.extra["ragdoll"] = positions
         if self.recording is not None:
             self._record(tick, inp)
         self.history.append(tick)

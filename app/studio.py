@@ -94,7 +94,8 @@ class Studio(SessionActions):
                           show_info=self.errors.inform, quit=self.quit,
                           set_preview=lambda owner, poses: self.viewport.set_preview(owner, poses),
                           preview_database_frame=self.preview_database_frame,
-                          follow_reference=self.follow_reference, set_reference_overlay=self.set_reference_overlay)
+                          follow_reference=self.follow_reference, set_reference_overlay=self.set_reference_overlay,
+                          set_ragdoll=self.set_ragdoll, reset_ragdolls=self.reset_ragdolls)
         return PanelContext(dpg=self.dpg, tuning=s.tuning, actions=actions, theme=self.theme, engine=engine)
 
     def _manifest(self):
@@ -116,6 +117,7 @@ class Studio(SessionActions):
         from .panels.latent import LatentPanel
         from .panels.menu import MenuBar
         from .panels.motion_search import MotionSearchPanel
+        from .panels.physics import PhysicsPanel
         from .panels.recording import RecordingPanel
         from .panels.search import CandidatesPanel, SearchPanel
         from .panels.stats import StatsPanel
@@ -138,7 +140,7 @@ class Studio(SessionActions):
         self.panels = {"viewport": self.viewport}
         for cls in (FeaturesPanel, LatentPanel, SearchPanel, CandidatesPanel, TuningPanel, StatsPanel,
                     TimelinePanel, RecordingPanel, DatabasePanel, CoveragePanel,
-                    MotionSearchPanel):
+                    MotionSearchPanel, PhysicsPanel):
             self.panels[cls.key] = cls(ctx)
         self.menu.build()
         for key, panel in self.panels.items():
@@ -252,7 +254,10 @@ class Studio(SessionActions):
                     replay_line=replay, devices=tuple(self.gamepad_names()),
                     reference=ref.name if ref is not None else "", layout=self.layouts.name,
                     following=s.following.name if s.following is not None else "",
-                    hidden_windows=self._hidden)
+                    hidden_windows=self._hidden, physics_status=s.physics_status,
+                    ragdoll={} if s.ragdolls is None else {"enabled": s.ragdolls.enabled,
+                                                           "residual": s.ragdolls.settings.residual,
+                                                           "drawn": s.ragdolls.drawn})
 
     def frame(self) -> None:
         dpg = self.dpg

@@ -25,6 +25,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--width", type=int, default=1600, help="window width (default 1600)")
     parser.add_argument("--height", type=int, default=900, help="window height (default 900)")
     parser.add_argument("--no-lmm", action="store_true", help="motion matching only")
+    parser.add_argument("--no-physics", action="store_true",
+                        help="no simulated ragdolls (they need the physics extra: pip install -e '.[physics]')")
     parser.add_argument("--samples", type=int, default=-1,
                         help="3D view multisampling, e.g. 0 or 4 (default: 4 on a GPU, 0 on software OpenGL)")
     parser.add_argument("--render-scale", type=float, default=1.0, metavar="S",
@@ -65,7 +67,7 @@ def main(args: argparse.Namespace) -> int:
 
     opts = StudioOptions(manifest=args.manifest, weights=args.weights, layout=args.layout, input=args.input,
                          frames=args.frames, screenshot=args.screenshot, width=args.width, height=args.height,
-                         lmm=not args.no_lmm, script=args.script, dump_state=args.dump_state,
+                         lmm=not args.no_lmm, physics=not args.no_physics, script=args.script, dump_state=args.dump_state,
                          fixed_step=args.fixed_step, gamepads=not args.no_gamepads,
                          save_layout=not args.no_save_layout, write_layouts=args.write_layouts,
                          samples=args.samples, render_scale=args.render_scale)

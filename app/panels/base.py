@@ -51,6 +51,10 @@ class Actions:
     preview_database_frame: Callable[[int], None] = lambda frame: None   # show a database frame (Database panel)
     follow_reference: Callable[[bool], bool] = lambda on: False         # the reference drives the characters
     set_reference_overlay: Callable[[bool], None] = lambda overlay: None  # draw it over them (else beside)
+    # the simulated ragdolls (lmm.physics.ragdoll): a setting by name ("enabled", "residual": bool; "drawn":
+    # a controller name), and back onto the tracked poses
+    set_ragdoll: Callable[[str, object], None] = lambda key, value: None
+    reset_ragdolls: Callable[[], None] = lambda: None
 
 
 @dataclass(frozen=True)
@@ -125,6 +129,8 @@ class View:
     following: str = ""                                 # the reference the characters follow ("" = none)
     layout: str = ""
     hidden_windows: tuple[str, ...] = ()                # window keys the layout hides
+    physics_status: str = ""                            # why there are no ragdolls ("" when they run)
+    ragdoll: dict = field(default_factory=dict)         # "enabled", "residual", "drawn" as the session has them
 
     @property
     def mode(self) -> str:

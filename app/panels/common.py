@@ -18,6 +18,7 @@ WINDOWS: dict[str, tuple[int, str]] = {
     "database": (10010, "Database"),
     "coverage": (10011, "Coverage"),
     "motion_search": (10012, "Motion Search"),
+    "physics": (10013, "Physics"),
 }
 
 
@@ -41,6 +42,7 @@ COLORS = {
     "lmm": (0.22, 0.66, 1.00),
 }
 SHORT = {"mm": "MM", "lmm": "LMM"}
+RAGDOLL_COLOR = (0.55, 0.78, 0.55)     # the simulated character: grey-green, neither MM's nor LMM's
 QUERY_COLOR = (0.92, 0.92, 0.92)
 GOOD = (0.35, 0.85, 0.45)
 BAD = (0.95, 0.35, 0.30)

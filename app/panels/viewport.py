@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from .base import Panel, PanelContext, View
-from .common import COLORS, SHORT
+from .common import COLORS, RAGDOLL_COLOR, SHORT
 from .viewport_scene import LEGEND, CharacterDrawing, MarkerBatch, PreviewDrawings, draw_character
 
 FORWARD = np.array([0.0, 0.0, 1.0])
@@ -89,6 +89,7 @@ class ViewportPanel(Panel):
         self.previews: dict[str, tuple] = {}   # owner -> PreviewPose tuple (see set_preview)
         self.preview_drawings = None
         self._preview_labels = 0
+        self.ragdoll_skeleton = None
 
     # -- items ------------------------------------------------------------------------------
     def build(self, parent_window_kwargs: dict) -> None:
@@ -121,9 +122,10 @@ class ViewportPanel(Panel):
         if key in ("sticks", "shadow"):
             for d in self.drawings.values():
                 d.set_style(self._style(), self.show["shadow"])
-            if self.reference_skeleton is not None:
-                self.reference_skeleton.style = self._style()
-                self.reference_skeleton.shadow = self.show["shadow"]
+            for sk in (self.reference_skeleton, self.ragdoll_skeleton):
+                if sk is not None:
+                    sk.style = self._style()
+                    sk.shadow = self.show["shadow"]
 
     def _style(self) -> str:
         return "sticks" if self.show["sticks"] else "capsules"
@@ -161,6 +163,10 @@ class ViewportPanel(Panel):
         self.preview_drawings = PreviewDrawings(viewer, self.gl, self.scene)
         self.scene.add(*self.batch.renderables())
         self.reference_skeleton = None
+        # the simulated ragdoll (lmm.physics.ragdoll), a third character beside the two
+        self.ragdoll_skeleton = viewer.Skeleton(self.gl, parents, color=RAGDOLL_COLOR, **self._body_style())
+        self.ragdoll_skeleton.visible = False
+        self.scene.add(self.ragdoll_skeleton)
         self.camera = viewer.OrbitCamera(target=np.array([0.8, 0.8, 0.0]), distance=4.6, yaw_deg=35.0,
                                          pitch_deg=16.0)
         self.gl_renderer = str(self.gl.info.get("GL_RENDERER", ""))
@@ -252,6 +258,8 @@ class ViewportPanel(Panel):
         else:
             dpg.draw_image(self.texture, (0, 0), (w, h), uv_min=(0, 1), uv_max=(1, 0), tag="vp_image",
                            parent="vp_drawlist")
+            dpg.draw_text((0, 0), "", tag="vp_label_ragdoll", parent="vp_drawlist", size=16,
+                          color=tuple(int(c * 255) for c in RAGDOLL_COLOR) + (255,))
             for name in COLORS:
                 if not dpg.does_item_exist(f"vp_label_{name}"):
                     dpg.draw_text((0, 0), SHORT.get(name, name), tag=f"vp_label_{name}", parent="vp_drawlist",
@@ -351,6 +359,7 @@ class ViewportPanel(Panel):
             if frame >= 0:       # the camera keeps the reference in view with the characters
                 self.drawn["reference"]["root_path"] = [float(x) for x in self.followed.root_at(view.tick_number)]
                 roots.append(np.asarray(positions[0], np.float64) + off)
+        self._update_ragdoll(view, roots)
         self._update_previews(view, roots)
         self.batch.flush()
         if roots and self.follow:
@@ -365,6 +374,36 @@ class ViewportPanel(Panel):
         self.gl.detect_framebuffer(0).use()
         self.render_ms = (t1 - t0) * 1e3
         self.readback_ms = (t2 - t1) * 1e3
+
+    def ragdoll_pose(self, view: View):
+        """The ragdoll the 3D view draws at the displayed tick: ``(controller, positions (J, 3), offset (3,))``,
+        or None. It stands beside the characters, to the left of the first one (further left when a
+        reference clip stands there)."""
+        tick = view.tick
+        poses = tick.extra.get("ragdoll") if tick is not None else None
+        if not poses:
+            return None
+        name = view.ragdoll.get("drawn", "mm")
+        if name not in poses:
+            name = next(iter(poses))
+        slots = 2 if self.reference is not None and self.reference_skeleton is not None else 1
+        off = np.array([-SIDE_OFFSET_M * slots, 0.0, 0.0])
+        return name, np.asarray(poses[name], np.float64), off
+
+    def _update_ragdoll(self, view: View, roots: list) -> None:
+        sk = self.ragdoll_skeleton
+        drawn = self.ragdoll_pose(view) if sk is not None else None
+        if drawn is None:
+            if sk is not None:
+                sk.visible = False
+            self.drawn["ragdoll"] = None
+            return
+        name, positions, off = drawn
+        sk.visible = True
+        sk.update(positions + off)
+        roots.append(positions[0] + off)
+        self.drawn["ragdoll"] = {"controller": name, "root": [float(x) for x in positions[0]],
+                                 "offset": [float(x) for x in off]}
 
     def _update_previews(self, view: View, roots: list) -> None:
         poses = self.preview_poses()
@@ -416,6 +455,19 @@ class ViewportPanel(Panel):
                 sizes[name] = (LABEL_CHAR_PX * len(texts[name]), LABEL_HEIGHT_PX)
             else:
                 dpg.configure_item(tag, show=False)
+        rag = self.drawn.get("ragdoll")
+        if rag is not None and dpg.does_item_exist("vp_label_ragdoll"):
+            _, positions, off = self.ragdoll_pose(view)
+            head = positions[int(np.argmax(positions[:, 1]))] + off + [0, 0.25, 0]
+            px, _, front = project_points(head[None], vp, w, h)
+            if front[0] and 0 <= px[0, 0] < w and 0 <= px[0, 1] < h:
+                texts["ragdoll"] = f"ragdoll ({SHORT.get(rag['controller'], rag['controller'])})"
+                anchors["ragdoll"] = (float(px[0, 0]) - 12, float(px[0, 1]) - 18)
+                sizes["ragdoll"] = (LABEL_CHAR_PX * len(texts["ragdoll"]), LABEL_HEIGHT_PX)
+            else:
+                dpg.configure_item("vp_label_ragdoll", show=False)
+        elif dpg.does_item_exist("vp_label_ragdoll"):
+            dpg.configure_item("vp_label_ragdoll", show=False)
         for i, p in enumerate(self.drawn.get("previews", [])):
             tag = f"vp_preview_label_{i}"
             if i >= self._preview_labels:
