@@ -595,12 +595,14 @@ def load_or_build(manifest_path=None, cache_dir=None, progress=None, rebuild: bo
     db = build(manifest, progress=progress)
     if out_path:
         db.save(path)  # atomic: an OSError leaves no file behind, and the caller reports it
+        db.source_path = path
         return db, LoadInfo(path, False, time.perf_counter() - t0)
     try:
         db.save(path)
     except OSError as e:  # a read-only or full cache location must not stop the tool
         return db, LoadInfo(None, False, time.perf_counter() - t0,
                             not_saved=f"cannot write the cache {path}: {e.strerror or type(e).__name__}")
+    db.source_path = path  # its derived arrays are cached beside the file (lmm.data.derived)
     return db, LoadInfo(path, False, time.perf_counter() - t0)
 
 
