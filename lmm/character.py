@@ -45,6 +45,7 @@ import numpy as np
 
 from lmm import quat
 from lmm import quat_scalar as qs
+from lmm.data.derived import cached
 from lmm.controller import Candidates, Controller, DebugSnapshot, InputState, Pose
 from lmm.features import build_query
 from lmm.ik import FootLockState, foot_lock_update, local_rotations_from_global, solve_leg
@@ -95,10 +96,15 @@ def database_source_pose(db, frame: int, root_local_velocity=None, root_local_an
 
 
 def root_local_velocities(db):
-    """Every frame's root velocity and angular velocity in the root's own frame, (N, 3) each."""
-    r = db.rotations[:, 0].astype(np.float64)
-    return (quat.inv_mul_vec(r, db.velocities[:, 0].astype(np.float64)),
-            quat.inv_mul_vec(r, db.angular_velocities[:, 0].astype(np.float64)))
+    """Every frame's root velocity and angular velocity in the root's own frame, (N, 3) each (cached
+    beside the database file, see :mod:`lmm.data.derived`)."""
+    def compute():
+        r = db.rotations[:, 0].astype(np.float64)
+        return np.concatenate([quat.inv_mul_vec(r, db.velocities[:, 0].astype(np.float64)),
+                               quat.inv_mul_vec(r, db.angular_velocities[:, 0].astype(np.float64))], axis=1)
+
+    both = cached(db, "root_local_velocities", [], compute, random_access=True)  # read a frame at a time
+    return both[:, :3], both[:, 3:]
 
 
 def forward_kinematics_pose(local_rot: np.ndarray, local_pos: np.ndarray, parents) -> tuple[np.ndarray, np.ndarray]:
@@ -201,7 +207,12 @@ def range_contact_heights(db, toe_bones, min_frames: int = 10) -> np.ndarray:
     above 15 cm: 1.07 % of a 600 s random run with the 10th percentile, 0.68 % with the median); a planted
     toe left below foot height is lifted by its lock by a few millimetres, which nobody sees.
     A range with fewer than ``min_frames`` contact toe-frames gets the database's median; NaN for every
-    range when the database has no contact at all."""
+    range when the database has no contact at all. Cached beside the database file."""
+    return cached(db, "range_contact_heights", [[int(t) for t in toe_bones], int(min_frames)],
+                  lambda: _range_contact_heights(db, toe_bones, min_frames))
+
+
+def _range_contact_heights(db, toe_bones, min_frames: int) -> np.ndarray:
     n_ranges = len(db.range_starts)
     heights = bone_heights(db, toe_bones)
     contacts = np.asarray(db.contacts, dtype=bool)

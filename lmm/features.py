@@ -26,6 +26,7 @@ from typing import Callable, Sequence
 import numpy as np
 
 from lmm import quat
+from lmm.data.derived import cached
 from lmm.filters import central_difference
 
 KINDS = ("bone_position", "bone_velocity", "trajectory_position", "trajectory_direction")
@@ -287,7 +288,8 @@ def build_features(db, layout: Sequence[Channel] | None = None) -> Features:
     if layout is None:
         schema = getattr(db, "feature_schema", None)
         layout = layout_from_schema(schema) if schema else DEFAULT_LAYOUT
-    raw = compute_raw(db, layout)
+    # cached beside the database file (a pass over every frame reads the whole database)
+    raw = cached(db, "features", schema_of(layout), lambda: compute_raw(db, layout))
     mean = raw.mean(axis=0)
     std = raw.std(axis=0)
     slices = layout_slices(layout)

@@ -16,6 +16,8 @@ import math
 
 import numpy as np
 
+from lmm.data.derived import cached
+
 
 class FootSkating:
     """Foot skating, accumulated: the horizontal (x, z) speed in cm/s of each toe joint from one tick to
@@ -171,7 +173,14 @@ def ground_skating(toes: np.ndarray, fps: float, floor_m: float | None = None) -
 
 def source_ground_skating(db, include_mirrored: bool = False) -> dict:
     """Ground skating of the database's source ranges (the mocap), each range with its own floor, counts
-    summed over ranges; mirrored copies are left out by default (they hold the same steps)."""
+    summed over ranges; mirrored copies are left out by default (they hold the same steps). The counts
+    are cached beside the database file."""
+    fast, ground = (int(v) for v in cached(db, "source_ground_skating", [bool(include_mirrored)],
+                                           lambda: _source_ground_skating_counts(db, include_mirrored)))
+    return {"fraction": fast / ground if ground else float("nan"), "skating_steps": fast, "ground_steps": ground}
+
+
+def _source_ground_skating_counts(db, include_mirrored: bool) -> np.ndarray:
     toes = [db.bone("left_toe"), db.bone("right_toe")]
     fast = ground = 0
     for r, (start, stop) in enumerate(zip(db.range_starts, db.range_stops)):
@@ -181,7 +190,7 @@ def source_ground_skating(db, include_mirrored: bool = False) -> dict:
         one = ground_skating(g_pos[:, toes], db.fps)
         fast += one["skating_steps"]
         ground += one["ground_steps"]
-    return {"fraction": fast / ground if ground else float("nan"), "skating_steps": fast, "ground_steps": ground}
+    return np.array([fast, ground], dtype=np.int64)
 
 
 class DurationStats:

@@ -5,12 +5,18 @@ import numpy as np
 
 from lmm.character import CharacterController, SearchOutcome, SourcePose, database_source_pose, root_local_velocities
 from lmm.controller import Candidates
+from lmm.data.derived import cached
 from lmm.search import SearchIndex, biased_search, brute_force_search, candidate_mask
 from lmm.tuning import DEFAULT_TAG_BIAS, IDLE_TAG, Tuning, TuningError
 
 
 def default_start_frame(db) -> int:
-    """A standing frame: the slowest root and hips among frames away from the ends of their ranges."""
+    """A standing frame: the slowest root and hips among frames away from the ends of their ranges
+    (cached beside the database file)."""
+    return int(cached(db, "default_start_frame", [], lambda: np.array(_slowest_frame(db), dtype=np.int64)))
+
+
+def _slowest_frame(db) -> int:
     root_speed = np.linalg.norm(db.velocities[:, 0], axis=-1)
     hips_speed = np.linalg.norm(db.velocities[:, db.bone("hips")], axis=-1)
     score = root_speed + hips_speed

@@ -49,6 +49,8 @@ def main(args) -> int:
     finally:
         if bar is not None:
             bar.close()
+    if info.path is not None:
+        _precompute_derived(db)
     source = "cache" if info.cached else "built"
     print(f"database  {db.name} ({source} in {info.seconds:.2f} s)")
     print(f"file      {info.path}" if info.path is not None else f"file      not saved ({info.not_saved})")
@@ -60,6 +62,21 @@ def main(args) -> int:
     if not args.no_checks:
         _warn_findings(args.manifest)
     return 0
+
+
+def _precompute_derived(db) -> None:
+    """Fill the per-database cache beside the file (features, root velocities, contact heights, start
+    frame, source skating; see lmm/data/derived.py) so the first run does not read every frame."""
+    from lmm.character import range_contact_heights, root_local_velocities
+    from lmm.features import build_features
+    from lmm.metrics import source_ground_skating
+    from lmm.mm import default_start_frame
+
+    build_features(db)
+    root_local_velocities(db)
+    range_contact_heights(db, [db.bone("left_toe"), db.bone("right_toe")])
+    default_start_frame(db)
+    source_ground_skating(db)
 
 
 def _warn_findings(manifest_path) -> None:

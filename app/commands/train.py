@@ -42,6 +42,9 @@ def add_arguments(p) -> None:
                    help="print a loss line every N iterations")
     p.add_argument("--resume", action="store_true",
                    help="stepper/projector: continue from the networks in --out with a new schedule")
+    p.add_argument("--device", default="auto",
+                   help="auto (CUDA when present, else CPU), cpu, cuda or cuda:N; under torchrun each process "
+                        "takes its local rank's GPU (see lmm/offline/distributed.py)")
     p.add_argument("--quiet", action="store_true", help="no progress bar or loss lines")
 
 
@@ -57,6 +60,9 @@ def main(args) -> int:
     from lmm.features import build_features
     from lmm.offline.training import NETWORKS, Recipe, train_pipeline
 
+    from lmm.offline.distributed import pick_device, setup, teardown
+
+    pick_device(args.device)  # a device not here fails now (DeviceError: one line), before the database
     check_writable(Path(args.out) / "default.npz")  # a read-only or file --out fails now, not after training
     db, _ = load_or_build(args.manifest)
     features = build_features(db)
@@ -71,11 +77,19 @@ def main(args) -> int:
         if args.lr:
             s.lr = args.lr
     frames = np.arange(min(args.frames, db.n_frames)) if args.frames else None
-    print(f"training {', '.join(stages)} on {db.name} ({db.n_frames} frames, key {db.key[:16]}) -> {args.out}",
-          file=sys.stderr)
-    t0 = time.perf_counter()
-    summary = train_pipeline(db, features, stages, recipe, args.out, frames=frames, quiet=args.quiet,
-                             resume=args.resume)  # WeightsError / OSError: one line from app/cli.py
-    summary["command_wall_s"] = round(time.perf_counter() - t0, 1)
-    print(json.dumps(summary, indent=2))
+    par = setup(args.device)
+    try:
+        if par.is_main:
+            where = f"{par.device}" + (f" x {par.world} processes (DDP)" if par.distributed else "")
+            print(f"training {', '.join(stages)} on {db.name} ({db.n_frames} frames, key {db.key[:16]}) on "
+                  f"{where} -> {args.out}", file=sys.stderr)
+        t0 = time.perf_counter()
+        summary = train_pipeline(db, features, stages, recipe, args.out, frames=frames, quiet=args.quiet,
+                                 resume=args.resume, par=par)  # WeightsError / OSError: one line from app/cli.py
+        summary["command_wall_s"] = round(time.perf_counter() - t0, 1)
+        summary["device"], summary["processes"] = str(par.device), par.world
+        if par.is_main:
+            print(json.dumps(summary, indent=2))
+    finally:
+        teardown(par)
     return 0

@@ -6,7 +6,8 @@ BVH -> local rotations/positions (unit scaled) -> trim to ranges -> cubic resamp
 -> foot contacts. Bone 0 is always the simulation bone; its position/velocity are in world space and
 every other bone is local to its parent (velocities and angular velocities in the parent's frame).
 
-The result is cached as a pickle-free ``.npz`` keyed by a hash of the file contents and settings; the
+The result is cached as a pickle-free, uncompressed ``.npz`` (its per-frame arrays memory-mapped on
+load, see :mod:`lmm.data.npz_mmap`) keyed by a hash of the file contents and settings; the
 cache file's name is made of that hash only (never of text from the manifest), and it is written
 atomically. A build stops with a ManifestError before resampling a range that would take the database
 past :data:`MAX_DATABASE_FRAMES` frames.
@@ -27,14 +28,16 @@ from lmm.data import bvh
 from lmm.data.atomic import atomic_write
 from lmm.filters import catmull_rom, central_difference, median_filter, savgol_smooth
 from lmm.data.manifest import Manifest, ManifestError, load_manifest
+from lmm.data.npz_mmap import map_members
 from lmm.errors import InputError
 
 DB_FORMAT_VERSION = 5  # 5: mirrored clips keep the original bone offsets
 SIMULATION_BONE = "Simulation"
-#: Most frames in a built database (mirrored copies included): 55 minutes at 60 fps, 3.5x the shipped
-#: set (57,500 frames). Building costs about 6 KB a frame at its peak (the shipped set: 350 MB), so this
-#: keeps a build near 1.2 GB; the runtime keeps about 1.2 KB a frame (23 bones).
-MAX_DATABASE_FRAMES = 200_000
+#: Most frames in a built database (mirrored copies included): 4.6 hours at 60 fps, twice every take of
+#: the LAFAN1 folder mirrored (501,918 frames) and 17x the shipped set (57,500). The build works one take
+#: at a time (a few hundred MB at its peak for the longest take) and writes about 1.2 KB a frame (23
+#: bones) to the cache, which the runtime memory-maps: 1.2 GB of cache at this limit.
+MAX_DATABASE_FRAMES = 1_000_000
 #: Fewest frames in a range after resampling: the velocities and the trajectory features need them.
 MIN_RANGE_FRAMES = 4
 
@@ -67,6 +70,7 @@ class Database:
     tag_names: list[str] = field(default_factory=list)               # (T,) sorted
     frame_tags: np.ndarray | None = None  # (N, T) bool: frame_tags[i, t] when frame i's range has tag_names[t]
     feature_schema: list[dict] = field(default_factory=list)  # the manifest's feature channels (empty: shipped)
+    source_path: Path | None = field(default=None, repr=False, compare=False)  # the file it was loaded from
 
     # -- sizes -----------------------------------------------------------------------------
     @property
@@ -180,12 +184,17 @@ class Database:
             np.savez(f, **self.to_arrays())
 
     @classmethod
-    def load(cls, path) -> "Database":
+    def load(cls, path, mmap: bool = True) -> "Database":
+        """Read a database file. With ``mmap`` (the default) the per-frame arrays are read-only memory
+        maps of the file (see :mod:`lmm.data.npz_mmap`): pages are read when first touched, so memory
+        holds the frames a run uses, not the whole database."""
         path = Path(path)
         try:
             with np.load(path, allow_pickle=False) as z:
                 if int(z["format_version"]) != DB_FORMAT_VERSION:
                     raise DatabaseError(f"{path}: database format {int(z['format_version'])}, expected {DB_FORMAT_VERSION}")
+                mapped = {k: np.asarray(v) for k, v in map_members(path, MAPPED_ARRAYS).items()} if mmap else {}
+                z = _Members(z, mapped)
                 db = cls(
                     names=[str(s) for s in z["names"]], parents=z["parents"].astype(np.int64),
                     positions=z["positions"], rotations=z["rotations"], velocities=z["velocities"],
@@ -198,16 +207,33 @@ class Database:
                 if "range_tags" in z.files:  # older caches have no tags (and a different build fingerprint)
                     db.range_tags = [tuple(t) for t in json.loads(str(z["range_tags"]))]
                     db.tag_names = [str(t) for t in z["tag_names"]]
-                    db.frame_tags = z["frame_tags"].astype(bool)
+                    db.frame_tags = np.asarray(z["frame_tags"], dtype=bool)
                 else:
                     db.set_tags([()] * db.n_ranges)
                 if "feature_schema" in z.files:
                     db.feature_schema = list(json.loads(str(z["feature_schema"])))
+                db.source_path = path
                 return db
         except DatabaseError:
             raise
         except Exception as e:  # zipfile.BadZipFile, OSError, KeyError, ValueError...: all mean "not a cache"
             raise DatabaseError(f"{path}: not a valid lmm-studio database cache ({e})") from None
+
+
+#: The per-frame arrays :meth:`Database.load` memory-maps (everything else is small and read).
+MAPPED_ARRAYS = ("positions", "rotations", "velocities", "angular_velocities", "contacts", "toe_speeds",
+                 "frame_tags")
+
+
+class _Members:
+    """An open ``.npz`` whose mapped members come from ``mapped`` (the rest are read as usual)."""
+
+    def __init__(self, z, mapped: dict):
+        self._z, self._mapped = z, mapped
+        self.files = z.files
+
+    def __getitem__(self, name):
+        return self._mapped[name] if name in self._mapped else self._z[name]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -569,12 +595,14 @@ def load_or_build(manifest_path=None, cache_dir=None, progress=None, rebuild: bo
     db = build(manifest, progress=progress)
     if out_path:
         db.save(path)  # atomic: an OSError leaves no file behind, and the caller reports it
+        db.source_path = path
         return db, LoadInfo(path, False, time.perf_counter() - t0)
     try:
         db.save(path)
     except OSError as e:  # a read-only or full cache location must not stop the tool
         return db, LoadInfo(None, False, time.perf_counter() - t0,
                             not_saved=f"cannot write the cache {path}: {e.strerror or type(e).__name__}")
+    db.source_path = path  # its derived arrays are cached beside the file (lmm.data.derived)
     return db, LoadInfo(path, False, time.perf_counter() - t0)
 
 

@@ -1,6 +1,10 @@
 """Dataset manifests: which BVH files, which frame ranges, and how to turn them into a database.
 
-A manifest is a JSON (or TOML) file. Paths inside it are relative to the manifest's folder.
+A manifest is a JSON (or TOML) file. Paths inside it are relative to the manifest's folder, or to its
+``root`` when it names one: a folder (itself relative to the manifest's folder) in which ``$NAME`` and
+``${NAME}`` are taken from the environment, so one manifest serves a download kept anywhere
+(``"root": "${LAFAN1_DIR}"``; an unset variable is an error naming it). The root is not part of the
+database key: only the files' contents are.
 A clip's ``ranges`` are ``[start, stop]`` pairs or ``{"range": [start, stop], "tags": ["walk", "run"]}``
 tables; a clip-level ``"tags"`` list applies to every range of the clip. Tags are words: lowercase
 letters, digits, ``_`` and ``-``.
@@ -15,6 +19,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -220,9 +225,11 @@ def parse_manifest(data: dict, path: Path | None = None, base_dir: Path | None =
         raise ManifestError(path, "<top>", "expected a JSON object / TOML table")
     if _nesting(data) > MAX_NESTING:
         raise ManifestError(path, "<top>", f"lists and tables nested deeper than {MAX_NESTING} levels")
-    base_dir = base_dir or (path.parent if path else Path.cwd())
+    base_dir = manifest_dir = base_dir or (path.parent if path else Path.cwd())
+    if "root" in data:  # the takes' folder; the feature schema file stays beside the manifest
+        base_dir = _root_dir(path, manifest_dir, data["root"])
     m = Manifest(path=path)
-    known = {"format", "version", "name", "description", "unit_scale", "target_fps", "speed_scale", "mirror",
+    known = {"format", "version", "root", "name", "description", "unit_scale", "target_fps", "speed_scale", "mirror",
              "mirror_name_pairs", "bones", "hips_forward_axis", "simulation", "contacts", "clips", "features"}
     unknown = sorted(set(data) - known)
     if unknown:
@@ -346,8 +353,32 @@ def parse_manifest(data: dict, path: Path | None = None, base_dir: Path | None =
         if role not in m.bones:
             raise ManifestError(path, f"bones.{role}", "missing")
     if "features" in data:
-        m.features, m.features_file = _feature_schema(path, base_dir, data["features"])
+        m.features, m.features_file = _feature_schema(path, manifest_dir, data["features"])
     return m
+
+
+_ENV_REFERENCE = re.compile(r"\$(?:\{([A-Za-z_][A-Za-z0-9_]*)\}|([A-Za-z_][A-Za-z0-9_]*))")
+
+
+def _root_dir(path, base_dir: Path, value) -> Path:
+    """The manifest's ``root``: environment references expanded, relative to the manifest's folder."""
+    text = _text(path, "root", value, MAX_PATH_CHARS)
+
+    def expand(match) -> str:
+        name = match.group(1) or match.group(2)
+        if name not in os.environ or not os.environ[name]:
+            raise ManifestError(path, "root", f"environment variable {name} is not set: set it to the folder "
+                                              "that holds the takes")
+        return os.environ[name]
+
+    root = base_dir / Path(_ENV_REFERENCE.sub(expand, text)).expanduser()
+    try:
+        found = root.is_dir()
+    except (OSError, ValueError) as e:
+        raise ManifestError(path, "root", f"cannot use the path ({getattr(e, 'strerror', None) or e})") from None
+    if not found:
+        raise ManifestError(path, "root", f"no such folder: {root}")
+    return root
 
 
 MAX_SCHEMA_BYTES = 1 << 20

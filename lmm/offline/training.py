@@ -17,7 +17,7 @@ import csv
 import math
 import sys
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -25,6 +25,7 @@ import torch
 import torch.nn.functional as F
 
 from lmm.features import Features
+from lmm.offline.distributed import Parallel
 from lmm.offline.networks import MLPSpec, NormalizedMLP, default_specs
 from lmm.nn import character_parents, character_space, pose_vector_size, pose_vector_slices, pose_vectors
 from lmm.progress import Progress
@@ -70,6 +71,13 @@ class TrainingData:
     @property
     def compressor_input(self) -> torch.Tensor:
         return torch.cat([self.Y, self.Q], dim=1)
+
+    def to(self, device) -> "TrainingData":
+        """The same data with its tensors on ``device`` (itself when they are there already)."""
+        device = torch.device(device)
+        if self.X.device == device:
+            return self
+        return replace(self, Y=self.Y.to(device), Q=self.Q.to(device), X=self.X.to(device))
 
 
 def prepare(db, features: Features, frames: np.ndarray | None = None) -> TrainingData:
@@ -316,24 +324,29 @@ def _optimise(loss, terms: dict, opt, sched, log, it: int) -> None:
 
 def train_decompressor(data: TrainingData, s: StageSettings, seed: int = 1234, latent: int = 32, hidden: int = 512,
                        log_every: int = 200, csv_path=None, quiet: bool = False, stream=None,
-                       networks=None, checkpoint=None):
-    """Train compressor + decompressor jointly. Returns (compressor, decompressor, LossLog)."""
-    rng = _seed(seed)
+                       networks=None, checkpoint=None, par: Parallel | None = None):
+    """Train compressor + decompressor jointly. Returns (compressor, decompressor, LossLog).
+    ``par``: the device and the processes taking part (default: this process on the CPU)."""
+    par = par or Parallel(torch.device("cpu"))
+    rng = _seed(par.seed(seed))
     compressor, decompressor = networks or make_autoencoder(data, latent, hidden)
+    run_c, run_d = par.wrap(compressor), par.wrap(decompressor)
+    data = data.to(par.device)
     c_in = data.compressor_input
     params = list(compressor.parameters()) + list(decompressor.parameters())
     opt, sched = make_optimizer(params, s)
-    log = LossLog("decompressor", s.iterations, log_every, csv_path, stream, quiet)
+    log = LossLog("decompressor", s.iterations, log_every, csv_path if par.is_main else None, stream,
+                  quiet or not par.is_main)
     starts = data.windows2
     for it in range(s.iterations):
-        f0 = torch.from_numpy(starts[rng.integers(0, len(starts), s.batch)])
+        f0 = torch.from_numpy(starts[rng.integers(0, len(starts), s.batch)]).to(par.device)
         frames = torch.cat([f0, f0 + 1])
-        z = compressor(c_in[frames])
-        y_hat = decompressor(torch.cat([data.X[frames], z], dim=1))
+        z = run_c(c_in[frames])
+        y_hat = run_d(torch.cat([data.X[frames], z], dim=1))
         terms = decompressor_losses(y_hat, data.Y[frames], data.Q[frames], z, data, s.batch)
         loss = sum(DECOMPRESSOR_WEIGHTS[k] * v for k, v in terms.items())
         _optimise(loss, terms, opt, sched, log, it)
-        if checkpoint and (it + 1) % (log_every * 10) == 0:
+        if checkpoint and par.is_main and (it + 1) % (log_every * 10) == 0:
             checkpoint(it + 1)
     log.close()
     return compressor, decompressor, log
@@ -341,8 +354,10 @@ def train_decompressor(data: TrainingData, s: StageSettings, seed: int = 1234, l
 
 @torch.no_grad()
 def compute_latents(compressor: NormalizedMLP, data: TrainingData, chunk: int = 8192) -> torch.Tensor:
+    """The latent of every frame, on the CPU (computed where the compressor is)."""
+    device = next(compressor.parameters()).device
     c_in = data.compressor_input
-    return torch.cat([compressor(c_in[i:i + chunk]) for i in range(0, c_in.shape[0], chunk)])
+    return torch.cat([compressor(c_in[i:i + chunk].to(device)).cpu() for i in range(0, c_in.shape[0], chunk)])
 
 
 # ---------------------------------------------------------------------------------------------
@@ -360,25 +375,28 @@ def make_stepper(data: TrainingData, Z: torch.Tensor, windows: np.ndarray, laten
 
 def train_stepper(data: TrainingData, Z: torch.Tensor, s: StageSettings, window: int = 20, seed: int = 1234,
                   hidden: int = 512, log_every: int = 200, csv_path=None, quiet=False, stream=None, stepper=None,
-                  log_name: str = "stepper"):
-    rng = _seed(seed + 1)
+                  log_name: str = "stepper", par: Parallel | None = None):
+    par = par or Parallel(torch.device("cpu"))
+    rng = _seed(par.seed(seed + 1))
     starts = window_starts_from(data, window)
     if stepper is None:
         stepper = make_stepper(data, Z, window_starts_from(data, 2), Z.shape[1], hidden)
-    S = torch.cat([data.X, Z], dim=1)
+    run = par.wrap(stepper)
+    S = torch.cat([data.X, Z], dim=1).to(par.device)
     nx = data.X.shape[1]
     s_std = stepper.in_std
     d_std = stepper.out_std
     opt, sched = make_optimizer(stepper.parameters(), s)
-    log = LossLog(log_name, s.iterations, log_every, csv_path, stream, quiet)
-    offsets = torch.arange(window)
+    log = LossLog(log_name, s.iterations, log_every, csv_path if par.is_main else None, stream,
+                  quiet or not par.is_main)
+    offsets = torch.arange(window, device=par.device)
     for it in range(s.iterations):
-        f0 = torch.from_numpy(starts[rng.integers(0, len(starts), s.batch)])
+        f0 = torch.from_numpy(starts[rng.integers(0, len(starts), s.batch)]).to(par.device)
         gt = S[f0[:, None] + offsets]                     # (B, W, 59)
         cur = gt[:, 0]
         preds = [cur]
         for _ in range(1, window):
-            cur = cur + data.dt * stepper(cur)
+            cur = cur + data.dt * run(cur)
             preds.append(cur)
         pred = torch.stack(preds, dim=1)
         err = torch.abs(pred[:, 1:] - gt[:, 1:]) / s_std
@@ -414,8 +432,9 @@ def noisy_queries(X: torch.Tensor, frames: torch.Tensor, x_std: torch.Tensor, ge
     ``noise`` 0.5: the queries' distances to their nearest frame then match those of the queries motion
     matching makes at run time (measured on builtin:random:1 and circle: median 1.33 / 1.24 against
     1.41 here; 2.57 with noise 1.0)."""
-    level = torch.rand(frames.shape[0], 1, generator=generator) * noise
-    return X[frames] + x_std * level * torch.randn(frames.shape[0], X.shape[1], generator=generator)
+    level = torch.rand(frames.shape[0], 1, generator=generator) * noise   # drawn on the (CPU) generator
+    direction = torch.randn(frames.shape[0], X.shape[1], generator=generator)
+    return X[frames] + x_std * level.to(X.device) * direction.to(X.device)
 
 
 def augmented_frames(X: torch.Tensor) -> torch.Tensor:
@@ -433,7 +452,7 @@ def nearest_neighbours(queries: torch.Tensor, X: torch.Tensor, chunk: int = 1024
     the network, the projector's training cost."""
     if aug is None:
         aug = augmented_frames(X)
-    qa = torch.cat([queries, torch.ones(queries.shape[0], 1, dtype=queries.dtype)], dim=1)
+    qa = torch.cat([queries, torch.ones(queries.shape[0], 1, dtype=queries.dtype, device=queries.device)], dim=1)
     values, indices = [], []
     for a in range(0, aug.shape[0], chunk):
         v, i = (qa @ aug[a:a + chunk].T).min(dim=1)
@@ -454,7 +473,7 @@ def frame_neighbours(X: torch.Tensor, k: int, chunk: int = 2048, aug: torch.Tens
     out = []
     for a in range(0, n, chunk):
         dist = X[a:a + chunk] @ aug[:, :d].T + aug[:, d]   # |x|^2 - 2 q.x, enough to rank
-        rows = torch.arange(dist.shape[0])
+        rows = torch.arange(dist.shape[0], device=dist.device)
         dist[rows, rows + a] = float("inf")                  # not itself
         out.append(dist.topk(k, dim=1, largest=False).indices)
     return torch.cat(out)
@@ -499,34 +518,37 @@ def make_projector(data: TrainingData, Z: torch.Tensor, hidden: int = 512, noise
 def train_projector(data: TrainingData, Z: torch.Tensor, s: StageSettings, seed: int = 1234, hidden: int = 512,
                     log_every: int = 200, csv_path=None, quiet=False, stream=None, projector=None,
                     log_name: str = "projector", noise: float = 0.5, neighbours: int = 16, margin: float = 0.1,
-                    weights: dict | None = None, skip: bool = True):
+                    weights: dict | None = None, skip: bool = True, par: Parallel | None = None):
     """Noisy queries, their exact nearest frames as targets (features and latent), L1 losses, the
     reference's distance term, and the cell term (:func:`cell_violation` against the target's
     ``neighbours`` nearest frames). The projector has a skip connection (features = query + correction).
     ``weights`` overrides :data:`PROJECTOR_WEIGHTS`; ``bench/projector_ablation.py`` varies it and ``skip``
     and measured the choice (table in ``lmm/data/weights/README.md``): the cell term trades feature
     accuracy for landing in the right cell, and too much of it collapses the projector to the identity."""
-    rng = _seed(seed + 2)
-    gen = torch.Generator().manual_seed(seed + 2)
+    par = par or Parallel(torch.device("cpu"))
+    rng = _seed(par.seed(seed + 2))
+    gen = torch.Generator().manual_seed(par.seed(seed + 2))
     if projector is None:
         projector = make_projector(data, Z, hidden, noise, skip=skip, seed=seed)
+    run = par.wrap(projector)
     weights = {**PROJECTOR_WEIGHTS, **(weights or {})}
-    X = data.X
+    X = data.X.to(par.device)
     nx = X.shape[1]
-    S = torch.cat([X, Z], dim=1)
+    S = torch.cat([X, Z.to(par.device)], dim=1)
     x_std = X.std(0)
     aug = augmented_frames(X)
     rivals = frame_neighbours(X, neighbours, aug=aug) if weights["cell"] > 0 and neighbours > 0 else None
-    z_std = torch.from_numpy(robust_std(Z.numpy()))
+    z_std = torch.from_numpy(robust_std(Z.numpy())).to(par.device)
     pool = data.frames if data.frames is not None else np.arange(X.shape[0])
     opt, sched = make_optimizer(projector.parameters(), s)
-    log = LossLog(log_name, s.iterations, log_every, csv_path, stream, quiet)
+    log = LossLog(log_name, s.iterations, log_every, csv_path if par.is_main else None, stream,
+                  quiet or not par.is_main)
     for it in range(s.iterations):
-        f = torch.from_numpy(pool[rng.integers(0, len(pool), s.batch)])
+        f = torch.from_numpy(pool[rng.integers(0, len(pool), s.batch)]).to(par.device)
         q = noisy_queries(X, f, x_std, gen, noise)
         nn_i, nn_cost = nearest_neighbours(q, X, aug=aug)
         target = S[nn_i]
-        pred = projector(q)
+        pred = run(q)
         px = pred[:, :nx]
         p_cost = ((q - px) ** 2).sum(1)
         terms = {"features": torch.mean(torch.abs(px - target[:, :nx])),
@@ -582,11 +604,15 @@ def _load_networks(path, names, db, features) -> tuple[dict, dict]:
 
 
 def train_pipeline(db, features: Features, stages=NETWORKS, recipe: Recipe | None = None, out_dir="lmm-weights",
-                   frames: np.ndarray | None = None, quiet: bool = False, stream=None, resume: bool = False) -> dict:
+                   frames: np.ndarray | None = None, quiet: bool = False, stream=None, resume: bool = False,
+                   par: Parallel | None = None) -> dict:
     """Train the given stages in order and write ``default.npz`` (decompressor, stepper, projector),
     ``compressor.npz`` and ``training_log.csv`` into ``out_dir``. Stages not trained are taken from
     the files already in ``out_dir``. ``resume``: stepper/projector start from the ones in ``out_dir``
-    (a further schedule on top of a finished run) instead of from scratch. Returns a summary."""
+    (a further schedule on top of a finished run) instead of from scratch. ``par``: the device and, under
+    torchrun, the processes taking part (see :mod:`lmm.offline.distributed`; only rank 0 writes files).
+    Returns a summary."""
+    par = par or Parallel(torch.device("cpu"))
     recipe = recipe or Recipe()
     stream = stream if stream is not None else sys.stderr
     torch.set_num_threads(recipe.threads)
@@ -623,6 +649,8 @@ def train_pipeline(db, features: Features, stages=NETWORKS, recipe: Recipe | Non
     wall = dict(previous.get("wall_s", {}))
 
     def save_all(note: str = ""):
+        if not par.is_main:
+            return
         runtime = {n: nets[n] for n in NETWORKS if n in nets}
         extra = {"wall_s": wall, "note": note}
         if "compressor" in nets:
@@ -645,7 +673,8 @@ def train_pipeline(db, features: Features, stages=NETWORKS, recipe: Recipe | Non
             save_all(f"checkpoint: decompressor at iteration {it}/{s.iterations}")
 
         _, _, log = train_decompressor(data, s, recipe.seed, recipe.latent, recipe.hidden, recipe.log_every,
-                                       csv_path, quiet, stream, networks=pair, checkpoint=None if frames is not None else checkpoint)
+                                       csv_path, quiet, stream, networks=pair,
+                                       checkpoint=None if frames is not None else checkpoint, par=par)
         wall["decompressor"] = round(time.perf_counter() - t0, 1)
         summary["first_loss"]["decompressor"], summary["final_loss"]["decompressor"] = log.first_loss, log.last_loss
         save_all("after decompressor")
@@ -655,7 +684,7 @@ def train_pipeline(db, features: Features, stages=NETWORKS, recipe: Recipe | Non
         nets["stepper"], log = train_stepper(data, Z, recipe.stepper, recipe.stepper_window, recipe.seed, recipe.hidden,
                                              recipe.log_every, csv_path, quiet, stream,
                                              stepper=nets.get("stepper") if resume else None,
-                                             log_name="stepper_resumed" if resume else "stepper")
+                                             log_name="stepper_resumed" if resume else "stepper", par=par)
         wall["stepper" + ("_resumed" if resume else "")] = round(time.perf_counter() - t0, 1)
         summary["first_loss"]["stepper"], summary["final_loss"]["stepper"] = log.first_loss, log.last_loss
         save_all("after stepper")
@@ -666,11 +695,12 @@ def train_pipeline(db, features: Features, stages=NETWORKS, recipe: Recipe | Non
                                                  projector=nets.get("projector") if resume else None,
                                                  log_name="projector_resumed" if resume else "projector",
                                                  noise=recipe.projector_noise, neighbours=recipe.projector_neighbours,
-                                                 margin=recipe.projector_margin)
+                                                 margin=recipe.projector_margin, par=par)
         wall["projector" + ("_resumed" if resume else "")] = round(time.perf_counter() - t0, 1)
         summary["first_loss"]["projector"], summary["final_loss"]["projector"] = log.first_loss, log.last_loss
     wall["total_this_run"] = round(time.perf_counter() - t_all, 1)
     save_all("complete" if all(n in nets for n in NETWORKS) else "partial")
+    par.barrier()  # every rank returns once rank 0 has written the files
     summary["wall_s"] = wall
     summary["paths"] = {"runtime": str(runtime_path), "compressor": str(comp_path), "log": str(csv_path)}
     return summary

@@ -1,0 +1,65 @@
+"""Large databases: manifests with a configurable root, memory-mapped caches, cached derived arrays."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from lmm import DATA_DIR
+from lmm.data.database import MAPPED_ARRAYS, Database, load_or_build
+from lmm.data.manifest import ManifestError, load_manifest
+from lmm.data.npz_mmap import map_members
+
+
+def _manifest(tmp_path, root: str) -> str:
+    path = tmp_path / "m.json"
+    path.write_text(json.dumps({"root": root, "clips": [{"file": "multipleActions1_subject1.bvh.gz",
+                                                         "ranges": [[1130, 1200]]}]}))
+    return str(path)
+
+
+def test_root_takes_environment_variables(tmp_path, monkeypatch):
+    monkeypatch.setenv("LMM_TEST_TAKES", str(DATA_DIR / "lafan1"))
+    m = load_manifest(_manifest(tmp_path, "${LMM_TEST_TAKES}"))
+    assert m.clips[0].file == (DATA_DIR / "lafan1" / "multipleActions1_subject1.bvh.gz").resolve()
+    monkeypatch.delenv("LMM_TEST_TAKES")
+    with pytest.raises(ManifestError, match="field 'root': environment variable LMM_TEST_TAKES is not set"):
+        load_manifest(_manifest(tmp_path, "$LMM_TEST_TAKES"))
+    with pytest.raises(ManifestError, match="field 'root': no such folder"):
+        load_manifest(_manifest(tmp_path, "no-such-folder"))
+
+
+def test_shipped_full_manifest_names_its_root(monkeypatch):
+    monkeypatch.delenv("LAFAN1_DIR", raising=False)
+    with pytest.raises(ManifestError, match="environment variable LAFAN1_DIR is not set"):
+        load_manifest(DATA_DIR / "manifests" / "lafan1_full.json")
+
+
+def test_mapped_database_equals_read_database(tmp_path, monkeypatch):
+    monkeypatch.setenv("LMM_TEST_TAKES", str(DATA_DIR / "lafan1"))
+    db, info = load_or_build(_manifest(tmp_path, "${LMM_TEST_TAKES}"), cache_dir=tmp_path / "cache")
+    mapped = map_members(info.path, MAPPED_ARRAYS)
+    assert {"positions", "rotations", "velocities", "angular_velocities"} <= set(mapped)
+    assert all(isinstance(a, np.memmap) for a in mapped.values())
+    read, lazy = Database.load(info.path, mmap=False), Database.load(info.path)
+    for name in ("positions", "rotations", "velocities", "angular_velocities", "contacts", "toe_speeds"):
+        assert np.array_equal(getattr(read, name), getattr(lazy, name)), name
+        assert not getattr(lazy, name).flags.writeable
+
+
+def test_derived_arrays_are_cached_bit_identical(tmp_path, monkeypatch):
+    from lmm.character import root_local_velocities
+    from lmm.features import build_features
+
+    monkeypatch.setenv("LMM_TEST_TAKES", str(DATA_DIR / "lafan1"))
+    _, info = load_or_build(_manifest(tmp_path, "${LMM_TEST_TAKES}"), cache_dir=tmp_path / "cache")
+    loaded = Database.load(info.path)
+    computed = build_features(loaded).raw            # computed, then written beside the file
+    assert list((info.path.parent / (info.path.name + ".derived")).glob("features-*.npy"))
+    again = build_features(Database.load(info.path)).raw  # from the cache
+    in_memory = Database.load(info.path, mmap=False)
+    in_memory.source_path = None                     # no file: computed every time
+    assert np.array_equal(computed, again) and np.array_equal(again, build_features(in_memory).raw)
+    for a, b in zip(root_local_velocities(Database.load(info.path)), root_local_velocities(in_memory)):
+        assert np.array_equal(a, b)
