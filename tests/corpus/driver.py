@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import resource
 import sys
 import tempfile
@@ -74,8 +75,14 @@ def _call(case: dict):
     raise ValueError(f"unknown call {call!r}")
 
 
+# the cache's own subfolders: trace logs, the motion search index, a database's derived arrays (named by
+# the database's hash, never by user text)
+_CACHE_SUBFOLDER = re.compile(r"^(logs|motion_search|db-[0-9a-f]{8,}\.npz\.derived)$")
+
+
 def _files_outside(root: Path, cache: Path) -> list[str]:
-    """Files and folders under ``root`` that are not top-level files of ``cache`` (or its logs/)."""
+    """Files and folders under ``root`` that are not top-level files of ``cache`` or files in one of its
+    own subfolders (:data:`_CACHE_SUBFOLDER`)."""
     out = []
     if not root.is_dir():
         return out
@@ -83,12 +90,12 @@ def _files_outside(root: Path, cache: Path) -> list[str]:
         d = Path(dirpath)
         for name in filenames:
             p = d / name
-            if p.parent == cache or p.parent == cache / "logs":
+            if p.parent == cache or (p.parent.parent == cache and _CACHE_SUBFOLDER.match(p.parent.name)):
                 continue
             out.append(str(p.relative_to(root)))
         if d == cache:
             for name in dirnames:
-                if name != "logs":
+                if not _CACHE_SUBFOLDER.match(name):
                     out.append(str((d / name).relative_to(root)) + "/")
     return sorted(out)
 
