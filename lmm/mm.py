@@ -162,10 +162,9 @@ class MotionMatchingController(CharacterController):
                     exclude_window=int(tun.exclude_current_window_frames), top_k=int(tun.top_k),
                     slices=self.features.slices)
         groups = self.tag_groups()
-        if accelerated:
+        if accelerated:  # every tag group in one pass (the same answer as one search per group)
             hint = self.search_hint() if hint is None else hint
-            return biased_search(lambda **kw: self.index.search(query_norm, hint=hint, **kw), groups[0][1], None,
-                                 group_masks=groups, **args)
+            return self.index.group_search(query_norm, groups, hint=hint, **args)
         return biased_search(lambda **kw: brute_force_search(self.features.normalized, query_norm, **kw),
                              groups[0][1], None, group_masks=groups, **args)
 

@@ -343,9 +343,16 @@ class SearchIndex:
         return lo.reshape(-1, self.n_dims) @ self._ones         # (L * per,)
 
     def _seed_bound(self, lb_large, q, valid, k):
-        """Upper bound on the k-th best cost without a hint, by a greedy descent: the exact costs of the
-        best ``seed_blocks`` small blocks within the best ``seed_blocks`` large blocks (widened until k
-        valid frames are found). Returns (bound, frames evaluated)."""
+        """Upper bound on the k-th best cost without a hint: the exact costs of the frames
+        :meth:`_seed_frames` picks. Returns (bound, frames evaluated)."""
+        frames = self._seed_frames(lb_large, q, valid, k)
+        if frames.size < k:
+            return np.float32(np.inf), 0
+        return np.partition(frame_costs(self.X[frames], q), k - 1)[k - 1], int(frames.size)
+
+    def _seed_frames(self, lb_large, q, valid, k):
+        """Valid frames of a greedy descent: the best ``seed_blocks`` small blocks within the best
+        ``seed_blocks`` large blocks (widened until k valid frames are found, or everything was looked at)."""
         m = s = self.seed_blocks
         while True:
             large = np.argpartition(lb_large, m - 1)[:m] if m < self.n_large else np.arange(self.n_large)
@@ -355,11 +362,121 @@ class SearchIndex:
             frames = (small[:, None] * self.small_block + self._offsets).ravel()
             frames = frames[valid[frames]]
             if frames.size >= k or (m >= self.n_large and s >= lb_small.size):
-                break
+                return frames
             m, s = min(m * 4, self.n_large), s * 4
-        if frames.size < k:
-            return np.float32(np.inf), 0
-        return np.partition(frame_costs(self.X[frames], q), k - 1)[k - 1], int(frames.size)
+
+    # -- tag-biased search: every bias group in one pass ---------------------------------------------
+    def _groups(self, group_masks):
+        """Per-frame bias (inf: not a candidate) and group number, and the least bias of each small and
+        large block (inf for a block without candidates), cached for the same (bias, mask) groups."""
+        key = tuple((float(b), id(m)) for b, m in group_masks)
+        cached = getattr(self, "_group_cache", None)
+        if cached is not None and cached[0] == key and all(a is m for a, (_, m) in zip(cached[1], group_masks)):
+            return cached[2]
+        size = self.n_large * self.large_block
+        bias = np.full(size + _PAD, np.inf, dtype=np.float32)
+        group = np.full(size + _PAD, -1, dtype=np.int64)
+        for g, (b, m) in enumerate(group_masks):
+            m = np.asarray(m, dtype=bool)
+            bias[:self.n_frames][m] = np.float32(b)
+            group[:self.n_frames][m] = g
+        small_min = bias[:size].reshape(-1, self.small_block).min(axis=1)          # (n_small,)
+        large_min = small_min.reshape(self.n_large, self.per_large).min(axis=1)    # (n_large,)
+        biases = [float(b) for b, _ in group_masks]
+        spread = max(abs(b) for b in biases) if biases else 0.0
+        valid = np.isfinite(bias)                                                  # padded, like _valid
+        out = (bias, group, small_min, large_min, valid, valid.copy(), spread)
+        self._group_cache = (key, [m for _, m in group_masks], out)
+        return out
+
+    def group_search(self, query: np.ndarray, group_masks, current: int = -1, transition_cost: float = 0.0,
+                     exclude_window: int = 20, top_k: int = 1, slices=None, hint=None) -> SearchResult:
+        """Exactly ``biased_search(lambda **kw: self.search(query, hint=hint, **kw), ..., group_masks=...)``
+        (same frames, totals and biases), in one pass over the index instead of one search per group.
+
+        ``group_masks``: disjoint (bias, mask) groups. A block's bound is its box bound plus the least bias
+        of its candidate frames (blocks without candidates are skipped); the upper bound is the k-th best
+        cost plus bias of real frames, widened by a relative 1e-5 so that float32 rounding of the totals
+        can never drop a frame of the answer. The surviving frames are ranked per group as each group's own
+        search ranks them, and the groups merged as :func:`biased_search` merges them.
+        """
+        q = np.asarray(query, dtype=np.float32)
+        k = max(int(top_k), 1)
+        frame_bias, frame_group, small_min, large_min, valid, candidates, spread = self._groups(group_masks)
+        if current >= 0:  # exclude the window around the playing frame for this search only
+            lo_w, hi_w = max(current - exclude_window, 0), current + exclude_window + 1
+            valid[lo_w:hi_w] = False
+        try:
+            per_group, cont, evaluated = self._group_search(q, frame_bias, frame_group, small_min, large_min,
+                                                            valid, candidates, spread, len(group_masks),
+                                                            current, transition_cost, k, hint)
+        finally:
+            if current >= 0:
+                valid[lo_w:hi_w] = candidates[lo_w:hi_w]
+        slices = slices if slices is not None else [slice(0, self.n_dims)]
+        if len(group_masks) == 1 and float(group_masks[0][0]) == 0.0:
+            f, total, bias = per_group[0]
+            return _result(self.X, q, slices, f, total, bias, current, cont, evaluated)
+        return _merge_groups(per_group, [b for b, _ in group_masks], current, k, self.X, q, slices, cont,
+                             evaluated)
+
+    def _group_search(self, q, frame_bias, frame_group, small_min, large_min, valid, candidates, spread,
+                      n_groups, current, transition_cost, k, hint):
+        # 1. coarse lower bound of every large block (as in _search), plus its least candidate bias
+        q1, gap = self._q1, self._g1
+        np.copyto(q1, q[self.l1_dims, None])
+        np.maximum(q1, self.l1_lo, out=gap)
+        np.minimum(gap, self.l1_hi, out=gap)
+        np.subtract(q1, gap, out=gap)
+        gap *= gap
+        lb_large = self._ones1 @ gap
+
+        # 2. an upper bound on the k-th best cost + bias, from real frames
+        evaluated = 0
+        cont = float("nan")
+        seeds = None
+        if hint is not None and len(hint):
+            seeds = (np.asarray(hint, dtype=np.int64)[:, None] + _HINT_SPREAD).ravel()
+            seeds.sort()
+            ok = valid[seeds]
+            ok[1:] &= seeds[1:] != seeds[:-1]
+            seeds = seeds[ok]
+        if seeds is None or seeds.size < k:
+            seeds = self._seed_frames(lb_large + large_min, q, valid, k)
+        in_group = current >= 0 and candidates[current]
+        rows = self.X[np.concatenate((seeds, (current,)))] if in_group else self.X[seeds]
+        rows -= q
+        c = np.einsum("ij,ij->i", rows, rows)       # the brute force's reduction: the same value per row
+        if in_group:
+            cont, c = float(c[-1]), c[:-1]
+        evaluated += seeds.size
+        ub = np.float32(np.inf)
+        if seeds.size >= k:
+            ub = np.partition(c + frame_bias[seeds], k - 1)[k - 1]
+        # a frame whose box bound * (1 - 1e-5) + bias exceeds this cannot be in any group's answer
+        cut = np.float32(float(ub) + 1e-5 * (abs(float(ub)) + abs(float(transition_cost)) + spread)) \
+            if ub < np.inf else np.float32(np.inf)
+
+        # 3. surviving large blocks -> their small blocks' bounds -> frames' exact costs
+        q_tile = q[self._tile_index]
+        large = (lb_large * _BOUND_SLACK + large_min <= cut).nonzero()[0]
+        small = (large[:, None] * self.per_large + self._per_offsets).ravel()
+        small = small[self._small_bounds(large, q_tile) * _BOUND_SLACK + small_min[small] <= cut]
+        d = self.rows[small]
+        d.reshape(len(small), -1).__isub__(q_tile[:self.small_block * self.n_dims])
+        costs = np.einsum("ijk,ijk->ij", d, d).ravel()
+        frames = (small[:, None] * self.small_block + self._offsets).ravel()
+        keep = valid[frames]
+        evaluated += frames.size
+        frames, costs = frames[keep], costs[keep]
+        groups = frame_group[frames]
+        cur_group = int(frame_group[current]) if in_group else -1
+        per_group = []
+        for g in range(n_groups):
+            sel = groups == g
+            per_group.append(_rank(frames[sel], costs[sel], current, cont if g == cur_group else float("nan"),
+                                   transition_cost, k))
+        return per_group, cont, evaluated
 
 
 def biased_search(search, mask: np.ndarray, frame_bias: np.ndarray | None, current: int = -1,
@@ -381,20 +498,31 @@ def biased_search(search, mask: np.ndarray, frame_bias: np.ndarray | None, curre
         return search(mask=group_masks[0][1], current=current, transition_cost=transition_cost, top_k=top_k,
                       **kwargs)
     k = max(int(top_k), 1)
-    rows, first, cont, evaluated = [], None, float("nan"), 0
+    per_group, first, cont, evaluated = [], None, float("nan"), 0
     for b, m in group_masks:
         r = search(mask=m, current=current, transition_cost=transition_cost, top_k=k, **kwargs)
         first = first or r
         evaluated += r.evaluated
         if r.continuing_cost == r.continuing_cost:
             cont = r.continuing_cost
-        for f, c, bias in zip(r.frames.tolist(), r.costs.tolist(), r.bias.tolist()):
+        per_group.append((r.frames, r.costs, r.bias))
+    features_norm, query, slices = first._breakdown
+    return _merge_groups(per_group, [b for b, _ in group_masks], current, k, features_norm, query, slices, cont,
+                         evaluated)
+
+
+def _merge_groups(per_group, biases, current, k, features_norm, query, slices, cont, evaluated) -> SearchResult:
+    """Merge per-group (frames, totals, bias) by total + group bias (ties: the continuing frame first, then
+    the lower frame) into the top K."""
+    rows = []
+    for (frames, costs, bias), b in zip(per_group, biases):
+        for f, c, fb in zip(frames.tolist(), costs.tolist(), bias.tolist()):
             is_cont = f == current  # the playing frame is never an ordinary candidate (exclusion window)
-            rows.append((float(np.float32(c) + np.float32(b)), 0 if is_cont else 1, f, float(np.float32(bias) + np.float32(b))))
+            rows.append((float(np.float32(c) + np.float32(b)), 0 if is_cont else 1, f,
+                         float(np.float32(fb) + np.float32(b))))
     rows.sort()
     rows = rows[:k]
     frames = np.array([r[2] for r in rows], dtype=np.int64)
     total = np.array([r[0] for r in rows], dtype=np.float32)
     bias = np.array([r[3] for r in rows], dtype=np.float32)
-    features_norm, query, slices = first._breakdown
     return _result(features_norm, query, slices, frames, total, bias, current, cont, evaluated)

@@ -8,7 +8,7 @@ import pytest
 
 from lmm.data.inputs import builtin
 from lmm.mm import MotionMatchingController
-from lmm.search import biased_search, brute_force_search
+from lmm.search import SearchIndex, biased_search, brute_force_search, candidate_mask
 from lmm.tuning import Tuning, TuningError
 
 
@@ -69,6 +69,44 @@ def test_biased_search_matches_brute_force_with_the_bias_added(features, db):
         res = biased_search(lambda **kw: brute_force_search(X, q, **kw), mask, frame_bias, top_k=4)
         total = ((X - q) ** 2).sum(axis=1) + frame_bias
         assert res.best_cost == pytest.approx(float(total.min()), abs=1e-3)
+
+
+def _same(a, b):
+    return (np.array_equal(a.frames, b.frames) and np.array_equal(a.costs, b.costs)
+            and np.array_equal(a.bias, b.bias) and np.array_equal(a.channel_costs, b.channel_costs)
+            and (a.continuing_cost == b.continuing_cost or (np.isnan(a.continuing_cost) and np.isnan(b.continuing_cost))))
+
+
+def test_the_one_pass_group_search_equals_one_search_per_group(features, db):
+    """Tag groups (biases of either sign, the idle set, one unbiased group), with and without a hint,
+    the playing frame in or out of the candidates: frames, totals, biases and breakdown all identical to
+    one accelerated search per group, and to the brute force."""
+    rng = np.random.default_rng(11)
+    X = features.normalized
+    index = SearchIndex(X)
+    base = candidate_mask(db.n_frames, db.range_starts, db.range_stops, 10)
+    idle = base & db.tag_mask("idle")
+    tags = db.frame_tags.astype(np.float32)
+    setups = [(base, np.zeros(len(db.tag_names), np.float32)), (idle, np.zeros(len(db.tag_names), np.float32))]
+    for _ in range(3):
+        setups.append((base, rng.choice([-1.0, 0.0, 0.5, 1.0, 3.0], len(db.tag_names)).astype(np.float32)))
+    tried = 0
+    for mask, bias in setups:
+        fb = tags @ bias
+        groups = [(float(b), mask & (fb == b)) for b in np.unique(fb[mask])]
+        for i in range(12):
+            f = int(rng.integers(db.n_frames))
+            q = X[f] + rng.normal(0, 0.2 * (i % 3), X.shape[1]).astype(np.float32)
+            current = int(rng.integers(db.n_frames)) if i % 4 else f
+            hint = None if i % 2 else rng.integers(0, db.n_frames, 6)
+            args = dict(current=current, transition_cost=0.05 * (i % 3), exclude_window=20, top_k=1 + i % 8,
+                        slices=features.slices)
+            one = index.group_search(q, groups, hint=hint, **args)
+            per = biased_search(lambda **kw: index.search(q, hint=hint, **kw), mask, None, group_masks=groups, **args)
+            brute = biased_search(lambda **kw: brute_force_search(X, q, **kw), mask, None, group_masks=groups, **args)
+            assert _same(one, per) and _same(one, brute), (bias, i)
+            tried += 1
+    assert tried == 60
 
 
 def test_an_idle_set_that_matches_nothing_is_one_line_and_searches_everything(db, features):
