@@ -161,7 +161,9 @@ class MLP:
         if plan is None:
             h0 = np.empty(self.n_in, np.float32)
             layers = [(w, b, np.empty(w.shape[1], np.float32)) for w, b in zip(self.weights, self.biases)]
-            scratch = [np.empty(w.shape[1], np.float32) for w in self.weights[:-1]]
+            # per hidden layer: a zero vector (np.maximum against an array is about twice as fast as
+            # against the scalar 0.0, same values) and the ELU's scratch
+            scratch = [(np.zeros(w.shape[1], np.float32), np.empty(w.shape[1], np.float32)) for w in self.weights[:-1]]
             plan = self._plan = (h0, layers[:-1], layers[-1], scratch)
         return plan
 
@@ -174,18 +176,18 @@ class MLP:
         np.multiply(h, self.in_inv_std, out=h)
         dot, maximum = np.dot, np.maximum
         if self.activation == "relu":
-            for w, b, nxt in hidden:
+            for (w, b, nxt), (zero, _) in zip(hidden, scratch):
                 dot(h, w, out=nxt)
                 nxt += b
-                maximum(nxt, 0.0, out=nxt)
+                maximum(nxt, zero, out=nxt)
                 h = nxt
         else:  # ELU(alpha=1): x if x > 0 else exp(x) - 1
-            for (w, b, nxt), neg in zip(hidden, scratch):
+            for (w, b, nxt), (zero, neg) in zip(hidden, scratch):
                 dot(h, w, out=nxt)
                 nxt += b
-                np.minimum(nxt, 0.0, out=neg)
+                np.minimum(nxt, zero, out=neg)
                 np.expm1(neg, out=neg)
-                maximum(nxt, 0.0, out=nxt)
+                maximum(nxt, zero, out=nxt)
                 nxt += neg
                 h = nxt
         dot(h, w_last, out=y_last)
