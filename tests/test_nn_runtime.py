@@ -76,3 +76,37 @@ def test_elu_float64_out_and_aliased_skip():
             buf[:5] = x
             mlp(buf[:5], out=buf)
             assert same_bits(buf, ref)
+
+
+def reference_xform_xy_to_quat(xy: np.ndarray) -> np.ndarray:
+    """The pose decoding as written before the gathered version (per-column cross product and signs)."""
+    signs = np.array([[1.0, 1.0, 1.0], [1.0, -1.0, -1.0], [-1.0, 1.0, -1.0], [-1.0, -1.0, 1.0]])
+    a = xy[:, :, 0]
+    a = a / np.sqrt(np.einsum("ij,ij->i", a, a))[:, None]
+    b = xy[:, :, 1]
+    b = b - np.einsum("ij,ij->i", a, b)[:, None] * a
+    b = b / np.sqrt(np.einsum("ij,ij->i", b, b))[:, None]
+    c = np.empty_like(a)
+    c[:, 0] = a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1]
+    c[:, 1] = a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2]
+    c[:, 2] = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+    diag = np.stack([a[:, 0], b[:, 1], c[:, 2]])
+    q = 0.5 * np.sqrt(np.maximum(signs @ diag + 1.0, 0.0)).T
+    q[:, 1] *= np.where(b[:, 2] - c[:, 1] < 0.0, -1.0, 1.0)
+    q[:, 2] *= np.where(c[:, 0] - a[:, 2] < 0.0, -1.0, 1.0)
+    q[:, 3] *= np.where(a[:, 1] - b[:, 0] < 0.0, -1.0, 1.0)
+    return q / np.sqrt(np.einsum("ij,ij->i", q, q))[:, None]
+
+
+def test_pose_decoding_bit_identical_to_the_per_column_version():
+    from lmm.learned import xform_xy_to_quat
+    rng = np.random.default_rng(11)
+    for t in range(3000):
+        y = rng.standard_normal(338) * rng.uniform(0.01, 3.0)    # a decompressor output, float64 as decoded
+        if t % 3 == 0:   # signed axis permutations: exact (and negative) zeros and ties in the matrix
+            for k in range(22):
+                perm = np.eye(3)[rng.permutation(3)] * rng.choice([-1.0, 1.0], 3)
+                y[66 + 6 * k: 72 + 6 * k] = perm[:, :2].reshape(-1)
+        xy = y[66:198].reshape(22, 3, 2)
+        got, ref = xform_xy_to_quat(xy), reference_xform_xy_to_quat(xy)
+        assert np.array_equal(got.view(np.uint64), ref.view(np.uint64)), f"pose {t}: {np.max(np.abs(got - ref))}"
