@@ -114,6 +114,7 @@ class MLP:
         if self.skip and self.n_out < self.n_in:
             raise ValueError(f"{name}: a skip connection needs n_out >= n_in ({self.n_in} -> {self.n_out})")
         self._buffers: dict[int, list[np.ndarray]] = {}
+        self._plan = None   # batch-1 buffers, see _single_plan
 
     @classmethod
     def from_arrays(cls, arrays: dict, prefix: str, activation: str, skip: bool = False) -> "MLP":
@@ -153,10 +154,62 @@ class MLP:
             self._buffers[batch] = bufs
         return bufs
 
+    def _single_plan(self):
+        """Batch-1 evaluation plan: the input buffer, (weights, bias, output buffer) per hidden layer, the
+        last layer's (weights, bias, buffer) and the ELU scratch buffers, all 1-D and preallocated."""
+        plan = self._plan
+        if plan is None:
+            h0 = np.empty(self.n_in, np.float32)
+            layers = [(w, b, np.empty(w.shape[1], np.float32)) for w, b in zip(self.weights, self.biases)]
+            # per hidden layer: a zero vector (np.maximum against an array is about twice as fast as
+            # against the scalar 0.0, same values) and the ELU's scratch
+            scratch = [(np.zeros(w.shape[1], np.float32), np.empty(w.shape[1], np.float32)) for w in self.weights[:-1]]
+            plan = self._plan = (h0, layers[:-1], layers[-1], scratch)
+        return plan
+
+    def _call_single(self, x: np.ndarray, out: np.ndarray | None) -> np.ndarray:
+        """One input vector (D,). The same float32 operations in the same order as the batched path (a
+        1-D ``np.dot`` runs the same BLAS gemv as ``matmul`` on a (1, D) row), so the results are
+        bit-identical; only Python overhead, temporaries and 2-D views are gone."""
+        h, hidden, (w_last, b_last, y_last), scratch = self._single_plan()
+        np.subtract(x, self.in_mean, out=h)
+        np.multiply(h, self.in_inv_std, out=h)
+        dot, maximum = np.dot, np.maximum
+        if self.activation == "relu":
+            for (w, b, nxt), (zero, _) in zip(hidden, scratch):
+                dot(h, w, out=nxt)
+                nxt += b
+                maximum(nxt, zero, out=nxt)
+                h = nxt
+        else:  # ELU(alpha=1): x if x > 0 else exp(x) - 1
+            for (w, b, nxt), (zero, neg) in zip(hidden, scratch):
+                dot(h, w, out=nxt)
+                nxt += b
+                np.minimum(nxt, zero, out=neg)
+                np.expm1(neg, out=neg)
+                maximum(nxt, zero, out=nxt)
+                nxt += neg
+                h = nxt
+        dot(h, w_last, out=y_last)
+        y_last += b_last
+        # write straight into ``out`` unless that needs a cast or would overwrite the skip's input
+        direct = (out is not None and out.dtype == np.float32 and out.shape == y_last.shape
+                  and not (self.skip and np.may_share_memory(out, x)))
+        y = out if direct else np.empty_like(y_last)
+        np.multiply(y_last, self.out_std, out=y)
+        y += self.out_mean
+        if self.skip:
+            y[:x.shape[0]] += x
+        if out is not None and not direct:
+            out[...] = y
+            return out
+        return y
+
     def __call__(self, x: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """Evaluate on (D,) or (B, D); returns a new array (or writes into ``out``)."""
-        single = x.ndim == 1
-        x2 = x.reshape(1, -1) if single else x
+        if x.ndim == 1:
+            return self._call_single(x, out)
+        x2 = x
         bufs = self._bufs(x2.shape[0])
         h = bufs[0]
         np.subtract(x2, self.in_mean, out=h)
@@ -180,6 +233,6 @@ class MLP:
         if self.skip:
             y[:, :x2.shape[1]] += x2
         if out is not None:
-            out[...] = y[0] if single else y
+            out[...] = y
             return out
-        return y[0] if single else y
+        return y

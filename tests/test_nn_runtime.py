@@ -1,0 +1,112 @@
+"""The numpy network runtime's batch-1 path gives bit-identical results to the plain batched evaluation
+(recordings of the learned controller depend on every bit)."""
+import numpy as np
+import pytest
+
+from lmm.learned import DEFAULT_WEIGHTS
+from lmm.nn import MLP
+
+
+def reference_mlp(mlp: MLP, x: np.ndarray) -> np.ndarray:
+    """The evaluation as written before the batch-1 path: (1, D) rows, matmul, bias, activation."""
+    h = np.empty((1, mlp.n_in), np.float32)
+    np.subtract(x.reshape(1, -1), mlp.in_mean, out=h)
+    np.multiply(h, mlp.in_inv_std, out=h)
+    for i, (w, b) in enumerate(zip(mlp.weights, mlp.biases)):
+        nxt = np.empty((1, w.shape[1]), np.float32)
+        np.matmul(h, w, out=nxt)
+        nxt += b
+        if i < len(mlp.weights) - 1:
+            if mlp.activation == "relu":
+                np.maximum(nxt, 0.0, out=nxt)
+            else:
+                neg = np.minimum(nxt, 0.0)
+                np.expm1(neg, out=neg)
+                np.maximum(nxt, 0.0, out=nxt)
+                nxt += neg
+        h = nxt
+    y = h * mlp.out_std
+    y += mlp.out_mean
+    if mlp.skip:
+        y[:, :x.shape[0]] += x
+    return y[0]
+
+
+def same_bits(a, b) -> bool:
+    return a.dtype == b.dtype and a.shape == b.shape and np.array_equal(a.view(np.uint32), b.view(np.uint32))
+
+
+@pytest.fixture(scope="module")
+def shipped():
+    arrays = dict(np.load(DEFAULT_WEIGHTS))
+    return {n: MLP.from_arrays(arrays, n, "relu", skip=n == "projector") for n in ("decompressor", "stepper", "projector")}
+
+
+@pytest.mark.parametrize("name", ["decompressor", "stepper", "projector"])
+def test_shipped_networks_batch1_bit_identical(shipped, name):
+    mlp = shipped[name]
+    rng = np.random.default_rng(7)
+    out = np.empty(mlp.n_out, np.float32)
+    for t in range(200):
+        x = (rng.standard_normal(mlp.n_in) * rng.uniform(0.1, 3.0)).astype(np.float32 if t % 3 else np.float64)
+        ref = reference_mlp(mlp, x)
+        got = mlp(x)
+        assert same_bits(got, ref), f"{name}: input {t} differs by {np.max(np.abs(got - ref))}"
+        assert mlp(x, out=out) is out and same_bits(out, ref)
+        assert same_bits(mlp(x[None])[0], ref)  # the batched path agrees as well
+    # a fresh array per call when no ``out`` is given (callers keep the states they get)
+    assert mlp(x) is not mlp(x)
+
+
+def test_elu_float64_out_and_aliased_skip():
+    rng = np.random.default_rng(3)
+    ws = [rng.standard_normal((5, 16)), rng.standard_normal((16, 16)), rng.standard_normal((16, 7))]
+    bs = [rng.standard_normal(16), rng.standard_normal(16), rng.standard_normal(7)]
+    norm = (rng.standard_normal(5), rng.uniform(0.5, 2, 5), rng.standard_normal(7), rng.uniform(0.5, 2, 7))
+    for act, skip in (("elu", False), ("relu", True), ("elu", True)):
+        mlp = MLP(ws, bs, act, *norm, skip=skip)
+        x = rng.standard_normal(5).astype(np.float32)
+        ref = reference_mlp(mlp, x)
+        assert same_bits(mlp(x), ref)
+        out64 = np.zeros(7)
+        mlp(x, out=out64)
+        assert np.array_equal(out64, ref.astype(np.float64))
+        if skip:  # the output overwrites the input it adds back
+            buf = np.zeros(7, np.float32)
+            buf[:5] = x
+            mlp(buf[:5], out=buf)
+            assert same_bits(buf, ref)
+
+
+def reference_xform_xy_to_quat(xy: np.ndarray) -> np.ndarray:
+    """The pose decoding as written before the gathered version (per-column cross product and signs)."""
+    signs = np.array([[1.0, 1.0, 1.0], [1.0, -1.0, -1.0], [-1.0, 1.0, -1.0], [-1.0, -1.0, 1.0]])
+    a = xy[:, :, 0]
+    a = a / np.sqrt(np.einsum("ij,ij->i", a, a))[:, None]
+    b = xy[:, :, 1]
+    b = b - np.einsum("ij,ij->i", a, b)[:, None] * a
+    b = b / np.sqrt(np.einsum("ij,ij->i", b, b))[:, None]
+    c = np.empty_like(a)
+    c[:, 0] = a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1]
+    c[:, 1] = a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2]
+    c[:, 2] = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+    diag = np.stack([a[:, 0], b[:, 1], c[:, 2]])
+    q = 0.5 * np.sqrt(np.maximum(signs @ diag + 1.0, 0.0)).T
+    q[:, 1] *= np.where(b[:, 2] - c[:, 1] < 0.0, -1.0, 1.0)
+    q[:, 2] *= np.where(c[:, 0] - a[:, 2] < 0.0, -1.0, 1.0)
+    q[:, 3] *= np.where(a[:, 1] - b[:, 0] < 0.0, -1.0, 1.0)
+    return q / np.sqrt(np.einsum("ij,ij->i", q, q))[:, None]
+
+
+def test_pose_decoding_bit_identical_to_the_per_column_version():
+    from lmm.learned import xform_xy_to_quat
+    rng = np.random.default_rng(11)
+    for t in range(3000):
+        y = rng.standard_normal(338) * rng.uniform(0.01, 3.0)    # a decompressor output, float64 as decoded
+        if t % 3 == 0:   # signed axis permutations: exact (and negative) zeros and ties in the matrix
+            for k in range(22):
+                perm = np.eye(3)[rng.permutation(3)] * rng.choice([-1.0, 1.0], 3)
+                y[66 + 6 * k: 72 + 6 * k] = perm[:, :2].reshape(-1)
+        xy = y[66:198].reshape(22, 3, 2)
+        got, ref = xform_xy_to_quat(xy), reference_xform_xy_to_quat(xy)
+        assert np.array_equal(got.view(np.uint64), ref.view(np.uint64)), f"pose {t}: {np.max(np.abs(got - ref))}"
