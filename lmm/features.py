@@ -181,8 +181,11 @@ def layout_slices(layout: Sequence[Channel]) -> list[slice]:
 
 def compute_raw(db, layout: Sequence[Channel] = DEFAULT_LAYOUT) -> np.ndarray:
     """Raw (unnormalised) features of every database frame, (N, D) float32, vectorised over frames."""
-    g_rot, g_pos = db.global_transforms()
-    root_rot, root_pos = g_rot[:, 0], g_pos[:, 0]
+    # forward kinematics of the root and the feature bones only (not every bone of every frame)
+    bones = sorted({0} | {db.bone(ch.bone) for ch in layout if ch.kind in ("bone_position", "bone_velocity")})
+    column = {b: i for i, b in enumerate(bones)}
+    g_rot, g_pos = db.global_transforms_of(bones)
+    root_rot, root_pos = g_rot[:, column[0]], g_pos[:, column[0]]
     frames = np.arange(db.n_frames)
     # bone velocities: central differences of the global positions inside each range (one-sided at the
     # range ends), i.e. how fast the bone really moves through space, the quantity foot skating measures
@@ -192,10 +195,10 @@ def compute_raw(db, layout: Sequence[Channel] = DEFAULT_LAYOUT) -> np.ndarray:
     cols = []
     for ch in layout:
         if ch.kind == "bone_position":
-            b = db.bone(ch.bone)
+            b = column[db.bone(ch.bone)]
             cols.append(quat.inv_mul_vec(root_rot, g_pos[:, b] - root_pos))
         elif ch.kind == "bone_velocity":
-            b = db.bone(ch.bone)
+            b = column[db.bone(ch.bone)]
             cols.append(quat.inv_mul_vec(root_rot, g_vel[:, b]))
         elif ch.kind == "trajectory_position":
             for off in ch.offsets:
