@@ -84,3 +84,23 @@ def test_build_db_refuses_jobs_below_one(tmp_path):
     r = subprocess.run([sys.executable, "-m", "app.cli", "build-db", "--jobs", "0", "--quiet"],
                        capture_output=True, text=True, timeout=60)
     assert r.returncode == 1 and r.stderr.strip() == "lmm-studio build-db: error: --jobs must be at least 1, got 0"
+
+
+def test_features_do_not_depend_on_the_chunk_size(db, monkeypatch):
+    import lmm.features as features
+    from lmm.data.database import Database
+
+    monkeypatch.setattr(features, "_CHUNK_FRAMES", 10**9)  # one pass over every frame, as before chunking
+    monkeypatch.setattr(Database, "FK_CHUNK_FRAMES", 10**9)
+    whole = features.compute_raw(db)
+    monkeypatch.setattr(features, "_CHUNK_FRAMES", 777)
+    monkeypatch.setattr(Database, "FK_CHUNK_FRAMES", 1000)
+    chunked = features.compute_raw(db)
+    assert whole.dtype == chunked.dtype == np.float32 and np.array_equal(whole, chunked)
+    g_rot, g_pos = db.global_transforms()  # every bone: the feet's columns agree with the chain-only FK
+    foot = db.bone("left_foot")
+    from lmm import quat
+    expected = quat.inv_mul_vec(g_rot[:, 0], g_pos[:, foot] - g_pos[:, 0]).astype(np.float32)
+    first = features.layout_slices(features.DEFAULT_LAYOUT)[0]
+    assert features.DEFAULT_LAYOUT[0].kind == "bone_position" and db.bone(features.DEFAULT_LAYOUT[0].bone) == foot
+    assert np.array_equal(chunked[:, first], expected)

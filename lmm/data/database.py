@@ -151,6 +151,8 @@ class Database:
         return quat.forward_kinematics(self.rotations[frames].astype(np.float64),
                                        self.positions[frames].astype(np.float64), self.parents)
 
+    FK_CHUNK_FRAMES = 8192
+
     def global_transforms_of(self, bones, frames=slice(None)):
         """Global rotations (n, len(bones), 4) and positions (n, len(bones), 3) of ``bones`` only (float64):
         forward kinematics over their ancestors, not the whole skeleton (bit-identical to the same
@@ -164,11 +166,20 @@ class Database:
         chain = sorted(needed)  # parents come before children
         slot = {j: i for i, j in enumerate(chain)}
         sub_parents = np.array([slot[int(self.parents[j])] if self.parents[j] >= 0 else -1 for j in chain])
-        rot = np.asarray(self.rotations[frames])[:, chain].astype(np.float64)
-        pos = np.asarray(self.positions[frames])[:, chain].astype(np.float64)
-        g_rot, g_pos = quat.forward_kinematics(rot, pos, sub_parents)
         cols = [slot[b] for b in bones]
-        return g_rot[:, cols], g_pos[:, cols]
+        index = np.arange(self.n_frames)[frames]
+        out_rot = np.empty((len(index), len(bones), 4), dtype=np.float64)
+        out_pos = np.empty((len(index), len(bones), 3), dtype=np.float64)
+        # a few thousand frames at a time: the intermediates stay in the CPU cache (5x faster at 0.5 M
+        # frames than one pass); every frame's arithmetic is the same, so are the results
+        for start in range(0, len(index), self.FK_CHUNK_FRAMES):
+            part = index[start:start + self.FK_CHUNK_FRAMES]
+            rot = np.asarray(self.rotations[part])[:, chain].astype(np.float64)
+            pos = np.asarray(self.positions[part])[:, chain].astype(np.float64)
+            g_rot, g_pos = quat.forward_kinematics(rot, pos, sub_parents)
+            out_rot[start:start + len(part)] = g_rot[:, cols]
+            out_pos[start:start + len(part)] = g_pos[:, cols]
+        return out_rot, out_pos
 
     def global_kinematics(self, frames=slice(None)):
         """Global rotations, positions, velocities and angular velocities (float64)."""
