@@ -181,31 +181,46 @@ def layout_slices(layout: Sequence[Channel]) -> list[slice]:
 
 def compute_raw(db, layout: Sequence[Channel] = DEFAULT_LAYOUT) -> np.ndarray:
     """Raw (unnormalised) features of every database frame, (N, D) float32, vectorised over frames."""
-    g_rot, g_pos = db.global_transforms()
-    root_rot, root_pos = g_rot[:, 0], g_pos[:, 0]
+    # forward kinematics of the root and the feature bones only (not every bone of every frame)
+    bones = sorted({0} | {db.bone(ch.bone) for ch in layout if ch.kind in ("bone_position", "bone_velocity")})
+    column = {b: i for i, b in enumerate(bones)}
+    g_rot, g_pos = db.global_transforms_of(bones)
+    root_rot, root_pos = g_rot[:, column[0]], g_pos[:, column[0]]
     frames = np.arange(db.n_frames)
     # bone velocities: central differences of the global positions inside each range (one-sided at the
     # range ends), i.e. how fast the bone really moves through space, the quantity foot skating measures
     g_vel = np.empty_like(g_pos)
     for s, e in zip(db.range_starts, db.range_stops):
         g_vel[s:e] = central_difference(g_pos[s:e], db.dt)
-    cols = []
-    for ch in layout:
-        if ch.kind == "bone_position":
-            b = db.bone(ch.bone)
-            cols.append(quat.inv_mul_vec(root_rot, g_pos[:, b] - root_pos))
-        elif ch.kind == "bone_velocity":
-            b = db.bone(ch.bone)
-            cols.append(quat.inv_mul_vec(root_rot, g_vel[:, b]))
-        elif ch.kind == "trajectory_position":
-            for off in ch.offsets:
-                f = db.future_frame(frames, off)
-                cols.append(quat.inv_mul_vec(root_rot, root_pos[f] - root_pos)[:, [0, 2]])
-        else:  # trajectory_direction
-            for off in ch.offsets:
-                f = db.future_frame(frames, off)
-                cols.append(quat.inv_mul_vec(root_rot, quat.mul_vec(root_rot[f], FORWARD))[:, [0, 2]])
-    return np.concatenate(cols, axis=1).astype(np.float32)
+    future = {off: db.future_frame(frames, off) for ch in layout
+              if ch.kind in ("trajectory_position", "trajectory_direction") for off in ch.offsets}
+    out = None
+    # a few thousand frames at a time (the temporaries stay in the CPU cache); per frame the same maths
+    for s in range(0, db.n_frames, _CHUNK_FRAMES):
+        e = min(s + _CHUNK_FRAMES, db.n_frames)
+        rr, rp = root_rot[s:e], root_pos[s:e]
+        cols = []
+        for ch in layout:
+            if ch.kind == "bone_position":
+                b = column[db.bone(ch.bone)]
+                cols.append(quat.inv_mul_vec(rr, g_pos[s:e, b] - rp))
+            elif ch.kind == "bone_velocity":
+                b = column[db.bone(ch.bone)]
+                cols.append(quat.inv_mul_vec(rr, g_vel[s:e, b]))
+            elif ch.kind == "trajectory_position":
+                for off in ch.offsets:
+                    cols.append(quat.inv_mul_vec(rr, root_pos[future[off][s:e]] - rp)[:, [0, 2]])
+            else:  # trajectory_direction
+                for off in ch.offsets:
+                    cols.append(quat.inv_mul_vec(rr, quat.mul_vec(root_rot[future[off][s:e]], FORWARD))[:, [0, 2]])
+        chunk = np.concatenate(cols, axis=1)
+        if out is None:
+            out = np.empty((db.n_frames, chunk.shape[1]), dtype=np.float32)
+        out[s:e] = chunk  # float64 -> float32 as astype does
+    return out if out is not None else np.zeros((0, sum(ch.dims for ch in layout)), dtype=np.float32)
+
+
+_CHUNK_FRAMES = 8192
 
 
 @dataclass

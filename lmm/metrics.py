@@ -186,8 +186,8 @@ def _source_ground_skating_counts(db, include_mirrored: bool) -> np.ndarray:
     for r, (start, stop) in enumerate(zip(db.range_starts, db.range_stops)):
         if db.range_mirrored[r] and not include_mirrored:
             continue
-        _, g_pos = db.global_transforms(slice(int(start), int(stop)))
-        one = ground_skating(g_pos[:, toes], db.fps)
+        _, toe_pos = db.global_transforms_of(toes, slice(int(start), int(stop)))
+        one = ground_skating(toe_pos, db.fps)
         fast += one["skating_steps"]
         ground += one["ground_steps"]
     return np.array([fast, ground], dtype=np.int64)

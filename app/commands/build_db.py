@@ -10,6 +10,8 @@ def add_arguments(p) -> None:
     p.add_argument("--rebuild", action="store_true", help="ignore the cache and build again")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--no-checks", action="store_true", help="skip the data checks (see check-data)")
+    p.add_argument("--jobs", type=int, default=None, metavar="N",
+                   help="processes that build takes side by side (default: one per core, at most 4; 1: none)")
 
 
 def _error(message: str) -> None:
@@ -24,9 +26,16 @@ def _os_error_line(e: OSError, out) -> str:
 
 
 def main(args) -> int:
-    from lmm.data.database import load_or_build
+    import os
+
+    from lmm.data.database import MAX_BUILD_WORKERS, load_or_build
     from lmm.errors import InputError
     from lmm.progress import Progress
+
+    if args.jobs is not None and args.jobs < 1:
+        _error(f"--jobs must be at least 1, got {args.jobs}")
+        return 1
+    jobs = args.jobs if args.jobs is not None else min(MAX_BUILD_WORKERS, os.cpu_count() or 1)
 
     bar = None
 
@@ -39,7 +48,9 @@ def main(args) -> int:
         bar.update(1, postfix=label)
 
     try:
-        db, info = load_or_build(args.manifest, progress=progress, rebuild=args.rebuild, out_path=args.out)
+        # one process needs no workers; more build takes side by side (same database bit for bit)
+        db, info = load_or_build(args.manifest, progress=progress, rebuild=args.rebuild, out_path=args.out,
+                                 workers=jobs if jobs > 1 else 0)
     except InputError as e:  # a bad manifest, take or field: the line names the file and field
         _error(str(e))
         return 1
@@ -49,6 +60,7 @@ def main(args) -> int:
     finally:
         if bar is not None:
             bar.close()
+    checks = None if args.no_checks else _start_checks(args.manifest, jobs)
     if info.path is not None:
         _precompute_derived(db)
     source = "cache" if info.cached else "built"
@@ -59,8 +71,8 @@ def main(args) -> int:
     print(f"seconds   {db.seconds:.1f}")
     print(f"bones     {db.n_bones}")
     print(f"bytes     {db.pose_bytes()} ({db.pose_bytes() / 2**20:.1f} MiB pose data)")
-    if not args.no_checks:
-        _warn_findings(args.manifest)
+    if checks is not None:
+        _print_warnings(checks)
     return 0
 
 
@@ -79,7 +91,7 @@ def _precompute_derived(db) -> None:
     source_ground_skating(db)
 
 
-def _warn_findings(manifest_path) -> None:
+def _warning_lines(manifest_path) -> list[str]:
     """The data checks' findings inside ranges the database uses, one warning line each."""
     from lmm import DEFAULT_MANIFEST
     from lmm.data.checks import CheckError, check_manifest
@@ -88,8 +100,30 @@ def _warn_findings(manifest_path) -> None:
     try:
         findings, _ = check_manifest(load_manifest(manifest_path or DEFAULT_MANIFEST))
     except (ManifestError, CheckError) as e:
-        print(f"warning: data checks skipped: {e}", file=sys.stderr)
-        return
-    for f in findings:
-        if f.in_used_range:
-            print(f"warning: {f.line()}", file=sys.stderr)
+        return [f"warning: data checks skipped: {e}"]
+    return [f"warning: {f.line()}" for f in findings if f.in_used_range]
+
+
+def _start_checks(manifest_path, jobs: int):
+    """The data checks' warning lines, as a call that returns them: with cores to spare the checks run
+    in a second process meanwhile (while this one fills the derived-array cache), else at the call."""
+    import multiprocessing
+
+    if jobs < 2 or "fork" not in multiprocessing.get_all_start_methods():
+        return lambda: _warning_lines(manifest_path)
+    from concurrent.futures import ProcessPoolExecutor
+
+    pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("fork"))
+    future = pool.submit(_warning_lines, manifest_path)
+
+    def result() -> list[str]:
+        try:
+            return future.result()
+        finally:
+            pool.shutdown()
+    return result
+
+
+def _print_warnings(checks) -> None:
+    for line in checks():
+        print(line, file=sys.stderr)
