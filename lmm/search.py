@@ -48,6 +48,16 @@ _HINT_SPREAD = np.arange(-2, 3)  # a hinted frame and its neighbours seed the up
 _PAD = 2                          # the candidate mask's extra False tail (hint neighbours may step outside)
 
 
+def _hint_seeds(hint, valid: np.ndarray) -> np.ndarray:
+    """The frames around the hinted ones (``_HINT_SPREAD``), sorted, unique and valid: real frames whose
+    costs give an upper bound on the k-th best before the blocks are scanned."""
+    seeds = (np.asarray(hint, dtype=np.int64)[:, None] + _HINT_SPREAD).ravel()
+    seeds.sort()
+    ok = valid[seeds]
+    ok[1:] &= seeds[1:] != seeds[:-1]
+    return seeds[ok]
+
+
 @dataclass
 class SearchResult:
     """Top-K candidates, best first. ``frames[0]`` is the answer.
@@ -291,11 +301,7 @@ class SearchIndex:
         evaluated = 0
         cont = float("nan")
         if hint is not None and len(hint):
-            seeds = (np.asarray(hint, dtype=np.int64)[:, None] + _HINT_SPREAD).ravel()
-            seeds.sort()
-            ok = valid[seeds]
-            ok[1:] &= seeds[1:] != seeds[:-1]
-            seeds = seeds[ok]
+            seeds = _hint_seeds(hint, valid)
             if seeds.size >= k:
                 if current >= 0:
                     c = self.X[np.concatenate((seeds, (current,)))]
@@ -434,13 +440,7 @@ class SearchIndex:
         # 2. an upper bound on the k-th best cost + bias, from real frames
         evaluated = 0
         cont = float("nan")
-        seeds = None
-        if hint is not None and len(hint):
-            seeds = (np.asarray(hint, dtype=np.int64)[:, None] + _HINT_SPREAD).ravel()
-            seeds.sort()
-            ok = valid[seeds]
-            ok[1:] &= seeds[1:] != seeds[:-1]
-            seeds = seeds[ok]
+        seeds = _hint_seeds(hint, valid) if hint is not None and len(hint) else None
         if seeds is None or seeds.size < k:
             seeds = self._seed_frames(lb_large + large_min, q, valid, k)
         in_group = current >= 0 and candidates[current]
