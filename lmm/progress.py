@@ -57,3 +57,32 @@ class Progress:
 
     def __exit__(self, *exc):
         self.close()
+
+
+class ProgressCallback:
+    """A ``progress(done, total, label)`` callback (the one ``load_or_build`` and ``MotionIndex.build``
+    take) that opens a :class:`Progress` bar on its first call and advances it one step per call;
+    ``skip_start`` ignores the calls with ``done == 0`` (a builder announcing the total). Nothing is drawn
+    when ``quiet``. Use as a context manager, or call :meth:`close`."""
+
+    def __init__(self, label: str, quiet: bool = False, skip_start: bool = False):
+        self.label, self.quiet, self.skip_start = label, quiet, skip_start
+        self.bar: Progress | None = None
+
+    def __call__(self, done, total, label) -> None:
+        if self.quiet:
+            return
+        if self.bar is None:
+            self.bar = Progress(total, self.label)
+        if done or not self.skip_start:
+            self.bar.update(1, postfix=label)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+
+    def __enter__(self) -> "ProgressCallback":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()

@@ -30,23 +30,14 @@ def main(args) -> int:
 
     from lmm.data.database import MAX_BUILD_WORKERS, load_or_build
     from lmm.errors import InputError
-    from lmm.progress import Progress
+    from lmm.progress import ProgressCallback
 
     if args.jobs is not None and args.jobs < 1:
         _error(f"--jobs must be at least 1, got {args.jobs}")
         return 1
     jobs = args.jobs if args.jobs is not None else min(MAX_BUILD_WORKERS, os.cpu_count() or 1)
 
-    bar = None
-
-    def progress(done, total, label):
-        nonlocal bar
-        if args.quiet:
-            return
-        if bar is None:
-            bar = Progress(total, "build-db")
-        bar.update(1, postfix=label)
-
+    progress = ProgressCallback("build-db", quiet=args.quiet)
     try:
         # one process needs no workers; more build takes side by side (same database bit for bit)
         db, info = load_or_build(args.manifest, progress=progress, rebuild=args.rebuild, out_path=args.out,
@@ -58,8 +49,7 @@ def main(args) -> int:
         _error(_os_error_line(e, args.out))
         return 1
     finally:
-        if bar is not None:
-            bar.close()
+        progress.close()
     checks = None if args.no_checks else _start_checks(args.manifest, jobs)
     if info.path is not None:
         _precompute_derived(db)

@@ -44,7 +44,7 @@ def add_arguments(p) -> None:
 def main(args) -> int:
     from lmm import DEFAULT_MANIFEST
     from lmm.motion_search.index import RERANK_TOP, MotionIndex, SearchError, query_from_bvh, sources_from
-    from lmm.progress import Progress
+    from lmm.progress import ProgressCallback
 
     if not args.quiet:
         from app.commands.extras import suggest
@@ -62,22 +62,8 @@ def main(args) -> int:
     # a query from a file the index holds is cut from the index (no second read of the file)
     indexed = {os.path.realpath(s.path) for s in sources}
     query = None if os.path.realpath(args.query) in indexed else query_from_bvh(args.query, args.frames)
-    bar = None
-
-    def progress(done, total, label):
-        nonlocal bar
-        if args.quiet:
-            return
-        if bar is None:
-            bar = Progress(total, "find: indexing")
-        if done:
-            bar.update(1, postfix=label)
-
-    try:
+    with ProgressCallback("find: indexing", quiet=args.quiet, skip_start=True) as progress:
         index = MotionIndex.build(sources, rebuild=args.rebuild, progress=progress)
-    finally:
-        if bar is not None:
-            bar.close()
     if query is None:
         query = index.query_range(index.source_of(args.query), args.frames, args.query)
     t0 = time.perf_counter()
