@@ -516,10 +516,10 @@ def _merge_groups(per_group, biases, current, k, features_norm, query, slices, c
     the lower frame) into the top K."""
     rows = []
     for (frames, costs, bias), b in zip(per_group, biases):
-        for f, c, fb in zip(frames.tolist(), costs.tolist(), bias.tolist()):
-            is_cont = f == current  # the playing frame is never an ordinary candidate (exclusion window)
-            rows.append((float(np.float32(c) + np.float32(b)), 0 if is_cont else 1, f,
-                         float(np.float32(fb) + np.float32(b))))
+        b32 = np.float32(b)   # float32 sums, as the per-frame totals are computed everywhere else
+        for f, c, fb in zip(frames.tolist(), (costs + b32).tolist(), (bias + b32).tolist()):
+            # the playing frame is never an ordinary candidate (exclusion window): it goes first on a tie
+            rows.append((c, 0 if f == current else 1, f, fb))
     rows.sort()
     rows = rows[:k]
     frames = np.array([r[2] for r in rows], dtype=np.int64)
