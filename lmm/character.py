@@ -39,6 +39,7 @@ from __future__ import annotations
 import copy
 import math
 import time
+import itertools
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -48,7 +49,7 @@ from lmm import quat_scalar as qs
 from lmm.data.derived import cached
 from lmm.controller import Candidates, Controller, DebugSnapshot, InputState, Pose
 from lmm.features import build_query
-from lmm.ik import FootLockState, foot_lock_update, local_rotations_from_global, solve_leg
+from lmm.ik import FootLockState, solve_leg_floats
 from lmm.inertialize import Offsets, inertialize_apply, inertialize_decay, inertialize_transition
 from lmm.springs import LN2, EPS
 from lmm.trajectory import (SimulationState, desired_rotation, desired_velocity, simulation_update,
@@ -107,20 +108,17 @@ def root_local_velocities(db):
     return both[:, :3], both[:, 3:]
 
 
-def forward_kinematics_pose(local_rot: np.ndarray, local_pos: np.ndarray, parents) -> tuple[np.ndarray, np.ndarray]:
-    """Global rotations (J, 4) and positions (J, 3) of one pose.
-
-    Plain Python floats: for one pose of ~20 bones this is several times faster than numpy calls on
-    tiny arrays (see :func:`lmm.quat.forward_kinematics` for frames in bulk).
-    """
-    rl = local_rot.tolist()
-    pl = local_pos.tolist()
-    n = len(rl)
+def forward_kinematics_lists(local_rot, local_pos, parents) -> tuple[list, list]:
+    """Global rotations and positions of one pose given as lists (per joint a 4- and a 3-sequence of
+    floats); returns two lists of tuples. Plain Python floats: for one pose of ~20 bones this is several
+    times faster than numpy calls on tiny arrays (see :func:`lmm.quat.forward_kinematics` for frames in
+    bulk)."""
+    n = len(local_rot)
     g = [None] * n
     p = [None] * n
     for j in range(n):
-        w, x, y, z = rl[j]
-        px, py, pz = pl[j]
+        w, x, y, z = local_rot[j]
+        px, py, pz = local_pos[j]
         pj = parents[j]
         if pj < 0:
             g[j] = (w, x, y, z)
@@ -135,6 +133,12 @@ def forward_kinematics_pose(local_rot: np.ndarray, local_pos: np.ndarray, parent
         qx, qy, qz = p[pj]
         p[j] = (qx + px + aw * tx + (ay * tz - az * ty), qy + py + aw * ty + (az * tx - ax * tz),
                 qz + pz + aw * tz + (ax * ty - ay * tx))
+    return g, p
+
+
+def forward_kinematics_pose(local_rot: np.ndarray, local_pos: np.ndarray, parents) -> tuple[np.ndarray, np.ndarray]:
+    """Global rotations (J, 4) and positions (J, 3) of one pose (:func:`forward_kinematics_lists` on arrays)."""
+    g, p = forward_kinematics_lists(local_rot.tolist(), local_pos.tolist(), parents)
     return np.array(g), np.array(p)
 
 
@@ -147,31 +151,37 @@ def subtree_joints(parents, joints) -> list[int]:
     return sorted(inside)
 
 
-def forward_kinematics_update(global_rot: np.ndarray, global_pos: np.ndarray, local_rot: np.ndarray,
-                              local_pos: np.ndarray, parents, joints) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`forward_kinematics_pose` recomputed only for ``joints`` (a topologically ordered list that
-    holds every descendant of each of its joints, see :func:`subtree_joints`); the other joints are taken
-    from ``global_rot``/``global_pos``. The same float operations per joint, so the result is bit for bit
-    the full pass's (after IK only the legs change: a few joints instead of the whole skeleton)."""
-    g = global_rot.tolist()
-    p = global_pos.tolist()
+def forward_kinematics_update_lists(global_rot: list, global_pos: list, local_rot, local_pos, parents,
+                                    joints) -> None:
+    """:func:`forward_kinematics_lists` recomputed in place only for ``joints`` (a topologically ordered list
+    that holds every descendant of each of its joints, see :func:`subtree_joints`); the other joints keep
+    their entries of ``global_rot``/``global_pos``. The same float operations per joint, so the result is
+    bit for bit the full pass's (after IK only the legs change: a few joints instead of the whole skeleton)."""
     for j in joints:
-        w, x, y, z = local_rot[j].tolist()
-        px, py, pz = local_pos[j].tolist()
+        w, x, y, z = local_rot[j]
+        px, py, pz = local_pos[j]
         pj = parents[j]
         if pj < 0:
-            g[j] = [w, x, y, z]
-            p[j] = [px, py, pz]
+            global_rot[j] = (w, x, y, z)
+            global_pos[j] = (px, py, pz)
             continue
-        aw, ax, ay, az = g[pj]
-        g[j] = [aw * w - ax * x - ay * y - az * z, aw * x + ax * w + ay * z - az * y,
-                aw * y - ax * z + ay * w + az * x, aw * z + ax * y - ay * x + az * w]
+        aw, ax, ay, az = global_rot[pj]
+        global_rot[j] = (aw * w - ax * x - ay * y - az * z, aw * x + ax * w + ay * z - az * y,
+                         aw * y - ax * z + ay * w + az * x, aw * z + ax * y - ay * x + az * w)
         tx = 2.0 * (ay * pz - az * py)
         ty = 2.0 * (az * px - ax * pz)
         tz = 2.0 * (ax * py - ay * px)
-        qx, qy, qz = p[pj]
-        p[j] = [qx + px + aw * tx + (ay * tz - az * ty), qy + py + aw * ty + (az * tx - ax * tz),
-                qz + pz + aw * tz + (ax * ty - ay * tx)]
+        qx, qy, qz = global_pos[pj]
+        global_pos[j] = (qx + px + aw * tx + (ay * tz - az * ty), qy + py + aw * ty + (az * tx - ax * tz),
+                         qz + pz + aw * tz + (ax * ty - ay * tx))
+
+
+def forward_kinematics_update(global_rot: np.ndarray, global_pos: np.ndarray, local_rot: np.ndarray,
+                              local_pos: np.ndarray, parents, joints) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`forward_kinematics_update_lists` on arrays: new (J, 4) and (J, 3) arrays."""
+    g = global_rot.tolist()
+    p = global_pos.tolist()
+    forward_kinematics_update_lists(g, p, local_rot.tolist(), local_pos.tolist(), parents, joints)
     return np.array(g), np.array(p)
 
 
@@ -420,46 +430,68 @@ class CharacterController(Controller):
         integrated = (self.root_position.copy(), self.root_rotation.copy())
         self._synchronize(root_vel_world, root_ang_world, dt)
 
-        # world pose, then foot locking
+        # world pose, then foot locking: the pose in plain floats (lists of tuples) through forward
+        # kinematics, foot locking, IK and the legs' forward kinematics; numpy arrays once at the end
         t0 = time.perf_counter()
-        local_rot = rot.copy()
-        local_pos = pos.copy()
-        local_rot[0] = self.root_rotation
-        local_pos[0] = self.root_position
+        rl = rot.tolist()
+        pl = pos.tolist()
+        rl[0] = self.root_rotation.tolist()
+        pl[0] = self.root_position.tolist()
         self._update_ground_offset(dt)
-        local_pos[self.hips_bone, 1] += self._ground_offset
-        g_rot, g_pos = forward_kinematics_pose(local_rot, local_pos, self.parents)
-        locked = np.zeros(2, dtype=bool)
-        toe_now = g_pos[self.toe_bones].copy()
+        pl[self.hips_bone][1] += self._ground_offset
+        parents = self.parents
+        g_rl, g_pl = forward_kinematics_lists(rl, pl, parents)
+        toe_now = [g_pl[t] for t in self.toe_bones]
+        locks = self.foot_lock
+        changed = []  # bones whose rotation IK changed
         if tun.ik_enabled:
-            toe_vel = np.zeros((2, 3)) if self._prev_toe is None or dt <= 0 else (toe_now - self._prev_toe) / dt
+            prev = self._prev_toe
+            if prev is None or dt <= 0:
+                toe_vel = [(0.0, 0.0, 0.0), (0.0, 0.0, 0.0)]
+            else:
+                toe_vel = [((a[0] - b[0]) / dt, (a[1] - b[1]) / dt, (a[2] - b[2]) / dt) for a, b in zip(toe_now, prev)]
             shift = self._root_shift(toe_now, *integrated) if tun.ik_counter_adjustment else None
-            self.foot_lock, targets = foot_lock_update(
-                self.foot_lock, toe_now, toe_vel, src.contacts, tun.ik_unlock_radius_m, tun.ik_blend_halflife_s,
-                tun.ik_foot_height_m, dt, tun.ik_lift_height_m, tun.ik_ground_blend_speed_m_s, tun.ik_step_height_m,
-                shift, tun.ik_swing_clearance_m)
-            locked = self.foot_lock.locked.copy()
+            contacts = src.contacts
+            targets = locks.update(
+                toe_now, toe_vel, contacts.tolist() if isinstance(contacts, np.ndarray) else contacts,
+                tun.ik_unlock_radius_m, tun.ik_blend_halflife_s, tun.ik_foot_height_m, dt, tun.ik_lift_height_m,
+                tun.ik_ground_blend_speed_m_s, tun.ik_step_height_m, shift, tun.ik_swing_clearance_m)
             new_global = {}
             for i, chain in enumerate(self.leg_chains):
-                if not locked[i] and float(np.abs(targets[i] - toe_now[i]).max()) <= 1e-6:
+                target, toe = targets[i], toe_now[i]
+                is_locked = locks.is_locked(i)
+                if not is_locked and (abs(target[0] - toe[0]) <= 1e-6 and abs(target[1] - toe[1]) <= 1e-6
+                                      and abs(target[2] - toe[2]) <= 1e-6):
                     continue  # free and fully blended back: nothing to solve
-                ground = targets[i][1] - tun.ik_foot_height_m if locked[i] else None
-                new_global.update(solve_leg(g_pos, g_rot, chain, targets[i], self.toe_axes[i],
-                                            tun.ik_toe_length_m, ground))
+                ground = target[1] - tun.ik_foot_height_m if is_locked else None
+                new_global.update(solve_leg_floats(g_pl, g_rl, chain, target, tuple(self.toe_axes[i].tolist()),
+                                                   tun.ik_toe_length_m, ground))
             if new_global:
                 changed = sorted(new_global)
                 for j in changed:
-                    g_rot[j] = new_global[j]
-                for j, q in local_rotations_from_global(g_rot, self.parents, changed).items():
-                    local_rot[j] = q
+                    g_rl[j] = new_global[j]
+                for j in changed:
+                    pw, px, py, pz = g_rl[parents[j]]
+                    rl[j] = qs.mul((pw, -px, -py, -pz), g_rl[j])  # parent^-1 * global
                 # only the legs changed: forward kinematics of their subtrees, not of the whole skeleton
                 joints = self._subtrees.get(tuple(changed))
                 if joints is None:
-                    joints = self._subtrees[tuple(changed)] = subtree_joints(self.parents, changed)
-                g_rot, g_pos = forward_kinematics_update(g_rot, g_pos, local_rot, local_pos, self.parents, joints)
+                    joints = self._subtrees[tuple(changed)] = subtree_joints(parents, changed)
+                forward_kinematics_update_lists(g_rl, g_pl, rl, pl, parents, joints)
         else:
-            self.foot_lock = FootLockState()
+            self.foot_lock = locks = FootLockState()
+        locked = np.array([locks.is_locked(0), locks.is_locked(1)])
         self._prev_toe = toe_now
+        local_rot = rot.copy()
+        local_rot[0] = rl[0]
+        for j in changed:
+            local_rot[j] = rl[j]
+        local_pos = pos.copy()
+        local_pos[0] = pl[0]
+        local_pos[self.hips_bone, 1] = pl[self.hips_bone][1]
+        n = len(g_rl)
+        g_rot = np.fromiter(itertools.chain.from_iterable(g_rl), np.float64, 4 * n).reshape(n, 4)
+        g_pos = np.fromiter(itertools.chain.from_iterable(g_pl), np.float64, 3 * n).reshape(n, 3)
         timings["pose"] = (time.perf_counter() - t0) * 1e6
 
         # ghost: the source pose without offsets, placed at the character root; debug only, so its forward
@@ -521,11 +553,22 @@ class CharacterController(Controller):
             forced = True
         return forced
 
-    def _root_shift(self, toes, position, rotation) -> np.ndarray:
-        """How far adjustment and clamping moved each toe (2, 3) this tick: the toes as shown minus where
-        they would be with the root left at ``position``/``rotation`` (the integrated root)."""
-        local = quat.inv_mul_vec(self.root_rotation, toes - self.root_position)
-        return toes - (position + quat.mul_vec(rotation, local))
+    def _root_shift(self, toes, position, rotation) -> list:
+        """How far adjustment and clamping moved each toe this tick (two 3-tuples; ``toes`` two 3-tuples):
+        the toes as shown minus where they would be with the root left at ``position``/``rotation`` (the
+        integrated root). Plain floats, the operations of ``toes - (position + quat.mul_vec(rotation,
+        quat.inv_mul_vec(self.root_rotation, toes - self.root_position)))``."""
+        root_pos = self.root_position.tolist()
+        root_rot = tuple(self.root_rotation.tolist())
+        position = position.tolist() if isinstance(position, np.ndarray) else position
+        rotation = tuple(rotation.tolist()) if isinstance(rotation, np.ndarray) else tuple(rotation)
+        out = []
+        for t in toes:
+            local = qs.inv_mul_vec(root_rot, (t[0] - root_pos[0], t[1] - root_pos[1], t[2] - root_pos[2]))
+            back = qs.mul_vec(rotation, local)
+            out.append((t[0] - (position[0] + back[0]), t[1] - (position[1] + back[1]),
+                        t[2] - (position[2] + back[2])))
+        return out
 
     def _ground_offset_target(self) -> float:
         """The height shift (m) that puts the playing take's planted toes at ``ik_foot_height_m`` (0 when
