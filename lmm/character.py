@@ -250,6 +250,7 @@ class CharacterController(Controller):
     """The shared pipeline; subclasses implement the source hooks (see the module doc)."""
 
     name = "character"
+    _contact_height_span = (0, 0, 0.0)  # frames [lo, hi) of the last take looked up, its contact height
 
     def __init__(self, db, features, tuning: Tuning | None = None):
         self.db = db
@@ -558,16 +559,27 @@ class CharacterController(Controller):
         the toes as shown minus where they would be with the root left at ``position``/``rotation`` (the
         integrated root). Plain floats, the operations of ``toes - (position + quat.mul_vec(rotation,
         quat.inv_mul_vec(self.root_rotation, toes - self.root_position)))``."""
-        root_pos = self.root_position.tolist()
-        root_rot = tuple(self.root_rotation.tolist())
-        position = position.tolist() if isinstance(position, np.ndarray) else position
-        rotation = tuple(rotation.tolist()) if isinstance(rotation, np.ndarray) else tuple(rotation)
+        px, py, pz = self.root_position.tolist()
+        rw, rx, ry, rz = self.root_rotation.tolist()
+        ox, oy, oz = position.tolist() if isinstance(position, np.ndarray) else position
+        w, x, y, z = rotation.tolist() if isinstance(rotation, np.ndarray) else rotation
         out = []
         for t in toes:
-            local = qs.inv_mul_vec(root_rot, (t[0] - root_pos[0], t[1] - root_pos[1], t[2] - root_pos[2]))
-            back = qs.mul_vec(rotation, local)
-            out.append((t[0] - (position[0] + back[0]), t[1] - (position[1] + back[1]),
-                        t[2] - (position[2] + back[2])))
+            # local = inv_mul_vec(root rotation, toe - root position), as qs.inv_mul_vec
+            v0, v1, v2 = t[0] - px, t[1] - py, t[2] - pz
+            t0 = 2.0 * (-ry * v2 - -rz * v1)
+            t1 = 2.0 * (-rz * v0 - -rx * v2)
+            t2 = 2.0 * (-rx * v1 - -ry * v0)
+            l0 = v0 + rw * t0 + (-ry * t2 - -rz * t1)
+            l1 = v1 + rw * t1 + (-rz * t0 - -rx * t2)
+            l2 = v2 + rw * t2 + (-rx * t1 - -ry * t0)
+            # back = mul_vec(rotation, local), as qs.mul_vec
+            t0 = 2.0 * (y * l2 - z * l1)
+            t1 = 2.0 * (z * l0 - x * l2)
+            t2 = 2.0 * (x * l1 - y * l0)
+            out.append((t[0] - (ox + (l0 + w * t0 + (y * t2 - z * t1))),
+                        t[1] - (oy + (l1 + w * t1 + (z * t0 - x * t2))),
+                        t[2] - (oz + (l2 + w * t2 + (x * t1 - y * t0)))))
         return out
 
     def _ground_offset_target(self) -> float:
@@ -578,7 +590,15 @@ class CharacterController(Controller):
         frame = self._source_frame()
         if frame < 0 or frame >= len(self.db.contacts):
             return 0.0
-        h = float(self._range_contact_height[int(self.db.range_index(frame))])
+        lo, hi, h = self._contact_height_span
+        if not lo <= frame < hi:
+            # the source plays through a take frame by frame: look the take up when the frame leaves it
+            r = int(self.db.range_index(frame))
+            stops = self.db.range_stops
+            lo = int(stops[r - 1]) if r > 0 else 0  # range_index gives r for stops[r-1] <= frame < stops[r]
+            hi = int(stops[r])
+            h = float(self._range_contact_height[r])
+            self._contact_height_span = (lo, hi, h)
         return self.tuning.ik_foot_height_m - h if math.isfinite(h) else 0.0
 
     def _update_ground_offset(self, dt: float) -> None:
