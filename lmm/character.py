@@ -457,27 +457,29 @@ class CharacterController(Controller):
                 toe_now, toe_vel, contacts.tolist() if isinstance(contacts, np.ndarray) else contacts,
                 tun.ik_unlock_radius_m, tun.ik_blend_halflife_s, tun.ik_foot_height_m, dt, tun.ik_lift_height_m,
                 tun.ik_ground_blend_speed_m_s, tun.ik_step_height_m, shift, tun.ik_swing_clearance_m)
-            new_global = {}
-            for i, chain in enumerate(self.leg_chains):
+            solved = []
+            for i, leg in enumerate(self.leg_chains):
                 target, toe = targets[i], toe_now[i]
                 is_locked = locks.is_locked(i)
                 if not is_locked and (abs(target[0] - toe[0]) <= 1e-6 and abs(target[1] - toe[1]) <= 1e-6
                                       and abs(target[2] - toe[2]) <= 1e-6):
                     continue  # free and fully blended back: nothing to solve
                 ground = target[1] - tun.ik_foot_height_m if is_locked else None
-                new_global.update(solve_leg_floats(g_pl, g_rl, chain, target, tuple(self.toe_axes[i].tolist()),
-                                                   tun.ik_toe_length_m, ground))
-            if new_global:
-                changed = sorted(new_global)
-                for j in changed:
-                    g_rl[j] = new_global[j]
+                solved.append((leg, solve_leg_floats(g_pl, g_rl, leg, target, tuple(self.toe_axes[i].tolist()),
+                                                     tun.ik_toe_length_m, ground)))
+            if solved:
+                for leg, rots in solved:
+                    for j, q in zip(leg, rots):
+                        g_rl[j] = q
+                changed = sorted(j for leg, _ in solved for j in leg)
                 for j in changed:
                     pw, px, py, pz = g_rl[parents[j]]
                     rl[j] = qs.mul((pw, -px, -py, -pz), g_rl[j])  # parent^-1 * global
                 # only the legs changed: forward kinematics of their subtrees, not of the whole skeleton
-                joints = self._subtrees.get(tuple(changed))
+                key = tuple(changed)
+                joints = self._subtrees.get(key)
                 if joints is None:
-                    joints = self._subtrees[tuple(changed)] = subtree_joints(parents, changed)
+                    joints = self._subtrees[key] = subtree_joints(parents, changed)
                 forward_kinematics_update_lists(g_rl, g_pl, rl, pl, parents, joints)
         else:
             self.foot_lock = locks = FootLockState()

@@ -123,12 +123,34 @@ def two_bone_ik_floats(a, b, c, t, hip_rot, knee_rot, eps: float = 1e-4):
     n = math.sqrt(x * x + y * y + z * z)
     turn = (x / n, y / n, z / n) if n > 1e-9 else bend
 
-    r0 = _axis_angle(bend, ac_ab_1 - ac_ab_0)
-    r1 = _axis_angle(bend, ba_bc_1 - ba_bc_0)
-    r2 = _axis_angle(turn, ac_at_0)
-    hip_new = _qmul(r2, _qmul(r0, hip_rot))
-    knee_new = _qmul(r2, _qmul(r0, _qmul(r1, knee_rot)))
-    return _qnormalize(hip_new), _qnormalize(knee_new)
+    # r0, r1 about the bend axis, r2 about the turn axis (_axis_angle); hip = r2 r0 hip_rot,
+    # knee = r2 r0 r1 knee_rot (_qmul), both normalised (_qnormalize)
+    bx, by, bz = bend
+    h = (ac_ab_1 - ac_ab_0) * 0.5
+    sn = math.sin(h)
+    r0w, r0x, r0y, r0z = math.cos(h), bx * sn, by * sn, bz * sn
+    h = (ba_bc_1 - ba_bc_0) * 0.5
+    sn = math.sin(h)
+    r1w, r1x, r1y, r1z = math.cos(h), bx * sn, by * sn, bz * sn
+    h = ac_at_0 * 0.5
+    sn = math.sin(h)
+    r2w, r2x, r2y, r2z = math.cos(h), turn[0] * sn, turn[1] * sn, turn[2] * sn
+
+    bw, bx, by, bz = hip_rot
+    mw, mx, my, mz = (r0w * bw - r0x * bx - r0y * by - r0z * bz, r0w * bx + r0x * bw + r0y * bz - r0z * by,
+                      r0w * by - r0x * bz + r0y * bw + r0z * bx, r0w * bz + r0x * by - r0y * bx + r0z * bw)
+    hw, hx, hy, hz = (r2w * mw - r2x * mx - r2y * my - r2z * mz, r2w * mx + r2x * mw + r2y * mz - r2z * my,
+                      r2w * my - r2x * mz + r2y * mw + r2z * mx, r2w * mz + r2x * my - r2y * mx + r2z * mw)
+    bw, bx, by, bz = knee_rot
+    mw, mx, my, mz = (r1w * bw - r1x * bx - r1y * by - r1z * bz, r1w * bx + r1x * bw + r1y * bz - r1z * by,
+                      r1w * by - r1x * bz + r1y * bw + r1z * bx, r1w * bz + r1x * by - r1y * bx + r1z * bw)
+    mw, mx, my, mz = (r0w * mw - r0x * mx - r0y * my - r0z * mz, r0w * mx + r0x * mw + r0y * mz - r0z * my,
+                      r0w * my - r0x * mz + r0y * mw + r0z * mx, r0w * mz + r0x * my - r0y * mx + r0z * mw)
+    kw, kx, ky, kz = (r2w * mw - r2x * mx - r2y * my - r2z * mz, r2w * mx + r2x * mw + r2y * mz - r2z * my,
+                      r2w * my - r2x * mz + r2y * mw + r2z * mx, r2w * mz + r2x * my - r2y * mx + r2z * mw)
+    n = math.sqrt(hw * hw + hx * hx + hy * hy + hz * hz)
+    m = math.sqrt(kw * kw + kx * kx + ky * ky + kz * kz)
+    return (hw / n, hx / n, hy / n, hz / n), (kw / m, kx / m, ky / m, kz / m)
 
 
 def two_bone_ik(hip_pos, knee_pos, ankle_pos, target, hip_rot, knee_rot, eps: float = 1e-4):
@@ -375,9 +397,10 @@ def toe_clear_ground(toe_pos, toe_rot, toe_axis_local, toe_length: float, ground
 
 
 def solve_leg_floats(global_pos, global_rot, chain, toe_target, toe_axis_local, toe_length: float,
-                     ground_height: float | None) -> dict:
+                     ground_height: float | None) -> tuple:
     """:func:`solve_leg` on one pose kept as lists of tuples of floats (``global_pos[j]`` a 3-tuple,
-    ``global_rot[j]`` a 4-tuple, target and axis 3-tuples). Returns a dict bone -> 4-tuple."""
+    ``global_rot[j]`` a 4-tuple, target and axis 3-tuples). Returns the new global rotations of (hip, knee,
+    foot, toe), 4-tuples in the order of ``chain`` (the foot's is its own, unchanged)."""
     hip, knee, foot, toe = chain
     tp, fp = global_pos[toe], global_pos[foot]
     # toe_target - (toe - foot), as the numpy form computes it
@@ -390,7 +413,7 @@ def solve_leg_floats(global_pos, global_rot, chain, toe_target, toe_axis_local, 
         bent = toe_clear_ground_floats(toe_target[1], toe_rot, toe_axis_local, toe_length, ground_height)
         if bent is not None:
             toe_rot = bent
-    return {hip: hip_rot, knee: knee_rot, foot: global_rot[foot], toe: toe_rot}
+    return hip_rot, knee_rot, global_rot[foot], toe_rot
 
 
 def solve_leg(global_pos, global_rot, chain, toe_target, toe_axis_local, toe_length: float,
@@ -405,7 +428,7 @@ def solve_leg(global_pos, global_rot, chain, toe_target, toe_axis_local, toe_len
     rot = {j: _floats(global_rot[j]) for j in chain}
     out = solve_leg_floats(pos, rot, chain, _floats(toe_target), _floats(toe_axis_local), toe_length,
                            None if ground_height is None else float(ground_height))
-    return {j: np.array(q) for j, q in out.items()}
+    return {j: np.array(q) for j, q in zip(chain, out)}
 
 
 def local_rotation_from_global(parent_global, global_rot) -> tuple:
