@@ -431,70 +431,9 @@ class CharacterController(Controller):
         integrated = (self.root_position.copy(), self.root_rotation.copy())
         self._synchronize(root_vel_world, root_ang_world, dt)
 
-        # world pose, then foot locking: the pose in plain floats (lists of tuples) through forward
-        # kinematics, foot locking, IK and the legs' forward kinematics; numpy arrays once at the end
+        # world pose, then foot locking: forward kinematics, foot locks, leg IK
         t0 = time.perf_counter()
-        rl = rot.tolist()
-        pl = pos.tolist()
-        rl[0] = self.root_rotation.tolist()
-        pl[0] = self.root_position.tolist()
-        self._update_ground_offset(dt)
-        pl[self.hips_bone][1] += self._ground_offset
-        parents = self.parents
-        g_rl, g_pl = forward_kinematics_lists(rl, pl, parents)
-        toe_now = [g_pl[t] for t in self.toe_bones]
-        locks = self.foot_lock
-        changed = []  # bones whose rotation IK changed
-        if tun.ik_enabled:
-            prev = self._prev_toe
-            if prev is None or dt <= 0:
-                toe_vel = [(0.0, 0.0, 0.0), (0.0, 0.0, 0.0)]
-            else:
-                toe_vel = [((a[0] - b[0]) / dt, (a[1] - b[1]) / dt, (a[2] - b[2]) / dt) for a, b in zip(toe_now, prev)]
-            shift = self._root_shift(toe_now, *integrated) if tun.ik_counter_adjustment else None
-            contacts = src.contacts
-            targets = locks.update(
-                toe_now, toe_vel, contacts.tolist() if isinstance(contacts, np.ndarray) else contacts,
-                tun.ik_unlock_radius_m, tun.ik_blend_halflife_s, tun.ik_foot_height_m, dt, tun.ik_lift_height_m,
-                tun.ik_ground_blend_speed_m_s, tun.ik_step_height_m, shift, tun.ik_swing_clearance_m)
-            solved = []
-            for i, leg in enumerate(self.leg_chains):
-                target, toe = targets[i], toe_now[i]
-                is_locked = locks.is_locked(i)
-                if not is_locked and (abs(target[0] - toe[0]) <= 1e-6 and abs(target[1] - toe[1]) <= 1e-6
-                                      and abs(target[2] - toe[2]) <= 1e-6):
-                    continue  # free and fully blended back: nothing to solve
-                ground = target[1] - tun.ik_foot_height_m if is_locked else None
-                solved.append((leg, solve_leg_floats(g_pl, g_rl, leg, target, tuple(self.toe_axes[i].tolist()),
-                                                     tun.ik_toe_length_m, ground)))
-            if solved:
-                for leg, rots in solved:
-                    for j, q in zip(leg, rots):
-                        g_rl[j] = q
-                changed = sorted(j for leg, _ in solved for j in leg)
-                for j in changed:
-                    pw, px, py, pz = g_rl[parents[j]]
-                    rl[j] = qs.mul((pw, -px, -py, -pz), g_rl[j])  # parent^-1 * global
-                # only the legs changed: forward kinematics of their subtrees, not of the whole skeleton
-                key = tuple(changed)
-                joints = self._subtrees.get(key)
-                if joints is None:
-                    joints = self._subtrees[key] = subtree_joints(parents, changed)
-                forward_kinematics_update_lists(g_rl, g_pl, rl, pl, parents, joints)
-        else:
-            self.foot_lock = locks = FootLockState()
-        locked = np.array([locks.is_locked(0), locks.is_locked(1)])
-        self._prev_toe = toe_now
-        local_rot = rot.copy()
-        local_rot[0] = rl[0]
-        for j in changed:
-            local_rot[j] = rl[j]
-        local_pos = pos.copy()
-        local_pos[0] = pl[0]
-        local_pos[self.hips_bone, 1] = pl[self.hips_bone][1]
-        n = len(g_rl)
-        g_rot = np.fromiter(itertools.chain.from_iterable(g_rl), np.float64, 4 * n).reshape(n, 4)
-        g_pos = np.fromiter(itertools.chain.from_iterable(g_pl), np.float64, 3 * n).reshape(n, 3)
+        local_rot, local_pos, g_rot, g_pos, locked = self._world_pose(rot, pos, src.contacts, integrated, dt)
         timings["pose"] = (time.perf_counter() - t0) * 1e6
 
         # ghost: the source pose without offsets, placed at the character root; debug only, so its forward
@@ -555,6 +494,78 @@ class CharacterController(Controller):
             self._rotation_change_high = False
             forced = True
         return forced
+
+    def _world_pose(self, rot, pos, contacts, integrated, dt):
+        """The shown local pose (``rot``/``pos``, bone 0 replaced by the character root) in world space,
+        with foot locking and leg IK: returns local rotations and positions, global rotations and
+        positions (float64 arrays) and the two feet's lock flags ((2,) bool).
+
+        One pose in plain floats (lists of tuples) through forward kinematics, the foot locks, the leg IK
+        and the legs' forward kinematics, numpy arrays built once at the end: numpy calls on 3- and
+        4-element arrays cost microseconds each. ``integrated`` = the root (position, rotation) before
+        adjustment and clamping (see :meth:`_root_shift`)."""
+        tun = self.tuning
+        rl = rot.tolist()
+        pl = pos.tolist()
+        rl[0] = self.root_rotation.tolist()
+        pl[0] = self.root_position.tolist()
+        self._update_ground_offset(dt)
+        pl[self.hips_bone][1] += self._ground_offset
+        parents = self.parents
+        g_rl, g_pl = forward_kinematics_lists(rl, pl, parents)
+        toe_now = [g_pl[t] for t in self.toe_bones]
+        locks = self.foot_lock
+        changed = []  # bones whose rotation IK changed
+        if tun.ik_enabled:
+            prev = self._prev_toe
+            if prev is None or dt <= 0:
+                toe_vel = [(0.0, 0.0, 0.0), (0.0, 0.0, 0.0)]
+            else:
+                toe_vel = [((a[0] - b[0]) / dt, (a[1] - b[1]) / dt, (a[2] - b[2]) / dt) for a, b in zip(toe_now, prev)]
+            shift = self._root_shift(toe_now, *integrated) if tun.ik_counter_adjustment else None
+            targets = locks.update(
+                toe_now, toe_vel, contacts.tolist() if isinstance(contacts, np.ndarray) else contacts,
+                tun.ik_unlock_radius_m, tun.ik_blend_halflife_s, tun.ik_foot_height_m, dt, tun.ik_lift_height_m,
+                tun.ik_ground_blend_speed_m_s, tun.ik_step_height_m, shift, tun.ik_swing_clearance_m)
+            solved = []
+            for i, leg in enumerate(self.leg_chains):
+                target, toe = targets[i], toe_now[i]
+                is_locked = locks.is_locked(i)
+                if not is_locked and (abs(target[0] - toe[0]) <= 1e-6 and abs(target[1] - toe[1]) <= 1e-6
+                                      and abs(target[2] - toe[2]) <= 1e-6):
+                    continue  # free and fully blended back: nothing to solve
+                ground = target[1] - tun.ik_foot_height_m if is_locked else None
+                solved.append((leg, solve_leg_floats(g_pl, g_rl, leg, target, tuple(self.toe_axes[i].tolist()),
+                                                     tun.ik_toe_length_m, ground)))
+            if solved:
+                for leg, rots in solved:
+                    for j, q in zip(leg, rots):
+                        g_rl[j] = q
+                changed = sorted(j for leg, _ in solved for j in leg)
+                for j in changed:  # local = parent^-1 * global (qs.mul(qs.conj(parent), global))
+                    aw, ax, ay, az = g_rl[parents[j]]
+                    ax, ay, az = -ax, -ay, -az
+                    bw, bx, by, bz = g_rl[j]
+                    rl[j] = (aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
+                             aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw)
+                # only the legs changed: forward kinematics of their subtrees, not of the whole skeleton
+                key = tuple(changed)
+                joints = self._subtrees.get(key)
+                if joints is None:
+                    joints = self._subtrees[key] = subtree_joints(parents, changed)
+                forward_kinematics_update_lists(g_rl, g_pl, rl, pl, parents, joints)
+        else:
+            self.foot_lock = locks = FootLockState()
+        locked = np.array([locks.is_locked(0), locks.is_locked(1)])
+        self._prev_toe = toe_now
+        n = len(g_rl)
+        local_rot = np.fromiter(itertools.chain.from_iterable(rl), np.float64, 4 * n).reshape(n, 4)
+        local_pos = pos.copy()
+        local_pos[0] = pl[0]
+        local_pos[self.hips_bone, 1] = pl[self.hips_bone][1]
+        g_rot = np.fromiter(itertools.chain.from_iterable(g_rl), np.float64, 4 * n).reshape(n, 4)
+        g_pos = np.fromiter(itertools.chain.from_iterable(g_pl), np.float64, 3 * n).reshape(n, 3)
+        return local_rot, local_pos, g_rot, g_pos, locked
 
     def _root_shift(self, toes, position, rotation) -> list:
         """How far adjustment and clamping moved each toe this tick (two 3-tuples; ``toes`` two 3-tuples):

@@ -98,18 +98,33 @@ def two_bone_ik_floats(a, b, c, t, hip_rot, knee_rot, eps: float = 1e-4):
     n_ac = math.sqrt(ac0 * ac0 + ac1 * ac1 + ac2 * ac2)
     l_at = min(max(n_at, eps), l_ab + l_cb - eps)
 
-    u_ab = (ab0 / l_ab, ab1 / l_ab, ab2 / l_ab) if l_ab > 1e-9 else (1.0, 0.0, 0.0)
-    u_cb = (cb0 / l_cb, cb1 / l_cb, cb2 / l_cb) if l_cb > 1e-9 else (1.0, 0.0, 0.0)
-    u_ac = (ac0 / n_ac, ac1 / n_ac, ac2 / n_ac) if n_ac > 1e-9 else (1.0, 0.0, 0.0)
-    u_at = (at0 / n_at, at1 / n_at, at2 / n_at) if n_at > 1e-9 else (1.0, 0.0, 0.0)
-    ac_ab_0 = math.acos(_clamp1(u_ac[0] * u_ab[0] + u_ac[1] * u_ab[1] + u_ac[2] * u_ab[2]))
+    # unit vectors (_unit: (1, 0, 0) for a null vector) and the angles between them (_angle_between,
+    # the cosine clamped to [-1, 1] as _clamp1 does)
+    if l_ab > 1e-9:
+        uab0, uab1, uab2 = ab0 / l_ab, ab1 / l_ab, ab2 / l_ab
+    else:
+        uab0, uab1, uab2 = 1.0, 0.0, 0.0
+    if n_ac > 1e-9:
+        uac0, uac1, uac2 = ac0 / n_ac, ac1 / n_ac, ac2 / n_ac
+    else:
+        uac0, uac1, uac2 = 1.0, 0.0, 0.0
+    if n_at > 1e-9:
+        uat0, uat1, uat2 = at0 / n_at, at1 / n_at, at2 / n_at
+    else:
+        uat0, uat1, uat2 = 1.0, 0.0, 0.0
+    d = uac0 * uab0 + uac1 * uab1 + uac2 * uab2
+    ac_ab_0 = math.acos(-1.0 if d < -1.0 else 1.0 if d > 1.0 else d)
     if l_ab > 1e-9 and l_cb > 1e-9:  # unit(a - b) . unit(c - b) = (-u_ab) . (-u_cb), bit for bit
-        ba_bc_0 = math.acos(_clamp1(u_ab[0] * u_cb[0] + u_ab[1] * u_cb[1] + u_ab[2] * u_cb[2]))
+        d = uab0 * (cb0 / l_cb) + uab1 * (cb1 / l_cb) + uab2 * (cb2 / l_cb)
+        ba_bc_0 = math.acos(-1.0 if d < -1.0 else 1.0 if d > 1.0 else d)
     else:
         ba_bc_0 = _angle_between(_sub(a, b), _sub(c, b))
-    ac_at_0 = math.acos(_clamp1(u_ac[0] * u_at[0] + u_ac[1] * u_at[1] + u_ac[2] * u_at[2]))
-    ac_ab_1 = math.acos(_clamp1((l_cb * l_cb - l_ab * l_ab - l_at * l_at) / (-2.0 * l_ab * l_at)))
-    ba_bc_1 = math.acos(_clamp1((l_at * l_at - l_ab * l_ab - l_cb * l_cb) / (-2.0 * l_ab * l_cb)))
+    d = uac0 * uat0 + uac1 * uat1 + uac2 * uat2
+    ac_at_0 = math.acos(-1.0 if d < -1.0 else 1.0 if d > 1.0 else d)
+    d = (l_cb * l_cb - l_ab * l_ab - l_at * l_at) / (-2.0 * l_ab * l_at)
+    ac_ab_1 = math.acos(-1.0 if d < -1.0 else 1.0 if d > 1.0 else d)
+    d = (l_at * l_at - l_ab * l_ab - l_cb * l_cb) / (-2.0 * l_ab * l_cb)
+    ba_bc_1 = math.acos(-1.0 if d < -1.0 else 1.0 if d > 1.0 else d)
 
     # bend axis: ac x ab (a straight leg bends about the knee's own Z axis)
     x, y, z = ac1 * ab2 - ac2 * ab1, ac2 * ab0 - ac0 * ab2, ac0 * ab1 - ac1 * ab0
