@@ -250,6 +250,7 @@ class CharacterController(Controller):
     """The shared pipeline; subclasses implement the source hooks (see the module doc)."""
 
     name = "character"
+    _toe_axes_floats = None  # toe_axes as tuples (filled on first use)
     _contact_height_span = (0, 0, 0.0)  # frames [lo, hi) of the last take looked up, its contact height
 
     def __init__(self, db, features, tuning: Tuning | None = None):
@@ -276,7 +277,7 @@ class CharacterController(Controller):
             self.leg_chains.append((hip, knee, f, t))
             axis = db.positions[0, t].astype(np.float64)
             self.toe_axes.append(axis / max(_norm(axis), 1e-9))
-        self._subtrees: dict[tuple, list[int]] = {}  # changed joints -> their subtrees (leg-only FK)
+        self._subtrees: dict[tuple, tuple] = {}  # solved legs -> (their bones, their subtrees) for leg-only FK
         self.hips_bone = 1  # the child of the simulation bone; its height is the pose's height
         self._range_contact_height = range_contact_heights(db, self.toe_bones)
         self.reset()
@@ -515,7 +516,6 @@ class CharacterController(Controller):
         g_rl, g_pl = forward_kinematics_lists(rl, pl, parents)
         toe_now = [g_pl[t] for t in self.toe_bones]
         locks = self.foot_lock
-        changed = []  # bones whose rotation IK changed
         if tun.ik_enabled:
             prev = self._prev_toe
             if prev is None or dt <= 0:
@@ -527,6 +527,9 @@ class CharacterController(Controller):
                 toe_now, toe_vel, contacts.tolist() if isinstance(contacts, np.ndarray) else contacts,
                 tun.ik_unlock_radius_m, tun.ik_blend_halflife_s, tun.ik_foot_height_m, dt, tun.ik_lift_height_m,
                 tun.ik_ground_blend_speed_m_s, tun.ik_step_height_m, shift, tun.ik_swing_clearance_m)
+            axes = self._toe_axes_floats
+            if axes is None:
+                axes = self._toe_axes_floats = [tuple(a.tolist()) for a in self.toe_axes]
             solved = []
             for i, leg in enumerate(self.leg_chains):
                 target, toe = targets[i], toe_now[i]
@@ -535,13 +538,17 @@ class CharacterController(Controller):
                                       and abs(target[2] - toe[2]) <= 1e-6):
                     continue  # free and fully blended back: nothing to solve
                 ground = target[1] - tun.ik_foot_height_m if is_locked else None
-                solved.append((leg, solve_leg_floats(g_pl, g_rl, leg, target, tuple(self.toe_axes[i].tolist()),
-                                                     tun.ik_toe_length_m, ground)))
+                rots = solve_leg_floats(g_pl, g_rl, leg, target, axes[i], tun.ik_toe_length_m, ground)
+                for j, q in zip(leg, rots):
+                    g_rl[j] = q  # the other leg's solve reads none of these bones
+                solved.append(i)
             if solved:
-                for leg, rots in solved:
-                    for j, q in zip(leg, rots):
-                        g_rl[j] = q
-                changed = sorted(j for leg, _ in solved for j in leg)
+                key = tuple(solved)
+                found = self._subtrees.get(key)
+                if found is None:
+                    changed = sorted(j for i in solved for j in self.leg_chains[i])
+                    found = self._subtrees[key] = (changed, subtree_joints(parents, changed))
+                changed, joints = found
                 for j in changed:  # local = parent^-1 * global (qs.mul(qs.conj(parent), global))
                     aw, ax, ay, az = g_rl[parents[j]]
                     ax, ay, az = -ax, -ay, -az
@@ -549,10 +556,6 @@ class CharacterController(Controller):
                     rl[j] = (aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
                              aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw)
                 # only the legs changed: forward kinematics of their subtrees, not of the whole skeleton
-                key = tuple(changed)
-                joints = self._subtrees.get(key)
-                if joints is None:
-                    joints = self._subtrees[key] = subtree_joints(parents, changed)
                 forward_kinematics_update_lists(g_rl, g_pl, rl, pl, parents, joints)
         else:
             self.foot_lock = locks = FootLockState()
