@@ -39,6 +39,7 @@ from __future__ import annotations
 import copy
 import math
 import time
+import itertools
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -48,7 +49,7 @@ from lmm import quat_scalar as qs
 from lmm.data.derived import cached
 from lmm.controller import Candidates, Controller, DebugSnapshot, InputState, Pose
 from lmm.features import build_query
-from lmm.ik import FootLockState, foot_lock_update, local_rotations_from_global, solve_leg
+from lmm.ik import FootLockState, solve_leg_floats
 from lmm.inertialize import Offsets, inertialize_apply, inertialize_decay, inertialize_transition
 from lmm.springs import LN2, EPS
 from lmm.trajectory import (SimulationState, desired_rotation, desired_velocity, simulation_update,
@@ -107,20 +108,17 @@ def root_local_velocities(db):
     return both[:, :3], both[:, 3:]
 
 
-def forward_kinematics_pose(local_rot: np.ndarray, local_pos: np.ndarray, parents) -> tuple[np.ndarray, np.ndarray]:
-    """Global rotations (J, 4) and positions (J, 3) of one pose.
-
-    Plain Python floats: for one pose of ~20 bones this is several times faster than numpy calls on
-    tiny arrays (see :func:`lmm.quat.forward_kinematics` for frames in bulk).
-    """
-    rl = local_rot.tolist()
-    pl = local_pos.tolist()
-    n = len(rl)
+def forward_kinematics_lists(local_rot, local_pos, parents) -> tuple[list, list]:
+    """Global rotations and positions of one pose given as lists (per joint a 4- and a 3-sequence of
+    floats); returns two lists of tuples. Plain Python floats: for one pose of ~20 bones this is several
+    times faster than numpy calls on tiny arrays (see :func:`lmm.quat.forward_kinematics` for frames in
+    bulk)."""
+    n = len(local_rot)
     g = [None] * n
     p = [None] * n
     for j in range(n):
-        w, x, y, z = rl[j]
-        px, py, pz = pl[j]
+        w, x, y, z = local_rot[j]
+        px, py, pz = local_pos[j]
         pj = parents[j]
         if pj < 0:
             g[j] = (w, x, y, z)
@@ -135,6 +133,12 @@ def forward_kinematics_pose(local_rot: np.ndarray, local_pos: np.ndarray, parent
         qx, qy, qz = p[pj]
         p[j] = (qx + px + aw * tx + (ay * tz - az * ty), qy + py + aw * ty + (az * tx - ax * tz),
                 qz + pz + aw * tz + (ax * ty - ay * tx))
+    return g, p
+
+
+def forward_kinematics_pose(local_rot: np.ndarray, local_pos: np.ndarray, parents) -> tuple[np.ndarray, np.ndarray]:
+    """Global rotations (J, 4) and positions (J, 3) of one pose (:func:`forward_kinematics_lists` on arrays)."""
+    g, p = forward_kinematics_lists(local_rot.tolist(), local_pos.tolist(), parents)
     return np.array(g), np.array(p)
 
 
@@ -147,31 +151,37 @@ def subtree_joints(parents, joints) -> list[int]:
     return sorted(inside)
 
 
-def forward_kinematics_update(global_rot: np.ndarray, global_pos: np.ndarray, local_rot: np.ndarray,
-                              local_pos: np.ndarray, parents, joints) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`forward_kinematics_pose` recomputed only for ``joints`` (a topologically ordered list that
-    holds every descendant of each of its joints, see :func:`subtree_joints`); the other joints are taken
-    from ``global_rot``/``global_pos``. The same float operations per joint, so the result is bit for bit
-    the full pass's (after IK only the legs change: a few joints instead of the whole skeleton)."""
-    g = global_rot.tolist()
-    p = global_pos.tolist()
+def forward_kinematics_update_lists(global_rot: list, global_pos: list, local_rot, local_pos, parents,
+                                    joints) -> None:
+    """:func:`forward_kinematics_lists` recomputed in place only for ``joints`` (a topologically ordered list
+    that holds every descendant of each of its joints, see :func:`subtree_joints`); the other joints keep
+    their entries of ``global_rot``/``global_pos``. The same float operations per joint, so the result is
+    bit for bit the full pass's (after IK only the legs change: a few joints instead of the whole skeleton)."""
     for j in joints:
-        w, x, y, z = local_rot[j].tolist()
-        px, py, pz = local_pos[j].tolist()
+        w, x, y, z = local_rot[j]
+        px, py, pz = local_pos[j]
         pj = parents[j]
         if pj < 0:
-            g[j] = [w, x, y, z]
-            p[j] = [px, py, pz]
+            global_rot[j] = (w, x, y, z)
+            global_pos[j] = (px, py, pz)
             continue
-        aw, ax, ay, az = g[pj]
-        g[j] = [aw * w - ax * x - ay * y - az * z, aw * x + ax * w + ay * z - az * y,
-                aw * y - ax * z + ay * w + az * x, aw * z + ax * y - ay * x + az * w]
+        aw, ax, ay, az = global_rot[pj]
+        global_rot[j] = (aw * w - ax * x - ay * y - az * z, aw * x + ax * w + ay * z - az * y,
+                         aw * y - ax * z + ay * w + az * x, aw * z + ax * y - ay * x + az * w)
         tx = 2.0 * (ay * pz - az * py)
         ty = 2.0 * (az * px - ax * pz)
         tz = 2.0 * (ax * py - ay * px)
-        qx, qy, qz = p[pj]
-        p[j] = [qx + px + aw * tx + (ay * tz - az * ty), qy + py + aw * ty + (az * tx - ax * tz),
-                qz + pz + aw * tz + (ax * ty - ay * tx)]
+        qx, qy, qz = global_pos[pj]
+        global_pos[j] = (qx + px + aw * tx + (ay * tz - az * ty), qy + py + aw * ty + (az * tx - ax * tz),
+                         qz + pz + aw * tz + (ax * ty - ay * tx))
+
+
+def forward_kinematics_update(global_rot: np.ndarray, global_pos: np.ndarray, local_rot: np.ndarray,
+                              local_pos: np.ndarray, parents, joints) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`forward_kinematics_update_lists` on arrays: new (J, 4) and (J, 3) arrays."""
+    g = global_rot.tolist()
+    p = global_pos.tolist()
+    forward_kinematics_update_lists(g, p, local_rot.tolist(), local_pos.tolist(), parents, joints)
     return np.array(g), np.array(p)
 
 
@@ -240,6 +250,8 @@ class CharacterController(Controller):
     """The shared pipeline; subclasses implement the source hooks (see the module doc)."""
 
     name = "character"
+    _toe_axes_floats = None  # toe_axes as tuples (filled on first use)
+    _contact_height_span = (0, 0, 0.0)  # frames [lo, hi) of the last take looked up, its contact height
 
     def __init__(self, db, features, tuning: Tuning | None = None):
         self.db = db
@@ -265,7 +277,7 @@ class CharacterController(Controller):
             self.leg_chains.append((hip, knee, f, t))
             axis = db.positions[0, t].astype(np.float64)
             self.toe_axes.append(axis / max(_norm(axis), 1e-9))
-        self._subtrees: dict[tuple, list[int]] = {}  # changed joints -> their subtrees (leg-only FK)
+        self._subtrees: dict[tuple, tuple] = {}  # solved legs -> (their bones, their subtrees) for leg-only FK
         self.hips_bone = 1  # the child of the simulation bone; its height is the pose's height
         self._range_contact_height = range_contact_heights(db, self.toe_bones)
         self.reset()
@@ -420,46 +432,9 @@ class CharacterController(Controller):
         integrated = (self.root_position.copy(), self.root_rotation.copy())
         self._synchronize(root_vel_world, root_ang_world, dt)
 
-        # world pose, then foot locking
+        # world pose, then foot locking: forward kinematics, foot locks, leg IK
         t0 = time.perf_counter()
-        local_rot = rot.copy()
-        local_pos = pos.copy()
-        local_rot[0] = self.root_rotation
-        local_pos[0] = self.root_position
-        self._update_ground_offset(dt)
-        local_pos[self.hips_bone, 1] += self._ground_offset
-        g_rot, g_pos = forward_kinematics_pose(local_rot, local_pos, self.parents)
-        locked = np.zeros(2, dtype=bool)
-        toe_now = g_pos[self.toe_bones].copy()
-        if tun.ik_enabled:
-            toe_vel = np.zeros((2, 3)) if self._prev_toe is None or dt <= 0 else (toe_now - self._prev_toe) / dt
-            shift = self._root_shift(toe_now, *integrated) if tun.ik_counter_adjustment else None
-            self.foot_lock, targets = foot_lock_update(
-                self.foot_lock, toe_now, toe_vel, src.contacts, tun.ik_unlock_radius_m, tun.ik_blend_halflife_s,
-                tun.ik_foot_height_m, dt, tun.ik_lift_height_m, tun.ik_ground_blend_speed_m_s, tun.ik_step_height_m,
-                shift, tun.ik_swing_clearance_m)
-            locked = self.foot_lock.locked.copy()
-            new_global = {}
-            for i, chain in enumerate(self.leg_chains):
-                if not locked[i] and float(np.abs(targets[i] - toe_now[i]).max()) <= 1e-6:
-                    continue  # free and fully blended back: nothing to solve
-                ground = targets[i][1] - tun.ik_foot_height_m if locked[i] else None
-                new_global.update(solve_leg(g_pos, g_rot, chain, targets[i], self.toe_axes[i],
-                                            tun.ik_toe_length_m, ground))
-            if new_global:
-                changed = sorted(new_global)
-                for j in changed:
-                    g_rot[j] = new_global[j]
-                for j, q in local_rotations_from_global(g_rot, self.parents, changed).items():
-                    local_rot[j] = q
-                # only the legs changed: forward kinematics of their subtrees, not of the whole skeleton
-                joints = self._subtrees.get(tuple(changed))
-                if joints is None:
-                    joints = self._subtrees[tuple(changed)] = subtree_joints(self.parents, changed)
-                g_rot, g_pos = forward_kinematics_update(g_rot, g_pos, local_rot, local_pos, self.parents, joints)
-        else:
-            self.foot_lock = FootLockState()
-        self._prev_toe = toe_now
+        local_rot, local_pos, g_rot, g_pos, locked = self._world_pose(rot, pos, src.contacts, integrated, dt)
         timings["pose"] = (time.perf_counter() - t0) * 1e6
 
         # ghost: the source pose without offsets, placed at the character root; debug only, so its forward
@@ -521,11 +496,107 @@ class CharacterController(Controller):
             forced = True
         return forced
 
-    def _root_shift(self, toes, position, rotation) -> np.ndarray:
-        """How far adjustment and clamping moved each toe (2, 3) this tick: the toes as shown minus where
-        they would be with the root left at ``position``/``rotation`` (the integrated root)."""
-        local = quat.inv_mul_vec(self.root_rotation, toes - self.root_position)
-        return toes - (position + quat.mul_vec(rotation, local))
+    def _world_pose(self, rot, pos, contacts, integrated, dt):
+        """The shown local pose (``rot``/``pos``, bone 0 replaced by the character root) in world space,
+        with foot locking and leg IK: returns local rotations and positions, global rotations and
+        positions (float64 arrays) and the two feet's lock flags ((2,) bool).
+
+        One pose in plain floats (lists of tuples) through forward kinematics, the foot locks, the leg IK
+        and the legs' forward kinematics, numpy arrays built once at the end: numpy calls on 3- and
+        4-element arrays cost microseconds each. ``integrated`` = the root (position, rotation) before
+        adjustment and clamping (see :meth:`_root_shift`)."""
+        tun = self.tuning
+        rl = rot.tolist()
+        pl = pos.tolist()
+        rl[0] = self.root_rotation.tolist()
+        pl[0] = self.root_position.tolist()
+        self._update_ground_offset(dt)
+        pl[self.hips_bone][1] += self._ground_offset
+        parents = self.parents
+        g_rl, g_pl = forward_kinematics_lists(rl, pl, parents)
+        toe_now = [g_pl[t] for t in self.toe_bones]
+        locks = self.foot_lock
+        if tun.ik_enabled:
+            prev = self._prev_toe
+            if prev is None or dt <= 0:
+                toe_vel = [(0.0, 0.0, 0.0), (0.0, 0.0, 0.0)]
+            else:
+                toe_vel = [((a[0] - b[0]) / dt, (a[1] - b[1]) / dt, (a[2] - b[2]) / dt) for a, b in zip(toe_now, prev)]
+            shift = self._root_shift(toe_now, *integrated) if tun.ik_counter_adjustment else None
+            targets = locks.update(
+                toe_now, toe_vel, contacts.tolist() if isinstance(contacts, np.ndarray) else contacts,
+                tun.ik_unlock_radius_m, tun.ik_blend_halflife_s, tun.ik_foot_height_m, dt, tun.ik_lift_height_m,
+                tun.ik_ground_blend_speed_m_s, tun.ik_step_height_m, shift, tun.ik_swing_clearance_m)
+            axes = self._toe_axes_floats
+            if axes is None:
+                axes = self._toe_axes_floats = [tuple(a.tolist()) for a in self.toe_axes]
+            solved = []
+            for i, leg in enumerate(self.leg_chains):
+                target, toe = targets[i], toe_now[i]
+                is_locked = locks.is_locked(i)
+                if not is_locked and (abs(target[0] - toe[0]) <= 1e-6 and abs(target[1] - toe[1]) <= 1e-6
+                                      and abs(target[2] - toe[2]) <= 1e-6):
+                    continue  # free and fully blended back: nothing to solve
+                ground = target[1] - tun.ik_foot_height_m if is_locked else None
+                rots = solve_leg_floats(g_pl, g_rl, leg, target, axes[i], tun.ik_toe_length_m, ground)
+                for j, q in zip(leg, rots):
+                    g_rl[j] = q  # the other leg's solve reads none of these bones
+                solved.append(i)
+            if solved:
+                key = tuple(solved)
+                found = self._subtrees.get(key)
+                if found is None:
+                    changed = sorted(j for i in solved for j in self.leg_chains[i])
+                    found = self._subtrees[key] = (changed, subtree_joints(parents, changed))
+                changed, joints = found
+                for j in changed:  # local = parent^-1 * global (qs.mul(qs.conj(parent), global))
+                    aw, ax, ay, az = g_rl[parents[j]]
+                    ax, ay, az = -ax, -ay, -az
+                    bw, bx, by, bz = g_rl[j]
+                    rl[j] = (aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
+                             aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw)
+                # only the legs changed: forward kinematics of their subtrees, not of the whole skeleton
+                forward_kinematics_update_lists(g_rl, g_pl, rl, pl, parents, joints)
+        else:
+            self.foot_lock = locks = FootLockState()
+        locked = np.array([locks.is_locked(0), locks.is_locked(1)])
+        self._prev_toe = toe_now
+        n = len(g_rl)
+        local_rot = np.fromiter(itertools.chain.from_iterable(rl), np.float64, 4 * n).reshape(n, 4)
+        local_pos = pos.copy()
+        local_pos[0] = pl[0]
+        local_pos[self.hips_bone, 1] = pl[self.hips_bone][1]
+        g_rot = np.fromiter(itertools.chain.from_iterable(g_rl), np.float64, 4 * n).reshape(n, 4)
+        g_pos = np.fromiter(itertools.chain.from_iterable(g_pl), np.float64, 3 * n).reshape(n, 3)
+        return local_rot, local_pos, g_rot, g_pos, locked
+
+    def _root_shift(self, toes, position, rotation) -> list:
+        """How far adjustment and clamping moved each toe this tick (two 3-tuples; ``toes`` two 3-tuples):
+        the toes as shown minus where they would be with the root left at ``position``/``rotation`` (the
+        integrated root). Plain floats, the operations of ``toes - (position + quat.mul_vec(rotation,
+        quat.inv_mul_vec(self.root_rotation, toes - self.root_position)))``."""
+        px, py, pz = self.root_position.tolist()
+        rw, rx, ry, rz = self.root_rotation.tolist()
+        ox, oy, oz = position.tolist() if isinstance(position, np.ndarray) else position
+        w, x, y, z = rotation.tolist() if isinstance(rotation, np.ndarray) else rotation
+        out = []
+        for t in toes:
+            # local = inv_mul_vec(root rotation, toe - root position), as qs.inv_mul_vec
+            v0, v1, v2 = t[0] - px, t[1] - py, t[2] - pz
+            t0 = 2.0 * (-ry * v2 - -rz * v1)
+            t1 = 2.0 * (-rz * v0 - -rx * v2)
+            t2 = 2.0 * (-rx * v1 - -ry * v0)
+            l0 = v0 + rw * t0 + (-ry * t2 - -rz * t1)
+            l1 = v1 + rw * t1 + (-rz * t0 - -rx * t2)
+            l2 = v2 + rw * t2 + (-rx * t1 - -ry * t0)
+            # back = mul_vec(rotation, local), as qs.mul_vec
+            t0 = 2.0 * (y * l2 - z * l1)
+            t1 = 2.0 * (z * l0 - x * l2)
+            t2 = 2.0 * (x * l1 - y * l0)
+            out.append((t[0] - (ox + (l0 + w * t0 + (y * t2 - z * t1))),
+                        t[1] - (oy + (l1 + w * t1 + (z * t0 - x * t2))),
+                        t[2] - (oz + (l2 + w * t2 + (x * t1 - y * t0)))))
+        return out
 
     def _ground_offset_target(self) -> float:
         """The height shift (m) that puts the playing take's planted toes at ``ik_foot_height_m`` (0 when
@@ -535,7 +606,15 @@ class CharacterController(Controller):
         frame = self._source_frame()
         if frame < 0 or frame >= len(self.db.contacts):
             return 0.0
-        h = float(self._range_contact_height[int(self.db.range_index(frame))])
+        lo, hi, h = self._contact_height_span
+        if not lo <= frame < hi:
+            # the source plays through a take frame by frame: look the take up when the frame leaves it
+            r = int(self.db.range_index(frame))
+            stops = self.db.range_stops
+            lo = int(stops[r - 1]) if r > 0 else 0  # range_index gives r for stops[r-1] <= frame < stops[r]
+            hi = int(stops[r])
+            h = float(self._range_contact_height[r])
+            self._contact_height_span = (lo, hi, h)
         return self.tuning.ik_foot_height_m - h if math.isfinite(h) else 0.0
 
     def _update_ground_offset(self, dt: float) -> None:

@@ -9,12 +9,13 @@ nothing pops and nothing skates (see :func:`foot_lock_update`). Locked toes are 
 height above the ground, and the toe is bent up if the tip of the foot (toe length ahead of the toe
 joint) would go below the ground.
 
-Everything here is numpy over one pose; the controller calls :func:`foot_lock_update` and
-:func:`solve_leg` once per foot per tick.
+One pose's worth of 3-vectors and quaternions is done in plain Python floats (tuples): several
+times faster than numpy calls on tiny arrays. The controller calls :meth:`FootLockState.update` and
+:func:`solve_leg_floats` once per tick on a pose kept as lists of tuples; :func:`foot_lock_update`,
+:func:`solve_leg`, :func:`two_bone_ik` and :func:`toe_clear_ground` are the same maths with numpy
+arrays in and out.
 """
 from __future__ import annotations
-
-from dataclasses import dataclass, field
 
 import math
 
@@ -78,6 +79,95 @@ def _qnormalize(q):
     return (q[0] / n, q[1] / n, q[2] / n, q[3] / n)
 
 
+def two_bone_ik_floats(a, b, c, t, hip_rot, knee_rot, eps: float = 1e-4):
+    """:func:`two_bone_ik` on tuples of floats (positions 3-tuples, rotations 4-tuples); returns two 4-tuples.
+
+    Written out (no helper per 3-vector), with the float operations of the helper form in the same order
+    (tests/test_ik.py keeps that form as the reference): ``a - b`` is exactly ``-(b - a)``, so the knee's
+    angle reuses the thigh and shin directions."""
+    a0, a1, a2 = a
+    b0, b1, b2 = b
+    c0, c1, c2 = c
+    ab0, ab1, ab2 = b0 - a0, b1 - a1, b2 - a2
+    cb0, cb1, cb2 = b0 - c0, b1 - c1, b2 - c2
+    ac0, ac1, ac2 = c0 - a0, c1 - a1, c2 - a2
+    at0, at1, at2 = t[0] - a0, t[1] - a1, t[2] - a2
+    l_ab = math.sqrt(ab0 * ab0 + ab1 * ab1 + ab2 * ab2)
+    l_cb = math.sqrt(cb0 * cb0 + cb1 * cb1 + cb2 * cb2)
+    n_at = math.sqrt(at0 * at0 + at1 * at1 + at2 * at2)
+    n_ac = math.sqrt(ac0 * ac0 + ac1 * ac1 + ac2 * ac2)
+    l_at = min(max(n_at, eps), l_ab + l_cb - eps)
+
+    # unit vectors (_unit: (1, 0, 0) for a null vector) and the angles between them (_angle_between,
+    # the cosine clamped to [-1, 1] as _clamp1 does)
+    if l_ab > 1e-9:
+        uab0, uab1, uab2 = ab0 / l_ab, ab1 / l_ab, ab2 / l_ab
+    else:
+        uab0, uab1, uab2 = 1.0, 0.0, 0.0
+    if n_ac > 1e-9:
+        uac0, uac1, uac2 = ac0 / n_ac, ac1 / n_ac, ac2 / n_ac
+    else:
+        uac0, uac1, uac2 = 1.0, 0.0, 0.0
+    if n_at > 1e-9:
+        uat0, uat1, uat2 = at0 / n_at, at1 / n_at, at2 / n_at
+    else:
+        uat0, uat1, uat2 = 1.0, 0.0, 0.0
+    d = uac0 * uab0 + uac1 * uab1 + uac2 * uab2
+    ac_ab_0 = math.acos(-1.0 if d < -1.0 else 1.0 if d > 1.0 else d)
+    if l_ab > 1e-9 and l_cb > 1e-9:  # unit(a - b) . unit(c - b) = (-u_ab) . (-u_cb), bit for bit
+        d = uab0 * (cb0 / l_cb) + uab1 * (cb1 / l_cb) + uab2 * (cb2 / l_cb)
+        ba_bc_0 = math.acos(-1.0 if d < -1.0 else 1.0 if d > 1.0 else d)
+    else:
+        ba_bc_0 = _angle_between(_sub(a, b), _sub(c, b))
+    d = uac0 * uat0 + uac1 * uat1 + uac2 * uat2
+    ac_at_0 = math.acos(-1.0 if d < -1.0 else 1.0 if d > 1.0 else d)
+    d = (l_cb * l_cb - l_ab * l_ab - l_at * l_at) / (-2.0 * l_ab * l_at)
+    ac_ab_1 = math.acos(-1.0 if d < -1.0 else 1.0 if d > 1.0 else d)
+    d = (l_at * l_at - l_ab * l_ab - l_cb * l_cb) / (-2.0 * l_ab * l_cb)
+    ba_bc_1 = math.acos(-1.0 if d < -1.0 else 1.0 if d > 1.0 else d)
+
+    # bend axis: ac x ab (a straight leg bends about the knee's own Z axis)
+    x, y, z = ac1 * ab2 - ac2 * ab1, ac2 * ab0 - ac0 * ab2, ac0 * ab1 - ac1 * ab0
+    n = math.sqrt(x * x + y * y + z * z)
+    if n < 1e-9:
+        x, y, z = _qrot(knee_rot, (0.0, 0.0, 1.0))
+        n = math.sqrt(x * x + y * y + z * z)
+    bend = (x / n, y / n, z / n) if n > 1e-9 else (1.0, 0.0, 0.0)
+    # turn axis: ac x at
+    x, y, z = ac1 * at2 - ac2 * at1, ac2 * at0 - ac0 * at2, ac0 * at1 - ac1 * at0
+    n = math.sqrt(x * x + y * y + z * z)
+    turn = (x / n, y / n, z / n) if n > 1e-9 else bend
+
+    # r0, r1 about the bend axis, r2 about the turn axis (_axis_angle); hip = r2 r0 hip_rot,
+    # knee = r2 r0 r1 knee_rot (_qmul), both normalised (_qnormalize)
+    bx, by, bz = bend
+    h = (ac_ab_1 - ac_ab_0) * 0.5
+    sn = math.sin(h)
+    r0w, r0x, r0y, r0z = math.cos(h), bx * sn, by * sn, bz * sn
+    h = (ba_bc_1 - ba_bc_0) * 0.5
+    sn = math.sin(h)
+    r1w, r1x, r1y, r1z = math.cos(h), bx * sn, by * sn, bz * sn
+    h = ac_at_0 * 0.5
+    sn = math.sin(h)
+    r2w, r2x, r2y, r2z = math.cos(h), turn[0] * sn, turn[1] * sn, turn[2] * sn
+
+    bw, bx, by, bz = hip_rot
+    mw, mx, my, mz = (r0w * bw - r0x * bx - r0y * by - r0z * bz, r0w * bx + r0x * bw + r0y * bz - r0z * by,
+                      r0w * by - r0x * bz + r0y * bw + r0z * bx, r0w * bz + r0x * by - r0y * bx + r0z * bw)
+    hw, hx, hy, hz = (r2w * mw - r2x * mx - r2y * my - r2z * mz, r2w * mx + r2x * mw + r2y * mz - r2z * my,
+                      r2w * my - r2x * mz + r2y * mw + r2z * mx, r2w * mz + r2x * my - r2y * mx + r2z * mw)
+    bw, bx, by, bz = knee_rot
+    mw, mx, my, mz = (r1w * bw - r1x * bx - r1y * by - r1z * bz, r1w * bx + r1x * bw + r1y * bz - r1z * by,
+                      r1w * by - r1x * bz + r1y * bw + r1z * bx, r1w * bz + r1x * by - r1y * bx + r1z * bw)
+    mw, mx, my, mz = (r0w * mw - r0x * mx - r0y * my - r0z * mz, r0w * mx + r0x * mw + r0y * mz - r0z * my,
+                      r0w * my - r0x * mz + r0y * mw + r0z * mx, r0w * mz + r0x * my - r0y * mx + r0z * mw)
+    kw, kx, ky, kz = (r2w * mw - r2x * mx - r2y * my - r2z * mz, r2w * mx + r2x * mw + r2y * mz - r2z * my,
+                      r2w * my - r2x * mz + r2y * mw + r2z * mx, r2w * mz + r2x * my - r2y * mx + r2z * mw)
+    n = math.sqrt(hw * hw + hx * hx + hy * hy + hz * hz)
+    m = math.sqrt(kw * kw + kx * kx + ky * ky + kz * kz)
+    return (hw / n, hx / n, hy / n, hz / n), (kw / m, kx / m, ky / m, kz / m)
+
+
 def two_bone_ik(hip_pos, knee_pos, ankle_pos, target, hip_rot, knee_rot, eps: float = 1e-4):
     """Global rotations (hip, knee) that bring the ankle onto ``target`` (or as close as the leg reaches).
 
@@ -86,52 +176,147 @@ def two_bone_ik(hip_pos, knee_pos, ankle_pos, target, hip_rot, knee_rot, eps: fl
     plane is kept (no twist); a straight leg bends in the plane of its knee's local Z axis.
     Returns two (4,) arrays.
     """
-    a, b, c, t = (tuple(float(v) for v in x) for x in (hip_pos, knee_pos, ankle_pos, target))
-    hip_rot = tuple(float(v) for v in hip_rot)
-    knee_rot = tuple(float(v) for v in knee_rot)
-    ab, cb, ac, at = _sub(b, a), _sub(b, c), _sub(c, a), _sub(t, a)
-    l_ab, l_cb = _norm(ab), _norm(cb)
-    l_at = min(max(_norm(at), eps), l_ab + l_cb - eps)
-
-    ac_ab_0 = _angle_between(ac, ab)
-    ba_bc_0 = _angle_between(_sub(a, b), _sub(c, b))
-    ac_at_0 = _angle_between(ac, at)
-    ac_ab_1 = math.acos(_clamp1((l_cb * l_cb - l_ab * l_ab - l_at * l_at) / (-2.0 * l_ab * l_at)))
-    ba_bc_1 = math.acos(_clamp1((l_at * l_at - l_ab * l_ab - l_cb * l_cb) / (-2.0 * l_ab * l_cb)))
-
-    bend_axis = _cross(ac, ab)
-    if _norm(bend_axis) < 1e-9:  # straight leg: bend about the knee's own Z axis
-        bend_axis = _qrot(knee_rot, (0.0, 0.0, 1.0))
-    bend_axis = _unit(bend_axis)
-    turn_axis = _unit(_cross(ac, at), fallback=bend_axis)
-
-    r0 = _axis_angle(bend_axis, ac_ab_1 - ac_ab_0)
-    r1 = _axis_angle(bend_axis, ba_bc_1 - ba_bc_0)
-    r2 = _axis_angle(turn_axis, ac_at_0)
-    hip_new = _qmul(r2, _qmul(r0, hip_rot))
-    knee_new = _qmul(r2, _qmul(r0, _qmul(r1, knee_rot)))
-    return np.array(_qnormalize(hip_new)), np.array(_qnormalize(knee_new))
+    hip, knee = two_bone_ik_floats(*(_floats(x) for x in (hip_pos, knee_pos, ankle_pos, target, hip_rot, knee_rot)),
+                                   eps=eps)
+    return np.array(hip), np.array(knee)
 
 
-@dataclass
+def _floats(x) -> tuple:
+    """A small vector (numpy array or sequence) as a tuple of Python floats."""
+    return tuple(x.tolist()) if isinstance(x, np.ndarray) else tuple(float(v) for v in x)
+
+
 class FootLockState:
     """Per foot (left, right): lock flag and position, the lowest height of the animated toe while locked,
     the offset (target minus animated toe) that blends out after an unlock and its velocity, and whether
     the foot was released by the unlock radius during the current contact (it is not locked again before
-    that contact ends)."""
-    locked: np.ndarray = field(default_factory=lambda: np.zeros(2, dtype=bool))
-    lock_position: np.ndarray = field(default_factory=lambda: np.zeros((2, 3)))
-    offset_position: np.ndarray = field(default_factory=lambda: np.zeros((2, 3)))
-    offset_velocity: np.ndarray = field(default_factory=lambda: np.zeros((2, 3)))
-    released: np.ndarray = field(default_factory=lambda: np.zeros(2, dtype=bool))  # unlocked by distance
-    previous_target: np.ndarray | None = None
-    lowest_animated: np.ndarray = field(default_factory=lambda: np.zeros(2))
+    that contact ends).
+
+    Mutable and kept in plain floats (the controller advances it in place once per tick, see
+    :meth:`update`); the fields read as numpy arrays (``locked`` (2,) bool, ``lock_position`` (2, 3), ...).
+    """
+    __slots__ = ("_locked", "_released", "_lowest", "_lock", "_off", "_off_v", "_previous")
+
+    def __init__(self):
+        self._locked = [False, False]
+        self._released = [False, False]  # unlocked by distance during the current contact
+        self._lowest = [0.0, 0.0]
+        self._lock = [(0.0, 0.0, 0.0), (0.0, 0.0, 0.0)]
+        self._off = [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]
+        self._off_v = [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]
+        self._previous = None  # the last targets, 2 tuples
 
     def copy(self) -> "FootLockState":
-        return FootLockState(self.locked.copy(), self.lock_position.copy(), self.offset_position.copy(),
-                             self.offset_velocity.copy(), self.released.copy(),
-                             None if self.previous_target is None else self.previous_target.copy(),
-                             self.lowest_animated.copy())
+        s = FootLockState()
+        s._locked, s._released, s._lowest = list(self._locked), list(self._released), list(self._lowest)
+        s._lock = list(self._lock)
+        s._off = [list(o) for o in self._off]
+        s._off_v = [list(v) for v in self._off_v]
+        s._previous = None if self._previous is None else list(self._previous)
+        return s
+
+    @property
+    def locked(self) -> np.ndarray:
+        return np.array(self._locked, dtype=bool)
+
+    @property
+    def released(self) -> np.ndarray:
+        return np.array(self._released, dtype=bool)
+
+    @property
+    def lock_position(self) -> np.ndarray:
+        return np.array(self._lock, dtype=np.float64)
+
+    @property
+    def offset_position(self) -> np.ndarray:
+        return np.array(self._off, dtype=np.float64)
+
+    @property
+    def offset_velocity(self) -> np.ndarray:
+        return np.array(self._off_v, dtype=np.float64)
+
+    @property
+    def lowest_animated(self) -> np.ndarray:
+        return np.array(self._lowest, dtype=np.float64)
+
+    @property
+    def previous_target(self) -> np.ndarray | None:
+        return None if self._previous is None else np.array(self._previous, dtype=np.float64)
+
+    def is_locked(self, i: int) -> bool:
+        return self._locked[i]
+
+    def update(self, anim, vel, contacts, unlock_radius: float, blend_halflife: float, foot_height: float,
+               dt: float, lift_height: float = 0.02, ground_blend_speed: float = 0.1, step_height: float = 0.04,
+               root_shift=None, swing_clearance: float = 0.0) -> list:
+        """:func:`foot_lock_update` in place, on plain floats: ``anim``/``vel`` two 3-tuples each,
+        ``contacts`` two bools, ``root_shift`` None or two 3-sequences. Returns the two targets (3-tuples)."""
+        locked, released, lowest, lock = self._locked, self._released, self._lowest, self._lock
+        off, off_v = self._off, self._off_v
+        y = 2.0 * math.log(2.0) / (blend_halflife + 1e-5)  # halflife_to_damping / 2
+        e = math.exp(-y * dt)
+        targets = []
+        for i in range(2):
+            a, c = anim[i], contacts[i]
+            if not c:
+                released[i] = False
+            elif released[i] and (off_v[i][1] < 0.0 and off[i][1] < 0.25 * step_height if step_height > 0.0
+                                  else abs(off[i][0]) + abs(off[i][1]) + abs(off[i][2]) < 0.01):
+                released[i] = False  # the step after a last-resort release has come down: lock again
+            if locked[i]:
+                lx, ly, lz = lock[i]
+                lowest[i] = min(lowest[i], a[1])
+                far = math.hypot(a[0] - lx, a[2] - lz) > unlock_radius
+                if far or (not c and a[1] > lowest[i] + lift_height):
+                    # release: the offset carries the target from the lock (at rest) back to the animation
+                    locked[i] = False
+                    released[i] = c
+                    off[i] = [lx - a[0], ly - a[1], lz - a[2]]
+                    off_v[i] = [-vel[i][0], -vel[i][1], -vel[i][2]]
+                    if far and step_height > 0.0:
+                        # an upward kick whose critically damped arc peaks at about step_height: x(t) = V t e^-yt
+                        off_v[i][1] += step_height * y * math.e
+                    targets.append(lock[i])  # this tick the foot is still where it was locked
+                    continue
+            elif c and not released[i]:
+                # a contact (it began, or a transition brought one): lock where the toe is shown now
+                shown = (a[0] + off[i][0], max(a[1] + off[i][1], foot_height), a[2] + off[i][2])
+                locked[i] = True
+                lock[i] = shown
+                lowest[i] = a[1]
+                off[i] = [0.0, 0.0, 0.0]
+                off_v[i] = [0.0, 0.0, 0.0]
+            if locked[i]:
+                targets.append(lock[i])
+                continue
+            if root_shift is not None and a[1] + off[i][1] < lock[i][1] + lift_height:
+                # the root was pulled towards the simulation object: a foot near the ground stays put
+                cx, cz = off[i][0] - float(root_shift[i][0]), off[i][2] - float(root_shift[i][2])
+                n = math.hypot(cx, cz)
+                if n > unlock_radius:
+                    cx, cz = (cx * unlock_radius / n, cz * unlock_radius / n) if n > 0.0 else (0.0, 0.0)
+                off[i][0], off[i][2] = cx, cz
+            ox, oy, oz = off[i]
+            vx, vy, vz = off_v[i]
+            nx, vx = _decay(ox, vx, y, e, dt)
+            ny, vy = _decay(oy, vy, y, e, dt)
+            nz, vz = _decay(oz, vz, y, e, dt)
+            if a[1] + ny < lock[i][1] + lift_height and dt > 0.0:
+                # near the ground: the blend may not glide the foot faster than ground_blend_speed
+                step = math.hypot(nx - ox, nz - oz)
+                cap = ground_blend_speed * dt
+                if step > cap:
+                    k = cap / step
+                    nx, nz = ox + (nx - ox) * k, oz + (nz - oz) * k
+                    vx, vz = (nx - ox) / dt, (nz - oz) / dt
+            off[i] = [nx, ny, nz]
+            off_v[i] = [vx, vy, vz]
+            ty = a[1] + ny
+            if swing_clearance > 0.0:
+                ty = soft_floor(ty, swing_floor(math.hypot(vel[i][0], vel[i][2]), foot_height, swing_clearance))
+            targets.append((a[0] + nx, ty, a[2] + nz))
+        self._previous = targets
+        return targets
 
 
 def _decay(x: float, v: float, y: float, e: float, dt: float) -> tuple[float, float]:
@@ -167,7 +352,8 @@ def foot_lock_update(state: FootLockState, toe_positions, toe_velocities, contac
                      blend_halflife: float, foot_height: float, dt: float, lift_height: float = 0.02,
                      ground_blend_speed: float = 0.1, step_height: float = 0.04,
                      root_shift=None, swing_clearance: float = 0.0) -> tuple[FootLockState, np.ndarray]:
-    """Advance the locks one tick. Returns the new state and the toe targets (2, 3), world space.
+    """Advance the locks one tick. Returns the new state (``state`` is left as it was) and the toe
+    targets (2, 3), world space. (The controller calls :meth:`FootLockState.update` in place instead.)
 
     The rule, per foot:
 
@@ -193,95 +379,56 @@ def foot_lock_update(state: FootLockState, toe_positions, toe_velocities, contac
     anim = [tuple(float(v) for v in p) for p in np.asarray(toe_positions, dtype=np.float64)]
     vel = [tuple(float(v) for v in p) for p in np.asarray(toe_velocities, dtype=np.float64)]
     contacts = [bool(c) for c in np.asarray(contacts, dtype=bool)]
-    locked = [bool(v) for v in state.locked]
-    released = [bool(v) for v in state.released]
-    lowest = [float(v) for v in state.lowest_animated]
-    lock = [tuple(float(v) for v in p) for p in state.lock_position]
-    off = [list(float(v) for v in p) for p in state.offset_position]
-    off_v = [list(float(v) for v in p) for p in state.offset_velocity]
-    y = 2.0 * math.log(2.0) / (blend_halflife + 1e-5)  # halflife_to_damping / 2
-    e = math.exp(-y * dt)
-    targets = []
-    for i in range(2):
-        a, c = anim[i], contacts[i]
-        if not c:
-            released[i] = False
-        elif released[i] and (off_v[i][1] < 0.0 and off[i][1] < 0.25 * step_height if step_height > 0.0
-                              else abs(off[i][0]) + abs(off[i][1]) + abs(off[i][2]) < 0.01):
-            released[i] = False  # the step after a last-resort release has come down: lock again
-        if locked[i]:
-            lx, ly, lz = lock[i]
-            lowest[i] = min(lowest[i], a[1])
-            far = math.hypot(a[0] - lx, a[2] - lz) > unlock_radius
-            if far or (not c and a[1] > lowest[i] + lift_height):
-                # release: the offset carries the target from the lock (at rest) back to the animation
-                locked[i] = False
-                released[i] = c
-                off[i] = [lx - a[0], ly - a[1], lz - a[2]]
-                off_v[i] = [-vel[i][0], -vel[i][1], -vel[i][2]]
-                if far and step_height > 0.0:
-                    # an upward kick whose critically damped arc peaks at about step_height: x(t) = V t e^-yt
-                    off_v[i][1] += step_height * y * math.e
-                targets.append(lock[i])  # this tick the foot is still where it was locked
-                continue
-        elif c and not released[i]:
-            # a contact (it began, or a transition brought one): lock where the toe is shown now
-            shown = (a[0] + off[i][0], max(a[1] + off[i][1], foot_height), a[2] + off[i][2])
-            locked[i] = True
-            lock[i] = shown
-            lowest[i] = a[1]
-            off[i] = [0.0, 0.0, 0.0]
-            off_v[i] = [0.0, 0.0, 0.0]
-        if locked[i]:
-            targets.append(lock[i])
-            continue
-        if root_shift is not None and a[1] + off[i][1] < lock[i][1] + lift_height:
-            # the root was pulled towards the simulation object: a foot near the ground stays put
-            cx, cz = off[i][0] - float(root_shift[i][0]), off[i][2] - float(root_shift[i][2])
-            n = math.hypot(cx, cz)
-            if n > unlock_radius:
-                cx, cz = (cx * unlock_radius / n, cz * unlock_radius / n) if n > 0.0 else (0.0, 0.0)
-            off[i][0], off[i][2] = cx, cz
-        ox, oy, oz = off[i]
-        vx, vy, vz = off_v[i]
-        nx, vx = _decay(ox, vx, y, e, dt)
-        ny, vy = _decay(oy, vy, y, e, dt)
-        nz, vz = _decay(oz, vz, y, e, dt)
-        if a[1] + ny < lock[i][1] + lift_height and dt > 0.0:
-            # near the ground: the blend may not glide the foot faster than ground_blend_speed
-            step = math.hypot(nx - ox, nz - oz)
-            cap = ground_blend_speed * dt
-            if step > cap:
-                k = cap / step
-                nx, nz = ox + (nx - ox) * k, oz + (nz - oz) * k
-                vx, vz = (nx - ox) / dt, (nz - oz) / dt
-        off[i] = [nx, ny, nz]
-        off_v[i] = [vx, vy, vz]
-        ty = a[1] + ny
-        if swing_clearance > 0.0:
-            ty = soft_floor(ty, swing_floor(math.hypot(vel[i][0], vel[i][2]), foot_height, swing_clearance))
-        targets.append((a[0] + nx, ty, a[2] + nz))
-    t = np.array(targets)
-    s = FootLockState(np.array(locked), np.array(lock, dtype=np.float64), np.array(off, dtype=np.float64),
-                      np.array(off_v, dtype=np.float64), np.array(released), t.copy(), np.array(lowest))
-    return s, t
+    if root_shift is not None:
+        root_shift = np.asarray(root_shift, dtype=np.float64).tolist()
+    s = state.copy()
+    targets = s.update(anim, vel, contacts, unlock_radius, blend_halflife, foot_height, dt, lift_height,
+                       ground_blend_speed, step_height, root_shift, swing_clearance)
+    return s, np.array(targets)
+
+
+def toe_clear_ground_floats(toe_y: float, q, toe_axis_local, toe_length: float, ground_height: float):
+    """:func:`toe_clear_ground` on floats (``q`` a 4-tuple, the axis a 3-tuple); None when the toe is left
+    as it is."""
+    if toe_length <= 0.0:
+        return None
+    d = _unit(_qrot(q, toe_axis_local))
+    if toe_y + toe_length * d[1] >= ground_height:
+        return None
+    want = _clamp1((ground_height - toe_y) / toe_length)
+    angle = math.asin(want) - math.asin(_clamp1(d[1]))
+    axis = _cross(d, (0.0, 1.0, 0.0))
+    if _norm(axis) < 1e-9:
+        return None
+    return _qnormalize(_qmul(_axis_angle(_unit(axis), angle), q))
 
 
 def toe_clear_ground(toe_pos, toe_rot, toe_axis_local, toe_length: float, ground_height: float):
     """The toe's global rotation bent up (about the horizontal axis across the foot) so the tip of the
     foot, ``toe_length`` along ``toe_axis_local`` from the toe joint, is not below ``ground_height``."""
-    if toe_length <= 0.0:
-        return toe_rot
-    q = tuple(float(v) for v in toe_rot)
-    d = _unit(_qrot(q, tuple(float(v) for v in toe_axis_local)))
-    if float(toe_pos[1]) + toe_length * d[1] >= ground_height:
-        return toe_rot
-    want = _clamp1((ground_height - float(toe_pos[1])) / toe_length)
-    angle = math.asin(want) - math.asin(_clamp1(d[1]))
-    axis = _cross(d, (0.0, 1.0, 0.0))
-    if _norm(axis) < 1e-9:
-        return toe_rot
-    return np.array(_qnormalize(_qmul(_axis_angle(_unit(axis), angle), q)))
+    new = toe_clear_ground_floats(float(toe_pos[1]), _floats(toe_rot), _floats(toe_axis_local), toe_length,
+                                  ground_height)
+    return toe_rot if new is None else np.array(new)
+
+
+def solve_leg_floats(global_pos, global_rot, chain, toe_target, toe_axis_local, toe_length: float,
+                     ground_height: float | None) -> tuple:
+    """:func:`solve_leg` on one pose kept as lists of tuples of floats (``global_pos[j]`` a 3-tuple,
+    ``global_rot[j]`` a 4-tuple, target and axis 3-tuples). Returns the new global rotations of (hip, knee,
+    foot, toe), 4-tuples in the order of ``chain`` (the foot's is its own, unchanged)."""
+    hip, knee, foot, toe = chain
+    tp, fp = global_pos[toe], global_pos[foot]
+    # toe_target - (toe - foot), as the numpy form computes it
+    ankle_target = (toe_target[0] - (tp[0] - fp[0]), toe_target[1] - (tp[1] - fp[1]),
+                    toe_target[2] - (tp[2] - fp[2]))
+    hip_rot, knee_rot = two_bone_ik_floats(global_pos[hip], global_pos[knee], fp, ankle_target,
+                                           global_rot[hip], global_rot[knee])
+    toe_rot = global_rot[toe]
+    if ground_height is not None:
+        bent = toe_clear_ground_floats(toe_target[1], toe_rot, toe_axis_local, toe_length, ground_height)
+        if bent is not None:
+            toe_rot = bent
+    return hip_rot, knee_rot, global_rot[foot], toe_rot
 
 
 def solve_leg(global_pos, global_rot, chain, toe_target, toe_axis_local, toe_length: float,
@@ -290,25 +437,22 @@ def solve_leg(global_pos, global_rot, chain, toe_target, toe_axis_local, toe_len
 
     ``chain`` = (hip, knee, foot, toe) bone indices. The foot keeps its global rotation (so the toe's
     offset from the ankle is unchanged); the ankle's target is the toe target minus that offset.
-    Returns a dict bone -> new global rotation.
+    Returns a dict bone -> new global rotation ((4,) arrays).
     """
-    hip, knee, foot, toe = chain
-    ankle_target = toe_target - (global_pos[toe] - global_pos[foot])
-    hip_rot, knee_rot = two_bone_ik(global_pos[hip], global_pos[knee], global_pos[foot], ankle_target,
-                                    global_rot[hip], global_rot[knee])
-    out = {hip: hip_rot, knee: knee_rot, foot: global_rot[foot]}
-    toe_rot = global_rot[toe]
-    if ground_height is not None:
-        toe_rot = toe_clear_ground(toe_target, toe_rot, toe_axis_local, toe_length, ground_height)
-    out[toe] = toe_rot
-    return out
+    pos = {j: _floats(global_pos[j]) for j in chain}
+    rot = {j: _floats(global_rot[j]) for j in chain}
+    out = solve_leg_floats(pos, rot, chain, _floats(toe_target), _floats(toe_axis_local), toe_length,
+                           None if ground_height is None else float(ground_height))
+    return {j: np.array(q) for j, q in zip(chain, out)}
+
+
+def local_rotation_from_global(parent_global, global_rot) -> tuple:
+    """parent^-1 * global on 4-tuples (one bone)."""
+    pw, px, py, pz = parent_global
+    return _qmul((pw, -px, -py, -pz), global_rot)
 
 
 def local_rotations_from_global(global_rot, parents, bones) -> dict:
     """Local rotations (parent^-1 * global) of the given bones of one pose, as (4,) arrays."""
-    out = {}
-    for j in bones:
-        pw, px, py, pz = (float(v) for v in global_rot[parents[j]])
-        out[j] = np.array(_qmul((pw, -px, -py, -pz), tuple(float(v) for v in global_rot[j])))
-    return out
-
+    return {j: np.array(local_rotation_from_global(_floats(global_rot[parents[j]]), _floats(global_rot[j])))
+            for j in bones}

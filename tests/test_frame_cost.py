@@ -84,3 +84,46 @@ def test_one_rotation_spring_is_bit_identical_to_the_vectorised_form():
             want_q, want_w = _spring_damper_exact_quat_arrays(q, w, goal, halflife, dt)
             assert got_q.shape == want_q.shape and np.array_equal(got_q, want_q)
             assert got_w.shape == want_w.shape and np.array_equal(got_w, want_w)
+
+
+def test_root_shift_in_floats_is_bit_identical_to_the_numpy_form(db, features):
+    c = MotionMatchingController(db, features)
+    rng = np.random.default_rng(9)
+    for _ in range(200):
+        c.root_position = rng.normal(size=3)
+        c.root_rotation = quat.normalize(rng.normal(size=4))
+        position, rotation = rng.normal(size=3), quat.normalize(rng.normal(size=4))
+        toes = rng.normal(size=(2, 3))
+        want = toes - (position + quat.mul_vec(rotation, quat.inv_mul_vec(c.root_rotation, toes - c.root_position)))
+        got = np.array(c._root_shift([tuple(t) for t in toes.tolist()], position, rotation))
+        assert np.array_equal(got, want)
+
+
+def test_ground_offset_target_follows_the_take_of_the_source_frame(db, features):
+    """The take's contact height is looked up once per take: the target for every frame, in order and
+    jumping around, equals the direct lookup."""
+    c = MotionMatchingController(db, features)
+    c.tuning.ik_ground_calibration = True
+    frames = list(range(0, len(db.contacts), 7)) + list(np.random.default_rng(1).integers(0, len(db.contacts), 300))
+    heights = c._range_contact_height
+    for f in frames:
+        c.frame = int(f)
+        h = float(heights[int(db.range_index(int(f)))])
+        want = c.tuning.ik_foot_height_m - h if np.isfinite(h) else 0.0
+        assert c._ground_offset_target() == want
+
+
+def test_world_pose_arrays_match_forward_kinematics_of_the_returned_local_pose(db, features):
+    """The pose block's global arrays are the forward kinematics of its local arrays (legs included)."""
+    c = MotionMatchingController(db, features)
+    log = builtin("zigzag", 3.0)
+    locked_seen = 0
+    for i in range(150):
+        pose, snap = c.step(log.at(i * DT), DT)
+        locked_seen += int(snap.foot_locked.sum())
+    src = c.shown
+    local_rot, local_pos, g_rot, g_pos, locked = c._world_pose(src[2], src[0], c.source.contacts,
+                                                               (c.root_position.copy(), c.root_rotation.copy()), DT)
+    full = forward_kinematics_pose(local_rot, local_pos, c.parents)
+    assert np.array_equal(full[0], g_rot) and np.array_equal(full[1], g_pos)
+    assert locked.dtype == bool and locked.shape == (2,) and locked_seen > 0

@@ -190,3 +190,94 @@ def test_an_unlocked_foot_near_the_ground_is_not_dragged_by_the_root_adjustment(
     ts = [foot_lock_update(s2, np.array([[0.01 * k, 0.025, 0.0], [1.0, 0.3, 0.0]]), np.zeros((2, 3)),
                            [False, False], 0.2, 0.1, 0.02, dt)[1][0][0] for k in (5, 6)]
     assert ts[1] - ts[0] > 0.005
+
+
+# --- the plain-float forms (issue 16) against the helper forms they replace, bit for bit -------------------
+
+def _two_bone_ik_reference(a, b, c, t, hip_rot, knee_rot, eps=1e-4):
+    """The helper-per-3-vector form that two_bone_ik_floats replaces (lmm/ik.py before issue 16)."""
+    import math
+
+    from lmm.ik import _angle_between, _axis_angle, _clamp1, _cross, _norm, _qmul, _qnormalize, _qrot, _sub, _unit
+    ab, cb, ac, at = _sub(b, a), _sub(b, c), _sub(c, a), _sub(t, a)
+    l_ab, l_cb = _norm(ab), _norm(cb)
+    l_at = min(max(_norm(at), eps), l_ab + l_cb - eps)
+    ac_ab_0 = _angle_between(ac, ab)
+    ba_bc_0 = _angle_between(_sub(a, b), _sub(c, b))
+    ac_at_0 = _angle_between(ac, at)
+    ac_ab_1 = math.acos(_clamp1((l_cb * l_cb - l_ab * l_ab - l_at * l_at) / (-2.0 * l_ab * l_at)))
+    ba_bc_1 = math.acos(_clamp1((l_at * l_at - l_ab * l_ab - l_cb * l_cb) / (-2.0 * l_ab * l_cb)))
+    bend_axis = _cross(ac, ab)
+    if _norm(bend_axis) < 1e-9:
+        bend_axis = _qrot(knee_rot, (0.0, 0.0, 1.0))
+    bend_axis = _unit(bend_axis)
+    turn_axis = _unit(_cross(ac, at), fallback=bend_axis)
+    r0 = _axis_angle(bend_axis, ac_ab_1 - ac_ab_0)
+    r1 = _axis_angle(bend_axis, ba_bc_1 - ba_bc_0)
+    r2 = _axis_angle(turn_axis, ac_at_0)
+    return (_qnormalize(_qmul(r2, _qmul(r0, hip_rot))), _qnormalize(_qmul(r2, _qmul(r0, _qmul(r1, knee_rot)))))
+
+
+def test_written_out_two_bone_ik_is_bit_identical_to_the_helper_form():
+    from lmm.ik import two_bone_ik_floats
+
+    rng = np.random.default_rng(11)
+    cases = 0
+    for k in range(2000):
+        a, b, c, t = (tuple(rng.normal(size=3).tolist()) for _ in range(4))
+        if k % 7 == 0:
+            c = tuple((2 * np.array(b) - np.array(a)).tolist())  # a straight leg
+        if k % 11 == 0:
+            t = tuple((np.array(a) + 10 * rng.normal(size=3)).tolist())  # out of reach
+        if k % 13 == 0:
+            t = a  # target on the hip
+        hip, knee = (tuple(quat.normalize(rng.normal(size=4)).tolist()) for _ in range(2))
+        got = two_bone_ik_floats(a, b, c, t, hip, knee)
+        want = _two_bone_ik_reference(a, b, c, t, hip, knee)
+        assert got == want, (k, got, want)
+        cases += 1
+    # the comparison can fail: a one-ulp change of the input changes the result
+    a, b, c, t = (0.0, 1.0, 0.0), (0.0, 0.55, 0.05), (0.0, 0.1, 0.0), (0.1, 0.2, 0.1)
+    hip = knee = (1.0, 0.0, 0.0, 0.0)
+    assert two_bone_ik_floats(a, b, c, t, hip, knee) != _two_bone_ik_reference(
+        a, b, c, (np.nextafter(0.1, 1.0), 0.2, 0.1), hip, knee)
+
+
+def test_float_solve_leg_matches_the_array_form():
+    from lmm.ik import solve_leg_floats
+
+    parents, g_rot, g_pos = _leg()
+    for ground in (None, 0.05, 0.5):
+        target = g_pos[3] + np.array([0.05, -0.6, -0.03])
+        want = solve_leg(g_pos, g_rot, (0, 1, 2, 3), target, np.array([0, 0, 1.0]), 0.15, ground)
+        got = solve_leg_floats([tuple(p) for p in g_pos.tolist()], [tuple(q) for q in g_rot.tolist()], (0, 1, 2, 3),
+                               tuple(target.tolist()), (0.0, 0.0, 1.0), 0.15, ground)
+        assert all(np.array_equal(want[j], np.array(q)) for j, q in zip((0, 1, 2, 3), got))
+
+
+def test_foot_lock_update_in_place_equals_the_functional_form_and_leaves_its_input_alone():
+    rng = np.random.default_rng(5)
+    functional = FootLockState()
+    in_place = FootLockState()
+    before = None
+    for k in range(400):
+        toes = np.array([[0.3 * np.sin(k / 20), 0.02 + max(0.0, 0.1 * np.sin(k / 9)), 0.01 * k],
+                         [0.2, 0.02 + 0.05 * rng.random(), 0.01 * k]])
+        vel = rng.normal(size=(2, 3))
+        contacts = [bool(np.sin(k / 9) < 0.2), bool(rng.random() < 0.7)]
+        shift = rng.normal(size=(2, 3)) * 0.01 if k % 3 else None
+        before = functional.lock_position, functional.offset_position, functional.locked
+        new, t = foot_lock_update(functional, toes, vel, contacts, 0.2, 0.1, 0.02, 1 / 60, root_shift=shift,
+                                  swing_clearance=0.02)
+        assert np.array_equal(functional.lock_position, before[0])  # the input state is not touched
+        assert np.array_equal(functional.offset_position, before[1])
+        assert np.array_equal(functional.locked, before[2])
+        functional = new
+        got = in_place.update([tuple(p) for p in toes.tolist()], [tuple(v) for v in vel.tolist()], contacts,
+                              0.2, 0.1, 0.02, 1 / 60, root_shift=None if shift is None else shift.tolist(),
+                              swing_clearance=0.02)
+        assert np.array_equal(np.array(got), t)
+        for name in ("locked", "released", "lock_position", "offset_position", "offset_velocity",
+                     "lowest_animated", "previous_target"):
+            assert np.array_equal(getattr(in_place, name), getattr(functional, name)), (k, name)
+    assert functional.locked.dtype == bool and functional.lock_position.shape == (2, 3)
