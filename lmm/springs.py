@@ -146,9 +146,11 @@ def decay_factors(y: float, dts: tuple) -> tuple:
     return tuple(np.exp(-y * np.asarray(dts, dtype=np.float64)).tolist())
 
 
-def spring_character_floats(x, v, a, v_goal, halflife: float, dts: tuple, eps: float = EPS) -> list:
-    """:func:`spring_character_update` for one 3-vector state: ``[(x, v, a), ...]``, one per horizon.
-    Written out per component (the same expressions, in the same order, as the numpy form)."""
+def spring_character_floats(x, v, a, v_goal, halflife: float, dts: tuple, eps: float = EPS,
+                            positions_only: bool = False) -> list:
+    """:func:`spring_character_update` for one 3-vector state: ``[(x, v, a), ...]``, one per horizon (only
+    the ``x`` when ``positions_only``). Written out per component (the same expressions, in the same
+    order, as the numpy form)."""
     y = float((4.0 * LN2) / (halflife + eps) / 2.0)
     yy = y * y
     x0, x1, x2 = x
@@ -160,6 +162,11 @@ def spring_character_floats(x, v, a, v_goal, halflife: float, dts: tuple, eps: f
     p0, p1, p2 = b0 / yy, b1 / yy, b2 / yy
     q0, q1, q2 = c0 / y, c1 / y, c2 / y
     by0, by1, by2 = b0 * y, b1 * y, b2 * y
+    if positions_only:
+        return [(e * (nb0 + (-c0 - b0 * dt) / y) + p0 + q0 + g0 * dt + x0,
+                 e * (nb1 + (-c1 - b1 * dt) / y) + p1 + q1 + g1 * dt + x1,
+                 e * (nb2 + (-c2 - b2 * dt) / y) + p2 + q2 + g2 * dt + x2)
+                for e, dt in zip(decay_factors(y, dts), dts)]
     out = []
     for e, dt in zip(decay_factors(y, dts), dts):
         out.append(((e * (nb0 + (-c0 - b0 * dt) / y) + p0 + q0 + g0 * dt + x0,

@@ -136,7 +136,6 @@ def trajectory_in_root_space(positions, rotations, root_position, root_rotation)
 # ------------------------------------------------------------------------------------------------------
 _hypot = np.hypot        # numpy's hypot and arctan2 differ from the C library's in the last bit
 _arctan2 = np.arctan2
-_FORWARD = (0.0, 0.0, 1.0)
 
 
 def yaw_rotation_floats(angle: float) -> tuple:
@@ -196,16 +195,32 @@ def trajectory_predict_floats(position, velocity, acceleration, rotation, angula
                               rotation_goal, velocity_halflife: float, rotation_halflife: float,
                               times: tuple) -> tuple[list, list]:
     """:func:`trajectory_predict` on tuples: the positions and rotations (lists of tuples), one per time."""
-    moves = spring_character_floats(position, velocity, acceleration, velocity_goal, velocity_halflife, times)
+    positions = spring_character_floats(position, velocity, acceleration, velocity_goal, velocity_halflife, times,
+                                        positions_only=True)
     turns = spring_rotation_floats(rotation, angular_velocity, rotation_goal, rotation_halflife, times,
                                    normalize=True)
-    return [p for p, _, _ in moves], [q for q, _ in turns]
+    return positions, [q for q, _ in turns]
 
 
 def trajectory_in_root_space_floats(positions, rotations, root_position, root_rotation) -> tuple[list, list]:
-    """:func:`trajectory_in_root_space` on tuples: lists of local positions and facing directions."""
+    """:func:`trajectory_in_root_space` on tuples: lists of local positions and facing directions. The
+    rotations written out (``quat_scalar.mul_vec``'s operations in its order, zero products included)."""
     rx, ry, rz = root_position
-    inv = qs.conj(root_rotation)
-    local_pos = [qs.mul_vec(inv, (px - rx, py - ry, pz - rz)) for px, py, pz in positions]
-    local_dir = [qs.mul_vec(inv, qs.mul_vec(q, _FORWARD)) for q in rotations]
+    w, x, y, z = root_rotation
+    x, y, z = -x, -y, -z  # the inverse rotation
+
+    def rotate(v0, v1, v2):
+        t0 = 2.0 * (y * v2 - z * v1)
+        t1 = 2.0 * (z * v0 - x * v2)
+        t2 = 2.0 * (x * v1 - y * v0)
+        return (v0 + w * t0 + (y * t2 - z * t1), v1 + w * t1 + (z * t0 - x * t2), v2 + w * t2 + (x * t1 - y * t0))
+
+    local_pos = [rotate(px - rx, py - ry, pz - rz) for px, py, pz in positions]
+    local_dir = []
+    for qw, qx, qy, qz in rotations:  # the facing: the rotation's +Z
+        t0 = 2.0 * (qy * 1.0 - qz * 0.0)
+        t1 = 2.0 * (qz * 0.0 - qx * 1.0)
+        t2 = 2.0 * (qx * 0.0 - qy * 0.0)
+        local_dir.append(rotate(0.0 + qw * t0 + (qy * t2 - qz * t1), 0.0 + qw * t1 + (qz * t0 - qx * t2),
+                                1.0 + qw * t2 + (qx * t1 - qy * t0)))
     return local_pos, local_dir

@@ -82,6 +82,8 @@ def test_springs_one_state():
             got = spring_character_floats(_t(x), _t(v), _t(a), _t(goal_v), halflife, dts)
             for k, want in enumerate(spring_character_update(x, v, a, goal_v, halflife, dt)):
                 assert _same([g[k] for g in got], np.reshape(want, (len(dts), 3)))
+            assert _same(spring_character_floats(_t(x), _t(v), _t(a), _t(goal_v), halflife, dts, positions_only=True),
+                         [g[0] for g in got])
             got = spring_rotation_floats(_t(q), _t(w), _t(goal_q), halflife, dts)
             want_q, want_w = _spring_damper_exact_quat_arrays(q, w, goal_q, halflife, dt)
             assert _same([g[0] for g in got], np.reshape(want_q, (len(dts), 4)))
