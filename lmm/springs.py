@@ -139,6 +139,9 @@ def spring_rotation_update(q, w, q_goal, halflife, dt, eps: float = EPS):
 # (bit for bit, tested in tests/test_springs.py), without numpy's per-call overhead on 3- and 4-element
 # arrays. Vectors are tuples; ``dts`` is a tuple of horizons (one tick: ``(dt,)``).
 # ------------------------------------------------------------------------------------------------------
+_arctan2 = np.arctan2  # numpy's, as quat_scalar.log (the C library's differs in the last bit)
+
+
 @functools.lru_cache(maxsize=256)
 def decay_factors(y: float, dts: tuple) -> tuple:
     """``exp(-y * dt)`` for each ``dt`` with numpy's exp (the C library's differs in the last bit).
@@ -183,12 +186,25 @@ def spring_rotation_floats(q, w, goal, halflife: float, dts: tuple, eps: float =
     renormalised (as ``quat.normalize``) only when ``normalize``. The exponential map, the product with the
     goal and the normalisation are written out: the operations of :mod:`lmm.quat_scalar`, in its order."""
     y = float((4.0 * LN2) / (halflife + eps) / 2.0)
-    j00, j01, j02 = qs.to_scaled_angle_axis(qs.abs_(qs.mul_inv(q, goal)))
+    sqrt, cos, sin = math.sqrt, math.cos, math.sin
+    # j0 = to_scaled_angle_axis(abs_(q * conj(goal)))
+    aw, ax, ay, az = q
+    gw, gx, gy, gz = goal
+    bx, by, bz = -gx, -gy, -gz
+    dw = aw * gw - ax * bx - ay * by - az * bz
+    dx = aw * bx + ax * gw + ay * bz - az * by
+    dy = aw * by - ax * bz + ay * gw + az * bx
+    dz = aw * bz + ax * by - ay * bx + az * gw
+    if dw < 0.0:
+        dw, dx, dy, dz = -dw, -dx, -dy, -dz
+    length = sqrt(dx * dx + dy * dy + dz * dz)
+    if length >= 1e-8:
+        k = float(_arctan2(length, -1.0 if dw < -1.0 else 1.0 if dw > 1.0 else dw)) / length
+        dx, dy, dz = k * dx, k * dy, k * dz
+    j00, j01, j02 = 2.0 * dx, 2.0 * dy, 2.0 * dz
     w0, w1, w2 = w
     b0, b1, b2 = w0 + j00 * y, w1 + j01 * y, w2 + j02 * y      # j1
     by0, by1, by2 = b0 * y, b1 * y, b2 * y
-    gw, gx, gy, gz = goal
-    sqrt, cos, sin = math.sqrt, math.cos, math.sin
     out = []
     for e, dt in zip(decay_factors(y, dts), dts):
         # from_scaled_angle_axis(e * (j0 + j1 dt)) = exp(half of it)
