@@ -48,13 +48,13 @@ from lmm import quat
 from lmm import quat_scalar as qs
 from lmm.data.derived import cached
 from lmm.controller import Candidates, Controller, DebugSnapshot, InputState, Pose
-from lmm.features import build_query
+from lmm.features import build_query_from_columns, trajectory_query_columns
 from lmm.ik import FootLockState, solve_leg_floats
 from lmm.inertialize import Offsets, inertialize_apply, inertialize_decay, inertialize_transition
 from lmm.springs import LN2, EPS
-from lmm.trajectory import (SimulationState, desired_rotation, desired_velocity, simulation_update,
-                         stick_to_world, stick_with_deadzone, trajectory_in_root_space, trajectory_offsets,
-                         trajectory_predict)
+from lmm.trajectory import (SimulationState, desired_rotation_floats, desired_velocity_floats,
+                            simulation_update_floats, stick_world_floats, trajectory_in_root_space_floats,
+                            trajectory_offsets, trajectory_predict_floats)
 from lmm.tuning import Tuning
 
 
@@ -265,6 +265,9 @@ class CharacterController(Controller):
         self.n_bones = db.n_bones
         self.traj_offsets = trajectory_offsets(self.features)
         self._traj_index = {int(o): i for i, o in enumerate(self.traj_offsets)}
+        self._traj_times = tuple((self.traj_offsets / db.fps).tolist())  # the offsets in seconds
+        self._query_columns = trajectory_query_columns(self.features, self._traj_index)
+        self._weights_seen = None  # (tuning's feature weights, the weights array they gave), see below
         feet = ("left_foot", "right_foot")
         toes = ("left_toe", "right_toe")
         self.toe_bones = [db.bone(t) for t in toes]
@@ -348,12 +351,17 @@ class CharacterController(Controller):
 
     def _apply_feature_weights(self) -> bool:
         fw = self.tuning.feature_weights
+        seen = self._weights_seen
+        # every tick: a dict comparison while neither the tuning's weights nor the features' changed
+        if seen is not None and seen[1] is self.features.weights and seen[0] == fw:
+            return False
         new = np.array([fw.get(ch.name, w) for ch, w in zip(self.features.layout, self.features.weights)],
                        dtype=np.float32)
-        if self.features.set_weights(new):
+        changed = self.features.set_weights(new)
+        if changed:
             self._on_features_changed()
-            return True
-        return False
+        self._weights_seen = (dict(fw), self.features.weights)
+        return changed
 
     # ------------------------------------------------------------------------------------------
     # the tick
@@ -364,29 +372,36 @@ class CharacterController(Controller):
         timings: dict[str, float] = {}
         self._apply_feature_weights()
 
-        # input -> desired velocity and rotation (camera relative, deadzone)
-        left = stick_to_world(stick_with_deadzone(inp.left_x, inp.left_y, tun.stick_deadzone), inp.camera_azimuth)
-        self.stick_released_s = self.stick_released_s + dt if not np.any(left) else 0.0
-        right = stick_to_world(stick_with_deadzone(inp.right_x, inp.right_y, tun.stick_deadzone), inp.camera_azimuth)
-        des_vel = desired_velocity(left, self.sim.rotation, inp.walk, tun)
-        des_rot = desired_rotation(left, right, des_vel, self.desired_rotation, inp.strafe, inp.camera_azimuth)
-        forced = self._sharp_input_change(des_vel, des_rot, dt)
+        # input -> desired velocity and rotation (camera relative, deadzone); one character's few vectors and
+        # quaternions in plain floats (tuples), the same float operations as the numpy forms (tested)
+        left = stick_world_floats(inp.left_x, inp.left_y, tun.stick_deadzone, inp.camera_azimuth)
+        self.stick_released_s = self.stick_released_s + dt if not any(left) else 0.0
+        right = stick_world_floats(inp.right_x, inp.right_y, tun.stick_deadzone, inp.camera_azimuth)
+        sim = self.sim
+        sim_rot = tuple(sim.rotation.tolist())
+        des_vel_t = desired_velocity_floats(left, sim_rot, inp.walk, tun)
+        des_rot_t = desired_rotation_floats(left, right, des_vel_t, self.desired_rotation.tolist(), inp.strafe,
+                                            inp.camera_azimuth)
+        forced = self._sharp_input_change(des_vel_t, des_rot_t, dt)
+        des_vel, des_rot = np.array(des_vel_t), np.array(des_rot_t)
         self.desired_velocity, self.desired_rotation = des_vel, des_rot
 
         # simulation object and its predicted future
-        self.sim = simulation_update(self.sim, des_vel, des_rot, tun.simulation_velocity_halflife_s,
-                                     tun.simulation_rotation_halflife_s, dt)
-        times = self.traj_offsets / self.db.fps
-        traj_pos, traj_rot, _ = trajectory_predict(self.sim, des_vel, des_rot, tun.simulation_velocity_halflife_s,
-                                                   tun.simulation_rotation_halflife_s, times)
+        vel_halflife, rot_halflife = tun.simulation_velocity_halflife_s, tun.simulation_rotation_halflife_s
+        state = simulation_update_floats(sim.position.tolist(), sim.velocity.tolist(), sim.acceleration.tolist(),
+                                         sim_rot, sim.angular_velocity.tolist(), des_vel_t, des_rot_t,
+                                         vel_halflife, rot_halflife, dt)
+        self.sim = SimulationState(*(np.array(x) for x in state))
+        traj_pos_t, traj_rot_t = trajectory_predict_floats(*state, des_vel_t, des_rot_t, vel_halflife,
+                                                           rot_halflife, self._traj_times)
+        traj_pos, traj_rot = np.array(traj_pos_t), np.array(traj_rot_t)
 
         # query: pose channels from the playing pose; trajectory channels from the prediction, seen from
         # the character root (as every database frame's features are seen from its own root), so a
         # character lagging behind the simulation object asks for the motion that catches up
-        local_pos, local_dir = trajectory_in_root_space(traj_pos, traj_rot, self.root_position, self.root_rotation)
-        index = self._traj_index
-        query_raw = build_query(self.features, self._source_features(),
-                                lambda o: (local_pos[index[o]], local_dir[index[o]]))
+        local_pos, local_dir = trajectory_in_root_space_floats(traj_pos_t, traj_rot_t, self.root_position.tolist(),
+                                                               tuple(self.root_rotation.tolist()))
+        query_raw = build_query_from_columns(self._source_features(), self._query_columns, local_pos, local_dir)
         query = self.features.normalize(query_raw)
 
         # search when due
@@ -476,13 +491,14 @@ class CharacterController(Controller):
     # ------------------------------------------------------------------------------------------
     def _sharp_input_change(self, des_vel, des_rot, dt) -> bool:
         """True on the tick the desired velocity's (or rotation's) rate of change falls back under the
-        threshold after exceeding it: the end of a sharp input change, when the new trajectory is known."""
+        threshold after exceeding it: the end of a sharp input change, when the new trajectory is known.
+        ``des_vel``/``des_rot``: this tick's desired velocity (3,) and rotation (4,), sequences of floats."""
         if dt <= 0:
             return False
         threshold = self.tuning.forced_search_threshold
-        vel_rate = float(_norm(des_vel - self.desired_velocity)) / dt
+        vel_rate = qs.norm([a - b for a, b in zip(des_vel, self.desired_velocity.tolist())]) / dt
         rot_rate = qs.norm(qs.to_scaled_angle_axis(qs.abs_(qs.mul_inv(
-            des_rot.tolist(), self.desired_rotation.tolist())))) / dt
+            tuple(des_rot), self.desired_rotation.tolist())))) / dt
         forced = False
         if vel_rate > threshold:
             self._velocity_change_high = True

@@ -281,7 +281,9 @@ class Features:
         return True
 
     def normalize(self, raw: np.ndarray) -> np.ndarray:
-        return ((raw - self.mean) * self.inv_scale).astype(np.float32)
+        out = raw - self.mean
+        out *= self.inv_scale  # in place: the same products as (raw - mean) * inv_scale, one array fewer
+        return out if out.dtype == np.float32 else out.astype(np.float32)
 
     def denormalize(self, x: np.ndarray) -> np.ndarray:
         """Inverse of normalize for channels with non-zero weight (zero-weight dims come back as the mean)."""
@@ -323,4 +325,28 @@ def build_query(features: Features, current_raw: np.ndarray,
             q[s] = np.concatenate([trajectory_at(o)[0][[0, 2]] for o in ch.offsets])
         elif ch.kind == "trajectory_direction":
             q[s] = np.concatenate([trajectory_at(o)[1][[0, 2]] for o in ch.offsets])
+    return q
+
+
+def trajectory_query_columns(features: Features, offset_index: dict[int, int]) -> tuple[np.ndarray, list]:
+    """Where :func:`build_query` puts each trajectory number: the query dims (K,) and, for each, a
+    ``(0 for a position | 1 for a direction, index of its offset in offset_index, 0 for x | 2 for z)``.
+    Computed once per layout, so a tick's query is one copy and one scattered assignment."""
+    dims, picks = [], []
+    for ch, s in zip(features.layout, features.slices):
+        if ch.kind in ("trajectory_position", "trajectory_direction"):
+            which = 0 if ch.kind == "trajectory_position" else 1
+            picks += [(which, offset_index[o], c) for o in ch.offsets for c in (0, 2)]
+            dims += range(s.start, s.stop)
+    return np.asarray(dims, dtype=np.int64), picks
+
+
+def build_query_from_columns(current_raw: np.ndarray, columns: tuple[np.ndarray, list], positions,
+                             directions) -> np.ndarray:
+    """:func:`build_query` with the trajectory as sequences of 3-vectors (``positions[i]``,
+    ``directions[i]`` for the i-th offset) placed by ``columns`` (see :func:`trajectory_query_columns`)."""
+    dims, picks = columns
+    q = np.array(current_raw, dtype=np.float32, copy=True)
+    both = (positions, directions)
+    q[dims] = [both[which][i][c] for which, i, c in picks]  # float64 -> float32 as the channel copy does
     return q

@@ -9,6 +9,9 @@ goal halves. A halflife of 0 snaps to the goal (the tiny epsilon keeps the maths
 """
 from __future__ import annotations
 
+import functools
+import math
+
 import numpy as np
 
 from lmm import quat
@@ -83,26 +86,17 @@ def _spring_damper_exact_quat_arrays(q, w, goal, halflife, dt, eps: float = EPS)
 
 
 def _spring_damper_exact_quat_one(q, w, goal, halflife, dt, eps: float = EPS):
-    """:func:`simple_spring_damper_exact_quat` for one rotation (and a scalar ``dt`` or a few horizons) in
-    plain floats: the same float operations (bit for bit, tested), without numpy's per-call overhead on
-    4-element arrays. ``np.exp`` stays numpy's (its kernel differs from ``math.exp`` in the last bit)."""
-    y = float(halflife_to_damping(halflife, eps)) / 2.0
-    goal_t = tuple(np.asarray(goal, dtype=np.float64).tolist())
-    w_t = np.asarray(w, dtype=np.float64).tolist()
-    j0 = qs.to_scaled_angle_axis(qs.abs_(qs.mul_inv(np.asarray(q, dtype=np.float64).tolist(), goal_t)))
-    j1 = [wi + j * y for wi, j in zip(w_t, j0)]
+    """:func:`simple_spring_damper_exact_quat` for one rotation (and a scalar ``dt`` or a few horizons):
+    :func:`spring_rotation_floats` with numpy arrays in and out."""
     dts = np.asarray(dt, dtype=np.float64)
-    es = np.exp(-y * dts)
+    out = spring_rotation_floats(tuple(np.asarray(q, dtype=np.float64).tolist()),
+                                 np.asarray(w, dtype=np.float64).tolist(),
+                                 tuple(np.asarray(goal, dtype=np.float64).tolist()), halflife,
+                                 tuple(dts.ravel().tolist()), eps)
     if dts.ndim == 0:
-        e, d = float(es), float(dts)
-        q_new = qs.mul(qs.from_scaled_angle_axis([e * (a + b * d) for a, b in zip(j0, j1)]), goal_t)
-        return np.array(q_new), np.array([e * (wi - b * y * d) for wi, b in zip(w_t, j1)])
-    q_out = np.empty(dts.shape + (4,))
-    w_out = np.empty(dts.shape + (3,))
-    for i, (e, d) in enumerate(zip(es.tolist(), dts.tolist())):
-        q_out[i] = qs.mul(qs.from_scaled_angle_axis([e * (a + b * d) for a, b in zip(j0, j1)]), goal_t)
-        w_out[i] = [e * (wi - b * y * d) for wi, b in zip(w_t, j1)]
-    return q_out, w_out
+        return np.array(out[0][0]), np.array(out[0][1])
+    return (np.array([q for q, _ in out]).reshape(dts.shape + (4,)),
+            np.array([w for _, w in out]).reshape(dts.shape + (3,)))
 
 
 def decay_spring_damper_exact_quat(q, w, halflife, dt, eps: float = EPS):
@@ -138,3 +132,99 @@ def spring_character_update(x, v, a, v_goal, halflife, dt, eps: float = EPS):
 def spring_rotation_update(q, w, q_goal, halflife, dt, eps: float = EPS):
     """Rotation and angular velocity of a spring towards a fixed goal rotation; ``dt`` may be an array."""
     return simple_spring_damper_exact_quat(q, w, q_goal, halflife, dt, eps)
+
+
+# ------------------------------------------------------------------------------------------------------
+# One character per tick in plain Python floats: the same float operations as the numpy forms above
+# (bit for bit, tested in tests/test_springs.py), without numpy's per-call overhead on 3- and 4-element
+# arrays. Vectors are tuples; ``dts`` is a tuple of horizons (one tick: ``(dt,)``).
+# ------------------------------------------------------------------------------------------------------
+_arctan2 = np.arctan2  # numpy's, as quat_scalar.log (the C library's differs in the last bit)
+
+
+@functools.lru_cache(maxsize=256)
+def decay_factors(y: float, dts: tuple) -> tuple:
+    """``exp(-y * dt)`` for each ``dt`` with numpy's exp (the C library's differs in the last bit).
+    Memoised: the halflife and the horizons change only when the tuning or the frame rate does."""
+    return tuple(np.exp(-y * np.asarray(dts, dtype=np.float64)).tolist())
+
+
+def spring_character_floats(x, v, a, v_goal, halflife: float, dts: tuple, eps: float = EPS,
+                            positions_only: bool = False) -> list:
+    """:func:`spring_character_update` for one 3-vector state: ``[(x, v, a), ...]``, one per horizon (only
+    the ``x`` when ``positions_only``). Written out per component (the same expressions, in the same
+    order, as the numpy form)."""
+    y = float((4.0 * LN2) / (halflife + eps) / 2.0)
+    yy = y * y
+    x0, x1, x2 = x
+    a0, a1, a2 = a
+    g0, g1, g2 = v_goal
+    c0, c1, c2 = v[0] - g0, v[1] - g1, v[2] - g2               # j0
+    b0, b1, b2 = a0 + c0 * y, a1 + c1 * y, a2 + c2 * y          # j1
+    nb0, nb1, nb2 = (-b0) / yy, (-b1) / yy, (-b2) / yy
+    p0, p1, p2 = b0 / yy, b1 / yy, b2 / yy
+    q0, q1, q2 = c0 / y, c1 / y, c2 / y
+    by0, by1, by2 = b0 * y, b1 * y, b2 * y
+    if positions_only:
+        return [(e * (nb0 + (-c0 - b0 * dt) / y) + p0 + q0 + g0 * dt + x0,
+                 e * (nb1 + (-c1 - b1 * dt) / y) + p1 + q1 + g1 * dt + x1,
+                 e * (nb2 + (-c2 - b2 * dt) / y) + p2 + q2 + g2 * dt + x2)
+                for e, dt in zip(decay_factors(y, dts), dts)]
+    out = []
+    for e, dt in zip(decay_factors(y, dts), dts):
+        out.append(((e * (nb0 + (-c0 - b0 * dt) / y) + p0 + q0 + g0 * dt + x0,
+                     e * (nb1 + (-c1 - b1 * dt) / y) + p1 + q1 + g1 * dt + x1,
+                     e * (nb2 + (-c2 - b2 * dt) / y) + p2 + q2 + g2 * dt + x2),
+                    (e * (c0 + b0 * dt) + g0, e * (c1 + b1 * dt) + g1, e * (c2 + b2 * dt) + g2),
+                    (e * (a0 - by0 * dt), e * (a1 - by1 * dt), e * (a2 - by2 * dt))))
+    return out
+
+
+def spring_rotation_floats(q, w, goal, halflife: float, dts: tuple, eps: float = EPS,
+                           normalize: bool = False) -> list:
+    """:func:`spring_rotation_update` for one rotation: ``[(q, w), ...]``, one per horizon; ``q``
+    renormalised (as ``quat.normalize``) only when ``normalize``. The exponential map, the product with the
+    goal and the normalisation are written out: the operations of :mod:`lmm.quat_scalar`, in its order."""
+    y = float((4.0 * LN2) / (halflife + eps) / 2.0)
+    sqrt, cos, sin = math.sqrt, math.cos, math.sin
+    # j0 = to_scaled_angle_axis(abs_(q * conj(goal)))
+    aw, ax, ay, az = q
+    gw, gx, gy, gz = goal
+    bx, by, bz = -gx, -gy, -gz
+    dw = aw * gw - ax * bx - ay * by - az * bz
+    dx = aw * bx + ax * gw + ay * bz - az * by
+    dy = aw * by - ax * bz + ay * gw + az * bx
+    dz = aw * bz + ax * by - ay * bx + az * gw
+    if dw < 0.0:
+        dw, dx, dy, dz = -dw, -dx, -dy, -dz
+    length = sqrt(dx * dx + dy * dy + dz * dz)
+    if length >= 1e-8:
+        k = float(_arctan2(length, -1.0 if dw < -1.0 else 1.0 if dw > 1.0 else dw)) / length
+        dx, dy, dz = k * dx, k * dy, k * dz
+    j00, j01, j02 = 2.0 * dx, 2.0 * dy, 2.0 * dz
+    w0, w1, w2 = w
+    b0, b1, b2 = w0 + j00 * y, w1 + j01 * y, w2 + j02 * y      # j1
+    by0, by1, by2 = b0 * y, b1 * y, b2 * y
+    out = []
+    for e, dt in zip(decay_factors(y, dts), dts):
+        # from_scaled_angle_axis(e * (j0 + j1 dt)) = exp(half of it)
+        h0, h1, h2 = e * (j00 + b0 * dt) * 0.5, e * (j01 + b1 * dt) * 0.5, e * (j02 + b2 * dt) * 0.5
+        half = sqrt(h0 * h0 + h1 * h1 + h2 * h2)
+        rw = cos(half)
+        if half >= 1e-8:
+            s = sin(half) / half
+            h0, h1, h2 = s * h0, s * h1, s * h2
+        n = sqrt(rw * rw + h0 * h0 + h1 * h1 + h2 * h2)
+        n = n if n > 1e-10 else 1e-10
+        rw, rx, ry, rz = rw / n, h0 / n, h1 / n, h2 / n
+        # times the goal
+        ow = rw * gw - rx * gx - ry * gy - rz * gz
+        ox = rw * gx + rx * gw + ry * gz - rz * gy
+        oy = rw * gy - rx * gz + ry * gw + rz * gx
+        oz = rw * gz + rx * gy - ry * gx + rz * gw
+        if normalize:
+            n = sqrt(ow * ow + ox * ox + oy * oy + oz * oz)
+            n = n if n > 1e-10 else 1e-10
+            ow, ox, oy, oz = ow / n, ox / n, oy / n, oz / n
+        out.append(((ow, ox, oy, oz), (e * (w0 - by0 * dt), e * (w1 - by1 * dt), e * (w2 - by2 * dt))))
+    return out

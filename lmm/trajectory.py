@@ -11,12 +11,15 @@ future is predicted with the same closed-form springs, holding the desired veloc
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from lmm import quat
-from lmm.springs import spring_character_update, spring_rotation_update
+from lmm import quat_scalar as qs
+from lmm.springs import (spring_character_floats, spring_character_update, spring_rotation_floats,
+                         spring_rotation_update)
 
 UP = np.array([0.0, 1.0, 0.0])
 FORWARD = np.array([0.0, 0.0, 1.0])
@@ -123,4 +126,101 @@ def trajectory_in_root_space(positions, rotations, root_position, root_rotation)
     """Trajectory points and facing directions (T, 3) in the space of a root (ground-plane features)."""
     local_pos = quat.inv_mul_vec(root_rotation, positions - root_position)
     local_dir = quat.inv_mul_vec(root_rotation, quat.mul_vec(rotations, FORWARD))
+    return local_pos, local_dir
+
+
+# ------------------------------------------------------------------------------------------------------
+# One character per tick in plain Python floats (vectors and quaternions as tuples): the same float
+# operations as the numpy forms above, bit for bit (tested in tests/test_trajectory_floats.py), at a
+# fraction of the cost of numpy calls on 2-, 3- and 4-element arrays.
+# ------------------------------------------------------------------------------------------------------
+_hypot = np.hypot        # numpy's hypot and arctan2 differ from the C library's in the last bit
+_arctan2 = np.arctan2
+
+
+def yaw_rotation_floats(angle: float) -> tuple:
+    """:func:`yaw_rotation` as a tuple (the zero components included: ``sin * 0.0`` keeps its sign)."""
+    half = angle * 0.5
+    s = math.sin(half)
+    return (math.cos(half), s * 0.0, s * 1.0, s * 0.0)
+
+
+def stick_world_floats(x: float, y: float, deadzone: float, camera_azimuth: float) -> tuple:
+    """``stick_to_world(stick_with_deadzone(x, y, deadzone), camera_azimuth)`` as a tuple (3,)."""
+    if x == 0.0 and y == 0.0:  # hypot(0, 0) = 0 <= deadzone: skip the call
+        sx = sy = 0.0
+    else:
+        mag = float(_hypot(x, y))
+        if mag <= deadzone or mag <= 0.0:
+            sx = sy = 0.0
+        else:
+            k = min((mag - deadzone) / max(1.0 - deadzone, 1e-6), 1.0) / mag
+            sx, sy = x * k, y * k
+    return qs.mul_vec(yaw_rotation_floats(camera_azimuth), (-sx, 0.0, sy))
+
+
+def desired_velocity_floats(stick_world, simulation_rotation, walk: bool, tuning) -> tuple:
+    """:func:`desired_velocity` on tuples."""
+    if walk:
+        fwd, side, back = tuning.walk_forward_speed_m_s, tuning.walk_sideways_speed_m_s, tuning.walk_backwards_speed_m_s
+    else:
+        fwd, side, back = tuning.run_forward_speed_m_s, tuning.run_sideways_speed_m_s, tuning.run_backwards_speed_m_s
+    lx, _, lz = qs.inv_mul_vec(simulation_rotation, stick_world)
+    return qs.mul_vec(simulation_rotation, (lx * side, 0.0, lz * (fwd if lz > 0.0 else back)))
+
+
+def desired_rotation_floats(stick_world, right_stick_world, velocity, current_rotation, strafe: bool,
+                            camera_azimuth: float) -> tuple:
+    """:func:`desired_rotation` on tuples."""
+    if strafe:
+        if qs.norm(right_stick_world) > 1e-5:
+            return yaw_rotation_floats(float(_arctan2(right_stick_world[0], right_stick_world[2])))
+        return yaw_rotation_floats(camera_azimuth)
+    if qs.norm(velocity) > 1e-5:
+        return yaw_rotation_floats(float(_arctan2(velocity[0], velocity[2])))
+    return tuple(current_rotation)
+
+
+def simulation_update_floats(position, velocity, acceleration, rotation, angular_velocity, velocity_goal,
+                             rotation_goal, velocity_halflife: float, rotation_halflife: float, dt: float):
+    """:func:`simulation_update` on tuples: (position, velocity, acceleration, rotation, angular_velocity)."""
+    (pos, vel, acc), = spring_character_floats(position, velocity, acceleration, velocity_goal,
+                                               velocity_halflife, (dt,))
+    (rot, ang), = spring_rotation_floats(rotation, angular_velocity, rotation_goal, rotation_halflife, (dt,),
+                                         normalize=True)
+    return pos, vel, acc, rot, ang
+
+
+def trajectory_predict_floats(position, velocity, acceleration, rotation, angular_velocity, velocity_goal,
+                              rotation_goal, velocity_halflife: float, rotation_halflife: float,
+                              times: tuple) -> tuple[list, list]:
+    """:func:`trajectory_predict` on tuples: the positions and rotations (lists of tuples), one per time."""
+    positions = spring_character_floats(position, velocity, acceleration, velocity_goal, velocity_halflife, times,
+                                        positions_only=True)
+    turns = spring_rotation_floats(rotation, angular_velocity, rotation_goal, rotation_halflife, times,
+                                   normalize=True)
+    return positions, [q for q, _ in turns]
+
+
+def trajectory_in_root_space_floats(positions, rotations, root_position, root_rotation) -> tuple[list, list]:
+    """:func:`trajectory_in_root_space` on tuples: lists of local positions and facing directions. The
+    rotations written out (``quat_scalar.mul_vec``'s operations in its order, zero products included)."""
+    rx, ry, rz = root_position
+    w, x, y, z = root_rotation
+    x, y, z = -x, -y, -z  # the inverse rotation
+
+    def rotate(v0, v1, v2):
+        t0 = 2.0 * (y * v2 - z * v1)
+        t1 = 2.0 * (z * v0 - x * v2)
+        t2 = 2.0 * (x * v1 - y * v0)
+        return (v0 + w * t0 + (y * t2 - z * t1), v1 + w * t1 + (z * t0 - x * t2), v2 + w * t2 + (x * t1 - y * t0))
+
+    local_pos = [rotate(px - rx, py - ry, pz - rz) for px, py, pz in positions]
+    local_dir = []
+    for qw, qx, qy, qz in rotations:  # the facing: the rotation's +Z
+        t0 = 2.0 * (qy * 1.0 - qz * 0.0)
+        t1 = 2.0 * (qz * 0.0 - qx * 1.0)
+        t2 = 2.0 * (qx * 0.0 - qy * 0.0)
+        local_dir.append(rotate(0.0 + qw * t0 + (qy * t2 - qz * t1), 0.0 + qw * t1 + (qz * t0 - qx * t2),
+                                1.0 + qw * t2 + (qx * t1 - qy * t0)))
     return local_pos, local_dir

@@ -1,0 +1,153 @@
+"""The per-tick motion of one character in plain floats (input -> desired motion -> simulation springs ->
+predicted trajectory -> query) gives bit for bit what the numpy forms give (recordings depend on it), and
+the feature weights are re-applied when, and only when, they change."""
+import numpy as np
+import pytest
+
+from lmm import quat
+from lmm.controller import InputState
+from lmm.features import build_query, build_query_from_columns, trajectory_query_columns
+from lmm.mm import MotionMatchingController
+from lmm.springs import (_spring_damper_exact_quat_arrays, spring_character_floats, spring_character_update,
+                         spring_rotation_floats)
+from lmm.trajectory import (SimulationState, desired_rotation, desired_rotation_floats, desired_velocity,
+                            desired_velocity_floats, simulation_update, simulation_update_floats,
+                            stick_to_world, stick_with_deadzone, stick_world_floats, trajectory_in_root_space,
+                            trajectory_in_root_space_floats, trajectory_predict, trajectory_predict_floats,
+                            yaw_rotation, yaw_rotation_floats)
+from lmm.tuning import Tuning
+
+TIMES = (20 / 60, 40 / 60, 60 / 60)
+
+
+def _same(a, b):
+    """Equal values and equal signs of zero (a -0.0 can become a different angle downstream)."""
+    a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
+    return a.shape == b.shape and np.array_equal(a, b, equal_nan=True) and np.array_equal(np.signbit(a), np.signbit(b))
+
+
+def _t(a):
+    return tuple(np.asarray(a, np.float64).tolist())
+
+
+def _quat(rng):
+    q = quat.normalize(rng.normal(size=4))
+    return q if rng.random() < 0.8 else -q
+
+
+def _states(rng, n):
+    for i in range(n):
+        scale = 0.0 if i % 9 == 0 else float(rng.uniform(0.01, 5.0))
+        yield (rng.normal(size=3) * 10, rng.normal(size=3) * scale, rng.normal(size=3) * scale, _quat(rng),
+               rng.normal(size=3) * scale)
+
+
+def test_the_comparison_sees_the_sign_of_zero():
+    assert not _same(yaw_rotation_floats(-0.0), yaw_rotation_floats(0.0))
+    assert _same(yaw_rotation_floats(-0.0), yaw_rotation(-0.0))
+
+
+def test_sticks_and_desired_motion():
+    rng = np.random.default_rng(3)
+    tun = Tuning()
+    sticks = [(0.0, 0.0), (-0.0, 0.0), (0.05, 0.0), (1.0, 0.0), (0.0, -1.0), (0.9, 0.9)]
+    sticks += [tuple(rng.uniform(-1, 1, 2).tolist()) for _ in range(300)]
+    rotations = [np.array([1.0, 0, 0, 0])] + [_quat(rng) for _ in range(20)]
+    for i, (x, y) in enumerate(sticks):
+        az = [0.0, -0.0, float(rng.uniform(-7, 7))][i % 3]
+        dz = [0.0, 0.1, 0.25][i % 3]
+        want = stick_to_world(stick_with_deadzone(x, y, dz), az)
+        got = stick_world_floats(x, y, dz, az)
+        assert _same(got, want), (x, y, dz, az)
+        right = stick_to_world(stick_with_deadzone(y, -x, dz), az)
+        sim_rot, current = rotations[i % len(rotations)], rotations[(i + 1) % len(rotations)]
+        for walk in (False, True):
+            vel = desired_velocity(want, sim_rot, walk, tun)
+            vel_t = desired_velocity_floats(got, _t(sim_rot), walk, tun)
+            assert _same(vel_t, vel)
+            for strafe in (False, True):
+                for r in (right, np.zeros(3)):
+                    assert _same(desired_rotation_floats(got, _t(r), vel_t, _t(current), strafe, az),
+                                 desired_rotation(want, r, vel, current, strafe, az))
+
+
+def test_springs_one_state():
+    rng = np.random.default_rng(4)
+    for i, (x, v, a, q, w) in enumerate(_states(rng, 300)):
+        goal_v = rng.normal(size=3) * 3
+        goal_q = q.copy() if i % 7 == 0 else _quat(rng)
+        halflife = [0.0, 0.1, float(rng.uniform(0, 1))][i % 3]
+        for dts in ((1 / 60,), (float(rng.uniform(0, 3)),), TIMES):
+            dt = np.array(dts) if len(dts) > 1 else dts[0]
+            got = spring_character_floats(_t(x), _t(v), _t(a), _t(goal_v), halflife, dts)
+            for k, want in enumerate(spring_character_update(x, v, a, goal_v, halflife, dt)):
+                assert _same([g[k] for g in got], np.reshape(want, (len(dts), 3)))
+            assert _same(spring_character_floats(_t(x), _t(v), _t(a), _t(goal_v), halflife, dts, positions_only=True),
+                         [g[0] for g in got])
+            got = spring_rotation_floats(_t(q), _t(w), _t(goal_q), halflife, dts)
+            want_q, want_w = _spring_damper_exact_quat_arrays(q, w, goal_q, halflife, dt)
+            assert _same([g[0] for g in got], np.reshape(want_q, (len(dts), 4)))
+            assert _same([g[1] for g in got], np.reshape(want_w, (len(dts), 3)))
+            normed = spring_rotation_floats(_t(q), _t(w), _t(goal_q), halflife, dts, normalize=True)
+            assert _same([g[0] for g in normed], quat.normalize(np.reshape(want_q, (len(dts), 4))))
+
+
+def test_simulation_trajectory_and_root_space():
+    rng = np.random.default_rng(5)
+    for i, (x, v, a, q, w) in enumerate(_states(rng, 200)):
+        goal_v, goal_q = rng.normal(size=3) * 3, _quat(rng)
+        vh, rh = float(rng.uniform(0, 0.5)), float(rng.uniform(0, 0.5))
+        state = SimulationState(x, v, a, q, w)
+        want = simulation_update(state, goal_v, goal_q, vh, rh, 1 / 60)
+        got = simulation_update_floats(_t(x), _t(v), _t(a), _t(q), _t(w), _t(goal_v), _t(goal_q), vh, rh, 1 / 60)
+        for g, name in zip(got, ("position", "velocity", "acceleration", "rotation", "angular_velocity")):
+            assert _same(g, getattr(want, name)), name
+        want_pos, want_rot, _ = trajectory_predict(want, goal_v, goal_q, vh, rh, np.array(TIMES))
+        got_pos, got_rot = trajectory_predict_floats(*got, _t(goal_v), _t(goal_q), vh, rh, TIMES)
+        assert _same(got_pos, want_pos) and _same(got_rot, want_rot)
+        root_pos, root_rot = rng.normal(size=3) * 10, _quat(rng)
+        want_lp, want_ld = trajectory_in_root_space(want_pos, want_rot, root_pos, root_rot)
+        got_lp, got_ld = trajectory_in_root_space_floats(got_pos, got_rot, _t(root_pos), _t(root_rot))
+        assert _same(got_lp, want_lp) and _same(got_ld, want_ld)
+
+
+def test_query_and_normalize(features):
+    rng = np.random.default_rng(6)
+    offsets = sorted({o for ch in features.layout if ch.kind.startswith("trajectory") for o in ch.offsets})
+    index = {o: i for i, o in enumerate(offsets)}
+    columns = trajectory_query_columns(features, index)
+    for _ in range(50):
+        current = features.raw[int(rng.integers(len(features.raw)))]
+        pos, dirs = rng.normal(size=(len(offsets), 3)) * 5, rng.normal(size=(len(offsets), 3))
+        want = build_query(features, current, lambda o: (pos[index[o]], dirs[index[o]]))
+        got = build_query_from_columns(current, columns, [_t(p) for p in pos], [_t(d) for d in dirs])
+        assert got.dtype == np.float32 and _same(got, want)
+        assert _same(features.normalize(got), ((want - features.mean) * features.inv_scale).astype(np.float32))
+        raw64 = want.astype(np.float64) + rng.normal(size=want.shape) * 1e-3
+        norm64 = features.normalize(raw64)
+        assert norm64.dtype == np.float32 and _same(norm64, ((raw64 - features.mean) * features.inv_scale).astype(np.float32))
+
+
+def test_feature_weights_follow_the_tuning(db, features):
+    c = MotionMatchingController(db, features)
+    inp = InputState(left_y=1.0)
+    for _ in range(3):
+        c.step(inp, 1 / 60)
+    name = c.features.layout[0].name
+    i = 0
+    before = c.features.normalized
+    c.tuning.feature_weights[name] = 2.5  # a slider writes the dict in place
+    c.step(inp, 1 / 60)
+    assert c.features.weights[i] == np.float32(2.5) and c.features.normalized is not before
+    same = c.features.normalized
+    c.step(inp, 1 / 60)
+    assert c.features.normalized is same  # unchanged weights: no rebuild
+    c.features.set_weights({name: 0.5})  # someone else changed the features: the tuning wins again
+    c.step(inp, 1 / 60)
+    assert c.features.weights[i] == np.float32(2.5)
+    c.tuning.feature_weights = dict(c.tuning.feature_weights, **{name: 1.25})  # a new dict (a preset)
+    c.step(inp, 1 / 60)
+    assert c.features.weights[i] == np.float32(1.25)
+    c.tuning.feature_weights[name] = -1.0
+    with pytest.raises(ValueError):
+        c.step(inp, 1 / 60)
