@@ -147,12 +147,26 @@ def _rotation_exp2(v: np.ndarray, eps: float = 1e-8) -> np.ndarray:
     return _normalize(q)
 
 
+_SPRING_CONSTANTS: dict = {}
+
+
+def _spring_constants(halflife: float, dt: float):
+    """(y, e) = (damping / 2, exp(-y dt)) as the springs compute them, remembered per (halflife, dt)."""
+    key = (halflife, dt)
+    c = _SPRING_CONSTANTS.get(key)
+    if c is None:
+        if len(_SPRING_CONSTANTS) > 64:
+            _SPRING_CONSTANTS.clear()
+        y = halflife_to_damping(halflife) / 2.0
+        c = _SPRING_CONSTANTS[key] = (float(y), float(np.exp(-y * dt)))
+    return c
+
+
 def inertialize_decay(offsets: Offsets, halflife: float, dt: float) -> Offsets:
     """The offsets ``dt`` seconds later: :func:`lmm.springs.decay_spring_damper_exact` on the position
     offsets and :func:`lmm.springs.decay_spring_damper_exact_quat` on the rotation offsets, run as one
     spring on (J, 6) = [position offset, rotation offset's scaled angle axis]."""
-    y = halflife_to_damping(halflife) / 2.0
-    e = np.exp(-y * dt)
+    y, e = _spring_constants(halflife, dt)
     n = len(offsets.positions)
     x = np.empty((n, 6))
     x[:, :3] = offsets.positions
