@@ -242,8 +242,29 @@ def _norm(v) -> float:
     return math.sqrt(float(v @ v))
 
 
+_DAMPER_FACTORS: dict = {}
+_RADIANS: dict = {}
+
+
 def _damper_factor(halflife: float, dt: float) -> float:
-    return 1.0 - float(np.exp(-LN2 * dt / (halflife + EPS)))
+    """1 - exp(-ln2 dt / halflife) (numpy's exp), remembered per (halflife, dt): a tuning changes rarely."""
+    key = (halflife, dt)
+    f = _DAMPER_FACTORS.get(key)
+    if f is None:
+        if len(_DAMPER_FACTORS) > 64:
+            _DAMPER_FACTORS.clear()
+        f = _DAMPER_FACTORS[key] = 1.0 - float(np.exp(-LN2 * dt / (halflife + EPS)))
+    return f
+
+
+def _radians(degrees: float) -> float:
+    """``float(np.radians(degrees))``, remembered per value."""
+    r = _RADIANS.get(degrees)
+    if r is None:
+        if len(_RADIANS) > 64:
+            _RADIANS.clear()
+        r = _RADIANS[degrees] = float(np.radians(degrees))
+    return r
 
 
 class CharacterController(Controller):
@@ -322,8 +343,7 @@ class CharacterController(Controller):
         self.sim = SimulationState(position=position.copy(), rotation=rotation.copy())
         self.desired_rotation = rotation.copy()
         self.desired_velocity = np.zeros(3)
-        self.root_position = position.copy()
-        self.root_rotation = rotation.copy()
+        self._set_root(position.tolist(), rotation.tolist())
         self.stick_released_s = 0.0  # time since the left stick was last outside its deadzone
         self._reset_source(frame)
         pose = self._current_source_pose()
@@ -438,14 +458,14 @@ class CharacterController(Controller):
         self.shown = (pos, vel, rot, ang)
 
         # root integration (character space velocities -> world), in plain floats (one 3-vector/quaternion)
-        root_rot = tuple(self.root_rotation.tolist())
+        root_rot = self._root_rotation_t
         root_vel_world = qs.mul_vec(root_rot, vel[0].tolist())
         root_ang_world = qs.mul_vec(root_rot, ang[0].tolist())
-        self.root_position = np.array([p + v * dt for p, v in zip(self.root_position.tolist(), root_vel_world)])
-        self.root_rotation = np.array(qs.normalize(qs.mul(qs.from_scaled_angle_axis(
-            [w * dt for w in root_ang_world]), root_rot)))
-        integrated = (self.root_position.copy(), self.root_rotation.copy())
-        self._synchronize(root_vel_world, root_ang_world, dt)
+        root_pos = [p + v * dt for p, v in zip(self._root_position_t, root_vel_world)]
+        root_rot = qs.normalize(qs.mul(qs.from_scaled_angle_axis([w * dt for w in root_ang_world]), root_rot))
+        # the root arrays are replaced every tick, never written in place: no copies needed
+        integrated = (np.array(root_pos), np.array(root_rot))
+        self._synchronize(root_pos, root_rot, root_vel_world, root_ang_world, dt)
 
         # world pose, then foot locking: forward kinematics, foot locks, leg IK
         t0 = time.perf_counter()
@@ -454,18 +474,20 @@ class CharacterController(Controller):
 
         # ghost: the source pose without offsets, placed at the character root; debug only, so its forward
         # kinematics runs when a reader of the snapshot asks for it (never in headless runs)
-        ghost_rot = src.rotations.copy()
-        ghost_pos = src.positions.copy()
-        ghost_rot[0] = self.root_rotation
-        ghost_pos[0] = self.root_position
-        parents = self.parents
+        # (a source pose and the root arrays are new every tick, never written in place: the function may
+        # read them whenever it is called)
+        parents, root_rot, root_pos = self.parents, self.root_rotation, self.root_position
 
         def ghost():
+            ghost_rot = src.rotations.copy()
+            ghost_pos = src.positions.copy()
+            ghost_rot[0] = root_rot
+            ghost_pos[0] = root_pos
             return forward_kinematics_pose(ghost_rot, ghost_pos, parents)[1].astype(np.float32)
 
         pose = Pose(local_positions=local_pos.astype(np.float32), local_rotations=local_rot.astype(np.float32),
                     global_positions=g_pos.astype(np.float32), global_rotations=g_rot.astype(np.float32),
-                    contacts=np.asarray(src.contacts, dtype=bool).copy())
+                    contacts=np.array(src.contacts, dtype=bool))
         self.tick += 1
         self.time_s = self.tick * dt if dt > 0 else self.time_s
         current_norm = self.features.normalize(self._source_features())
@@ -646,12 +668,12 @@ class CharacterController(Controller):
         self._ground_offset = target + e * (x + j1 * dt)
         self._ground_offset_velocity = e * (v - j1 * y * dt)
 
-    def _synchronize(self, root_vel_world, root_ang_world, dt) -> None:
-        """Adjustment (pull the character root towards the simulation object) and clamping. Plain floats
-        (one position and one quaternion): the same operations as the numpy form, a fraction of the time."""
+    def _synchronize(self, root_pos, root_rot, root_vel_world, root_ang_world, dt) -> None:
+        """Adjustment (pull the integrated character root ``root_pos``/``root_rot``, floats, towards the
+        simulation object) and clamping; sets the character root. Plain floats (one position and one
+        quaternion): the same operations as the numpy form, a fraction of the time."""
         tun = self.tuning
         sim_pos, sim_rot = self.sim.position.tolist(), tuple(self.sim.rotation.tolist())
-        root_pos, root_rot = self.root_position.tolist(), tuple(self.root_rotation.tolist())
         if tun.adjustment_enabled and dt > 0:
             factor = _damper_factor(tun.adjustment_position_halflife_s, dt)
             delta = [(s - r) * factor for s, r in zip(sim_pos, root_pos)]
@@ -677,9 +699,15 @@ class CharacterController(Controller):
                 root_pos = [s + o * (tun.clamp_max_distance_m / dist) for s, o in zip(sim_pos, offset)]
             diff = qs.to_scaled_angle_axis(qs.abs_(qs.mul_inv(root_rot, sim_rot)))
             angle = qs.norm(diff)
-            max_angle = float(np.radians(tun.clamp_max_angle_deg))
+            max_angle = _radians(tun.clamp_max_angle_deg)
             if angle > max_angle:
                 root_rot = qs.normalize(qs.mul(qs.from_scaled_angle_axis([d * (max_angle / angle) for d in diff]),
                                                sim_rot))
-        self.root_position = np.array(root_pos, dtype=np.float64)
-        self.root_rotation = np.array(root_rot, dtype=np.float64)
+        self._set_root(root_pos, root_rot)
+
+    def _set_root(self, position, rotation) -> None:
+        """Set the character root (3 and 4 floats): the arrays the pipeline reads and their float copies."""
+        self._root_position_t = tuple(position)
+        self._root_rotation_t = tuple(rotation)
+        self.root_position = np.array(self._root_position_t)
+        self.root_rotation = np.array(self._root_rotation_t)

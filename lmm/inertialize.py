@@ -7,6 +7,13 @@ so the output stays continuous in position and velocity and converges to the sou
 
 All functions are vectorised over bones; rotations are (w, x, y, z) and rotation offsets are applied
 on the left (``shown = offset * source``).
+
+The per-tick functions (:func:`inertialize_decay`, :func:`inertialize_apply`) run once per tick on one
+pose of ~20 bones, where a numpy call costs far more than its arithmetic. They perform exactly the float
+operations of the spring and quaternion functions of :mod:`lmm.springs` and :mod:`lmm.quat` (same
+products, same order of sums: the results are bit for bit identical, tested in
+tests/test_inertialize.py) in a few calls on whole arrays: the position and rotation springs run as one
+(J, 6) spring, a Hamilton product is 16 signed products summed in four column blocks.
 """
 from __future__ import annotations
 
@@ -15,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from lmm import quat
-from lmm.springs import decay_spring_damper_exact, decay_spring_damper_exact_quat
+from lmm.springs import halflife_to_damping
 
 
 @dataclass
@@ -50,18 +57,140 @@ def inertialize_transition(shown_positions, shown_velocities, shown_rotations, s
     )
 
 
+# Hamilton product a * b as four blocks of signed products, block k holding term k of each component:
+# w = aw bw - ax bx - ay by - az bz, x = aw bx + ax bw + ay bz - az by, ... (see lmm.quat.mul); a - p is
+# a + (-p) exactly, so summing the blocks left to right is the same arithmetic.
+_MUL_A = np.repeat(np.arange(4), 4)
+_MUL_B = np.array([0, 1, 2, 3, 1, 0, 3, 2, 2, 3, 0, 1, 3, 2, 1, 0])
+_MUL_SIGN = np.array([1.0, 1.0, 1.0, 1.0, -1.0, 1.0, -1.0, 1.0, -1.0, 1.0, 1.0, -1.0, -1.0, -1.0, 1.0, 1.0])
+# cross(a, b) = a[:, L1] * b[:, R1] - a[:, L2] * b[:, R2]; for the vector part of a quaternion, +1
+_CROSS_L1, _CROSS_R1 = np.array([1, 2, 0]), np.array([2, 0, 1])
+_CROSS_L2, _CROSS_R2 = np.array([2, 0, 1]), np.array([1, 2, 0])
+
+
+def _mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """:func:`lmm.quat.mul` of (J, 4) arrays, the same float operations in seven numpy calls."""
+    p = a.take(_MUL_A, axis=1)
+    p *= _MUL_SIGN
+    p *= b.take(_MUL_B, axis=1)
+    out = p[:, 0:4] + p[:, 4:8]
+    out += p[:, 8:12]
+    out += p[:, 12:16]
+    return out
+
+
+def _normalize(q: np.ndarray) -> np.ndarray:
+    """:func:`lmm.quat.normalize` of (J, 4), in place (numpy sums a 4-wide last axis left to right)."""
+    sq = q * q
+    n = sq[:, 0] + sq[:, 1]
+    n += sq[:, 2]
+    n += sq[:, 3]
+    np.sqrt(n, out=n)
+    np.maximum(n, 1e-10, out=n)
+    q /= n[:, None]
+    return q
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    out = a.take(_CROSS_L1, axis=1)
+    out *= b.take(_CROSS_R1, axis=1)
+    out -= a.take(_CROSS_L2, axis=1) * b.take(_CROSS_R2, axis=1)
+    return out
+
+
+def _mul_vec(q: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """:func:`lmm.quat.mul_vec` of (J, 4) and (J, 3): v + w t + u x t with t = 2 (u x v)."""
+    u = q[:, 1:]
+    t = _cross(u, v)
+    t *= 2.0
+    out = q[:, 0:1] * t
+    out += v
+    out += _cross(u, t)
+    return out
+
+
+def _norm3(v: np.ndarray) -> np.ndarray:
+    """np.linalg.norm(v, axis=-1) of (J, 3): the squares summed left to right."""
+    sq = v * v
+    n = sq[:, 0] + sq[:, 1]
+    n += sq[:, 2]
+    return np.sqrt(n, out=n)
+
+
+def _rotation_log2(q: np.ndarray, out: np.ndarray, eps: float = 1e-8) -> None:
+    """``quat.to_scaled_angle_axis(quat.abs_(q))`` of (J, 4) into ``out`` (J, 3)."""
+    w = q[:, 0]
+    xyz = q[:, 1:]
+    length = _norm3(xyz)
+    small = length < eps
+    # abs_ negates q where w < 0: |w| here (w = -0.0 gives the same arctan2 unless length is 0, the small
+    # branch), and the sign of the vector part folded into the scale ((-s) x == s (-x) exactly)
+    scale = np.arctan2(length, np.minimum(np.abs(w), 1.0))
+    scale /= np.where(small, 1.0, length)
+    scale[small] = 1.0                  # 1.0 * xyz == xyz: the small-angle branch
+    np.negative(scale, out=scale, where=w < 0.0)
+    np.multiply(xyz, scale[:, None], out=out)
+    out *= 2.0
+
+
+def _rotation_exp2(v: np.ndarray, eps: float = 1e-8) -> np.ndarray:
+    """``quat.from_scaled_angle_axis(v)`` of (J, 3): a new (J, 4) array."""
+    h = v * 0.5
+    half = _norm3(h)
+    small = half < eps
+    q = np.empty((len(v), 4))
+    np.cos(half, out=q[:, 0])
+    scale = np.sin(half)
+    scale /= np.where(small, 1.0, half)
+    scale[small] = 1.0
+    np.multiply(h, scale[:, None], out=q[:, 1:])
+    return _normalize(q)
+
+
+_SPRING_CONSTANTS: dict = {}
+
+
+def _spring_constants(halflife: float, dt: float):
+    """(y, e) = (damping / 2, exp(-y dt)) as the springs compute them, remembered per (halflife, dt)."""
+    key = (halflife, dt)
+    c = _SPRING_CONSTANTS.get(key)
+    if c is None:
+        if len(_SPRING_CONSTANTS) > 64:
+            _SPRING_CONSTANTS.clear()
+        y = halflife_to_damping(halflife) / 2.0
+        c = _SPRING_CONSTANTS[key] = (float(y), float(np.exp(-y * dt)))
+    return c
+
+
 def inertialize_decay(offsets: Offsets, halflife: float, dt: float) -> Offsets:
-    """The offsets ``dt`` seconds later."""
-    pos, vel = decay_spring_damper_exact(offsets.positions, offsets.velocities, halflife, dt)
-    rot, ang = decay_spring_damper_exact_quat(offsets.rotations, offsets.angular_velocities, halflife, dt)
-    return Offsets(pos, vel, rot, ang)
+    """The offsets ``dt`` seconds later: :func:`lmm.springs.decay_spring_damper_exact` on the position
+    offsets and :func:`lmm.springs.decay_spring_damper_exact_quat` on the rotation offsets, run as one
+    spring on (J, 6) = [position offset, rotation offset's scaled angle axis]."""
+    y, e = _spring_constants(halflife, dt)
+    n = len(offsets.positions)
+    x = np.empty((n, 6))
+    x[:, :3] = offsets.positions
+    _rotation_log2(offsets.rotations, x[:, 3:])
+    v = np.empty((n, 6))
+    v[:, :3] = offsets.velocities
+    v[:, 3:] = offsets.angular_velocities
+    j1 = x * y
+    j1 += v                             # v + x y
+    x_new = j1 * dt
+    x_new += x
+    x_new *= e                          # e (x + j1 dt)
+    v_new = j1 * y
+    v_new *= dt
+    np.subtract(v, v_new, out=v_new)
+    v_new *= e                          # e (v - j1 y dt)
+    return Offsets(x_new[:, :3], v_new[:, :3], _rotation_exp2(x_new[:, 3:]), v_new[:, 3:])
 
 
 def inertialize_apply(offsets: Offsets, positions, velocities, rotations, angular_velocities):
     """The shown pose: source + offsets. Returns (positions, velocities, rotations, angular velocities)."""
-    rot = quat.mul(offsets.rotations, rotations)
-    return (positions + offsets.positions, velocities + offsets.velocities, quat.normalize(rot),
-            offsets.angular_velocities + quat.mul_vec(offsets.rotations, angular_velocities))
+    rot = _normalize(_mul(offsets.rotations, rotations))
+    return (positions + offsets.positions, velocities + offsets.velocities, rot,
+            offsets.angular_velocities + _mul_vec(offsets.rotations, angular_velocities))
 
 
 def inertialize_update(offsets: Offsets, positions, velocities, rotations, angular_velocities,

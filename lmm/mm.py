@@ -1,6 +1,8 @@
 """Motion matching: the pose source plays database frames and jumps to the best match of each search."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from lmm.character import CharacterController, SearchOutcome, SourcePose, database_source_pose, root_local_velocities
@@ -45,6 +47,7 @@ class MotionMatchingController(CharacterController):
         self._root_vel, self._root_ang = root_local_velocities(db)
         self.frame = 0
         self.phase = 0.0
+        self._range_bounds = (0, 0)  # [first frame, stop) of the range _range_stop last looked up
         self.last_search = None
         self._hint = None          # the last search's candidates ...
         self._frames_since = 0     # ... and the frames played since (they seed the next search's bound)
@@ -92,7 +95,20 @@ class MotionMatchingController(CharacterController):
         return int(self.frame)
 
     def _must_jump(self) -> bool:
-        return self.frame >= int(self.db.range_stop_of(self.frame)) - 1
+        return self.frame >= self._range_stop(self.frame) - 1
+
+    def _range_stop(self, frame: int) -> int:
+        """``db.range_stop_of(frame)``, remembered for the range last asked about (the source plays on in
+        one range between jumps)."""
+        lo, hi = self._range_bounds
+        if not lo <= frame < hi:
+            i = int(self.db.range_index(frame))
+            lo = int(self.db.range_stops[i - 1]) if i > 0 else 0
+            hi = int(self.db.range_stops[i]) if i < len(self.db.range_stops) else lo
+            self._range_bounds = (lo, hi)
+            if not lo <= frame < hi:        # outside every range: no caching
+                return int(self.db.range_stop_of(frame))
+        return hi
 
     def _on_features_changed(self) -> None:
         if self.index is not None:
@@ -188,11 +204,11 @@ class MotionMatchingController(CharacterController):
 
     def _advance_pose(self, dt: float) -> SourcePose:
         self.phase += dt * self.db.fps
-        steps = int(np.floor(self.phase + 1e-6))
+        steps = math.floor(self.phase + 1e-6)
         if steps > 0:
             self.phase -= steps
             self._frames_since += steps
-            last = int(self.db.range_stop_of(self.frame)) - 1
+            last = self._range_stop(self.frame) - 1
             self.frame = min(self.frame + steps, last)
         return self._pose(self.frame)
 

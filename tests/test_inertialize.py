@@ -48,3 +48,45 @@ def test_output_is_continuous_across_a_transition():
     pos, *_ = inertialize_apply(off2, dst_pos + dst_vel * dt, dst_vel, rot, np.zeros((1, 3)))
     assert np.allclose(pos, shown_pos + shown_vel * dt, atol=1e-6)
     assert isinstance(Offsets.zeros(3).rotations, np.ndarray)
+
+
+def _reference_decay(off, halflife, dt):
+    """The numpy forms the fast decay replaces (lmm.springs on each part)."""
+    from lmm.springs import decay_spring_damper_exact, decay_spring_damper_exact_quat
+    pos, vel = decay_spring_damper_exact(off.positions, off.velocities, halflife, dt)
+    rot, ang = decay_spring_damper_exact_quat(off.rotations, off.angular_velocities, halflife, dt)
+    return pos, vel, rot, ang
+
+
+def _reference_apply(off, positions, velocities, rotations, angular_velocities):
+    return (positions + off.positions, velocities + off.velocities,
+            quat.normalize(quat.mul(off.rotations, rotations)),
+            off.angular_velocities + quat.mul_vec(off.rotations, angular_velocities))
+
+
+def _random_offsets(rng, n):
+    rot = quat.normalize(rng.normal(size=(n, 4)))
+    rot[: n // 4] = quat.normalize(np.concatenate([np.ones((n // 4, 1)), rng.normal(size=(n // 4, 3)) * 1e-9], 1))
+    rot[n // 4: n // 2, 0] *= -1.0           # negative w: the abs_ branch
+    rot[n // 2] = (1.0, 0.0, 0.0, 0.0)       # exactly identity: the small-angle branch
+    rot[n // 2 + 1] = (-0.0, 1.0, 0.0, 0.0)  # half a turn
+    scale = rng.uniform(1e-6, 10.0, size=(n, 1))
+    return Offsets(rng.normal(size=(n, 3)) * scale, rng.normal(size=(n, 3)) * scale, rot,
+                   rng.normal(size=(n, 3)) * scale)
+
+
+def test_fast_decay_and_apply_equal_the_numpy_forms_bit_for_bit():
+    rng = np.random.default_rng(7)
+    for trial in range(200):
+        n = int(rng.integers(4, 40))
+        off = _random_offsets(rng, n)
+        halflife = [0.0, 0.1, 0.05, float(rng.uniform(0.0, 1.0))][trial % 4]
+        dt = [1 / 60, 1 / 30, 2.0, float(rng.uniform(0.0, 0.1))][trial % 4]
+        got = inertialize_decay(off, halflife, dt)
+        want = _reference_decay(off, halflife, dt)
+        for g, w in zip((got.positions, got.velocities, got.rotations, got.angular_velocities), want):
+            assert g.shape == w.shape and np.array_equal(g, w)
+        src = (rng.normal(size=(n, 3)), rng.normal(size=(n, 3)), quat.normalize(rng.normal(size=(n, 4))),
+               rng.normal(size=(n, 3)))
+        for g, w in zip(inertialize_apply(off, *src), _reference_apply(off, *src)):
+            assert g.shape == w.shape and np.array_equal(g, w)
