@@ -42,7 +42,7 @@ def test_mapped_database_equals_read_database(tmp_path, monkeypatch):
     mapped = map_members(info.path, MAPPED_ARRAYS)
     assert {"positions", "rotations", "velocities", "angular_velocities"} <= set(mapped)
     assert all(isinstance(a, np.memmap) for a in mapped.values())
-    read, lazy = Database.load(info.path, mmap=False), Database.load(info.path)
+    read, lazy = Database.load(info.path, mmap=False), Database.load(info.path, mmap=True)
     for name in ("positions", "rotations", "velocities", "angular_velocities", "contacts", "toe_speeds"):
         assert np.array_equal(getattr(read, name), getattr(lazy, name)), name
         assert not getattr(lazy, name).flags.writeable
@@ -63,3 +63,17 @@ def test_derived_arrays_are_cached_bit_identical(tmp_path, monkeypatch):
     assert np.array_equal(computed, again) and np.array_equal(again, build_features(in_memory).raw)
     for a, b in zip(root_local_velocities(Database.load(info.path)), root_local_velocities(in_memory)):
         assert np.array_equal(a, b)
+
+
+def test_small_caches_are_read_whole_and_large_ones_mapped(tmp_path, monkeypatch):
+    """A small cache is read into memory (no page faults inside ticks); from MAP_MIN_BYTES up it is mapped."""
+    import lmm.data.npz_mmap as npz_mmap
+
+    monkeypatch.setenv("LMM_TEST_TAKES", str(DATA_DIR / "lafan1"))
+    _, info = load_or_build(_manifest(tmp_path, "${LMM_TEST_TAKES}"), cache_dir=tmp_path / "cache")
+    small = Database.load(info.path)
+    assert not isinstance(small.positions.base, np.memmap)    # its own memory, read from the file
+    monkeypatch.setattr(npz_mmap, "MAP_MIN_BYTES", 1)
+    large = Database.load(info.path)
+    assert isinstance(large.positions.base, np.memmap)         # a view of the file's map
+    assert np.array_equal(small.positions, large.positions)

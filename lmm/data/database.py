@@ -28,7 +28,7 @@ from lmm.data import bvh
 from lmm.data.atomic import atomic_write
 from lmm.filters import catmull_rom, central_difference, median_filter, savgol_smooth
 from lmm.data.manifest import Manifest, ManifestError, load_manifest
-from lmm.data.npz_mmap import map_members
+from lmm.data.npz_mmap import map_members, worth_mapping
 from lmm.errors import InputError
 
 DB_FORMAT_VERSION = 5  # 5: mirrored clips keep the original bone offsets
@@ -214,11 +214,14 @@ class Database:
             np.savez(f, **self.to_arrays())
 
     @classmethod
-    def load(cls, path, mmap: bool = True) -> "Database":
-        """Read a database file. With ``mmap`` (the default) the per-frame arrays are read-only memory
-        maps of the file (see :mod:`lmm.data.npz_mmap`): pages are read when first touched, so memory
-        holds the frames a run uses, not the whole database."""
+    def load(cls, path, mmap: bool | None = None) -> "Database":
+        """Read a database file. With ``mmap`` the per-frame arrays are read-only memory maps of the file
+        (see :mod:`lmm.data.npz_mmap`): pages are read when first touched, so memory holds the frames a
+        run uses, not the whole database. ``None`` (the default) maps large files only
+        (:func:`lmm.data.npz_mmap.worth_mapping`) and reads small ones whole (read-only as well)."""
         path = Path(path)
+        if mmap is None:
+            mmap = worth_mapping(path)
         try:
             with np.load(path, allow_pickle=False) as z:
                 if int(z["format_version"]) != DB_FORMAT_VERSION:

@@ -20,7 +20,7 @@ from typing import Callable
 import numpy as np
 
 from lmm.data.atomic import atomic_write
-from lmm.data.npz_mmap import advise_random, drop_cached_pages
+from lmm.data.npz_mmap import advise_random, drop_cached_pages, worth_mapping
 
 
 def _module_source_digest(fn) -> str:
@@ -47,7 +47,11 @@ def entry_path(db, name: str, params, compute: Callable) -> Path | None:
     return folder / f"{name}-{h.hexdigest()[:20]}.npy"
 
 
-def _map(path: Path, random_access: bool) -> np.ndarray:
+def _map(path: Path, random_access: bool, mapped: bool = True) -> np.ndarray:
+    if not mapped:  # beside a small database: read whole (read-only, like a map), no page faults in a tick
+        array = np.load(path, allow_pickle=False)
+        array.flags.writeable = False
+        return array
     array = np.load(path, mmap_mode="r", allow_pickle=False)
     if random_access and isinstance(array, np.memmap):
         drop_cached_pages_of(path)
@@ -67,7 +71,8 @@ def cached(db, name: str, params, compute: Callable[[], np.ndarray], random_acce
     path = entry_path(db, name, params, compute)
     if path is not None and path.is_file():
         try:
-            return _map(path, random_access)
+            # mapped when the database is (a large one), else read whole: see lmm.data.npz_mmap.worth_mapping
+            return _map(path, random_access, mapped=worth_mapping(getattr(db, "source_path", None) or path))
         except (OSError, ValueError):
             pass  # damaged: computed and written again below
     value = np.asarray(compute())
