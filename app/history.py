@@ -212,10 +212,14 @@ def search_agreement(history: History, controller: str, end_tick: int, n: int,
     """Fraction of the searches in the window where the frame the projector chose (the database
     frame nearest its output, series ``chosen``) is within ``tolerance_frames`` of the exact nearest
     neighbour (``nn_frame``), and how many searches there were. (nan, 0) without searches."""
-    searched = history.window(controller, "searched", end_tick, n) > 0.5
-    nn = history.window(controller, "nn_frame", end_tick, n)
-    got = history.window(controller, chosen, end_tick, n)
-    valid = searched & np.isfinite(nn) & (nn >= 0) & np.isfinite(got)
+    return agreement(history.window(controller, "searched", end_tick, n),
+                     history.window(controller, "nn_frame", end_tick, n),
+                     history.window(controller, chosen, end_tick, n), tolerance_frames)
+
+
+def agreement(searched: np.ndarray, nn: np.ndarray, got: np.ndarray, tolerance_frames: int = 0) -> tuple[float, int]:
+    """:func:`search_agreement` of windows already gathered (``searched``, ``nn_frame`` and the chosen frame)."""
+    valid = (searched > 0.5) & np.isfinite(nn) & (nn >= 0) & np.isfinite(got)
     k = int(valid.sum())
     if k == 0:
         return float("nan"), 0

@@ -169,6 +169,7 @@ class Studio(SessionActions):
         dpg = self.dpg
         self.keyboard = KeyboardInput()
         self.key_lookup = build_key_lookup(lambda c: getattr(dpg, c, None))
+        self._shortcut_keys = (dpg.mvKey_Spacebar, dpg.mvKey_Home, dpg.mvKey_Comma, dpg.mvKey_Period, dpg.mvKey_F)
         try:
             from .input.manager import InputManager
 
@@ -218,14 +219,16 @@ class Studio(SessionActions):
     def _keys(self) -> None:
         dpg = self.dpg
         names = set(self.script.keys)
-        if not self.typing():
-            names.update(name for code, name in self.key_lookup.items() if dpg.is_key_down(code))
+        down = [name for code, name in self.key_lookup.items() if dpg.is_key_down(code)]
+        pressed = [key for key in self._shortcut_keys if dpg.is_key_pressed(key)]
+        # typing() asks every text item whether it is being edited: only worth it when a key is down
+        if (down or pressed) and not self.typing():
+            names.update(down)
             shortcuts = {dpg.mvKey_Spacebar: self.playback.toggle_pause, dpg.mvKey_Home: self.playback.go_live,
                          dpg.mvKey_Comma: lambda: self.playback.step(-1),
                          dpg.mvKey_Period: lambda: self.playback.step(1), dpg.mvKey_F: self.viewport.toggle_follow}
-            for key, action in shortcuts.items():
-                if dpg.is_key_pressed(key):
-                    action()
+            for key in pressed:
+                shortcuts[key]()
         self.keyboard.set_keys(names)
 
     def _live_input(self, frame_dt: float) -> InputState:

@@ -2,6 +2,8 @@
 formats and small dearpygui helpers. What a panel is and may touch: :mod:`app.panels.base`."""
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 # key -> (fixed item id, title). The ids key the windows in layout (.ini) files: never renumber.
@@ -112,6 +114,13 @@ def overlapping(rects: dict, tolerance: float = 3.0) -> set:
     return out
 
 
+@functools.lru_cache(maxsize=32)
+def seconds_axis(n: int, dt: float) -> np.ndarray:
+    """Times of the ``n`` ticks ending now, in seconds (the newest at 0): a plot's x values, shared
+    by every caller (never write to it)."""
+    return (np.arange(n) - (n - 1)) * dt
+
+
 def decimate(x: np.ndarray, y: np.ndarray, max_points: int) -> tuple[np.ndarray, np.ndarray]:
     """Every k-th point (the last one always kept) so a line series has at most ``max_points``:
     a plot a few hundred pixels wide shows no more, and each point costs raster time."""
@@ -124,7 +133,8 @@ def decimate(x: np.ndarray, y: np.ndarray, max_points: int) -> tuple[np.ndarray,
 
 
 class TextCache:
-    """Sets a dearpygui value only when it changed (set_value on text costs a string copy)."""
+    """Sets a dearpygui value, option or axis limit only when it changed: a panel whose data did not
+    change makes no dearpygui call (set_value on text costs a string copy, configure_item a few us)."""
 
     def __init__(self, dpg):
         self.dpg = dpg
@@ -137,3 +147,22 @@ class TextCache:
 
     def get(self, item, default=None):
         return self.values.get(item, default)
+
+    def configure(self, item, **options) -> None:
+        """``configure_item(item, **options)`` with only the options whose value changed (the item's
+        options must be changed only through this cache)."""
+        values = self.values
+        changed = {k: v for k, v in options.items() if values.get((item, k), _UNSET) != v}
+        if changed:
+            for k, v in changed.items():
+                values[(item, k)] = v
+            self.dpg.configure_item(item, **changed)
+
+    def axis_limits(self, axis, lo: float, hi: float) -> None:
+        key = (axis, "limits")
+        if self.values.get(key) != (lo, hi):
+            self.values[key] = (lo, hi)
+            self.dpg.set_axis_limits(axis, lo, hi)
+
+
+_UNSET = object()

@@ -48,12 +48,17 @@ def channel_errors(features, a, b) -> list[float]:
     """Per-channel squared distance between two normalised vectors (nan when either is missing)."""
     if a is None or b is None:
         return [float("nan")] * len(features.layout)
-    return [float(np.sum((a[s] - b[s]) ** 2)) for s in features.slices]
+    d = np.asarray(a, np.float64) - np.asarray(b, np.float64)
+    starts = [s.start for s in features.slices]
+    if starts and all(s.stop == e for s, e in zip(features.slices, starts[1:] + [len(d)])):
+        return np.add.reduceat(d * d, starts).tolist()     # the channels tile the vector: one call
+    return [float(np.sum(d[s] ** 2)) for s in features.slices]
 
 
 class FeaturesPanel(Panel):
     key = "features"
     _weights = None
+    _bar_x = None      # bar x positions per shift (the layout's x never changes)
 
     def build(self, window_kwargs: dict) -> None:
         dpg = self.dpg
@@ -91,14 +96,15 @@ class FeaturesPanel(Panel):
             self.layout["labels"] = labels
         vals = bar_values(view)
         x = self.layout["x"]
+        if self._bar_x is None:
+            self._bar_x = {shift: x + shift for shift in (-BAR_WIDTH, 0.0, BAR_WIDTH)}
+            self._zeros = np.zeros_like(x)
         for key, tag, shift in (("query", "feat_query", -BAR_WIDTH), ("matched", "feat_matched", 0.0),
                                 ("projected", "feat_projected", BAR_WIDTH)):
             v = vals[key]
-            if v is None:
-                v = np.zeros_like(x)
-            dpg.set_value(tag, [x + shift, v])
+            dpg.set_value(tag, [self._bar_x[shift], self._zeros if v is None else v])
         inspected = SHORT.get(view.inspected, view.inspected)
-        dpg.configure_item("feat_query", label=f"query ({inspected})")
+        self.text.configure("feat_query", label=f"query ({inspected})")
         # each controller's own query: the projector answered LMM's query, the search MM's
         mm, lmm = view.snap_of("mm"), view.snap_of("lmm")
         total_m = total_p = float("nan")

@@ -3,10 +3,12 @@ per dimension), beside the compressor's latent of the frames motion matching pla
 dimension of both as curves."""
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from .base import Panel, View
-from .common import COLORS
+from .common import COLORS, seconds_axis
 
 COLUMNS = 200
 GAP = 2.0       # rows of space between the two maps
@@ -30,15 +32,30 @@ def heat_image(values: np.ndarray, scale: float, lut: np.ndarray, columns: int =
     NaN is dark grey."""
     v = np.asarray(values, np.float64)
     T, L = v.shape
-    idx = np.clip(np.round(np.linspace(0, T - 1, columns)).astype(np.int64), 0, T - 1)   # newest kept
-    cols = v[idx].T                                                                       # (L, columns)
-    k = np.clip(((cols / max(scale, 1e-9)) + 1.0) * 0.5 * (len(lut) - 1), 0, len(lut) - 1)
-    img = lut[np.nan_to_num(k, nan=0.0).astype(np.int64)]
-    img[~np.isfinite(cols)] = (0.2, 0.2, 0.22, 1.0)
-    if out is not None:
-        out[...] = img
-        return out
-    return img
+    idx = _column_ticks(T, columns)
+    k = v.take(idx, axis=0).T                                                             # (L, columns)
+    bad = ~np.isfinite(k)
+    # in place, the same operations as ((k / scale) + 1) * 0.5 * (n - 1) clipped to the table
+    np.divide(k, max(scale, 1e-9), out=k)
+    k += 1.0
+    k *= 0.5
+    k *= len(lut) - 1
+    np.clip(k, 0, len(lut) - 1, out=k)
+    any_bad = bool(bad.any())
+    if any_bad:
+        k[bad] = 0.0
+    if out is None:
+        out = np.empty((L, columns, lut.shape[1]), lut.dtype)
+    np.take(lut, k.astype(np.intp), axis=0, out=out)
+    if any_bad:
+        out[bad] = (0.2, 0.2, 0.22, 1.0)
+    return out
+
+
+@functools.lru_cache(maxsize=16)
+def _column_ticks(T: int, columns: int) -> np.ndarray:
+    """Which of ``T`` ticks each of ``columns`` image columns shows (the newest always kept)."""
+    return np.clip(np.round(np.linspace(0, T - 1, columns)).astype(np.int64), 0, T - 1)
 
 
 def latent_scale(values: np.ndarray, floor: float = 0.5) -> float:
@@ -113,7 +130,7 @@ class LatentPanel(Panel):
         dt = self.ctx.engine.dt
         n = max(int(self.seconds / dt), 2)
         end = view.tick_number
-        t = (np.arange(n) - (n - 1)) * dt
+        t = seconds_axis(n, dt)
         series = {}
         for key, field in (("lmm", "latent"), ("mm", "matched_latent")):   # the controllers report them
             if h.has_series(key, field):
@@ -121,22 +138,23 @@ class LatentPanel(Panel):
         for key, v in series.items():  # each map's colour range follows its recent values smoothly
             if v.ndim == 2 and view.frame % 6 == 0:
                 self._scale[key] = 0.7 * self._scale[key] + 0.3 * latent_scale(v[-60:])
+        cache = self.text
         for key in ("lmm", "mm"):
             v = series.get(key)
             tag = f"lat_heat_{key}"
             if v is None or v.ndim != 2 or v.shape[1] != self.n_latent:
-                dpg.configure_item(tag, show=False)
+                cache.configure(tag, show=False)
                 continue
             sc = self._scale[key]
             heat_image(v, sc, self.lut, COLUMNS, out=self.images[key])   # in place: the texture shows it
             lo, hi = self._rows(key)
-            dpg.configure_item(tag, show=True, bounds_min=(float(t[0]), lo), bounds_max=(0.0, hi))
+            cache.configure(tag, show=True, bounds_min=(float(t[0]), lo), bounds_max=(0.0, hi))
         labels = tuple(f"{k.upper()} ±{self._scale[k]:.1f}" for k in ("mm", "lmm"))
         if labels != self._label_shown.get("ticks"):
             self._label_shown["ticks"] = labels
             L = self.n_latent
             dpg.set_axis_ticks("lat_y", ((labels[0], L / 2), (labels[1], L + GAP + L / 2)))
-        dpg.set_axis_limits("lat_x", float(t[0]), 0.0)
+        cache.axis_limits("lat_x", float(t[0]), 0.0)
         dim = self.dim
         for key, tag, label in (("lmm", "lat_curve_lmm", "LMM latent"), ("mm", "lat_curve_mm", "MM matched latent")):
             v = series.get(key)
@@ -145,9 +163,9 @@ class LatentPanel(Panel):
             else:
                 y = v[:, dim]
                 ok = np.isfinite(y)
-                dpg.set_value(tag, [t[ok], y[ok]])
-            dpg.configure_item(tag, label=f"{label}[{dim}]")
-        dpg.set_axis_limits("lat_curve_x", float(t[0]), 0.0)
+                dpg.set_value(tag, [t, np.ascontiguousarray(y)] if ok.all() else [t[ok], y[ok]])
+            cache.configure(tag, label=f"{label}[{dim}]")
+        cache.axis_limits("lat_curve_x", float(t[0]), 0.0)
         missing = [k for k in ("lmm", "mm") if k not in series]
         reasons = {"lmm": "LMM: " + (view.problems.get("lmm") or "not running"),
                    "mm": "MM: " + (view.latent_status or "no matched latents")}

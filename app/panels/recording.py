@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from .base import Panel, View
-from .common import COLORS, SHORT, decimate
+from .common import COLORS, SHORT, decimate, seconds_axis
 
 BUILTINS = ("circle", "zigzag", "stop-and-go", "strafe", "turns", "random:1")
 
@@ -21,6 +21,10 @@ def default_recording_path() -> Path:
 class RecordingPanel(Panel):
     key = "recording"
     _recording = False
+
+    def __init__(self, ctx):
+        super().__init__(ctx)
+        self._error_points: dict[str, bool] = {}   # controller -> its pose error curve holds points
 
     def build(self, window_kwargs: dict) -> None:
         dpg = self.dpg
@@ -97,7 +101,7 @@ class RecordingPanel(Panel):
             dpg.configure_item("rec_lmm", enabled="lmm" in self.ctx.engine.controller_names())
         rec = view.recording
         self._recording = rec is not None
-        dpg.configure_item("rec_button", label="Stop" if rec is not None else "Record")
+        self.text.configure("rec_button", label="Stop" if rec is not None else "Record")
         if rec is not None:
             self.text.set("rec_status", f"REC {rec.seconds:5.1f} s -> {', '.join(rec.files)}")
         else:
@@ -136,21 +140,26 @@ class RecordingPanel(Panel):
         self.text.set("ref_error", line if view.following else
                       ("not following (tick Follow reference)" if view.reference else ""))
         n = h.capacity
-        t = (np.arange(n) - (n - 1)) * dt
+        t = seconds_axis(n, dt)
         top = 0.0
         for name in COLORS:
-            y = h.window(name, "reference_error", newest, n) if newest >= 0 else np.full(n, np.nan)
-            ok = np.isfinite(y)
-            dpg.configure_item(f"ref_err_{name}", show=bool(ok.any()))
-            x, v = decimate(t[ok], y[ok], 400)
-            dpg.set_value(f"ref_err_{name}", [x.tolist(), v.tolist()])
-            if len(v):
-                top = max(top, float(v.max()))
+            # no error series (never followed): nothing to gather, and an empty plot stays as it is
+            y = h.window(name, "reference_error", newest, n) \
+                if newest >= 0 and h.has_series(name, "reference_error") else None
+            ok = None if y is None else np.isfinite(y)
+            plotted = ok is not None and bool(ok.any())
+            self.text.configure(f"ref_err_{name}", show=plotted)
+            if plotted or self._error_points.get(name, True):
+                x, v = decimate(t[ok], y[ok], 400) if plotted else ([], [])
+                dpg.set_value(f"ref_err_{name}", [np.asarray(x).tolist(), np.asarray(v).tolist()])
+                self._error_points[name] = plotted
+                if len(v):
+                    top = max(top, float(np.max(v)))
         cursor = (view.tick_number - newest) * dt if newest >= 0 else 0.0
-        dpg.set_value("ref_cursor", [[cursor]])
+        self.text.set("ref_cursor", [[cursor]])
         held = (newest - h.oldest_tick + 1) * dt if newest >= 0 else 0.0      # the ticks since the reset
-        dpg.set_axis_limits("ref_x", -max(min(held, n * dt), 2.0), 0.0)
-        dpg.set_axis_limits("ref_y", 0.0, max(0.5, 1.15 * top))
+        self.text.axis_limits("ref_x", -max(min(held, n * dt), 2.0), 0.0)
+        self.text.axis_limits("ref_y", 0.0, max(0.5, 1.15 * top))
         return {"following": view.following, "now": {k: {"error_rad": e, "frame": f} for k, (e, f) in now.items()},
                 "cursor_s": cursor, "line": line}
 

@@ -14,10 +14,10 @@ import re
 
 import numpy as np
 
-from app.history import search_agreement
+from app.history import agreement
 
 from .base import Panel, View
-from .common import COLORS, GOOD, SHORT, cost_color, decimate, fmt_num, short_channel_name
+from .common import COLORS, GOOD, SHORT, cost_color, decimate, fmt_num, seconds_axis, short_channel_name
 
 MAX_ROWS = 64
 
@@ -115,6 +115,10 @@ class SearchPanel(Panel):
     seconds = 10.0
     tolerance = 6
 
+    def __init__(self, ctx):
+        super().__init__(ctx)
+        self._labels: dict[int, tuple[str, str]] = {}
+
     def build(self, window_kwargs: dict) -> None:
         dpg = self.dpg
         with self.window(window_kwargs):
@@ -164,20 +168,38 @@ class SearchPanel(Panel):
         theme.series("cost_transitions", COLORS["mm"], marker=True)
         theme.series("cost_agree", GOOD, weight=1.5)
 
+    def _label(self, frame: int) -> tuple[str, str]:
+        """The frame and clip cells of a database frame (cached: a frame's clip never changes)."""
+        cells = self._labels.get(frame)
+        if cells is None:
+            db = self.ctx.engine.db
+            clip, tc = frame_label(db, frame)
+            tags = frame_tags(db, frame)
+            cells = ("-" if frame < 0 else str(frame) + (f" [{tags}]" if tags else ""),
+                     "-" if frame < 0 else f"{clip[:22]} {tc:5.2f}s")
+            if len(self._labels) > 4096:
+                self._labels.clear()
+            self._labels[frame] = cells
+        return cells
+
     def update(self, view: View) -> None:
         dpg = self.dpg
+        cache = self.text
         db = self.ctx.engine.db
         h = view.history
         dt = self.ctx.engine.dt
         n = max(int(self.seconds / dt), 2)
         end = view.tick_number
-        t = (np.arange(n) - (n - 1)) * dt
+        t = seconds_axis(n, dt)
         lmm, mm = view.snap_of("lmm"), view.snap_of("mm")
         shown = {}
         if lmm is not None:
+            # each series is gathered once: the table, the agreement and its curve share them
+            searched = h.window("lmm", "searched", end, n)
+            nn = h.window("lmm", "nn_frame", end, n)
+            projected = h.window("lmm", "projected_frame", end, n)
             nn_frame = int(lmm.nn_frame)
-            proj = h.window("lmm", "projected_frame", end, n)
-            proj = proj[np.isfinite(proj)]
+            proj = projected[np.isfinite(projected)]
             proj_frame = int(proj[-1]) if len(proj) else -1
             shown["nn"] = (nn_frame, float(lmm.nn_cost))
             shown["proj"] = (proj_frame, float(lmm.projected_cost))
@@ -185,46 +207,48 @@ class SearchPanel(Panel):
             if lmm.projected_features is not None and 0 <= nn_frame < db.n_frames:
                 features = self.ctx.engine.features_of("lmm")
                 dist = float(np.linalg.norm(np.asarray(lmm.projected_features) - features.normalized[nn_frame]))
-            rate, k = search_agreement(h, "lmm", end, n, self.tolerance)
+            rate, k = agreement(searched, nn, projected, self.tolerance)
             agree = "-" if k == 0 else f"{100 * rate:.0f}% of {k} searches"
-            self.text.set("nn_status", "LMM projector vs exact nearest neighbour of the same query")
+            cache.set("nn_status", "LMM projector vs exact nearest neighbour of the same query")
         else:
             dist, rate, k = float("nan"), float("nan"), 0
             agree = "-"
             reason = view.problems.get("lmm") or "LMM is not running"
-            self.text.set("nn_status", reason)
+            cache.set("nn_status", reason)
         if mm is not None:
             shown["mm"] = (int(mm.matched_frame), float(mm.best_cost))
         for col in ("nn", "proj", "mm"):
             frame, cost = shown.get(col, (-1, float("nan")))
-            clip, tc = frame_label(db, frame)
-            tags = frame_tags(db, frame)
-            self.text.set(f"nn_{col}_frame", "-" if frame < 0 else str(frame) + (f" [{tags}]" if tags else ""))
-            self.text.set(f"nn_{col}_clip", "-" if frame < 0 else f"{clip[:22]} {tc:5.2f}s")
-            self.text.set(f"nn_{col}_cost", fmt_num(cost))
-        self.text.set("nn_distance", fmt_num(dist))
-        self.text.set("nn_agreement", agree)
+            frame_cell, clip_cell = self._label(frame)
+            cache.set(f"nn_{col}_frame", frame_cell)
+            cache.set(f"nn_{col}_clip", clip_cell)
+            cache.set(f"nn_{col}_cost", fmt_num(cost))
+        cache.set("nn_distance", fmt_num(dist))
+        cache.set("nn_agreement", agree)
         # cost timeline
+        best_cost = None
         for name, field, tag in (("mm", "best_cost", "cost_mm"), ("lmm", "nn_cost", "cost_nn"),
                                  ("lmm", "projected_cost", "cost_proj")):
             y = h.window(name, field, end, n)
+            if tag == "cost_mm":
+                best_cost = y
             ok = np.isfinite(y)
-            if ok.any():
+            any_ok = bool(ok.any())
+            if any_ok:
                 dpg.set_value(tag, list(decimate(t[ok], y[ok], 300)))
             else:
                 dpg.set_value(tag, [t[-1:], np.zeros(1)])
-            dpg.configure_item(tag, show=bool(ok.any()))
+            cache.configure(tag, show=any_ok)
         tr = h.window("mm", "transitioned", end, n) > 0.5
-        cost = h.window("mm", "best_cost", end, n)
-        sel = tr & np.isfinite(cost)
-        dpg.set_value("cost_transitions", [t[sel] if sel.any() else t[-1:], cost[sel] if sel.any() else np.zeros(1)])
+        sel = tr & np.isfinite(best_cost)
+        dpg.set_value("cost_transitions", [t[sel] if sel.any() else t[-1:],
+                                           best_cost[sel] if sel.any() else np.zeros(1)])
         if lmm is not None:
-            ag = rolling_agreement(h.window("lmm", "searched", end, n), h.window("lmm", "nn_frame", end, n),
-                                   h.window("lmm", "projected_frame", end, n), int(2.0 / dt), self.tolerance)
+            ag = rolling_agreement(searched, nn, projected, int(2.0 / dt), self.tolerance)
             ok = np.isfinite(ag)
             dpg.set_value("cost_agree", list(decimate(t[ok], ag[ok], 300)) if ok.any() else [t[-1:], np.zeros(1)])
-        dpg.configure_item("cost_agree", show=lmm is not None)
-        dpg.set_axis_limits("cost_x", float(t[0]), 0.0)
+        cache.configure("cost_agree", show=lmm is not None)
+        cache.axis_limits("cost_x", float(t[0]), 0.0)
         self.last = {"tick": end, "nn_frame": shown.get("nn", (-1,))[0], "nn_cost": shown.get("nn", (0, None))[1],
                      "projected_frame": shown.get("proj", (-1,))[0],
                      "projected_cost": shown.get("proj", (0, None))[1],

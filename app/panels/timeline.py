@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from .base import Panel, View
-from .common import COLORS, decimate
+from .common import COLORS, decimate, seconds_axis
 
 
 def scrub_target(history, current: int, delta: int) -> int:
@@ -76,21 +76,22 @@ class TimelinePanel(Panel):
         if abs(line - self._line_value) > 1e-6 and dpg.is_item_hovered("tl_plot"):
             self.ctx.actions.scrub_to(int(round(newest + line / dt)))
             want = line
-        dpg.set_value("tl_drag", want)
+        if line != want:
+            dpg.set_value("tl_drag", want)
         self._line_value = want
         n = h.capacity
-        t = (np.arange(n) - (n - 1)) * dt
+        t = seconds_axis(n, dt)
         first = max(0, n - (newest - oldest + 1))
         for name in COLORS:
             running = name in names
-            dpg.configure_item(f"tl_speed_{name}", show=running)
+            self.text.configure(f"tl_speed_{name}", show=running)
             if running:
                 y = h.window(name, "speed", newest, n)
                 dpg.set_value(f"tl_speed_{name}", list(decimate(t[first:], y[first:], 400)))
         name0 = names[0]
         dpg.set_value("tl_desired", list(decimate(t[first:], h.window(name0, "desired_speed", newest, n)[first:], 400)))
-        dpg.set_axis_limits("tl_x", float(t[0]), 0.0)
-        dpg.configure_item("tl_play", label="Play" if view.paused else "Pause")
+        self.text.axis_limits("tl_x", float(t[0]), 0.0)
+        self.text.configure("tl_play", label="Play" if view.paused else "Pause")
         held = (newest - oldest + 1) * dt
         mode = view.mode
         t_now = view.tick.time_s if view.tick is not None else 0.0

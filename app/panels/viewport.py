@@ -22,6 +22,7 @@ FORWARD = np.array([0.0, 0.0, 1.0])
 SIDE_OFFSET_M = 1.6
 TRAIL_SECONDS = 4.0
 LABEL_CHAR_PX, LABEL_HEIGHT_PX = 8.5, 17.0      # a character label's size per character at font size 16
+BYTE_TO_UNIT = np.float32(1.0 / 255.0)          # an 8-bit colour channel to the raw texture's 0..1
 
 def yaw_deg_from_azimuth(azimuth: float) -> float:
     """The orbit camera's yaw for an input-layer azimuth (radians; 0 looks along +Z)."""
@@ -249,6 +250,7 @@ class ViewportPanel(Panel):
         self._texture_counter += 1
         self.tex_array = np.zeros((rh, rw, 4), dtype=np.float32)
         self.tex_array[..., 3] = 1.0
+        self._read_bytes = np.zeros((rh, rw, 4), dtype=np.uint8)
         self.texture = f"vp_texture_{self._texture_counter}"
         dpg.add_raw_texture(rw, rh, self.tex_array, format=dpg.mvFormat_Float_rgba, tag=self.texture,
                             parent="texture_registry")
@@ -369,7 +371,10 @@ class ViewportPanel(Panel):
         t0 = time.perf_counter()
         self.renderer.render_to(self.scene, self.camera)
         t1 = time.perf_counter()
-        self.renderer.read(dtype=np.float32, out=self.tex_array, flip=False)
+        # read bytes and scale them here: several times cheaper than the driver's float read on
+        # software GL, and the same numbers (x * float32(1/255) is what llvmpipe computes)
+        self.renderer.read(dtype=np.uint8, out=self._read_bytes, flip=False)
+        np.multiply(self._read_bytes, BYTE_TO_UNIT, out=self.tex_array)
         t2 = time.perf_counter()
         self.gl.detect_framebuffer(0).use()
         self.render_ms = (t1 - t0) * 1e3
@@ -431,69 +436,63 @@ class ViewportPanel(Panel):
         return self.ctx.engine.features_of(name)
 
     def _labels(self, view: View, roots) -> None:
+        """Name labels over the characters' (and the ragdoll's and the preview ghosts') heads, and the
+        overlay line. Only changed label options reach dearpygui (positions move, texts rarely do)."""
         dpg = self.dpg
+        cache = self.text
         w, h = self.size
         vp = self.camera.view_projection(w / max(h, 1))
         from viewer.camera import project_points
 
-        anchors, sizes, texts = {}, {}, {}
+        # every label's anchor above a head, projected in one call
+        wanted = []     # (label key, item tag, text, world point)
         for name in COLORS:
             tag = f"vp_label_{name}"
-            if not dpg.does_item_exist(tag):
-                continue
             snap = view.tick.snapshots.get(name) if view.tick is not None and name in self.drawings else None
             if snap is None:
-                dpg.configure_item(tag, show=False)
+                cache.configure(tag, show=False)
                 continue
-            head = np.asarray(snap.pose.global_positions, np.float64)[:, 1].argmax()
-            p = np.asarray(snap.pose.global_positions[head], np.float64) + self.offset_of(name) + [0, 0.25, 0]
-            px, _, front = project_points(p[None], vp, w, h)
-            if front[0] and 0 <= px[0, 0] < w and 0 <= px[0, 1] < h:
-                texts[name] = SHORT.get(name, name) + (" (inspected)" if name == view.inspected
-                                                       and len(self.drawings) > 1 else "")
-                anchors[name] = (float(px[0, 0]) - 12, float(px[0, 1]) - 18)
-                sizes[name] = (LABEL_CHAR_PX * len(texts[name]), LABEL_HEIGHT_PX)
-            else:
-                dpg.configure_item(tag, show=False)
+            g = np.asarray(snap.pose.global_positions, np.float64)
+            text = SHORT.get(name, name) + (" (inspected)" if name == view.inspected and len(self.drawings) > 1 else "")
+            wanted.append((name, tag, text, g[g[:, 1].argmax()] + self.offset_of(name) + [0, 0.25, 0]))
         rag = self.drawn.get("ragdoll")
-        if rag is not None and dpg.does_item_exist("vp_label_ragdoll"):
+        if rag is not None:
             _, positions, off = self.ragdoll_pose(view)
-            head = positions[int(np.argmax(positions[:, 1]))] + off + [0, 0.25, 0]
-            px, _, front = project_points(head[None], vp, w, h)
-            if front[0] and 0 <= px[0, 0] < w and 0 <= px[0, 1] < h:
-                texts["ragdoll"] = f"ragdoll ({SHORT.get(rag['controller'], rag['controller'])})"
-                anchors["ragdoll"] = (float(px[0, 0]) - 12, float(px[0, 1]) - 18)
-                sizes["ragdoll"] = (LABEL_CHAR_PX * len(texts["ragdoll"]), LABEL_HEIGHT_PX)
-            else:
-                dpg.configure_item("vp_label_ragdoll", show=False)
-        elif dpg.does_item_exist("vp_label_ragdoll"):
-            dpg.configure_item("vp_label_ragdoll", show=False)
-        for i, p in enumerate(self.drawn.get("previews", [])):
+            wanted.append(("ragdoll", "vp_label_ragdoll",
+                           f"ragdoll ({SHORT.get(rag['controller'], rag['controller'])})",
+                           positions[int(np.argmax(positions[:, 1]))] + off + [0, 0.25, 0]))
+        else:
+            cache.configure("vp_label_ragdoll", show=False)
+        previews = self.drawn.get("previews", [])
+        for i, p in enumerate(previews):
             tag = f"vp_preview_label_{i}"
             if i >= self._preview_labels:
                 dpg.draw_text((0, 0), "", tag=tag, parent="vp_drawlist", size=15,
                               color=(150, 240, 150, 255))
                 self._preview_labels = i + 1
-            px, _, front = project_points(np.asarray(p["head"])[None] + [0, 0.25, 0], vp, w, h)
-            if front[0] and 0 <= px[0, 0] < w and 0 <= px[0, 1] < h:
-                texts[tag] = p["label"]
-                anchors[tag] = (float(px[0, 0]) - 12, float(px[0, 1]) - 18)
-                sizes[tag] = (LABEL_CHAR_PX * len(p["label"]), LABEL_HEIGHT_PX)
-            else:
-                dpg.configure_item(tag, show=False)
-        for i in range(len(self.drawn.get("previews", [])), self._preview_labels):
-            dpg.configure_item(f"vp_preview_label_{i}", show=False)
+            wanted.append((tag, tag, p["label"], np.asarray(p["head"], np.float64) + [0, 0.25, 0]))
+        for i in range(len(previews), self._preview_labels):
+            cache.configure(f"vp_preview_label_{i}", show=False)
+        anchors, sizes, texts, tags = {}, {}, {}, {}
+        if wanted:
+            px, _, front = project_points(np.array([wt[3] for wt in wanted]), vp, w, h)
+            for (key, tag, text, _), (x, y), ok in zip(wanted, px, front):
+                if ok and 0 <= x < w and 0 <= y < h:
+                    texts[key], tags[key] = text, tag
+                    anchors[key] = (float(x) - 12, float(y) - 18)
+                    sizes[key] = (LABEL_CHAR_PX * len(text), LABEL_HEIGHT_PX)
+                else:
+                    cache.configure(tag, show=False)
         placed = separate_labels(anchors, sizes)
-        for name, pos in placed.items():
-            tag = name if name.startswith("vp_preview_label_") else f"vp_label_{name}"
-            dpg.configure_item(tag, show=True, pos=pos, text=texts[name])
+        for key, pos in placed.items():
+            cache.configure(tags[key], show=True, pos=pos, text=texts[key])
         self.drawn["labels"] = {n: [float(pos[0]), float(pos[1]), *map(float, sizes[n])] for n, pos in placed.items()}
         state = view.mode
         t = view.tick.time_s if view.tick is not None else 0.0
         text = f"{state}  tick {view.tick_number}  t={t:6.2f} s"
         if not view.live:
             text += f"   ({(view.tick_number - view.history.newest_tick) * self.ctx.engine.dt:+.2f} s)"
-        dpg.configure_item("vp_overlay", text=text)
+        cache.configure("vp_overlay", text=text)
 
     def state(self) -> dict:
         out = dict(self.drawn)

@@ -62,16 +62,16 @@ class MarkerBatch:
         return [self.lines, self.spheres, self.arrows]
 
     def clear(self) -> None:
-        self._centers, self._radii, self._sphere_colors = [], [], []
-        self._origins, self._vectors, self._arrow_colors = [], [], []
-        self._segments, self._segment_colors = [], []
+        # each add keeps its points and one (count, size, colour) run; flush repeats the runs
+        self._centers, self._sphere_runs = [], []
+        self._origins, self._vectors, self._arrow_runs = [], [], []
+        self._segments, self._segment_runs = [], []
 
     def add_spheres(self, centers, radius: float, color) -> None:
         c = np.asarray(centers, np.float64).reshape(-1, 3)
         if len(c):
             self._centers.append(c)
-            self._radii.append(np.full(len(c), radius))
-            self._sphere_colors.append(np.broadcast_to(np.asarray(color, np.float64)[:3], (len(c), 3)))
+            self._sphere_runs.append((len(c), radius, tuple(color[:3])))
 
     def add_arrows(self, origins, vectors, color) -> None:
         o = np.asarray(origins, np.float64).reshape(-1, 3)
@@ -80,7 +80,7 @@ class MarkerBatch:
         if n:
             self._origins.append(o[:n])
             self._vectors.append(v[:n])
-            self._arrow_colors.append(np.broadcast_to(np.asarray(color, np.float64)[:3], (n, 3)))
+            self._arrow_runs.append((n, 0.0, tuple(color[:3])))
 
     def add_polyline(self, points, color) -> None:
         p = np.asarray(points, np.float64).reshape(-1, 3)
@@ -89,23 +89,30 @@ class MarkerBatch:
             seg[0::2] = p[:-1]
             seg[1::2] = p[1:]
             self._segments.append(seg)
-            self._segment_colors.append(np.broadcast_to(np.asarray(color, np.float64)[:3], (len(seg), 3)))
+            self._segment_runs.append((len(seg), 0.0, tuple(color[:3])))
+
+    @staticmethod
+    def _repeat(runs):
+        """(per-item sizes (N,), per-item colours (N, 3)) of a list of (count, size, colour) runs."""
+        counts = [r[0] for r in runs]
+        return (np.repeat(np.array([r[1] for r in runs], np.float64), counts),
+                np.repeat(np.array([r[2] for r in runs], np.float64), counts, axis=0))
 
     def flush(self) -> None:
         z3 = np.zeros((0, 3))
         if self._centers:
-            self.spheres.update(np.concatenate(self._centers), np.concatenate(self._radii),
-                                np.concatenate(self._sphere_colors))
+            radii, colors = self._repeat(self._sphere_runs)
+            self.spheres.update(np.concatenate(self._centers), radii, colors)
         else:
             self.spheres.update(z3)
         if self._origins:
             self.arrows.update(np.concatenate(self._origins), np.concatenate(self._vectors),
-                               np.concatenate(self._arrow_colors))
+                               self._repeat(self._arrow_runs)[1])
         else:
             self.arrows.update(z3, z3)
         if self._segments:
             self.lines.update(np.concatenate(self._segments), mode="segments",
-                              colors=np.concatenate(self._segment_colors))
+                              colors=self._repeat(self._segment_runs)[1])
         else:
             self.lines.update(z3, mode="segments")
 
@@ -180,19 +187,13 @@ def draw_character(d: CharacterDrawing, b: MarkerBatch, snap, off, show: dict, f
         b.add_arrows(m["traj"][:n] + up, m["traj_dirs"][:n] * 0.28, MATCHED_COLOR)
     # the pose features of the playing frame: foot positions and foot/hip velocities
     if show["features"] and features is not None:
-        bones = {}
-        for ch in features.layout:
-            if ch.bone:
-                try:
-                    bones[ch.bone] = g[db.bone(ch.bone)]
-                except KeyError:
-                    pass
+        bones = {bone: g[j] for bone, j in _feature_bones(features, db)}
         m = feature_markers(features, snap.current_features, root_pos, root_rot, bones)
         b.add_spheres(m["points"] + off, 0.035, FEATURE_COLOR)
         o, v = m["arrows"]
         b.add_arrows(o + off, v, FEATURE_COLOR)
     if show["contacts"]:
-        toes = g[[db.bone("left_toe"), db.bone("right_toe")]]
+        toes = g[_toe_bones(db)]
         contacts = np.asarray(snap.foot_contacts, bool)
         locked = np.asarray(snap.foot_locked, bool)
         for i in range(2):
@@ -203,6 +204,36 @@ def draw_character(d: CharacterDrawing, b: MarkerBatch, snap, off, show: dict, f
             trail = trail[np.isfinite(trail).all(axis=1)]
             if len(trail) >= 2:
                 b.add_polyline(trail[::3] + off + np.array([0.0, 0.01, 0.0]), d.trail_color)
+
+
+_BONES: dict = {}
+
+
+def _feature_bones(features, db) -> list:
+    """``[(bone name, joint index)]`` of the feature channels' bones that ``db`` has (cached)."""
+    key = ("features", id(features), id(db))
+    hit = _BONES.get(key)
+    if hit is None or hit[0] is not features or hit[1] is not db:
+        pairs = []
+        for ch in features.layout:
+            if ch.bone:
+                try:
+                    pairs.append((ch.bone, db.bone(ch.bone)))
+                except KeyError:
+                    pass
+        if len(_BONES) > 64:
+            _BONES.clear()
+        hit = _BONES[key] = (features, db, pairs)
+    return hit[2]
+
+
+def _toe_bones(db) -> list:
+    """Joint indices of the left and right toes (cached; KeyError when ``db`` has none)."""
+    key = ("toes", id(db))
+    hit = _BONES.get(key)
+    if hit is None or hit[1] is not db:
+        hit = _BONES[key] = (None, db, [db.bone("left_toe"), db.bone("right_toe")])
+    return hit[2]
 
 
 PREVIEW_SPACING_M = 1.3     # preview ghosts stand this far apart, to the inspected character's side

@@ -104,6 +104,7 @@ class Skeleton(Renderable):
         self._lengths = None
         self._body = None          # (joint radii, bone end radii, leaf extensions, end factors, height)
         self._body_key = None
+        self._layout = None        # (body sizes it was made for, capsule records' fixed part)
         self._uploaded_style = None
 
     @property
@@ -218,22 +219,21 @@ class Skeleton(Renderable):
         self._capsules.upload(c)
         self._capsule_data = c
 
-    def _upload_capsules(self, p, rgba) -> None:
-        radii, bone_end, ext, end, _ = self._body_sizes()
+    def _capsule_layout(self):
+        """What of the capsule records does not depend on the pose, cached with the body sizes: which
+        joints each record joins, and its radius columns. Rebuilt when the sizes change."""
+        body_sizes = self._body_sizes()
+        if self._layout is not None and self._layout[0] is body_sizes:
+            return self._layout[1]
+        radii, bone_end, ext, end, _ = body_sizes
         parents, kids = self._bone_parents, self._children
         keep = (radii[parents] > 0) & (radii[kids] > 0)
         parents, kids = parents[keep], kids[keep]
         # leaf extensions continue the parent bone past the leaf
         leaves = np.nonzero(ext > 0)[0]
         leaves = leaves[self._shown[leaves] & (radii[leaves] > 0)]
-        d = p[leaves] - p[self.parents[leaves]]
-        norm = np.linalg.norm(d, axis=1, keepdims=True)
-        d = np.where(norm > 1e-9, d / np.maximum(norm, 1e-12), [0.0, 1.0, 0.0])
         # heads: a sphere centred past the head joint, along the neck
         heads = self._heads[radii[self._heads] > 0]
-        hd = p[heads] - p[self.parents[heads]]
-        hn = np.linalg.norm(hd, axis=1, keepdims=True)
-        hd = np.where(hn > 1e-9, hd / np.maximum(hn, 1e-12), [0.0, 1.0, 0.0])
         # joints no bone reaches (a lone root, a skeleton of one joint) are spheres of their own
         lonely = np.ones(self.n_joints, dtype=bool)
         lonely[parents] = False
@@ -241,29 +241,46 @@ class Skeleton(Renderable):
         lonely &= radii > 0
         lonely = np.nonzero(lonely)[0]
         nb, nl, nh, nj = len(kids), len(leaves), len(heads), len(lonely)
-        c = self._capsules.staging(nb + nl + nh + nj)
-        c[:nb, 0:3] = p[parents]
-        c[:nb, 3:6] = p[kids]
+        r = np.empty((nb + nl + nh + nj, 2), np.float32)
         # no two caps on one joint may be the same sphere: their facets would poke through each
         # other in jagged stripes
-        c[:nb, 6] = radii[parents] * self._start_scale[keep]
-        c[:nb, 7] = bone_end[kids] * (1.0 - self._seam)
+        r[:nb, 0] = radii[parents] * self._start_scale[keep]
+        r[:nb, 1] = bone_end[kids] * (1.0 - self._seam)
+        r[nb:nb + nl, 0] = radii[leaves]
+        r[nb:nb + nl, 1] = radii[leaves] * end[leaves]
+        r[nb + nl:nb + nl + nh] = radii[heads, None]
+        r[nb + nl + nh:] = radii[lonely, None]
+        layout = {"parents": parents, "kids": kids, "leaves": leaves, "leaf_parents": self.parents[leaves],
+                  "leaf_ext": ext[leaves, None], "heads": heads, "head_parents": self.parents[heads],
+                  "head_offset": (body.HEAD_CENTER_OFFSET * radii[heads])[:, None], "lonely": lonely,
+                  "radii": r}
+        self._layout = (body_sizes, layout)
+        return layout
+
+    def _upload_capsules(self, p, rgba) -> None:
+        L = self._capsule_layout()
+        parents, kids, leaves, heads, lonely = L["parents"], L["kids"], L["leaves"], L["heads"], L["lonely"]
+        d = p[leaves] - p[L["leaf_parents"]]
+        norm = np.linalg.norm(d, axis=1, keepdims=True)
+        d = np.where(norm > 1e-9, d / np.maximum(norm, 1e-12), [0.0, 1.0, 0.0])
+        hd = p[heads] - p[L["head_parents"]]
+        hn = np.linalg.norm(hd, axis=1, keepdims=True)
+        hd = np.where(hn > 1e-9, hd / np.maximum(hn, 1e-12), [0.0, 1.0, 0.0])
+        nb, nl, nh = len(kids), len(leaves), len(heads)
+        c = self._capsules.staging(len(L["radii"]))
+        c[:nb, 0:3] = p[parents]
+        c[:nb, 3:6] = p[kids]
         s = slice(nb, nb + nl)
         c[s, 0:3] = p[leaves]
-        c[s, 3:6] = p[leaves] + d * ext[leaves, None]
-        c[s, 6] = radii[leaves]
-        c[s, 7] = radii[leaves] * end[leaves]
+        c[s, 3:6] = p[leaves] + d * L["leaf_ext"]
         s = slice(nb + nl, nb + nl + nh)
-        centre = p[heads] + hd * (body.HEAD_CENTER_OFFSET * radii[heads])[:, None]
+        centre = p[heads] + hd * L["head_offset"]
         c[s, 0:3] = centre
         c[s, 3:6] = centre
-        c[s, 6] = radii[heads]
-        c[s, 7] = radii[heads]
         s = slice(nb + nl + nh, None)
         c[s, 0:3] = p[lonely]
         c[s, 3:6] = p[lonely]
-        c[s, 6] = radii[lonely]
-        c[s, 7] = radii[lonely]
+        c[:, 6:8] = L["radii"]
         c[:, 8:12] = rgba
         self._capsules.upload(c)
         self._capsule_data = c
