@@ -52,8 +52,8 @@ from lmm.features import build_query_from_columns, trajectory_query_columns
 from lmm.ik import FootLockState, solve_leg_floats
 from lmm.inertialize import Offsets, inertialize_apply, inertialize_decay, inertialize_transition
 from lmm.springs import LN2, EPS
-from lmm.trajectory import (SimulationState, desired_rotation_floats, desired_velocity_floats,
-                            simulation_update_floats, stick_world_floats, trajectory_in_root_space_floats,
+from lmm.trajectory import (SimulationFloats, StickWorld, desired_rotation_floats, desired_velocity_floats,
+                            simulation_update_floats, trajectory_in_root_space_floats,
                             trajectory_offsets, trajectory_predict_floats)
 from lmm.tuning import Tuning
 
@@ -340,9 +340,12 @@ class CharacterController(Controller):
         position = np.zeros(3) if position is None else np.asarray(position, dtype=np.float64)
         rotation = np.array([1.0, 0, 0, 0]) if rotation is None else quat.normalize(np.asarray(rotation, np.float64))
         self._apply_feature_weights()
-        self.sim = SimulationState(position=position.copy(), rotation=rotation.copy())
+        p, q = tuple(position.tolist()), tuple(rotation.tolist())
+        self.sim = SimulationFloats((p, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), q, (0.0, 0.0, 0.0)))
         self.desired_rotation = rotation.copy()
         self.desired_velocity = np.zeros(3)
+        self._desired_t = ((0.0, 0.0, 0.0), q)  # the two as float tuples
+        self._left_stick, self._right_stick = StickWorld(), StickWorld()
         self._set_root(position.tolist(), rotation.tolist())
         self.stick_released_s = 0.0  # time since the left stick was last outside its deadzone
         self._reset_source(frame)
@@ -394,24 +397,23 @@ class CharacterController(Controller):
 
         # input -> desired velocity and rotation (camera relative, deadzone); one character's few vectors and
         # quaternions in plain floats (tuples), the same float operations as the numpy forms (tested)
-        left = stick_world_floats(inp.left_x, inp.left_y, tun.stick_deadzone, inp.camera_azimuth)
+        left = self._left_stick(inp.left_x, inp.left_y, tun.stick_deadzone, inp.camera_azimuth)
         self.stick_released_s = self.stick_released_s + dt if not any(left) else 0.0
-        right = stick_world_floats(inp.right_x, inp.right_y, tun.stick_deadzone, inp.camera_azimuth)
-        sim = self.sim
-        sim_rot = tuple(sim.rotation.tolist())
+        right = self._right_stick(inp.right_x, inp.right_y, tun.stick_deadzone, inp.camera_azimuth)
+        sim_state = self.sim.state
+        sim_rot = sim_state[3]
         des_vel_t = desired_velocity_floats(left, sim_rot, inp.walk, tun)
-        des_rot_t = desired_rotation_floats(left, right, des_vel_t, self.desired_rotation.tolist(), inp.strafe,
+        des_rot_t = desired_rotation_floats(left, right, des_vel_t, self._desired_t[1], inp.strafe,
                                             inp.camera_azimuth)
         forced = self._sharp_input_change(des_vel_t, des_rot_t, dt)
+        self._desired_t = (des_vel_t, des_rot_t)
         des_vel, des_rot = np.array(des_vel_t), np.array(des_rot_t)
         self.desired_velocity, self.desired_rotation = des_vel, des_rot
 
         # simulation object and its predicted future
         vel_halflife, rot_halflife = tun.simulation_velocity_halflife_s, tun.simulation_rotation_halflife_s
-        state = simulation_update_floats(sim.position.tolist(), sim.velocity.tolist(), sim.acceleration.tolist(),
-                                         sim_rot, sim.angular_velocity.tolist(), des_vel_t, des_rot_t,
-                                         vel_halflife, rot_halflife, dt)
-        self.sim = SimulationState(*(np.array(x) for x in state))
+        state = simulation_update_floats(*sim_state, des_vel_t, des_rot_t, vel_halflife, rot_halflife, dt)
+        self.sim = SimulationFloats(state)
         traj_pos_t, traj_rot_t = trajectory_predict_floats(*state, des_vel_t, des_rot_t, vel_halflife,
                                                            rot_halflife, self._traj_times)
         traj_pos, traj_rot = np.array(traj_pos_t), np.array(traj_rot_t)
@@ -419,8 +421,8 @@ class CharacterController(Controller):
         # query: pose channels from the playing pose; trajectory channels from the prediction, seen from
         # the character root (as every database frame's features are seen from its own root), so a
         # character lagging behind the simulation object asks for the motion that catches up
-        local_pos, local_dir = trajectory_in_root_space_floats(traj_pos_t, traj_rot_t, self.root_position.tolist(),
-                                                               tuple(self.root_rotation.tolist()))
+        local_pos, local_dir = trajectory_in_root_space_floats(traj_pos_t, traj_rot_t, self._root_position_t,
+                                                               self._root_rotation_t)
         query_raw = build_query_from_columns(self._source_features(), self._query_columns, local_pos, local_dir)
         query = self.features.normalize(query_raw)
 
@@ -518,9 +520,14 @@ class CharacterController(Controller):
         if dt <= 0:
             return False
         threshold = self.tuning.forced_search_threshold
-        vel_rate = qs.norm([a - b for a, b in zip(des_vel, self.desired_velocity.tolist())]) / dt
-        rot_rate = qs.norm(qs.to_scaled_angle_axis(qs.abs_(qs.mul_inv(
-            tuple(des_rot), self.desired_rotation.tolist())))) / dt
+        prev_vel, prev_rot = self._desired_t
+        vel_rate = qs.norm([a - b for a, b in zip(des_vel, prev_vel)]) / dt
+        if des_rot == prev_rot and threshold * dt > 1e-12:
+            # unchanged: q * conj(q)'s vector part is zero up to a rounding or two of its products (under
+            # 1e-15), so its rate stays under the threshold; skip the logarithm
+            rot_rate = 0.0
+        else:
+            rot_rate = qs.norm(qs.to_scaled_angle_axis(qs.abs_(qs.mul_inv(tuple(des_rot), prev_rot)))) / dt
         forced = False
         if vel_rate > threshold:
             self._velocity_change_high = True
@@ -673,7 +680,8 @@ class CharacterController(Controller):
         simulation object) and clamping; sets the character root. Plain floats (one position and one
         quaternion): the same operations as the numpy form, a fraction of the time."""
         tun = self.tuning
-        sim_pos, sim_rot = self.sim.position.tolist(), tuple(self.sim.rotation.tolist())
+        sim_state = self.sim.state
+        sim_pos, sim_rot = sim_state[0], sim_state[3]
         if tun.adjustment_enabled and dt > 0:
             factor = _damper_factor(tun.adjustment_position_halflife_s, dt)
             delta = [(s - r) * factor for s, r in zip(sim_pos, root_pos)]

@@ -329,7 +329,8 @@ def build_query(features: Features, current_raw: np.ndarray,
 
 
 def trajectory_query_columns(features: Features, offset_index: dict[int, int]) -> tuple[np.ndarray, list]:
-    """Where :func:`build_query` puts each trajectory number: the query dims (K,) and, for each, a
+    """Where :func:`build_query` puts each trajectory number: the query dims (K,) (a slice when they are
+    one run) and, for each, a
     ``(0 for a position | 1 for a direction, index of its offset in offset_index, 0 for x | 2 for z)``.
     Computed once per layout, so a tick's query is one copy and one scattered assignment."""
     dims, picks = [], []
@@ -338,6 +339,8 @@ def trajectory_query_columns(features: Features, offset_index: dict[int, int]) -
             which = 0 if ch.kind == "trajectory_position" else 1
             picks += [(which, offset_index[o], c) for o in ch.offsets for c in (0, 2)]
             dims += range(s.start, s.stop)
+    if dims and dims == list(range(dims[0], dims[-1] + 1)):  # one run of dims (the usual layout): a slice
+        return slice(dims[0], dims[-1] + 1), picks
     return np.asarray(dims, dtype=np.int64), picks
 
 

@@ -181,10 +181,11 @@ def spring_character_floats(x, v, a, v_goal, halflife: float, dts: tuple, eps: f
 
 
 def spring_rotation_floats(q, w, goal, halflife: float, dts: tuple, eps: float = EPS,
-                           normalize: bool = False) -> list:
+                           normalize: bool = False, rotations_only: bool = False) -> list:
     """:func:`spring_rotation_update` for one rotation: ``[(q, w), ...]``, one per horizon; ``q``
-    renormalised (as ``quat.normalize``) only when ``normalize``. The exponential map, the product with the
-    goal and the normalisation are written out: the operations of :mod:`lmm.quat_scalar`, in its order."""
+    renormalised (as ``quat.normalize``) only when ``normalize``; only the ``q`` when ``rotations_only``.
+    The exponential map, the product with the goal and the normalisation are written out: the operations
+    of :mod:`lmm.quat_scalar`, in its order."""
     y = float((4.0 * LN2) / (halflife + eps) / 2.0)
     sqrt, cos, sin = math.sqrt, math.cos, math.sin
     # j0 = to_scaled_angle_axis(abs_(q * conj(goal)))
@@ -226,5 +227,8 @@ def spring_rotation_floats(q, w, goal, halflife: float, dts: tuple, eps: float =
             n = sqrt(ow * ow + ox * ox + oy * oy + oz * oz)
             n = n if n > 1e-10 else 1e-10
             ow, ox, oy, oz = ow / n, ox / n, oy / n, oz / n
-        out.append(((ow, ox, oy, oz), (e * (w0 - by0 * dt), e * (w1 - by1 * dt), e * (w2 - by2 * dt))))
+        if rotations_only:
+            out.append((ow, ox, oy, oz))
+        else:
+            out.append(((ow, ox, oy, oz), (e * (w0 - by0 * dt), e * (w1 - by1 * dt), e * (w2 - by2 * dt))))
     return out

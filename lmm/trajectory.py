@@ -181,6 +181,48 @@ def desired_rotation_floats(stick_world, right_stick_world, velocity, current_ro
     return tuple(current_rotation)
 
 
+class StickWorld:
+    """:func:`stick_world_floats` remembering its last answer: a stick rests or is held still on most
+    ticks. A repeat is recognised only for the same floats with the same signs of zero (``-0.0 == 0.0``,
+    but a stick's or the azimuth's sign of zero can reach the answer's zeros)."""
+    __slots__ = ("_key", "_signs", "_value")
+
+    def __init__(self):
+        self._key = self._signs = self._value = None
+
+    def __call__(self, x: float, y: float, deadzone: float, camera_azimuth: float) -> tuple:
+        key = (x, y, deadzone, camera_azimuth)
+        copysign = math.copysign
+        if key == self._key:
+            signs = (copysign(1.0, x), copysign(1.0, y), copysign(1.0, camera_azimuth))
+            if signs == self._signs:
+                return self._value
+        else:
+            signs = (copysign(1.0, x), copysign(1.0, y), copysign(1.0, camera_azimuth))
+        value = stick_world_floats(x, y, deadzone, camera_azimuth)
+        self._key, self._signs, self._value = key, signs, value
+        return value
+
+
+class SimulationFloats:
+    """The simulation object as one tuple of float tuples ``state`` = (position, velocity, acceleration,
+    rotation, angular_velocity), what the per-tick code reads and writes; :class:`SimulationState`'s
+    array fields are built when read (a new array on every read)."""
+    __slots__ = ("state",)
+
+    def __init__(self, state: tuple):
+        self.state = state
+
+    position = property(lambda self: np.array(self.state[0]))
+    velocity = property(lambda self: np.array(self.state[1]))
+    acceleration = property(lambda self: np.array(self.state[2]))
+    rotation = property(lambda self: np.array(self.state[3]))
+    angular_velocity = property(lambda self: np.array(self.state[4]))
+
+    def copy(self) -> SimulationState:
+        return SimulationState(*(np.array(x) for x in self.state))
+
+
 def simulation_update_floats(position, velocity, acceleration, rotation, angular_velocity, velocity_goal,
                              rotation_goal, velocity_halflife: float, rotation_halflife: float, dt: float):
     """:func:`simulation_update` on tuples: (position, velocity, acceleration, rotation, angular_velocity)."""
@@ -198,8 +240,8 @@ def trajectory_predict_floats(position, velocity, acceleration, rotation, angula
     positions = spring_character_floats(position, velocity, acceleration, velocity_goal, velocity_halflife, times,
                                         positions_only=True)
     turns = spring_rotation_floats(rotation, angular_velocity, rotation_goal, rotation_halflife, times,
-                                   normalize=True)
-    return positions, [q for q, _ in turns]
+                                   normalize=True, rotations_only=True)
+    return positions, turns
 
 
 def trajectory_in_root_space_floats(positions, rotations, root_position, root_rotation) -> tuple[list, list]:
@@ -208,19 +250,24 @@ def trajectory_in_root_space_floats(positions, rotations, root_position, root_ro
     rx, ry, rz = root_position
     w, x, y, z = root_rotation
     x, y, z = -x, -y, -z  # the inverse rotation
-
-    def rotate(v0, v1, v2):
+    local_pos = []
+    for px, py, pz in positions:
+        v0, v1, v2 = px - rx, py - ry, pz - rz
         t0 = 2.0 * (y * v2 - z * v1)
         t1 = 2.0 * (z * v0 - x * v2)
         t2 = 2.0 * (x * v1 - y * v0)
-        return (v0 + w * t0 + (y * t2 - z * t1), v1 + w * t1 + (z * t0 - x * t2), v2 + w * t2 + (x * t1 - y * t0))
-
-    local_pos = [rotate(px - rx, py - ry, pz - rz) for px, py, pz in positions]
+        local_pos.append((v0 + w * t0 + (y * t2 - z * t1), v1 + w * t1 + (z * t0 - x * t2),
+                          v2 + w * t2 + (x * t1 - y * t0)))
     local_dir = []
     for qw, qx, qy, qz in rotations:  # the facing: the rotation's +Z
         t0 = 2.0 * (qy * 1.0 - qz * 0.0)
         t1 = 2.0 * (qz * 0.0 - qx * 1.0)
         t2 = 2.0 * (qx * 0.0 - qy * 0.0)
-        local_dir.append(rotate(0.0 + qw * t0 + (qy * t2 - qz * t1), 0.0 + qw * t1 + (qz * t0 - qx * t2),
-                                1.0 + qw * t2 + (qx * t1 - qy * t0)))
+        v0, v1, v2 = 0.0 + qw * t0 + (qy * t2 - qz * t1), 0.0 + qw * t1 + (qz * t0 - qx * t2), \
+            1.0 + qw * t2 + (qx * t1 - qy * t0)
+        t0 = 2.0 * (y * v2 - z * v1)
+        t1 = 2.0 * (z * v0 - x * v2)
+        t2 = 2.0 * (x * v1 - y * v0)
+        local_dir.append((v0 + w * t0 + (y * t2 - z * t1), v1 + w * t1 + (z * t0 - x * t2),
+                          v2 + w * t2 + (x * t1 - y * t0)))
     return local_pos, local_dir

@@ -151,3 +151,29 @@ def test_feature_weights_follow_the_tuning(db, features):
     c.tuning.feature_weights[name] = -1.0
     with pytest.raises(ValueError):
         c.step(inp, 1 / 60)
+
+
+def test_remembered_stick_and_simulation_floats():
+    """The remembering stick answers what the plain function answers, signs of zero included; the float
+    simulation state reads as the arrays it holds."""
+    from lmm.trajectory import SimulationFloats, StickWorld
+    stick = StickWorld()
+    rng = np.random.default_rng(7)
+    calls = [(0.0, 0.0, 0.1, 0.0), (0.0, 0.0, 0.1, -0.0), (-0.0, 0.5, 0.1, 0.0), (0.0, 0.5, 0.1, 0.0),
+             (0.0, 0.5, 0.1, 0.0), (0.3, 0.4, 0.1, 1.0), (0.3, 0.4, 0.1, 1.0), (0.3, 0.4, 0.2, 1.0)]
+    calls += [tuple(rng.uniform(-1, 1, 2).tolist()) + (0.1, 0.5) for _ in range(20) for _ in range(2)]
+    for args in calls:
+        assert _same(stick(*args), stick_world_floats(*args)), args
+    state = tuple(tuple(rng.normal(size=n).tolist()) for n in (3, 3, 3, 4, 3))
+    sim = SimulationFloats(state)
+    names = ("position", "velocity", "acceleration", "rotation", "angular_velocity")
+    for name, want in zip(names, state):
+        assert _same(getattr(sim, name), want) and _same(getattr(sim.copy(), name), want)
+
+
+def test_trajectory_columns_as_a_slice(features):
+    offsets = sorted({o for ch in features.layout if ch.kind.startswith("trajectory") for o in ch.offsets})
+    dims, picks = trajectory_query_columns(features, {o: i for i, o in enumerate(offsets)})
+    want = [d for ch, s in zip(features.layout, features.slices) if ch.kind in ("trajectory_position", "trajectory_direction")
+            for d in range(s.start, s.stop)]
+    assert list(range(len(features.mean)))[dims] == want and len(picks) == len(want)
