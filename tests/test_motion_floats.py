@@ -174,6 +174,6 @@ def test_remembered_stick_and_simulation_floats():
 def test_trajectory_columns_as_a_slice(features):
     offsets = sorted({o for ch in features.layout if ch.kind.startswith("trajectory") for o in ch.offsets})
     dims, picks = trajectory_query_columns(features, {o: i for i, o in enumerate(offsets)})
-    want = [d for ch, s in zip(features.layout, features.slices) if ch.kind in ("trajectory_position", "trajectory_direction")
-            for d in range(s.start, s.stop)]
+    kinds = ("trajectory_position", "trajectory_direction")
+    want = [d for ch, s in zip(features.layout, features.slices) if ch.kind in kinds for d in range(s.start, s.stop)]
     assert list(range(len(features.mean)))[dims] == want and len(picks) == len(want)
