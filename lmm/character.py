@@ -311,6 +311,18 @@ class _FKPlan:
                      for chain, sub in zip(leg_chains, subtrees)] if ok else None
 
 
+class _LazyRootShift:
+    """``controller._root_shift(toes, position, rotation)[i]`` worked out when item ``i`` is read (the foot
+    locks read it only for an unlocked foot near the ground): the same floats, often none computed."""
+    __slots__ = ("_controller", "_toes", "_position", "_rotation")
+
+    def __init__(self, controller, toes, position, rotation):
+        self._controller, self._toes, self._position, self._rotation = controller, toes, position, rotation
+
+    def __getitem__(self, i: int):
+        return self._controller._root_shift((self._toes[i],), self._position, self._rotation)[0]
+
+
 def _norm(v) -> float:
     """Length of one small vector (np.linalg.norm costs several microseconds per call)."""
     v = np.asarray(v, dtype=np.float64).ravel()
@@ -641,7 +653,8 @@ class CharacterController(Controller):
                 toe_vel = [(0.0, 0.0, 0.0), (0.0, 0.0, 0.0)]
             else:
                 toe_vel = [((a[0] - b[0]) / dt, (a[1] - b[1]) / dt, (a[2] - b[2]) / dt) for a, b in zip(toe_now, prev)]
-            shift = self._root_shift(toe_now, *integrated) if tun.ik_counter_adjustment else None
+            # the root shift is read only for an unlocked foot near the ground: worked out per foot when read
+            shift = _LazyRootShift(self, toe_now, *integrated) if tun.ik_counter_adjustment else None
             targets = locks.update(
                 toe_now, toe_vel, contacts.tolist() if isinstance(contacts, np.ndarray) else contacts,
                 tun.ik_unlock_radius_m, tun.ik_blend_halflife_s, tun.ik_foot_height_m, dt, tun.ik_lift_height_m,
@@ -705,8 +718,8 @@ class CharacterController(Controller):
         the toes as shown minus where they would be with the root left at ``position``/``rotation`` (the
         integrated root). Plain floats, the operations of ``toes - (position + quat.mul_vec(rotation,
         quat.inv_mul_vec(self.root_rotation, toes - self.root_position)))``."""
-        px, py, pz = self.root_position.tolist()
-        rw, rx, ry, rz = self.root_rotation.tolist()
+        px, py, pz = self._root_position_t
+        rw, rx, ry, rz = self._root_rotation_t
         ox, oy, oz = position.tolist() if isinstance(position, np.ndarray) else position
         w, x, y, z = rotation.tolist() if isinstance(rotation, np.ndarray) else rotation
         out = []

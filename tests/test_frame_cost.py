@@ -3,7 +3,7 @@ replace (recordings stay byte-identical), and debug-only work is deferred until 
 import numpy as np
 
 from lmm import quat
-from lmm.character import forward_kinematics_pose, forward_kinematics_update, subtree_joints
+from lmm.character import _LazyRootShift, forward_kinematics_pose, forward_kinematics_update, subtree_joints
 from lmm.controller import InputState
 from lmm.data.inputs import builtin
 from lmm.mm import MotionMatchingController
@@ -90,13 +90,14 @@ def test_root_shift_in_floats_is_bit_identical_to_the_numpy_form(db, features):
     c = MotionMatchingController(db, features)
     rng = np.random.default_rng(9)
     for _ in range(200):
-        c.root_position = rng.normal(size=3)
-        c.root_rotation = quat.normalize(rng.normal(size=4))
+        c._set_root(rng.normal(size=3).tolist(), quat.normalize(rng.normal(size=4)).tolist())
         position, rotation = rng.normal(size=3), quat.normalize(rng.normal(size=4))
         toes = rng.normal(size=(2, 3))
         want = toes - (position + quat.mul_vec(rotation, quat.inv_mul_vec(c.root_rotation, toes - c.root_position)))
         got = np.array(c._root_shift([tuple(t) for t in toes.tolist()], position, rotation))
         assert np.array_equal(got, want)
+        lazy = _LazyRootShift(c, [tuple(t) for t in toes.tolist()], position, rotation)
+        assert np.array_equal(np.array([lazy[1], lazy[0]]), want[::-1])
 
 
 def test_ground_offset_target_follows_the_take_of_the_source_frame(db, features):
