@@ -136,6 +136,31 @@ def forward_kinematics_lists(local_rot, local_pos, parents) -> tuple[list, list]
     return g, p
 
 
+def forward_kinematics_links(local_rot, local_pos, roots, links) -> tuple[list, list]:
+    """:func:`forward_kinematics_lists` with the skeleton given as ``roots`` (the joints without a parent)
+    and ``links`` ((joint, parent) pairs of all the others, in index order): no parent test per joint.
+    The same float operations, so the same bits."""
+    n = len(local_rot)
+    g = [None] * n
+    p = [None] * n
+    for j in roots:
+        g[j] = tuple(local_rot[j])
+        p[j] = tuple(local_pos[j])
+    for j, pj in links:
+        w, x, y, z = local_rot[j]
+        px, py, pz = local_pos[j]
+        aw, ax, ay, az = g[pj]
+        g[j] = (aw * w - ax * x - ay * y - az * z, aw * x + ax * w + ay * z - az * y,
+                aw * y - ax * z + ay * w + az * x, aw * z + ax * y - ay * x + az * w)
+        tx = 2.0 * (ay * pz - az * py)
+        ty = 2.0 * (az * px - ax * pz)
+        tz = 2.0 * (ax * py - ay * px)
+        qx, qy, qz = p[pj]
+        p[j] = (qx + px + aw * tx + (ay * tz - az * ty), qy + py + aw * ty + (az * tx - ax * tz),
+                qz + pz + aw * tz + (ax * ty - ay * tx))
+    return g, p
+
+
 def forward_kinematics_pose(local_rot: np.ndarray, local_pos: np.ndarray, parents) -> tuple[np.ndarray, np.ndarray]:
     """Global rotations (J, 4) and positions (J, 3) of one pose (:func:`forward_kinematics_lists` on arrays)."""
     g, p = forward_kinematics_lists(local_rot.tolist(), local_pos.tolist(), parents)
@@ -183,6 +208,36 @@ def forward_kinematics_update(global_rot: np.ndarray, global_pos: np.ndarray, lo
     p = global_pos.tolist()
     forward_kinematics_update_lists(g, p, local_rot.tolist(), local_pos.tolist(), parents, joints)
     return np.array(g), np.array(p)
+
+
+def _leg_update(global_rot: list, global_pos: list, local_rot: list, local_pos, chain, parent: int, solved) -> None:
+    """One leg after IK, in place: the local rotations of ``chain`` (hip, knee, foot, toe; each the parent of
+    the next, ``parent`` the hip's parent) from their ``solved`` global rotations (parent^-1 * global, the
+    parent's global as solved), then forward kinematics of the chain from the hip's parent (unchanged). The
+    hip's global position depends only on bones that did not change: it is kept. The float operations of
+    the local-from-global loop and :func:`forward_kinematics_update_lists`, so the same bits."""
+    sw, sx, sy, sz = global_rot[parent]  # the parent's global rotation as solved (and kept)
+    gw, gx, gy, gz = sw, sx, sy, sz      # the parent's global rotation after the update
+    pj = -1                              # the parent of j once past the hip
+    for j, (bw, bx, by, bz) in zip(chain, solved):
+        aw, ax, ay, az = sw, -sx, -sy, -sz
+        w, x, y, z = local_rot[j] = (aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
+                                     aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw)
+        sw, sx, sy, sz = bw, bx, by, bz
+        aw, ax, ay, az = gw, gx, gy, gz
+        gw, gx, gy, gz = global_rot[j] = (aw * w - ax * x - ay * y - az * z, aw * x + ax * w + ay * z - az * y,
+                                          aw * y - ax * z + ay * w + az * x, aw * z + ax * y - ay * x + az * w)
+        if pj < 0:  # the hip: its position (parent's position plus its rotated offset) did not change
+            pj = j
+            continue
+        px, py, pz = local_pos[j]
+        tx = 2.0 * (ay * pz - az * py)
+        ty = 2.0 * (az * px - ax * pz)
+        tz = 2.0 * (ax * py - ay * px)
+        qx, qy, qz = global_pos[pj]
+        global_pos[j] = (qx + px + aw * tx + (ay * tz - az * ty), qy + py + aw * ty + (az * tx - ax * tz),
+                         qz + pz + aw * tz + (ax * ty - ay * tx))
+        pj = j
 
 
 def bone_heights(db, bones) -> np.ndarray:
@@ -236,6 +291,38 @@ def _range_contact_heights(db, toe_bones, min_frames: int) -> np.ndarray:
     return out
 
 
+class _FKPlan:
+    """A skeleton's forward kinematics in the form the per-tick code wants: ``roots`` and ``links`` for
+    :func:`forward_kinematics_links`; ``legs`` per leg chain (hip, knee, foot, toe) ``(chain, hip's parent,
+    the rest of the chain's subtree)`` for :func:`_leg_update`, or None when the legs do not have the shape it
+    needs (each bone of a chain the parent of the next, the legs' subtrees disjoint and the hips' parents
+    outside both)."""
+    __slots__ = ("roots", "links", "legs")
+
+    def __init__(self, parents, leg_chains):
+        self.roots = [j for j, pj in enumerate(parents) if pj < 0]
+        self.links = [(j, pj) for j, pj in enumerate(parents) if pj >= 0]
+        subtrees = [subtree_joints(parents, [chain[0]]) for chain in leg_chains]
+        inside = [j for sub in subtrees for j in sub]
+        ok = len(set(inside)) == len(inside) and all(
+            all(parents[b] == a for a, b in zip(chain, chain[1:])) and parents[chain[0]] >= 0
+            and parents[chain[0]] not in inside for chain in leg_chains)
+        self.legs = [(tuple(chain), parents[chain[0]], [j for j in sub if j not in chain])
+                     for chain, sub in zip(leg_chains, subtrees)] if ok else None
+
+
+class _LazyRootShift:
+    """``controller._root_shift(toes, position, rotation)[i]`` worked out when item ``i`` is read (the foot
+    locks read it only for an unlocked foot near the ground): the same floats, often none computed."""
+    __slots__ = ("_controller", "_toes", "_position", "_rotation")
+
+    def __init__(self, controller, toes, position, rotation):
+        self._controller, self._toes, self._position, self._rotation = controller, toes, position, rotation
+
+    def __getitem__(self, i: int):
+        return self._controller._root_shift((self._toes[i],), self._position, self._rotation)[0]
+
+
 def _norm(v) -> float:
     """Length of one small vector (np.linalg.norm costs several microseconds per call)."""
     v = np.asarray(v, dtype=np.float64).ravel()
@@ -273,6 +360,7 @@ class CharacterController(Controller):
     name = "character"
     _toe_axes_floats = None  # toe_axes as tuples (filled on first use)
     _contact_height_span = (0, 0, 0.0)  # frames [lo, hi) of the last take looked up, its contact height
+    _fk_plan = None  # _FKPlan of the skeleton (made on first use)
 
     def __init__(self, db, features, tuning: Tuning | None = None):
         self.db = db
@@ -471,7 +559,8 @@ class CharacterController(Controller):
 
         # world pose, then foot locking: forward kinematics, foot locks, leg IK
         t0 = time.perf_counter()
-        local_rot, local_pos, g_rot, g_pos, locked = self._world_pose(rot, pos, src.contacts, integrated, dt)
+        local_rot, local_pos, g_rot, g_pos, locked = self._world_pose(rot, pos, src.contacts, integrated, dt,
+                                                                      np.float32)
         timings["pose"] = (time.perf_counter() - t0) * 1e6
 
         # ghost: the source pose without offsets, placed at the character root; debug only, so its forward
@@ -487,8 +576,7 @@ class CharacterController(Controller):
             ghost_pos[0] = root_pos
             return forward_kinematics_pose(ghost_rot, ghost_pos, parents)[1].astype(np.float32)
 
-        pose = Pose(local_positions=local_pos.astype(np.float32), local_rotations=local_rot.astype(np.float32),
-                    global_positions=g_pos.astype(np.float32), global_rotations=g_rot.astype(np.float32),
+        pose = Pose(local_positions=local_pos, local_rotations=local_rot, global_positions=g_pos, global_rotations=g_rot,
                     contacts=np.array(src.contacts, dtype=bool))
         self.tick += 1
         self.time_s = self.tick * dt if dt > 0 else self.time_s
@@ -541,10 +629,11 @@ class CharacterController(Controller):
             forced = True
         return forced
 
-    def _world_pose(self, rot, pos, contacts, integrated, dt):
+    def _world_pose(self, rot, pos, contacts, integrated, dt, dtype=np.float64):
         """The shown local pose (``rot``/``pos``, bone 0 replaced by the character root) in world space,
         with foot locking and leg IK: returns local rotations and positions, global rotations and
-        positions (float64 arrays) and the two feet's lock flags ((2,) bool).
+        positions (arrays of ``dtype``; the step asks for float32 directly, the same bits as float64
+        arrays cast to float32) and the two feet's lock flags ((2,) bool).
 
         One pose in plain floats (lists of tuples) through forward kinematics, the foot locks, the leg IK
         and the legs' forward kinematics, numpy arrays built once at the end: numpy calls on 3- and
@@ -553,12 +642,16 @@ class CharacterController(Controller):
         tun = self.tuning
         rl = rot.tolist()
         pl = pos.tolist()
-        rl[0] = self.root_rotation.tolist()
-        pl[0] = self.root_position.tolist()
+        rl[0] = self._root_rotation_t
+        pl[0] = self._root_position_t
         self._update_ground_offset(dt)
-        pl[self.hips_bone][1] += self._ground_offset
-        parents = self.parents
-        g_rl, g_pl = forward_kinematics_lists(rl, pl, parents)
+        hips = self.hips_bone
+        hip_pos = pl[hips]
+        hip_pos[1] += self._ground_offset
+        plan = self._fk_plan
+        if plan is None:
+            plan = self._fk_plan = _FKPlan(self.parents, self.leg_chains)
+        g_rl, g_pl = forward_kinematics_links(rl, pl, plan.roots, plan.links)
         toe_now = [g_pl[t] for t in self.toe_bones]
         locks = self.foot_lock
         if tun.ik_enabled:
@@ -567,7 +660,8 @@ class CharacterController(Controller):
                 toe_vel = [(0.0, 0.0, 0.0), (0.0, 0.0, 0.0)]
             else:
                 toe_vel = [((a[0] - b[0]) / dt, (a[1] - b[1]) / dt, (a[2] - b[2]) / dt) for a, b in zip(toe_now, prev)]
-            shift = self._root_shift(toe_now, *integrated) if tun.ik_counter_adjustment else None
+            # the root shift is read only for an unlocked foot near the ground: worked out per foot when read
+            shift = _LazyRootShift(self, toe_now, *integrated) if tun.ik_counter_adjustment else None
             targets = locks.update(
                 toe_now, toe_vel, contacts.tolist() if isinstance(contacts, np.ndarray) else contacts,
                 tun.ik_unlock_radius_m, tun.ik_blend_halflife_s, tun.ik_foot_height_m, dt, tun.ik_lift_height_m,
@@ -583,15 +677,25 @@ class CharacterController(Controller):
                                       and abs(target[2] - toe[2]) <= 1e-6):
                     continue  # free and fully blended back: nothing to solve
                 ground = target[1] - tun.ik_foot_height_m if is_locked else None
-                rots = solve_leg_floats(g_pl, g_rl, leg, target, axes[i], tun.ik_toe_length_m, ground)
-                for j, q in zip(leg, rots):
-                    g_rl[j] = q  # the other leg's solve reads none of these bones
-                solved.append(i)
-            if solved:
-                key = tuple(solved)
+                solved.append((i, solve_leg_floats(g_pl, g_rl, leg, target, axes[i], tun.ik_toe_length_m, ground)))
+            if solved and plan.legs is not None:
+                # per solved leg: its local rotations from the solved globals, then forward kinematics of
+                # its chain and subtree (the legs are disjoint subtrees below unchanged bones: the result is
+                # the generic form's below, bit for bit)
+                for i, rots in solved:
+                    chain, parent, rest = plan.legs[i]
+                    _leg_update(g_rl, g_pl, rl, pl, chain, parent, rots)
+                    if rest:
+                        forward_kinematics_update_lists(g_rl, g_pl, rl, pl, self.parents, rest)
+            elif solved:
+                parents = self.parents
+                for i, rots in solved:
+                    for j, q in zip(self.leg_chains[i], rots):
+                        g_rl[j] = q  # the other leg's solve read none of these bones
+                key = tuple(i for i, _ in solved)
                 found = self._subtrees.get(key)
                 if found is None:
-                    changed = sorted(j for i in solved for j in self.leg_chains[i])
+                    changed = sorted(j for i in key for j in self.leg_chains[i])
                     found = self._subtrees[key] = (changed, subtree_joints(parents, changed))
                 changed, joints = found
                 for j in changed:  # local = parent^-1 * global (qs.mul(qs.conj(parent), global))
@@ -607,12 +711,13 @@ class CharacterController(Controller):
         locked = np.array([locks.is_locked(0), locks.is_locked(1)])
         self._prev_toe = toe_now
         n = len(g_rl)
-        local_rot = np.fromiter(itertools.chain.from_iterable(rl), np.float64, 4 * n).reshape(n, 4)
-        local_pos = pos.copy()
+        flat = itertools.chain.from_iterable
+        local_rot = np.fromiter(flat(rl), dtype, 4 * n).reshape(n, 4)
+        local_pos = pos.astype(dtype)
         local_pos[0] = pl[0]
-        local_pos[self.hips_bone, 1] = pl[self.hips_bone][1]
-        g_rot = np.fromiter(itertools.chain.from_iterable(g_rl), np.float64, 4 * n).reshape(n, 4)
-        g_pos = np.fromiter(itertools.chain.from_iterable(g_pl), np.float64, 3 * n).reshape(n, 3)
+        local_pos[hips, 1] = hip_pos[1]
+        g_rot = np.fromiter(flat(g_rl), dtype, 4 * n).reshape(n, 4)
+        g_pos = np.fromiter(flat(g_pl), dtype, 3 * n).reshape(n, 3)
         return local_rot, local_pos, g_rot, g_pos, locked
 
     def _root_shift(self, toes, position, rotation) -> list:
@@ -620,8 +725,8 @@ class CharacterController(Controller):
         the toes as shown minus where they would be with the root left at ``position``/``rotation`` (the
         integrated root). Plain floats, the operations of ``toes - (position + quat.mul_vec(rotation,
         quat.inv_mul_vec(self.root_rotation, toes - self.root_position)))``."""
-        px, py, pz = self.root_position.tolist()
-        rw, rx, ry, rz = self.root_rotation.tolist()
+        px, py, pz = self._root_position_t
+        rw, rx, ry, rz = self._root_rotation_t
         ox, oy, oz = position.tolist() if isinstance(position, np.ndarray) else position
         w, x, y, z = rotation.tolist() if isinstance(rotation, np.ndarray) else rotation
         out = []

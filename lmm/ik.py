@@ -291,7 +291,8 @@ class FootLockState:
                 continue
             if root_shift is not None and a[1] + off[i][1] < lock[i][1] + lift_height:
                 # the root was pulled towards the simulation object: a foot near the ground stays put
-                cx, cz = off[i][0] - float(root_shift[i][0]), off[i][2] - float(root_shift[i][2])
+                shift = root_shift[i]
+                cx, cz = off[i][0] - float(shift[0]), off[i][2] - float(shift[2])
                 n = math.hypot(cx, cz)
                 if n > unlock_radius:
                     cx, cz = (cx * unlock_radius / n, cz * unlock_radius / n) if n > 0.0 else (0.0, 0.0)

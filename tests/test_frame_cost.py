@@ -3,7 +3,7 @@ replace (recordings stay byte-identical), and debug-only work is deferred until 
 import numpy as np
 
 from lmm import quat
-from lmm.character import forward_kinematics_pose, forward_kinematics_update, subtree_joints
+from lmm.character import _LazyRootShift, forward_kinematics_pose, forward_kinematics_update, subtree_joints
 from lmm.controller import InputState
 from lmm.data.inputs import builtin
 from lmm.mm import MotionMatchingController
@@ -90,13 +90,14 @@ def test_root_shift_in_floats_is_bit_identical_to_the_numpy_form(db, features):
     c = MotionMatchingController(db, features)
     rng = np.random.default_rng(9)
     for _ in range(200):
-        c.root_position = rng.normal(size=3)
-        c.root_rotation = quat.normalize(rng.normal(size=4))
+        c._set_root(rng.normal(size=3).tolist(), quat.normalize(rng.normal(size=4)).tolist())
         position, rotation = rng.normal(size=3), quat.normalize(rng.normal(size=4))
         toes = rng.normal(size=(2, 3))
         want = toes - (position + quat.mul_vec(rotation, quat.inv_mul_vec(c.root_rotation, toes - c.root_position)))
         got = np.array(c._root_shift([tuple(t) for t in toes.tolist()], position, rotation))
         assert np.array_equal(got, want)
+        lazy = _LazyRootShift(c, [tuple(t) for t in toes.tolist()], position, rotation)
+        assert np.array_equal(np.array([lazy[1], lazy[0]]), want[::-1])
 
 
 def test_ground_offset_target_follows_the_take_of_the_source_frame(db, features):
@@ -127,3 +128,64 @@ def test_world_pose_arrays_match_forward_kinematics_of_the_returned_local_pose(d
     full = forward_kinematics_pose(local_rot, local_pos, c.parents)
     assert np.array_equal(full[0], g_rot) and np.array_equal(full[1], g_pos)
     assert locked.dtype == bool and locked.shape == (2,) and locked_seen > 0
+
+
+def test_forward_kinematics_without_parent_tests_is_bit_identical(db):
+    from lmm.character import forward_kinematics_links, forward_kinematics_lists
+
+    parents = [int(p) for p in db.parents]
+    roots = [j for j, p in enumerate(parents) if p < 0]
+    links = [(j, p) for j, p in enumerate(parents) if p >= 0]
+    rng = np.random.default_rng(4)
+    for _ in range(50):
+        rot, pos = _random_pose(rng, db.n_bones)
+        assert forward_kinematics_links(rot.tolist(), pos.tolist(), roots, links) == \
+            forward_kinematics_lists(rot.tolist(), pos.tolist(), parents)
+
+
+def _world_pose_state(c):
+    return (c.foot_lock.copy(), c._prev_toe, c._ground_offset, c._ground_offset_velocity, c._contact_height_span)
+
+
+def _set_world_pose_state(c, state):
+    c.foot_lock = state[0].copy()
+    c._prev_toe, c._ground_offset, c._ground_offset_velocity, c._contact_height_span = state[1:]
+
+
+def test_fused_leg_update_and_float32_arrays_equal_the_generic_float64_form(db, features):
+    """Per tick: the per-leg update (:func:`lmm.character._leg_update`) gives the bits of the generic
+    local-from-global loop plus subtree forward kinematics, and the float32 arrays the step asks for are the
+    float64 arrays cast; the foot lock state advances the same."""
+    from lmm.character import _FKPlan
+
+    c = MotionMatchingController(db, features)
+    log = builtin("zigzag", 4.0)
+    generic = _FKPlan(c.parents, c.leg_chains)
+    fused = _FKPlan(c.parents, c.leg_chains)
+    assert fused.legs is not None
+    generic.legs = None
+    both_legs = 0
+    for i in range(200):
+        c.step(log.at(i * DT), DT)
+        src, root = c.shown, (c.root_position.copy(), c.root_rotation.copy())
+        state = _world_pose_state(c)
+        c._fk_plan = generic
+        want = c._world_pose(src[2], src[0], c.source.contacts, root, DT)
+        want_state = _world_pose_state(c)
+        _set_world_pose_state(c, state)
+        c._fk_plan = fused
+        got64 = c._world_pose(src[2], src[0], c.source.contacts, root, DT)
+        _set_world_pose_state(c, state)
+        got = c._world_pose(src[2], src[0], c.source.contacts, root, DT, np.float32)
+        got_state = _world_pose_state(c)
+        for a, b, b64 in zip(want[:4], got[:4], got64[:4]):
+            assert np.array_equal(a, b64)
+            assert b.dtype == np.float32 and np.array_equal(a.astype(np.float32), b)
+        assert np.array_equal(want[4], got[4])
+        assert want_state[1:] == got_state[1:]
+        for name in ("locked", "lock_position", "offset_position", "offset_velocity", "lowest_animated"):
+            assert np.array_equal(getattr(want_state[0], name), getattr(got_state[0], name))
+        _set_world_pose_state(c, state)
+        both_legs += int(not np.array_equal(want[0][c.leg_chains[0][0]], src[2][c.leg_chains[0][0]])
+                         and not np.array_equal(want[0][c.leg_chains[1][0]], src[2][c.leg_chains[1][0]]))
+    assert both_legs > 50  # the legs were solved (their local rotations changed)
