@@ -96,10 +96,11 @@ def load_default_networks(db, features, path=None) -> LMMNetworks:
     return LMMNetworks.load(path or DEFAULT_WEIGHTS, db, features)
 
 
-_QUAT_DIAG_SIGNS = np.array([[1.0, 1.0, 1.0], [1.0, -1.0, -1.0], [-1.0, 1.0, -1.0], [-1.0, -1.0, 1.0]])
-# rows of the scratch matrix (15, n) of :class:`XformToQuat`: the rotation matrix's columns a (rows 0-5:
+# 4 |q_i|^2 = (+-m00 +-m11 +-m22) + 1: the signs, and the 1 as a fourth column (against a row of ones)
+_QUAT_DIAG_SIGNS = np.array([[1.0, 1.0, 1.0, 1.0], [1.0, -1.0, -1.0, 1.0], [-1.0, 1.0, -1.0, 1.0], [-1.0, -1.0, 1.0, 1.0]])
+# rows of the scratch matrix (22, n) of :class:`XformToQuat`: the rotation matrix's columns a (rows 0-5:
 # a0 a1 a2 a0 a1 a2), b (rows 6-11, the same) and c (rows 12-14), so that every cross product term and
-# the diagonal (a0, b1, c2: rows 0, 7, 14) are slices
+# the diagonal (a0, b1, c2: rows 0, 7, 14; with the ones of row 21) are slices
 _SIGN_ROWS = np.array([8, 12, 1, 13, 2, 6])    # (m21, m02, m10) = (b2, c0, a1) against (m12, m20, m01) = (c1, a2, b0)
 
 
@@ -119,7 +120,8 @@ class XformToQuat:
 
     def __init__(self, n: int):
         self.x = x = np.empty((12, n))
-        m = np.empty((15, n))
+        m = np.empty((22, n))
+        m[21] = 1.0
         p3, p4 = np.empty((3, n)), np.empty((4, n))
         self._q = q = np.empty((4, n))
         self._d = d = np.empty((6, n))
@@ -128,7 +130,7 @@ class XformToQuat:
         self._x_views = (x[:3], x[:6], x[6:9], x[6:12])
         self._m_views = (m[:3], m[:6], m[6:9], m[6:12], m[1:4], m[8:11], m[2:5], m[7:10], m[12:15], m[::7])
         self._q_views = (q[1:], d[:3], d[3:], p3[0], p3[1], p3[2], p4[0], p4[1], p4[2], p4[3])
-        self._zeros, self._ones = np.zeros((4, n)), np.ones((4, n))
+        self._zeros = np.zeros((4, n))
 
     def __call__(self, out: np.ndarray) -> np.ndarray:
         mul, add, div, sqrt = np.multiply, np.add, np.divide, np.sqrt
@@ -156,11 +158,12 @@ class XformToQuat:
         mul(a_2, b_1, out=r3)
         np.subtract(l3, r3, out=c)
         q = self._q
-        np.matmul(_QUAT_DIAG_SIGNS, diag, out=q)       # 4 |q_i|^2 - 1 from the diagonal
-        add(q, self._ones, out=q)
+        np.matmul(_QUAT_DIAG_SIGNS, diag, out=q)       # 4 |q_i|^2 from the diagonal
         np.maximum(q, self._zeros, out=q)
+        # 2 |q_i|: the halving is left out, as it cancels in the normalisation below without changing a
+        # bit (every value is scaled by exact powers of two; 4 |q_i|^2 is 0 or at least 2^-53, so no
+        # square is subnormal)
         sqrt(q, out=q)
-        mul(q, 0.5, out=q)
         # signs of (m21 - m12, m02 - m20, m10 - m01); + 0.0 makes a -0.0 difference +0.0 (not negative)
         self._m.take(_SIGN_ROWS, axis=0, out=self._d, mode="clip")
         np.subtract(d_plus, d_minus, out=d_plus)
@@ -202,10 +205,10 @@ class PoseDecoder:
         size = s["contacts"].stop
         zero, one = size, size + 1
         self.n_bones = n_bones
-        self._contacts = s["contacts"]
         self._y = np.zeros(size + 2)
         self._y[one] = 1.0
         self._y_head = self._y[:size]
+        self._y_contacts = self._y[s["contacts"]]
 
         def rows(name, shape):
             return np.arange(s[name].start, s[name].stop).reshape(shape)
@@ -231,7 +234,7 @@ class PoseDecoder:
         buf.take(self._axes, out=self._to_quat.x, mode="clip")
         rot = np.empty((self.n_bones, 4))
         self._to_quat(rot.T)
-        return SourcePose(pva[0], rot, pva[1], pva[2], y[self._contacts] > 0.5, -1)
+        return SourcePose(pva[0], rot, pva[1], pva[2], np.greater(self._y_contacts, 0.5), -1)
 
 
 def decode_source_pose(y: np.ndarray, n_bones: int, slices: dict | None = None) -> SourcePose:
@@ -251,7 +254,6 @@ class LearnedMotionMatchingController(CharacterController):
         if self.nets.n_bones != db.n_bones:
             raise WeightsError(f"{self.nets.path}: networks for {self.nets.n_bones} bones, database has {db.n_bones}")
         self.compare_with_search = compare_with_search
-        self._slices = pose_vector_slices(db.n_bones)
         self._decode = PoseDecoder(db.n_bones)
         d = self.nets.n_features
         self.state = np.zeros(d + self.nets.n_latent, np.float32)
@@ -402,8 +404,10 @@ class LearnedMotionMatchingController(CharacterController):
 
     def _advance_pose(self, dt: float) -> SourcePose:
         if dt > 0:
-            self.nets.stepper(self.state, out=self._deriv)
-            self.state += np.float32(dt) * self._deriv
+            deriv = self._deriv
+            self.nets.stepper(self.state, out=deriv)
+            np.multiply(deriv, np.float32(dt), out=deriv)
+            self.state += deriv
         return self.decompress(self.state)
 
     def _snapshot_extras(self) -> dict:
