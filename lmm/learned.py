@@ -96,78 +96,151 @@ def load_default_networks(db, features, path=None) -> LMMNetworks:
     return LMMNetworks.load(path or DEFAULT_WEIGHTS, db, features)
 
 
-_QUAT_DIAG_SIGNS = np.array([[1.0, 1.0, 1.0], [1.0, -1.0, -1.0], [-1.0, 1.0, -1.0], [-1.0, -1.0, 1.0]])
-# columns of the rotation matrix rows (J, 9) = [a0 a1 a2 b0 b1 b2 c0 c1 c2] (a, b, c: its columns)
-_CROSS_LEFT = np.array([1, 2, 0, 2, 0, 1])     # c = (left * right)[:, :3] - (left * right)[:, 3:]
-_CROSS_RIGHT = np.array([5, 3, 4, 4, 5, 3])
-_DIAG = np.array([0, 4, 8])                    # m00, m11, m22
-_SIGN_PLUS = np.array([5, 6, 1])               # m21 - m12, m02 - m20, m10 - m01
-_SIGN_MINUS = np.array([7, 2, 3])
+# 4 |q_i|^2 = (+-m00 +-m11 +-m22) + 1: the signs, and the 1 as a fourth column (against a row of ones)
+_QUAT_DIAG_SIGNS = np.array([[1.0, 1.0, 1.0, 1.0], [1.0, -1.0, -1.0, 1.0], [-1.0, 1.0, -1.0, 1.0], [-1.0, -1.0, 1.0, 1.0]])
+# rows of the scratch matrix (22, n) of :class:`XformToQuat`: the rotation matrix's columns a (rows 0-5:
+# a0 a1 a2 a0 a1 a2), b (rows 6-11, the same) and c (rows 12-14), so that every cross product term and
+# the diagonal (a0, b1, c2: rows 0, 7, 14; with the ones of row 21) are slices
+_SIGN_ROWS = np.array([8, 12, 1, 13, 2, 6])    # (m21, m02, m10) = (b2, c0, a1) against (m12, m20, m01) = (c1, a2, b0)
+
+
+class XformToQuat:
+    """2-axis rotations of ``n`` bones, component-major, -> unit quaternions via Gram-Schmidt, into
+    preallocated buffers with every view made once (a numpy call on a 3 x 23 block costs far more than its
+    arithmetic, so the work is about the number of calls).
+
+    Fill :attr:`x` (12, n), rows a0 a1 a2 a0 a1 a2 b0 b1 b2 b0 b1 b2 (the two axes, each written twice so
+    the cross product's cyclic terms are slices), then :meth:`__call__` writes the quaternions to ``out``
+    (4, n), e.g. the transposed view of a new (n, 4) array. The magnitudes come from the matrix diagonal,
+    the signs from the off-diagonal differences. Every element sees the float operations, in the order,
+    of the per-column version this replaced (``tests/test_nn_runtime.py``): the dot products summed as
+    ``np.einsum`` did on this numpy ((0 + 1) + 2, but (0 + 2) + 1 for ``b . b``), so it is bit-identical
+    (a NaN input still gives NaN, possibly of the other sign).
+    """
+
+    def __init__(self, n: int):
+        self.x = x = np.empty((12, n))
+        m = np.empty((22, n))
+        m[21] = 1.0
+        p3, p4 = np.empty((3, n)), np.empty((4, n))
+        self._q = q = np.empty((4, n))
+        self._d = d = np.empty((6, n))
+        self._m, self._t6, self._l3, self._r3 = m, np.empty((6, n)), np.empty((3, n)), np.empty((3, n))
+        self._n, self._p3, self._p4 = np.empty(n), p3, p4
+        self._x_views = (x[:3], x[:6], x[6:9], x[6:12])
+        self._m_views = (m[:3], m[:6], m[6:9], m[6:12], m[1:4], m[8:11], m[2:5], m[7:10], m[12:15], m[::7])
+        self._q_views = (q[1:], d[:3], d[3:], p3[0], p3[1], p3[2], p4[0], p4[1], p4[2], p4[3])
+        self._zeros = np.zeros((4, n))
+
+    def __call__(self, out: np.ndarray) -> np.ndarray:
+        mul, add, div, sqrt = np.multiply, np.add, np.divide, np.sqrt
+        xa3, xa6, xb3, xb6 = self._x_views
+        a3, a6, b3, b6, a_1, b_2, a_2, b_1, c, diag = self._m_views
+        q1, d_plus, d_minus, p0, p1, p2, s0, s1, s2, s3 = self._q_views
+        n, p3, t = self._n, self._p3, self._t6
+        mul(xa3, xa3, out=p3)                          # a = x_a / |x_a|
+        add(p0, p1, out=n)
+        add(n, p2, out=n)
+        sqrt(n, out=n)
+        div(xa6, n, out=a6)
+        mul(a3, xb3, out=p3)                           # b = x_b - (a . x_b) a, normalised
+        add(p0, p1, out=n)
+        add(n, p2, out=n)
+        mul(n, a6, out=t)
+        np.subtract(xb6, t, out=b6)
+        mul(b3, b3, out=p3)
+        add(p0, p2, out=n)
+        add(n, p1, out=n)
+        sqrt(n, out=n)
+        div(b6, n, out=b6)
+        l3, r3 = self._l3, self._r3                    # c = a x b
+        mul(a_1, b_2, out=l3)
+        mul(a_2, b_1, out=r3)
+        np.subtract(l3, r3, out=c)
+        q = self._q
+        np.matmul(_QUAT_DIAG_SIGNS, diag, out=q)       # 4 |q_i|^2 from the diagonal
+        np.maximum(q, self._zeros, out=q)
+        # 2 |q_i|: the halving is left out, as it cancels in the normalisation below without changing a
+        # bit (every value is scaled by exact powers of two; 4 |q_i|^2 is 0 or at least 2^-53, so no
+        # square is subnormal)
+        sqrt(q, out=q)
+        # signs of (m21 - m12, m02 - m20, m10 - m01); + 0.0 makes a -0.0 difference +0.0 (not negative)
+        self._m.take(_SIGN_ROWS, axis=0, out=self._d, mode="clip")
+        np.subtract(d_plus, d_minus, out=d_plus)
+        add(d_plus, self._zeros[1:], out=d_plus)
+        np.copysign(q1, d_plus, out=q1)
+        p4 = self._p4
+        mul(q, q, out=p4)
+        add(s0, s1, out=n)
+        add(n, s2, out=n)
+        add(n, s3, out=n)
+        sqrt(n, out=n)
+        return div(q, n, out=out)
 
 
 def xform_xy_to_quat(xy: np.ndarray) -> np.ndarray:
     """2-axis rotations (J, 3, 2) -> unit quaternions (J, 4) via Gram-Schmidt, in few numpy calls.
 
-    Same rotations as :func:`lmm.quat.from_xform_xy` (up to sign), about 6x faster for one pose: the
-    quaternion's magnitudes come from the matrix diagonal, its signs from the off-diagonal differences.
-    The cross product and the sign differences gather whole columns at once; the quaternion is built
-    component-major (4, J). The dot products are summed in a fixed order, written out: the order of the
-    ``np.einsum`` calls of the earlier version on this numpy (left to right on strided rows, (0 + 2) + 1
-    on a contiguous 3-wide row), so the output is bit-identical to it (tested against it).
-    """
-    m = np.empty((xy.shape[0], 9))
-    a = xy[:, :, 0]
-    p = a * a
-    n = p[:, 0] + p[:, 1]
-    n += p[:, 2]
-    np.sqrt(n, out=n)
-    a = np.divide(a, n[:, None], out=m[:, 0:3])
-    b = xy[:, :, 1]
-    p = a * b
-    n = p[:, 0] + p[:, 1]
-    n += p[:, 2]
-    b = np.subtract(b, n[:, None] * a, out=m[:, 3:6])
-    p = b * b
-    n = p[:, 0] + p[:, 2]
-    n += p[:, 1]
-    np.sqrt(n, out=n)
-    b /= n[:, None]
-    lr = m.take(_CROSS_LEFT, axis=1)
-    lr *= m.take(_CROSS_RIGHT, axis=1)
-    np.subtract(lr[:, :3], lr[:, 3:], out=m[:, 6:9])
-    q4 = _QUAT_DIAG_SIGNS @ m.take(_DIAG, axis=1).T     # (4, J): 4 |q_i|^2 - 1 from the diagonal
-    q4 += 1.0
-    np.maximum(q4, 0.0, out=q4)
-    np.sqrt(q4, out=q4)
-    q4 *= 0.5
-    d = m.take(_SIGN_PLUS, axis=1).T
-    d -= m.take(_SIGN_MINUS, axis=1).T
-    v = q4[1:]
-    np.negative(v, out=v, where=d < 0.0)                # sign(m21 - m12), sign(m02 - m20), sign(m10 - m01)
-    p = q4 * q4
-    n = p[0] + p[1]
-    n += p[2]
-    n += p[3]
-    return q4.T / np.sqrt(n)[:, None]
+    Same rotations as :func:`lmm.quat.from_xform_xy` (up to sign), several times faster for one pose
+    (see :class:`XformToQuat`, which the pose decoding keeps and fills with its own gather)."""
+    n = xy.shape[0]
+    conv = XformToQuat(n)
+    a, b = xy[:, :, 0].T, xy[:, :, 1].T
+    conv.x[:] = np.concatenate([a, a, b, b])
+    out = np.empty((n, 4))
+    conv(out.T)
+    return out
+
+
+class PoseDecoder:
+    """Decompressor output vectors (P,) -> :class:`SourcePose` (float64; bone 0 carries root velocities).
+
+    One gather builds positions, velocities and angular velocities of all bones (bone 0's position is a
+    constant zero slot) and one the rotations' axes (bone 0's rotation is decoded from a constant identity
+    2-axis matrix, which gives exactly (1, 0, 0, 0)), so a pose costs a cast, two gathers and the rotation
+    arithmetic on all bones at once. The returned arrays are new each call (callers keep source poses)."""
+
+    def __init__(self, n_bones: int):
+        s = pose_vector_slices(n_bones)
+        size = s["contacts"].stop
+        zero, one = size, size + 1
+        self.n_bones = n_bones
+        self._y = np.zeros(size + 2)
+        self._y[one] = 1.0
+        self._y_head = self._y[:size]
+        self._y_contacts = self._y[s["contacts"]]
+
+        def rows(name, shape):
+            return np.arange(s[name].start, s[name].stop).reshape(shape)
+
+        j = n_bones - 1
+        pva = np.full((3, n_bones, 3), zero)
+        pva[0, 1:] = rows("positions", (j, 3))
+        pva[1, 0], pva[1, 1:] = rows("root_velocity", 3), rows("velocities", (j, 3))
+        pva[2, 0], pva[2, 1:] = rows("root_angular_velocity", 3), rows("angular_velocities", (j, 3))
+        self._pva = pva
+        xy = rows("rotations", (j, 3, 2))
+        axes = np.full((12, n_bones), zero)
+        axes[[0, 3, 7, 10], 0] = one                   # bone 0: a = (1, 0, 0), b = (0, 1, 0)
+        for k in range(2):
+            axes[6 * k:6 * k + 3, 1:] = axes[6 * k + 3:6 * k + 6, 1:] = xy[:, :, k].T
+        self._axes = axes
+        self._to_quat = XformToQuat(n_bones)
+
+    def __call__(self, y: np.ndarray) -> SourcePose:
+        buf = self._y
+        self._y_head[...] = y
+        pva = buf.take(self._pva)
+        buf.take(self._axes, out=self._to_quat.x, mode="clip")
+        rot = np.empty((self.n_bones, 4))
+        self._to_quat(rot.T)
+        return SourcePose(pva[0], rot, pva[1], pva[2], np.greater(self._y_contacts, 0.5), -1)
 
 
 def decode_source_pose(y: np.ndarray, n_bones: int, slices: dict | None = None) -> SourcePose:
-    """A decompressor output vector as a :class:`SourcePose` (float64; bone 0 carries root velocities)."""
-    s = slices or pose_vector_slices(n_bones)
-    j = n_bones - 1
-    y = y.astype(np.float64)
-    pos = np.zeros((n_bones, 3))
-    rot = np.zeros((n_bones, 4))
-    vel = np.zeros((n_bones, 3))
-    ang = np.zeros((n_bones, 3))
-    pos[1:] = y[s["positions"]].reshape(j, 3)
-    rot[0, 0] = 1.0
-    rot[1:] = xform_xy_to_quat(y[s["rotations"]].reshape(j, 3, 2))
-    vel[1:] = y[s["velocities"]].reshape(j, 3)
-    ang[1:] = y[s["angular_velocities"]].reshape(j, 3)
-    vel[0] = y[s["root_velocity"]]
-    ang[0] = y[s["root_angular_velocity"]]
-    return SourcePose(pos, rot, vel, ang, y[s["contacts"]] > 0.5, -1)
+    """A decompressor output vector as a :class:`SourcePose` (float64; bone 0 carries root velocities);
+    a controller keeps a :class:`PoseDecoder` instead of building one per pose."""
+    return PoseDecoder(n_bones)(y)
 
 
 class LearnedMotionMatchingController(CharacterController):
@@ -181,7 +254,7 @@ class LearnedMotionMatchingController(CharacterController):
         if self.nets.n_bones != db.n_bones:
             raise WeightsError(f"{self.nets.path}: networks for {self.nets.n_bones} bones, database has {db.n_bones}")
         self.compare_with_search = compare_with_search
-        self._slices = pose_vector_slices(db.n_bones)
+        self._decode = PoseDecoder(db.n_bones)
         d = self.nets.n_features
         self.state = np.zeros(d + self.nets.n_latent, np.float32)
         self._deriv = np.zeros_like(self.state)
@@ -206,7 +279,7 @@ class LearnedMotionMatchingController(CharacterController):
 
     def decompress(self, state: np.ndarray) -> SourcePose:
         self.nets.decompressor(state, out=self._pose_vec)
-        return decode_source_pose(self._pose_vec, self.n_bones, self._slices)
+        return self._decode(self._pose_vec)
 
     def exact_nearest(self, query_norm: np.ndarray, top_k: int | None = None):
         """The exact nearest neighbour of a query over every frame (no exclusions): (frame, cost, result)
@@ -331,8 +404,10 @@ class LearnedMotionMatchingController(CharacterController):
 
     def _advance_pose(self, dt: float) -> SourcePose:
         if dt > 0:
-            self.nets.stepper(self.state, out=self._deriv)
-            self.state += np.float32(dt) * self._deriv
+            deriv = self._deriv
+            self.nets.stepper(self.state, out=deriv)
+            np.multiply(deriv, np.float32(dt), out=deriv)
+            self.state += deriv
         return self.decompress(self.state)
 
     def _snapshot_extras(self) -> dict:

@@ -120,7 +120,8 @@ def reference_xform_xy_to_quat(xy: np.ndarray) -> np.ndarray:
 
 
 def test_pose_decoding_bit_identical_to_the_per_column_version():
-    from lmm.learned import xform_xy_to_quat
+    from lmm.learned import PoseDecoder, xform_xy_to_quat
+    decoder = PoseDecoder(23)
     rng = np.random.default_rng(11)
     for t in range(3000):
         y = rng.standard_normal(338) * rng.uniform(0.01, 3.0)    # a decompressor output, float64 as decoded
@@ -131,6 +132,38 @@ def test_pose_decoding_bit_identical_to_the_per_column_version():
         xy = y[66:198].reshape(22, 3, 2)
         got, ref = xform_xy_to_quat(xy), reference_xform_xy_to_quat(xy)
         assert np.array_equal(got.view(np.uint64), ref.view(np.uint64)), f"pose {t}: {np.max(np.abs(got - ref))}"
+        # the controller's decoder (one gather for all bones, bone 0 decoded from a constant identity)
+        pose, want = decoder(y), reference_decode(y)
+        for name in ("positions", "rotations", "velocities", "angular_velocities"):
+            g, w = getattr(pose, name), want[name]
+            assert g.shape == w.shape and g.flags.c_contiguous and np.array_equal(g.view(np.uint64), w.view(np.uint64)), \
+                f"pose {t}: {name}"
+        assert np.array_equal(pose.contacts, want["contacts"]) and pose.frame == -1
+
+
+def reference_decode(y: np.ndarray) -> dict:
+    """The pose decoding as written before the gathered decoder (23 bones, bone 0: root velocities)."""
+    y = y.astype(np.float64)
+    pos, rot, vel, ang = np.zeros((23, 3)), np.zeros((23, 4)), np.zeros((23, 3)), np.zeros((23, 3))
+    pos[1:] = y[0:66].reshape(22, 3)
+    rot[0, 0] = 1.0
+    rot[1:] = reference_xform_xy_to_quat(y[66:198].reshape(22, 3, 2))
+    vel[1:] = y[198:264].reshape(22, 3)
+    ang[1:] = y[264:330].reshape(22, 3)
+    vel[0], ang[0] = y[330:333], y[333:336]
+    return {"positions": pos, "rotations": rot, "velocities": vel, "angular_velocities": ang,
+            "contacts": y[336:338] > 0.5}
+
+
+def test_decoded_poses_are_new_arrays_each_call():
+    """Controllers keep source poses (the ghost reads one later): a decode never reuses earlier arrays."""
+    from lmm.learned import PoseDecoder
+    decoder = PoseDecoder(23)
+    y = np.random.default_rng(2).standard_normal(338).astype(np.float32)
+    first, second = decoder(y), decoder(-y)
+    for name in ("positions", "rotations", "velocities", "angular_velocities", "contacts"):
+        assert not np.may_share_memory(getattr(first, name), getattr(second, name)), name
+    assert np.array_equal(first.positions[1:], y[:66].reshape(22, 3))
 
 
 def test_learned_controller_with_the_folded_networks_stays_within_a_millimetre(db, features, monkeypatch):
