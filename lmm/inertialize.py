@@ -17,7 +17,7 @@ tests/test_inertialize.py) in a few calls on whole arrays: the position and rota
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -31,6 +31,8 @@ class Offsets:
     velocities: np.ndarray          # (J, 3)
     rotations: np.ndarray           # (J, 4)
     angular_velocities: np.ndarray  # (J, 3)
+    # set by inertialize_decay: the fields as views of its stacked arrays (see there); never compared
+    _stack: tuple | None = field(default=None, repr=False, compare=False)
 
     @classmethod
     def zeros(cls, n_bones: int) -> "Offsets":
@@ -63,9 +65,12 @@ def inertialize_transition(shown_positions, shown_velocities, shown_rotations, s
 _MUL_A = np.repeat(np.arange(4), 4)
 _MUL_B = np.array([0, 1, 2, 3, 1, 0, 3, 2, 2, 3, 0, 1, 3, 2, 1, 0])
 _MUL_SIGN = np.array([1.0, 1.0, 1.0, 1.0, -1.0, 1.0, -1.0, 1.0, -1.0, 1.0, 1.0, -1.0, -1.0, -1.0, 1.0, 1.0])
-# cross(a, b) = a[:, L1] * b[:, R1] - a[:, L2] * b[:, R2]; for the vector part of a quaternion, +1
-_CROSS_L1, _CROSS_R1 = np.array([1, 2, 0]), np.array([2, 0, 1])
-_CROSS_L2, _CROSS_R2 = np.array([2, 0, 1]), np.array([1, 2, 0])
+# cross(a, b) = a[:, L1] * b[:, R1] - a[:, L2] * b[:, R2], both products in one gather each:
+# p = a[:, L] * b[:, R] with L = L1 + L2, R = R1 + R2, cross = p[:, :3] - p[:, 3:]
+_CROSS_L = np.array([1, 2, 0, 2, 0, 1])
+_CROSS_R = np.array([2, 0, 1, 1, 2, 0])
+# the same for the vector part of a quaternion (its columns 1..3)
+_CROSS_QL = _CROSS_L + 1
 
 
 def _mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -91,21 +96,19 @@ def _normalize(q: np.ndarray) -> np.ndarray:
     return q
 
 
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    out = a.take(_CROSS_L1, axis=1)
-    out *= b.take(_CROSS_R1, axis=1)
-    out -= a.take(_CROSS_L2, axis=1) * b.take(_CROSS_R2, axis=1)
-    return out
-
-
 def _mul_vec(q: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """:func:`lmm.quat.mul_vec` of (J, 4) and (J, 3): v + w t + u x t with t = 2 (u x v)."""
-    u = q[:, 1:]
-    t = _cross(u, v)
+    """:func:`lmm.quat.mul_vec` of (J, 4) and (J, 3): v + w t + u x t with t = 2 (u x v), u = q[:, 1:]."""
+    u = q.take(_CROSS_QL, axis=1)       # u's columns for both products of a cross product
+    p = v.take(_CROSS_R, axis=1)
+    p *= u
+    t = p[:, :3] - p[:, 3:]             # u x v
     t *= 2.0
+    p = t.take(_CROSS_R, axis=1)
+    p *= u
     out = q[:, 0:1] * t
     out += v
-    out += _cross(u, t)
+    np.subtract(p[:, :3], p[:, 3:], out=t)  # u x t (t is read above, into p, before it is overwritten)
+    out += t                            # (v + w t) + (u x t)
     return out
 
 
@@ -122,13 +125,16 @@ def _rotation_log2(q: np.ndarray, out: np.ndarray, eps: float = 1e-8) -> None:
     w = q[:, 0]
     xyz = q[:, 1:]
     length = _norm3(xyz)
-    small = length < eps
     # abs_ negates q where w < 0: |w| here (w = -0.0 gives the same arctan2 unless length is 0, the small
     # branch), and the sign of the vector part folded into the scale ((-s) x == s (-x) exactly)
-    scale = np.arctan2(length, np.minimum(np.abs(w), 1.0))
-    scale /= np.where(small, 1.0, length)
-    scale[small] = 1.0                  # 1.0 * xyz == xyz: the small-angle branch
-    np.negative(scale, out=scale, where=w < 0.0)
+    c = np.abs(w)
+    np.minimum(c, 1.0, out=c)
+    angle = np.arctan2(length, c)
+    scale = np.ones(len(q))             # 1.0 * xyz == xyz: the small-angle branch (length < eps)
+    np.divide(angle, length, out=scale, where=length >= eps)
+    # the sign of w, -0.0 counted as positive (abs_ tests w < 0.0); -0.0 + 0.0 == +0.0, others unchanged
+    c = w + 0.0
+    np.copysign(scale, c, out=scale)
     np.multiply(xyz, scale[:, None], out=out)
     out *= 2.0
 
@@ -137,14 +143,21 @@ def _rotation_exp2(v: np.ndarray, eps: float = 1e-8) -> np.ndarray:
     """``quat.from_scaled_angle_axis(v)`` of (J, 3): a new (J, 4) array."""
     h = v * 0.5
     half = _norm3(h)
-    small = half < eps
     q = np.empty((len(v), 4))
     np.cos(half, out=q[:, 0])
-    scale = np.sin(half)
-    scale /= np.where(small, 1.0, half)
-    scale[small] = 1.0
+    s = np.sin(half)
+    scale = np.ones(len(v))             # the small-angle branch keeps h
+    np.divide(s, half, out=scale, where=half >= eps)
     np.multiply(h, scale[:, None], out=q[:, 1:])
-    return _normalize(q)
+    # normalize: the length is cos^2 + sin^2 ~ 1 (or cos(tiny)^2 ~ 1 in the small branch), never under
+    # the 1e-10 floor of quat.normalize, so that maximum is left out (NaN stays NaN either way)
+    sq = q * q
+    n = sq[:, 0] + sq[:, 1]
+    n += sq[:, 2]
+    n += sq[:, 3]
+    np.sqrt(n, out=n)
+    q /= n[:, None]
+    return q
 
 
 _SPRING_CONSTANTS: dict = {}
@@ -165,15 +178,24 @@ def _spring_constants(halflife: float, dt: float):
 def inertialize_decay(offsets: Offsets, halflife: float, dt: float) -> Offsets:
     """The offsets ``dt`` seconds later: :func:`lmm.springs.decay_spring_damper_exact` on the position
     offsets and :func:`lmm.springs.decay_spring_damper_exact_quat` on the rotation offsets, run as one
-    spring on (J, 6) = [position offset, rotation offset's scaled angle axis]."""
+    spring on (J, 6) = [position offset, rotation offset's scaled angle axis].
+
+    The result's fields are views of two (J, 6) arrays [position | rotation vector] and [velocity |
+    angular velocity]; when the next decay finds them still so (the fields not replaced), it reads the
+    velocities as they are and writes the rotation log next to the positions, without gathering."""
     y, e = _spring_constants(halflife, dt)
     n = len(offsets.positions)
-    x = np.empty((n, 6))
-    x[:, :3] = offsets.positions
+    stack = offsets._stack
+    pos, vel, ang = offsets.positions, offsets.velocities, offsets.angular_velocities
+    if stack is not None and stack[0] is pos and stack[1] is vel and stack[2] is ang:
+        x, v = pos.base, vel.base       # the rotation-vector half of x is scratch: overwritten below
+    else:
+        x = np.empty((n, 6))
+        x[:, :3] = pos
+        v = np.empty((n, 6))
+        v[:, :3] = vel
+        v[:, 3:] = ang
     _rotation_log2(offsets.rotations, x[:, 3:])
-    v = np.empty((n, 6))
-    v[:, :3] = offsets.velocities
-    v[:, 3:] = offsets.angular_velocities
     j1 = x * y
     j1 += v                             # v + x y
     x_new = j1 * dt
@@ -183,7 +205,9 @@ def inertialize_decay(offsets: Offsets, halflife: float, dt: float) -> Offsets:
     v_new *= dt
     np.subtract(v, v_new, out=v_new)
     v_new *= e                          # e (v - j1 y dt)
-    return Offsets(x_new[:, :3], v_new[:, :3], _rotation_exp2(x_new[:, 3:]), v_new[:, 3:])
+    out = Offsets(x_new[:, :3], v_new[:, :3], _rotation_exp2(x_new[:, 3:]), v_new[:, 3:])
+    out._stack = (out.positions, out.velocities, out.angular_velocities)
+    return out
 
 
 def inertialize_apply(offsets: Offsets, positions, velocities, rotations, angular_velocities):
