@@ -493,18 +493,23 @@ class CharacterController(Controller):
         current_norm = self.features.normalize(self._source_features())
         timings["total"] = (time.perf_counter() - t_start) * 1e6
         frame = self._source_frame()
+        # the simulation's and the desired arrays are replaced every tick, never written in place: the
+        # snapshot shares them (as it shares the trajectory and query arrays made this tick)
+        sim = self.sim
+        diff = query - current_norm
+        diff *= diff                    # the same squares as (query - current_norm) ** 2
         snap = DebugSnapshot(
             controller=self.name, tick=self.tick, time_s=self.time_s, input=inp.copy(),
-            simulation_position=self.sim.position.copy(), simulation_rotation=self.sim.rotation.copy(),
-            simulation_velocity=self.sim.velocity.copy(), desired_velocity=des_vel.copy(),
-            desired_rotation=des_rot.copy(), trajectory_positions=traj_pos, trajectory_rotations=traj_rot,
+            simulation_position=sim.position, simulation_rotation=sim.rotation,
+            simulation_velocity=sim.velocity, desired_velocity=des_vel,
+            desired_rotation=des_rot, trajectory_positions=traj_pos, trajectory_rotations=traj_rot,
             trajectory_offsets=self.traj_offsets.copy(), query=query, current_features=current_norm,
             matched_frame=int(frame),
             matched_features=(self.features.normalized[frame].copy() if frame >= 0 else current_norm),
             candidates=self._last_candidates, searched=searched, forced_search=bool(searched and (forced or must)),
             transitioned=transitioned, best_cost=float(self._last_best_cost), pose=pose,
             matched_pose_positions=ghost, foot_contacts=pose.contacts.copy(),
-            foot_locked=locked, timings_us=timings, current_cost=float(np.sum((query - current_norm) ** 2)),
+            foot_locked=locked, timings_us=timings, current_cost=float(diff.sum()),
             **self._snapshot_extras())
         return pose, snap
 
