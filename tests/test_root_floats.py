@@ -4,7 +4,6 @@ import numpy as np
 
 from lmm import quat_scalar as qs
 from lmm.character import CharacterController, _damper_factor, _integrate_root_f, _radians
-from lmm.trajectory import SimulationState
 from lmm.tuning import Tuning
 
 
@@ -50,6 +49,14 @@ def _reference_synchronize(tun, sim_pos, sim_rot, root_pos, root_rot, root_vel_w
     return tuple(root_pos), tuple(root_rot)
 
 
+class _Sim:
+    """The simulation object as either form reads it: arrays, and (position, ..., rotation, ...) tuples."""
+
+    def __init__(self, position, rotation):
+        self.position, self.rotation = position, rotation
+        self.state = (tuple(position.tolist()), None, None, tuple(rotation.tolist()), None)
+
+
 class _Root:
     """Just what _synchronize reads and writes."""
 
@@ -88,7 +95,7 @@ def test_integration_and_synchronization_equal_the_quat_scalar_forms_bit_for_bit
         assert [tuple(g) for g in got] == [tuple(w) for w in want]
         sim_pos = np.array(root_pos) + rng.normal(size=3) * rng.uniform(0, 0.6)
         sim_rot = np.array(_unit(rng, 4)) if trial % 4 else np.array(root_rot)
-        fake = _Root(tun, SimulationState(position=sim_pos, rotation=sim_rot))
+        fake = _Root(tun, _Sim(sim_pos, sim_rot))
         CharacterController._synchronize(fake, got[2], got[3], got[0], got[1], dt)
         ref = _reference_synchronize(tun, sim_pos.tolist(), tuple(sim_rot.tolist()), list(got[2]), got[3],
                                      got[0], got[1], dt)
