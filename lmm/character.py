@@ -344,6 +344,68 @@ def _damper_factor(halflife: float, dt: float) -> float:
     return f
 
 
+# The root's integration and synchronization in written-out float arithmetic: each helper performs exactly
+# the float operations of its namesake in lmm.quat_scalar (same products, same order of sums; tested in
+# tests/test_mm.py against those functions) without the generic loops and tuple building.
+_atan2 = np.arctan2
+
+
+def _mul_f(aw, ax, ay, az, bw, bx, by, bz) -> tuple:
+    """``qs.mul`` of two quaternions given as 4 + 4 floats."""
+    return (aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw)
+
+
+def _normalize_f(w, x, y, z) -> tuple:
+    """``qs.normalize``."""
+    n = math.sqrt(w * w + x * x + y * y + z * z)
+    if not n > 1e-10:
+        n = 1e-10
+    return (w / n, x / n, y / n, z / n)
+
+
+def _exp_half_f(vx, vy, vz) -> tuple:
+    """``qs.from_scaled_angle_axis((vx, vy, vz))``: ``qs.exp`` of the halved vector."""
+    vx, vy, vz = vx * 0.5, vy * 0.5, vz * 0.5
+    half = math.sqrt(vx * vx + vy * vy + vz * vz)
+    w = math.cos(half)
+    if half < 1e-8:
+        return _normalize_f(w, vx, vy, vz)
+    s = math.sin(half) / half
+    return _normalize_f(w, s * vx, s * vy, s * vz)
+
+
+def _log_mul_inv_f(aw, ax, ay, az, bw, bx, by, bz) -> tuple:
+    """``qs.to_scaled_angle_axis(qs.abs_(qs.mul_inv(a, b)))``."""
+    w, x, y, z = _mul_f(aw, ax, ay, az, bw, -bx, -by, -bz)
+    if w < 0.0:
+        w, x, y, z = -w, -x, -y, -z
+    length = math.sqrt(x * x + y * y + z * z)
+    if length < 1e-8:
+        return (2.0 * x, 2.0 * y, 2.0 * z)
+    w = -1.0 if w < -1.0 else 1.0 if w > 1.0 else w
+    s = float(_atan2(length, w)) / length
+    return (2.0 * (s * x), 2.0 * (s * y), 2.0 * (s * z))
+
+
+def _integrate_root_f(root_pos, root_rot, vel, ang, dt) -> tuple:
+    """The character root moved by its local velocity ``vel`` and angular velocity ``ang`` (3 floats each)
+    for ``dt``: (world velocity, world angular velocity, position, rotation), the operations of
+    ``qs.mul_vec``, ``p + v dt`` and ``qs.normalize(qs.mul(qs.from_scaled_angle_axis(a dt), rot))``."""
+    w, x, y, z = root_rot
+    out = []
+    for v0, v1, v2 in (vel, ang):
+        t0 = 2.0 * (y * v2 - z * v1)
+        t1 = 2.0 * (z * v0 - x * v2)
+        t2 = 2.0 * (x * v1 - y * v0)
+        out.append((v0 + w * t0 + (y * t2 - z * t1), v1 + w * t1 + (z * t0 - x * t2),
+                    v2 + w * t2 + (x * t1 - y * t0)))
+    vw, aw = out
+    pos = (root_pos[0] + vw[0] * dt, root_pos[1] + vw[1] * dt, root_pos[2] + vw[2] * dt)
+    rot = _normalize_f(*_mul_f(*_exp_half_f(aw[0] * dt, aw[1] * dt, aw[2] * dt), w, x, y, z))
+    return vw, aw, pos, rot
+
+
 def _radians(degrees: float) -> float:
     """``float(np.radians(degrees))``, remembered per value."""
     r = _RADIANS.get(degrees)
@@ -548,11 +610,8 @@ class CharacterController(Controller):
         self.shown = (pos, vel, rot, ang)
 
         # root integration (character space velocities -> world), in plain floats (one 3-vector/quaternion)
-        root_rot = self._root_rotation_t
-        root_vel_world = qs.mul_vec(root_rot, vel[0].tolist())
-        root_ang_world = qs.mul_vec(root_rot, ang[0].tolist())
-        root_pos = [p + v * dt for p, v in zip(self._root_position_t, root_vel_world)]
-        root_rot = qs.normalize(qs.mul(qs.from_scaled_angle_axis([w * dt for w in root_ang_world]), root_rot))
+        root_vel_world, root_ang_world, root_pos, root_rot = _integrate_root_f(
+            self._root_position_t, self._root_rotation_t, vel[0].tolist(), ang[0].tolist(), dt)
         # the root arrays are replaced every tick, never written in place: no copies needed
         integrated = (np.array(root_pos), np.array(root_rot))
         self._synchronize(root_pos, root_rot, root_vel_world, root_ang_world, dt)
@@ -583,18 +642,23 @@ class CharacterController(Controller):
         current_norm = self.features.normalize(self._source_features())
         timings["total"] = (time.perf_counter() - t_start) * 1e6
         frame = self._source_frame()
+        # the simulation's and the desired arrays are replaced every tick, never written in place: the
+        # snapshot shares them (as it shares the trajectory and query arrays made this tick)
+        sim = self.sim
+        diff = query - current_norm
+        diff *= diff                    # the same squares as (query - current_norm) ** 2
         snap = DebugSnapshot(
             controller=self.name, tick=self.tick, time_s=self.time_s, input=inp.copy(),
-            simulation_position=self.sim.position.copy(), simulation_rotation=self.sim.rotation.copy(),
-            simulation_velocity=self.sim.velocity.copy(), desired_velocity=des_vel.copy(),
-            desired_rotation=des_rot.copy(), trajectory_positions=traj_pos, trajectory_rotations=traj_rot,
+            simulation_position=sim.position, simulation_rotation=sim.rotation,
+            simulation_velocity=sim.velocity, desired_velocity=des_vel,
+            desired_rotation=des_rot, trajectory_positions=traj_pos, trajectory_rotations=traj_rot,
             trajectory_offsets=self.traj_offsets.copy(), query=query, current_features=current_norm,
             matched_frame=int(frame),
             matched_features=(self.features.normalized[frame].copy() if frame >= 0 else current_norm),
             candidates=self._last_candidates, searched=searched, forced_search=bool(searched and (forced or must)),
             transitioned=transitioned, best_cost=float(self._last_best_cost), pose=pose,
             matched_pose_positions=ghost, foot_contacts=pose.contacts.copy(),
-            foot_locked=locked, timings_us=timings, current_cost=float(np.sum((query - current_norm) ** 2)),
+            foot_locked=locked, timings_us=timings, current_cost=float(diff.sum()),
             **self._snapshot_extras())
         return pose, snap
 
@@ -783,40 +847,48 @@ class CharacterController(Controller):
     def _synchronize(self, root_pos, root_rot, root_vel_world, root_ang_world, dt) -> None:
         """Adjustment (pull the integrated character root ``root_pos``/``root_rot``, floats, towards the
         simulation object) and clamping; sets the character root. Plain floats (one position and one
-        quaternion): the same operations as the numpy form, a fraction of the time."""
+        quaternion), written out: the same operations as the numpy form (tested), a fraction of the time."""
         tun = self.tuning
         sim_state = self.sim.state
-        sim_pos, sim_rot = sim_state[0], sim_state[3]
+        (sx, sy, sz), (sw, sqx, sqy, sqz) = sim_state[0], sim_state[3]
+        px, py, pz = root_pos
+        rw, rx, ry, rz = root_rot
         if tun.adjustment_enabled and dt > 0:
             factor = _damper_factor(tun.adjustment_position_halflife_s, dt)
-            delta = [(s - r) * factor for s, r in zip(sim_pos, root_pos)]
+            dx, dy, dz = (sx - px) * factor, (sy - py) * factor, (sz - pz) * factor
             if tun.adjustment_by_velocity:
-                cap = tun.adjustment_max_speed_ratio * qs.norm(root_vel_world) * dt
-                length = qs.norm(delta)
+                vx, vy, vz = root_vel_world
+                cap = tun.adjustment_max_speed_ratio * math.sqrt(vx * vx + vy * vy + vz * vz) * dt
+                length = math.sqrt(dx * dx + dy * dy + dz * dz)
                 if length > cap:
-                    delta = [d * (cap / length) for d in delta]
-            root_pos = [r + d for r, d in zip(root_pos, delta)]
-            diff = qs.to_scaled_angle_axis(qs.abs_(qs.mul_inv(sim_rot, root_rot)))
+                    k = cap / length
+                    dx, dy, dz = dx * k, dy * k, dz * k
+            px, py, pz = px + dx, py + dy, pz + dz
+            dx, dy, dz = _log_mul_inv_f(sw, sqx, sqy, sqz, rw, rx, ry, rz)
             factor = _damper_factor(tun.adjustment_rotation_halflife_s, dt)
-            step = [d * factor for d in diff]
+            dx, dy, dz = dx * factor, dy * factor, dz * factor
             if tun.adjustment_by_velocity:
-                cap = tun.adjustment_max_speed_ratio * qs.norm(root_ang_world) * dt
-                length = qs.norm(step)
+                vx, vy, vz = root_ang_world
+                cap = tun.adjustment_max_speed_ratio * math.sqrt(vx * vx + vy * vy + vz * vz) * dt
+                length = math.sqrt(dx * dx + dy * dy + dz * dz)
                 if length > cap:
-                    step = [d * (cap / length) for d in step]
-            root_rot = qs.normalize(qs.mul(qs.from_scaled_angle_axis(step), root_rot))
+                    k = cap / length
+                    dx, dy, dz = dx * k, dy * k, dz * k
+            rw, rx, ry, rz = _normalize_f(*_mul_f(*_exp_half_f(dx, dy, dz), rw, rx, ry, rz))
         if tun.clamping_enabled:
-            offset = [r - s for r, s in zip(root_pos, sim_pos)]
-            dist = qs.norm(offset)
-            if dist > tun.clamp_max_distance_m:
-                root_pos = [s + o * (tun.clamp_max_distance_m / dist) for s, o in zip(sim_pos, offset)]
-            diff = qs.to_scaled_angle_axis(qs.abs_(qs.mul_inv(root_rot, sim_rot)))
-            angle = qs.norm(diff)
+            ox, oy, oz = px - sx, py - sy, pz - sz
+            dist = math.sqrt(ox * ox + oy * oy + oz * oz)
+            max_dist = tun.clamp_max_distance_m
+            if dist > max_dist:
+                k = max_dist / dist
+                px, py, pz = sx + ox * k, sy + oy * k, sz + oz * k
+            dx, dy, dz = _log_mul_inv_f(rw, rx, ry, rz, sw, sqx, sqy, sqz)
+            angle = math.sqrt(dx * dx + dy * dy + dz * dz)
             max_angle = _radians(tun.clamp_max_angle_deg)
             if angle > max_angle:
-                root_rot = qs.normalize(qs.mul(qs.from_scaled_angle_axis([d * (max_angle / angle) for d in diff]),
-                                               sim_rot))
-        self._set_root(root_pos, root_rot)
+                k = max_angle / angle
+                rw, rx, ry, rz = _normalize_f(*_mul_f(*_exp_half_f(dx * k, dy * k, dz * k), sw, sqx, sqy, sqz))
+        self._set_root((px, py, pz), (rw, rx, ry, rz))
 
     def _set_root(self, position, rotation) -> None:
         """Set the character root (3 and 4 floats): the arrays the pipeline reads and their float copies."""

@@ -90,3 +90,24 @@ def test_fast_decay_and_apply_equal_the_numpy_forms_bit_for_bit():
                rng.normal(size=(n, 3)))
         for g, w in zip(inertialize_apply(off, *src), _reference_apply(off, *src)):
             assert g.shape == w.shape and np.array_equal(g, w)
+
+
+def test_decay_of_decayed_offsets_equals_the_numpy_forms_bit_for_bit():
+    """A decay's result keeps its fields as views of stacked arrays, read as they are by the next decay;
+    chains of decays (with a field replaced or written in place between them) still equal the reference."""
+    rng = np.random.default_rng(11)
+    for trial in range(40):
+        n = int(rng.integers(4, 30))
+        off = _random_offsets(rng, n)
+        ref = (off.positions, off.velocities, off.rotations, off.angular_velocities)
+        for k in range(6):
+            off = inertialize_decay(off, 0.1, 1 / 60)
+            ref = _reference_decay(Offsets(*ref), 0.1, 1 / 60)
+            for g, w in zip((off.positions, off.velocities, off.rotations, off.angular_velocities), ref):
+                assert np.array_equal(g, w)
+            if k == 2:
+                off.velocities[1] = 3.0          # in place: seen through the stacked array
+                ref[1][1] = 3.0
+            if k == 4:
+                off.angular_velocities = off.angular_velocities * 0.5   # replaced: not the stacked view
+                ref = (ref[0], ref[1], ref[2], ref[3] * 0.5)
