@@ -108,44 +108,11 @@ def root_local_velocities(db):
     return both[:, :3], both[:, 3:]
 
 
-def forward_kinematics_lists(local_rot, local_pos, parents) -> tuple[list, list]:
-    """Global rotations and positions of one pose given as lists (per joint a 4- and a 3-sequence of
-    floats); returns two lists of tuples. Plain Python floats: for one pose of ~20 bones this is several
-    times faster than numpy calls on tiny arrays (see :func:`lmm.quat.forward_kinematics` for frames in
-    bulk)."""
-    n = len(local_rot)
-    g = [None] * n
-    p = [None] * n
-    for j in range(n):
-        w, x, y, z = local_rot[j]
-        px, py, pz = local_pos[j]
-        pj = parents[j]
-        if pj < 0:
-            g[j] = (w, x, y, z)
-            p[j] = (px, py, pz)
-            continue
-        aw, ax, ay, az = g[pj]
-        g[j] = (aw * w - ax * x - ay * y - az * z, aw * x + ax * w + ay * z - az * y,
-                aw * y - ax * z + ay * w + az * x, aw * z + ax * y - ay * x + az * w)
-        tx = 2.0 * (ay * pz - az * py)
-        ty = 2.0 * (az * px - ax * pz)
-        tz = 2.0 * (ax * py - ay * px)
-        qx, qy, qz = p[pj]
-        p[j] = (qx + px + aw * tx + (ay * tz - az * ty), qy + py + aw * ty + (az * tx - ax * tz),
-                qz + pz + aw * tz + (ax * ty - ay * tx))
-    return g, p
-
-
-def forward_kinematics_links(local_rot, local_pos, roots, links) -> tuple[list, list]:
-    """:func:`forward_kinematics_lists` with the skeleton given as ``roots`` (the joints without a parent)
-    and ``links`` ((joint, parent) pairs of all the others, in index order): no parent test per joint.
-    The same float operations, so the same bits."""
-    n = len(local_rot)
-    g = [None] * n
-    p = [None] * n
-    for j in roots:
-        g[j] = tuple(local_rot[j])
-        p[j] = tuple(local_pos[j])
+def _fk_links_into(g: list, p: list, local_rot, local_pos, links) -> None:
+    """Forward kinematics along ``links`` ((joint, parent) pairs, each parent's entry of ``g``/``p`` already
+    set), in place: the one loop every forward kinematics of a single pose here runs. Plain Python
+    floats: for one pose of ~20 bones this is several times faster than numpy calls on tiny arrays (see
+    :func:`lmm.quat.forward_kinematics` for frames in bulk)."""
     for j, pj in links:
         w, x, y, z = local_rot[j]
         px, py, pz = local_pos[j]
@@ -158,7 +125,31 @@ def forward_kinematics_links(local_rot, local_pos, roots, links) -> tuple[list, 
         qx, qy, qz = p[pj]
         p[j] = (qx + px + aw * tx + (ay * tz - az * ty), qy + py + aw * ty + (az * tx - ax * tz),
                 qz + pz + aw * tz + (ax * ty - ay * tx))
+
+
+def skeleton_links(parents) -> tuple[list[int], list[tuple[int, int]]]:
+    """``(roots, links)`` of a skeleton: the joints without a parent, and (joint, parent) for the others in
+    index order (a parent before its children)."""
+    return ([j for j, pj in enumerate(parents) if pj < 0],
+            [(j, int(pj)) for j, pj in enumerate(parents) if pj >= 0])
+
+
+def forward_kinematics_links(local_rot, local_pos, roots, links) -> tuple[list, list]:
+    """Global rotations and positions of one pose given as lists (per joint a 4- and a 3-sequence of
+    floats), the skeleton as :func:`skeleton_links` gives it; returns two lists of tuples."""
+    n = len(local_rot)
+    g = [None] * n
+    p = [None] * n
+    for j in roots:
+        g[j] = tuple(local_rot[j])
+        p[j] = tuple(local_pos[j])
+    _fk_links_into(g, p, local_rot, local_pos, links)
     return g, p
+
+
+def forward_kinematics_lists(local_rot, local_pos, parents) -> tuple[list, list]:
+    """:func:`forward_kinematics_links` for a skeleton given by its ``parents``."""
+    return forward_kinematics_links(local_rot, local_pos, *skeleton_links(parents))
 
 
 def forward_kinematics_pose(local_rot: np.ndarray, local_pos: np.ndarray, parents) -> tuple[np.ndarray, np.ndarray]:
@@ -182,23 +173,15 @@ def forward_kinematics_update_lists(global_rot: list, global_pos: list, local_ro
     that holds every descendant of each of its joints, see :func:`subtree_joints`); the other joints keep
     their entries of ``global_rot``/``global_pos``. The same float operations per joint, so the result is
     bit for bit the full pass's (after IK only the legs change: a few joints instead of the whole skeleton)."""
+    links = []
     for j in joints:
-        w, x, y, z = local_rot[j]
-        px, py, pz = local_pos[j]
         pj = parents[j]
         if pj < 0:
-            global_rot[j] = (w, x, y, z)
-            global_pos[j] = (px, py, pz)
-            continue
-        aw, ax, ay, az = global_rot[pj]
-        global_rot[j] = (aw * w - ax * x - ay * y - az * z, aw * x + ax * w + ay * z - az * y,
-                         aw * y - ax * z + ay * w + az * x, aw * z + ax * y - ay * x + az * w)
-        tx = 2.0 * (ay * pz - az * py)
-        ty = 2.0 * (az * px - ax * pz)
-        tz = 2.0 * (ax * py - ay * px)
-        qx, qy, qz = global_pos[pj]
-        global_pos[j] = (qx + px + aw * tx + (ay * tz - az * ty), qy + py + aw * ty + (az * tx - ax * tz),
-                         qz + pz + aw * tz + (ax * ty - ay * tx))
+            global_rot[j] = tuple(local_rot[j])
+            global_pos[j] = tuple(local_pos[j])
+        else:
+            links.append((j, pj))
+    _fk_links_into(global_rot, global_pos, local_rot, local_pos, links)
 
 
 def forward_kinematics_update(global_rot: np.ndarray, global_pos: np.ndarray, local_rot: np.ndarray,
@@ -300,8 +283,7 @@ class _FKPlan:
     __slots__ = ("roots", "links", "legs")
 
     def __init__(self, parents, leg_chains):
-        self.roots = [j for j, pj in enumerate(parents) if pj < 0]
-        self.links = [(j, pj) for j, pj in enumerate(parents) if pj >= 0]
+        self.roots, self.links = skeleton_links(parents)
         subtrees = [subtree_joints(parents, [chain[0]]) for chain in leg_chains]
         inside = [j for sub in subtrees for j in sub]
         ok = len(set(inside)) == len(inside) and all(
