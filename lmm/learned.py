@@ -19,6 +19,7 @@ comparison, not what the networks learned.
 """
 from __future__ import annotations
 
+import functools
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -120,62 +121,48 @@ class XformToQuat:
 
     def __init__(self, n: int):
         self.x = x = np.empty((12, n))
-        m = np.empty((22, n))
+        self._m = m = np.empty((22, n))
         m[21] = 1.0
         p3, p4 = np.empty((3, n)), np.empty((4, n))
         self._q = q = np.empty((4, n))
-        self._d = d = np.empty((6, n))
-        self._m, self._t6, self._l3, self._r3 = m, np.empty((6, n)), np.empty((3, n)), np.empty((3, n))
-        self._n, self._p3, self._p4 = np.empty(n), p3, p4
-        self._x_views = (x[:3], x[:6], x[6:9], x[6:12])
-        self._m_views = (m[:3], m[:6], m[6:9], m[6:12], m[1:4], m[8:11], m[2:5], m[7:10], m[12:15], m[::7])
-        self._q_views = (q[1:], d[:3], d[3:], p3[0], p3[1], p3[2], p4[0], p4[1], p4[2], p4[3])
-        self._zeros = np.zeros((4, n))
+        d = np.empty((6, n))
+        t, l3, r3, nrm = np.empty((6, n)), np.empty((3, n)), np.empty((3, n)), np.empty(n)
+        zeros = np.zeros((4, n))
+        xa3, xa6, xb3, xb6 = x[:3], x[:6], x[6:9], x[6:12]
+        a3, a6, b3, b6 = m[:3], m[:6], m[6:9], m[6:12]
+        a_1, b_2, a_2, b_1, c, diag = m[1:4], m[8:11], m[2:5], m[7:10], m[12:15], m[::7]
+        p0, p1, p2 = p3
+        s0, s1, s2, s3 = p4
+        d_plus, d_minus = d[:3], d[3:]
+        mul, add, div, sqrt, sub = np.multiply, np.add, np.divide, np.sqrt, np.subtract
+        # (function, positional arguments) in order; the output is the last positional argument (the
+        # ufuncs' and matmul's ``out``), except for np.maximum (a positional out is deprecated there)
+        self._ops = (
+            (mul, (xa3, xa3, p3)),                     # a = x_a / |x_a|
+            (add, (p0, p1, nrm)), (add, (nrm, p2, nrm)), (sqrt, (nrm, nrm)), (div, (xa6, nrm, a6)),
+            (mul, (a3, xb3, p3)),                      # b = x_b - (a . x_b) a, normalised
+            (add, (p0, p1, nrm)), (add, (nrm, p2, nrm)), (mul, (nrm, a6, t)), (sub, (xb6, t, b6)),
+            (mul, (b3, b3, p3)),
+            (add, (p0, p2, nrm)), (add, (nrm, p1, nrm)), (sqrt, (nrm, nrm)), (div, (b6, nrm, b6)),
+            (mul, (a_1, b_2, l3)), (mul, (a_2, b_1, r3)), (sub, (l3, r3, c)),   # c = a x b
+            (np.matmul, (_QUAT_DIAG_SIGNS, diag, q)),  # 4 |q_i|^2 from the diagonal
+            (functools.partial(np.maximum, out=q), (q, zeros)),
+            # 2 |q_i|: the halving is left out, as it cancels in the normalisation below without
+            # changing a bit (every value is scaled by exact powers of two; 4 |q_i|^2 is 0 or at least
+            # 2^-53, so no square is subnormal)
+            (sqrt, (q, q)),
+            # signs of (m21 - m12, m02 - m20, m10 - m01); + 0.0 makes a -0.0 difference +0.0 (not negative)
+            (m.take, (_SIGN_ROWS, 0, d, "clip")),
+            (sub, (d_plus, d_minus, d_plus)), (add, (d_plus, zeros[1:], d_plus)), (np.copysign, (q[1:], d_plus, q[1:])),
+            (mul, (q, q, p4)),
+            (add, (s0, s1, nrm)), (add, (nrm, s2, nrm)), (add, (nrm, s3, nrm)), (sqrt, (nrm, nrm)),
+        )
+        self._n = nrm
 
     def __call__(self, out: np.ndarray) -> np.ndarray:
-        mul, add, div, sqrt = np.multiply, np.add, np.divide, np.sqrt
-        xa3, xa6, xb3, xb6 = self._x_views
-        a3, a6, b3, b6, a_1, b_2, a_2, b_1, c, diag = self._m_views
-        q1, d_plus, d_minus, p0, p1, p2, s0, s1, s2, s3 = self._q_views
-        n, p3, t = self._n, self._p3, self._t6
-        mul(xa3, xa3, out=p3)                          # a = x_a / |x_a|
-        add(p0, p1, out=n)
-        add(n, p2, out=n)
-        sqrt(n, out=n)
-        div(xa6, n, out=a6)
-        mul(a3, xb3, out=p3)                           # b = x_b - (a . x_b) a, normalised
-        add(p0, p1, out=n)
-        add(n, p2, out=n)
-        mul(n, a6, out=t)
-        np.subtract(xb6, t, out=b6)
-        mul(b3, b3, out=p3)
-        add(p0, p2, out=n)
-        add(n, p1, out=n)
-        sqrt(n, out=n)
-        div(b6, n, out=b6)
-        l3, r3 = self._l3, self._r3                    # c = a x b
-        mul(a_1, b_2, out=l3)
-        mul(a_2, b_1, out=r3)
-        np.subtract(l3, r3, out=c)
-        q = self._q
-        np.matmul(_QUAT_DIAG_SIGNS, diag, out=q)       # 4 |q_i|^2 from the diagonal
-        np.maximum(q, self._zeros, out=q)
-        # 2 |q_i|: the halving is left out, as it cancels in the normalisation below without changing a
-        # bit (every value is scaled by exact powers of two; 4 |q_i|^2 is 0 or at least 2^-53, so no
-        # square is subnormal)
-        sqrt(q, out=q)
-        # signs of (m21 - m12, m02 - m20, m10 - m01); + 0.0 makes a -0.0 difference +0.0 (not negative)
-        self._m.take(_SIGN_ROWS, axis=0, out=self._d, mode="clip")
-        np.subtract(d_plus, d_minus, out=d_plus)
-        add(d_plus, self._zeros[1:], out=d_plus)
-        np.copysign(q1, d_plus, out=q1)
-        p4 = self._p4
-        mul(q, q, out=p4)
-        add(s0, s1, out=n)
-        add(n, s2, out=n)
-        add(n, s3, out=n)
-        sqrt(n, out=n)
-        return div(q, n, out=out)
+        for f, args in self._ops:
+            f(*args)
+        return np.divide(self._q, self._n, out=out)
 
 
 def xform_xy_to_quat(xy: np.ndarray) -> np.ndarray:
@@ -256,9 +243,17 @@ class LearnedMotionMatchingController(CharacterController):
         self.compare_with_search = compare_with_search
         self._decode = PoseDecoder(db.n_bones)
         d = self.nets.n_features
-        self.state = np.zeros(d + self.nets.n_latent, np.float32)
+        # the state lives in a buffer ending with a constant 1 that both networks read directly (their
+        # first layer's bias row, see lmm.nn.MLP.bind_single): no copy of the state per network call
+        self._state1 = np.ones(d + self.nets.n_latent + 1, np.float32)
+        self.state = self._state1[:-1]
+        self.state[:] = 0.0
         self._deriv = np.zeros_like(self.state)
         self._pose_vec = np.zeros(self.nets.decompressor.n_out, np.float32)
+        self._run_stepper = self.nets.stepper.bind_single(self._deriv, self._state1)
+        self._run_decompressor = self.nets.decompressor.bind_single(self._pose_vec, self._state1)
+        self._dt32 = (None, None)    # (dt, np.float32(dt)) of the last tick
+        self._source_raw = None      # from_network_space of the state's features (None: not computed since it changed)
         self._index: SearchIndex | None = None
         self._all_frames = np.ones(db.n_frames, dtype=bool)
         self._nn_frame = -1
@@ -278,7 +273,10 @@ class LearnedMotionMatchingController(CharacterController):
         return self.nets.projector(self.nets.to_network_space(raw))
 
     def decompress(self, state: np.ndarray) -> SourcePose:
-        self.nets.decompressor(state, out=self._pose_vec)
+        if state is self.state:
+            self._run_decompressor()
+        else:
+            self.nets.decompressor(state, out=self._pose_vec)
         return self._decode(self._pose_vec)
 
     def exact_nearest(self, query_norm: np.ndarray, top_k: int | None = None):
@@ -345,6 +343,7 @@ class LearnedMotionMatchingController(CharacterController):
         if not 0 <= frame < self.db.n_frames:
             raise ValueError(f"start frame {frame} is outside the database (0..{self.db.n_frames - 1})")
         self.state[:] = self.nets.projector(self.nets.to_network_space(self.features.raw[frame]))
+        self._source_raw = None
         self._nn_frame = frame
         self._nn_cost = 0.0
         self._projected = self.features.normalize(self.nets.from_network_space(self.state[:self.nets.n_features]))
@@ -353,7 +352,12 @@ class LearnedMotionMatchingController(CharacterController):
         self._idle_playing = False
 
     def _source_features(self) -> np.ndarray:
-        return self.nets.from_network_space(self.state[:self.nets.n_features])
+        # asked twice per tick for the same state (the query, then the snapshot's current features):
+        # computed once per change of the state (callers copy it, never write it)
+        raw = self._source_raw
+        if raw is None:
+            raw = self._source_raw = self.nets.from_network_space(self.state[:self.nets.n_features])
+        return raw
 
     def _source_frame(self) -> int:
         return int(self._nn_frame)
@@ -396,6 +400,7 @@ class LearnedMotionMatchingController(CharacterController):
         if entering_idle or projected_cost + float(self.tuning.transition_cost) < current_cost:
             self._idle_playing = idle is not None
             self.state[:] = projected
+            self._source_raw = None
             t0 = time.perf_counter()
             target = self.decompress(self.state)
             timings["decompressor_transition"] = (time.perf_counter() - t0) * 1e6
@@ -405,18 +410,25 @@ class LearnedMotionMatchingController(CharacterController):
     def _advance_pose(self, dt: float) -> SourcePose:
         if dt > 0:
             deriv = self._deriv
-            self.nets.stepper(self.state, out=deriv)
-            np.multiply(deriv, np.float32(dt), out=deriv)
-            self.state += deriv
-        return self.decompress(self.state)
+            self._run_stepper()
+            last_dt, dt32 = self._dt32
+            if dt != last_dt:
+                dt32 = np.float32(dt)
+                self._dt32 = (dt, dt32)
+            np.multiply(deriv, dt32, deriv)
+            np.add(self.state, deriv, self.state)
+            self._source_raw = None
+        self._run_decompressor()
+        return self._decode(self._pose_vec)
 
     def _snapshot_extras(self) -> dict:
         d = self.nets.n_features
         # the projected frame belongs to the tick that projected: handed to its snapshot once, then cleared
         projected_frame, self._projected_frame = self._projected_frame, -1
         return {"latent": self.state[d:].copy(),
-                "projected_features": None if self._projected is None else self._projected.copy(),
+                # replaced by each projection, never written in place: shared, not copied
+                "projected_features": self._projected,
                 "nn_frame": int(self._nn_frame), "nn_cost": float(self._nn_cost),
-                "search_note": self.idle_note if self.idle_set_active() else "",
+                "search_note": self.idle_note if self.idle_note and self.idle_set_active() else "",
                 "projected_cost": float(self._projected_cost),
                 "projected_frame": int(projected_frame)}

@@ -219,6 +219,47 @@ class MLP:
             return out
         return y
 
+    def bind_single(self, out: np.ndarray, x1: np.ndarray | None = None):
+        """A function ``run(x)`` that evaluates one vector like :meth:`_call_single` (the same numpy calls
+        on the same operands, so the same bits) into the caller's own float32 buffer ``out`` (n_out,), with
+        every buffer and matrix bound once: for a per-tick caller, whose checks of ``out`` are then made
+        here, once.
+
+        With ``x1`` (float32 (n_in + 1,), its last element 1.0: the caller keeps its input vector in
+        ``x1[:-1]``) the first layer reads ``x1`` directly and ``run()`` takes no argument: no copy of the
+        input. ``out`` must not share memory with the input when the network has a skip connection."""
+        x_own, x_view, hidden, last, _ = self._single_plan()
+        if out.dtype != np.float32 or out.shape != (self.n_out,):
+            raise ValueError(f"{self.name}: bind_single needs a float32 ({self.n_out},) buffer, got {out.dtype} {out.shape}")
+        if x1 is not None and (x1.dtype != np.float32 or x1.shape != (self.n_in + 1,) or x1[-1] != 1.0):
+            raise ValueError(f"{self.name}: x1 must be float32 ({self.n_in + 1},) ending with 1.0")
+        if self.skip and np.may_share_memory(out, x_own if x1 is None else x1):
+            raise ValueError(f"{self.name}: with a skip connection out must not share the input's memory")
+        dot, maximum = np.dot, np.maximum
+        first = x_own if x1 is None else x1
+        inputs = [first] + [buf for _, buf, _, _, _ in hidden]
+        layers = [(h, m, val, zero) for h, (m, _, val, zero, _) in zip(inputs, hidden)]
+        h_last = inputs[-1]
+        if self.activation != "relu" or self.skip:
+            if x1 is None:
+                return lambda x: self._call_single(x, out)
+            view = x1[:-1]
+            return lambda: self._call_single(view, out)
+        if x1 is None:
+            def run(x):
+                x_view[...] = x
+                for h, m, val, zero in layers:
+                    dot(h, m, val)
+                    maximum(val, zero, out=val)
+                return dot(h_last, last, out)
+        else:
+            def run():
+                for h, m, val, zero in layers:
+                    dot(h, m, val)
+                    maximum(val, zero, out=val)
+                return dot(h_last, last, out)
+        return run
+
     def __call__(self, x: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """Evaluate on (D,) or (B, D); returns a new array (or writes into ``out``)."""
         if x.ndim == 1:

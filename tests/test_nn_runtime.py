@@ -179,6 +179,9 @@ def test_learned_controller_with_the_folded_networks_stays_within_a_millimetre(d
             for name in ("decompressor", "stepper", "projector"):
                 mlp = getattr(nets, name)
                 monkeypatch.setattr(mlp, "_call_single", lambda x, out, m=mlp: _plain_into(m, x, out))
+                # the controller binds its per-tick calls: route them through the plain evaluation too
+                monkeypatch.setattr(mlp, "bind_single", lambda out, x1=None, m=mlp:
+                                    lambda x=None: m._call_single(x1[:-1] if x is None else x, out))
         c = LearnedMotionMatchingController(db, features, networks=nets, compare_with_search=False)
         log, dt = builtin("random:1", 30.0), 1.0 / 60.0
         poses, frames = [], []
@@ -202,3 +205,90 @@ def _plain_into(mlp, x, out):
         return y
     out[...] = y
     return out
+
+
+def _call_single_as_on_main(mlp: MLP, x: np.ndarray, out) -> np.ndarray:
+    """``MLP._call_single`` as it was before :meth:`MLP.bind_single` (main 81f3b27), relu, no skip."""
+    x1, x_view, hidden, last, y_last = mlp._single_plan()
+    x_view[...] = x
+    h = x1
+    for m, buf, val, zero, _ in hidden:
+        np.dot(h, m, out=val)
+        np.maximum(val, zero, out=val)
+        h = buf
+    y = np.empty_like(y_last)
+    np.dot(h, last, out=y)
+    out[...] = y
+    return out
+
+
+@pytest.mark.parametrize("name", ["decompressor", "stepper", "projector"])
+def test_bound_single_calls_are_bit_identical(shipped, name):
+    """bind_single (with its own input copy, or reading the caller's [x, 1] buffer) gives the bits of
+    _call_single and of main's version of it."""
+    mlp = shipped[name]
+    rng = np.random.default_rng(5)
+    out = np.empty(mlp.n_out, np.float32)
+    x1 = np.ones(mlp.n_in + 1, np.float32)
+    run_copy, run_x1 = mlp.bind_single(out), mlp.bind_single(out, x1)
+    for t in range(100):
+        x = (rng.standard_normal(mlp.n_in) * rng.uniform(0.1, 3.0)).astype(np.float32)
+        want = mlp._call_single(x, None).copy()
+        assert same_bits(run_copy(x), want)
+        x1[:-1] = x
+        assert same_bits(run_x1(), want) and same_bits(out, want)
+        if not mlp.skip:
+            assert same_bits(_call_single_as_on_main(mlp, x, np.empty_like(out)), want)
+
+
+def test_bind_single_rejects_bad_buffers(shipped):
+    mlp = shipped["stepper"]
+    with pytest.raises(ValueError, match="float32"):
+        mlp.bind_single(np.empty(mlp.n_out))
+    with pytest.raises(ValueError, match="ending with 1.0"):
+        mlp.bind_single(np.empty(mlp.n_out, np.float32), np.zeros(mlp.n_in + 1, np.float32))
+    proj = shipped["projector"]
+    buf = np.ones(proj.n_in + proj.n_out + 1, np.float32)
+    with pytest.raises(ValueError, match="skip"):
+        proj.bind_single(buf[1:proj.n_out + 1], buf[:proj.n_in + 1])   # out overlaps the input
+
+
+def test_learned_controller_ticks_bit_identical_to_mains_hooks(db, features):
+    """The controller's bound network calls, its state buffer and its cached source features give the
+    bits of main's hooks (written out below): 20 s of builtin:random:1, every pose and snapshot field
+    the learned controller fills."""
+    from lmm.data.inputs import builtin
+    from lmm.learned import LearnedMotionMatchingController, load_default_networks
+
+    class AsOnMain(LearnedMotionMatchingController):
+        def decompress(self, state):
+            self.nets.decompressor(state, out=self._pose_vec)
+            return self._decode(self._pose_vec)
+
+        def _source_features(self):
+            return self.nets.from_network_space(self.state[:self.nets.n_features])
+
+        def _advance_pose(self, dt):
+            if dt > 0:
+                deriv = self._deriv
+                self.nets.stepper(self.state, out=deriv)
+                np.multiply(deriv, np.float32(dt), out=deriv)
+                self.state += deriv
+            return self.decompress(self.state)
+
+    nets = load_default_networks(db, features)
+    fast = LearnedMotionMatchingController(db, features, networks=nets, compare_with_search=False)
+    main = AsOnMain(db, features, networks=load_default_networks(db, features), compare_with_search=False)
+    log, dt = builtin("random:1", 20.0), 1.0 / 60.0
+    jumps = 0
+    for i in range(1200):
+        inp = log.at(i * dt)
+        (p1, s1), (p2, s2) = fast.step(inp, dt), main.step(inp, dt)
+        for name in ("global_positions", "global_rotations", "local_positions", "local_rotations", "contacts"):
+            assert np.array_equal(getattr(p1, name), getattr(p2, name)), f"tick {i}: {name}"
+        for name in ("latent", "projected_features", "current_features", "query"):
+            a, b = getattr(s1, name), getattr(s2, name)
+            assert a.dtype == b.dtype and np.array_equal(a.view(np.uint32), b.view(np.uint32)), f"tick {i}: {name}"
+        assert s1.transitioned == s2.transitioned and s1.matched_frame == s2.matched_frame
+        jumps += s1.transitioned
+    assert jumps > 5  # projections jumped the state: the cached features were invalidated and recomputed
