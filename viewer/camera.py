@@ -57,12 +57,17 @@ def project_points(points, view_proj: np.ndarray, width: int, height: int):
     ``image[int(y), int(x)]`` is the pixel the point lands on.
     """
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    clip = np.c_[p, np.ones(len(p))] @ np.asarray(view_proj, dtype=np.float64).T
+    homogeneous = np.empty((len(p), 4))
+    homogeneous[:, :3] = p
+    homogeneous[:, 3] = 1.0
+    clip = homogeneous @ np.asarray(view_proj, dtype=np.float64).T
     w = clip[:, 3]
     in_front = w > 1e-9
     safe_w = np.where(in_front, w, 1.0)
     ndc = clip[:, :3] / safe_w[:, None]
-    pixels = np.c_[(ndc[:, 0] + 1.0) * 0.5 * width, (1.0 - ndc[:, 1]) * 0.5 * height]
+    pixels = np.empty((len(p), 2))
+    pixels[:, 0] = (ndc[:, 0] + 1.0) * 0.5 * width
+    pixels[:, 1] = (1.0 - ndc[:, 1]) * 0.5 * height
     return pixels, ndc[:, 2], in_front
 
 
