@@ -56,6 +56,7 @@ class MarkerBatch:
         self.spheres = viewer.Spheres(ctx, radius=0.04)
         self.arrows = viewer.Arrows(ctx, shaft_radius=0.011, head_radius=0.032, head_length=0.07)
         self.lines = viewer.Lines(ctx, width_px=2.5)
+        self._expanded: dict = {}
         self.clear()
 
     def renderables(self):
@@ -91,12 +92,19 @@ class MarkerBatch:
             self._segments.append(seg)
             self._segment_runs.append((len(seg), 0.0, tuple(color[:3])))
 
-    @staticmethod
-    def _repeat(runs):
-        """(per-item sizes (N,), per-item colours (N, 3)) of a list of (count, size, colour) runs."""
-        counts = [r[0] for r in runs]
-        return (np.repeat(np.array([r[1] for r in runs], np.float64), counts),
-                np.repeat(np.array([r[2] for r in runs], np.float64), counts, axis=0))
+    def _repeat(self, runs):
+        """(per-item sizes (N,), per-item colours (N, 3)) of a list of (count, size, colour) runs; the
+        runs are the same from frame to frame, so their expansions are kept (never written to)."""
+        key = tuple(runs)
+        hit = self._expanded.get(key)
+        if hit is None:
+            counts = [r[0] for r in runs]
+            hit = (np.repeat(np.array([r[1] for r in runs], np.float64), counts),
+                   np.repeat(np.array([r[2] for r in runs], np.float64), counts, axis=0))
+            if len(self._expanded) > 64:
+                self._expanded.clear()
+            self._expanded[key] = hit
+        return hit
 
     def flush(self) -> None:
         z3 = np.zeros((0, 3))
