@@ -17,15 +17,20 @@ class FrameTimes:
         self.n = n
         self.parts: dict[str, deque] = {}
         self.frames: deque = deque(maxlen=n)
+        self._medians: dict = {}     # part -> median, until the next add (the menu asks every frame)
 
     def add(self, frame_ms: float, parts: dict) -> None:
+        self._medians.clear()
         self.frames.append(float(frame_ms))
         for k, v in parts.items():
             self.parts.setdefault(k, deque(maxlen=self.n)).append(float(v))
 
     def median(self, part: str | None = None) -> float:
-        d = self.frames if part is None else self.parts.get(part)
-        return float(np.median(d)) if d else float("nan")
+        m = self._medians.get(part)
+        if m is None:
+            d = self.frames if part is None else self.parts.get(part)
+            m = self._medians[part] = float(np.median(d)) if d else float("nan")
+        return m
 
     def fps(self) -> float:
         m = self.median()

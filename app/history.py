@@ -99,6 +99,8 @@ class History:
         self._tick_series: set[tuple[str, str]] = set()     # keys that came from Tick.series
         self.count = 0          # ticks appended in total
         self.newest_tick = -1
+        self._version = 0       # changes whenever the held ticks do (the window slots cache's key)
+        self._slot_cache: dict = {}
 
     # -- appending ---------------------------------------------------------------------------
     def append(self, tick: Tick) -> None:
@@ -125,6 +127,7 @@ class History:
             self._tick_series.add((name, key))
         self.count += 1
         self.newest_tick = tick.tick
+        self._version += 1
 
     def _store(self, controller: str, key: str, slot: int, value) -> None:
         k = (controller, key)
@@ -183,18 +186,32 @@ class History:
         Ticks not held (before the oldest, after the newest, or skipped) are NaN. Shape ``(n,)`` or
         ``(n, dims)``; a series never seen is all NaN with shape ``(n,)``.
         """
-        ticks = np.arange(end_tick - n + 1, end_tick + 1)
-        slots = ticks % self.capacity
-        held = (ticks >= 0) & (self._numbers[slots] == ticks)
+        slots, missing = self._window_slots(end_tick, n)
         arr = self._series.get((controller, key))
         if arr is None:
             res = np.full(n, np.nan) if out is None else out
             res[...] = np.nan
             return res
         res = np.take(arr, slots, axis=0, out=out)
-        if not held.all():
-            res[~held] = np.nan
+        if missing is not None:
+            res[missing] = np.nan
         return res
+
+    def _window_slots(self, end_tick: int, n: int):
+        """(ring slots of the ``n`` ticks ending at ``end_tick``, mask of those not held or None when all
+        are), kept until the held ticks change: the panels ask for many series of the same window."""
+        key = (end_tick, n)
+        hit = self._slot_cache.get(key)
+        if hit is not None and hit[0] == self._version:
+            return hit[1], hit[2]
+        ticks = np.arange(end_tick - n + 1, end_tick + 1)
+        slots = ticks % self.capacity
+        held = (ticks >= 0) & (self._numbers[slots] == ticks)
+        missing = None if held.all() else ~held
+        if len(self._slot_cache) > 16:
+            self._slot_cache.clear()
+        self._slot_cache[key] = (self._version, slots, missing)
+        return slots, missing
 
     def times(self, end_tick: int, n: int) -> np.ndarray:
         ticks = np.arange(end_tick - n + 1, end_tick + 1)

@@ -8,29 +8,33 @@ glfw player drive one camera type the same way.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
-_UP = np.array([0.0, 1.0, 0.0])
 
 
 def look_at(eye, target, up=(0.0, 1.0, 0.0)) -> np.ndarray:
     """World -> view matrix of a camera at ``eye`` looking at ``target`` (view looks down -Z)."""
-    eye = np.asarray(eye, dtype=np.float64)
-    forward = np.asarray(target, dtype=np.float64) - eye
-    forward /= max(np.linalg.norm(forward), 1e-12)
-    right = np.cross(forward, np.asarray(up, dtype=np.float64))
-    n = np.linalg.norm(right)
-    if n < 1e-9:  # looking straight along `up`: any right vector will do
-        right = np.cross(forward, [0.0, 0.0, 1.0])
-        n = np.linalg.norm(right)
-    right /= n
-    true_up = np.cross(right, forward)
-    m = np.eye(4)
-    m[0, :3], m[1, :3], m[2, :3] = right, true_up, -forward
-    m[:3, 3] = -m[:3, :3] @ eye
-    return m.astype(np.float32)
+    # plain float arithmetic: numpy's per-call overhead on 3-vectors is most of the cost otherwise
+    ex, ey, ez = (float(v) for v in eye)
+    tx, ty, tz = (float(v) for v in target)
+    ux, uy, uz = (float(v) for v in up)
+    fx, fy, fz = tx - ex, ty - ey, tz - ez
+    n = max(math.sqrt(fx * fx + fy * fy + fz * fz), 1e-12)
+    fx, fy, fz = fx / n, fy / n, fz / n
+    rx, ry, rz = fy * uz - fz * uy, fz * ux - fx * uz, fx * uy - fy * ux
+    n = math.sqrt(rx * rx + ry * ry + rz * rz)
+    if n < 1e-9:  # looking straight along `up`: any right vector will do (forward x +Z)
+        rx, ry, rz = fy, -fx, 0.0
+        n = math.sqrt(rx * rx + ry * ry)
+    rx, ry, rz = rx / n, ry / n, rz / n
+    vx, vy, vz = ry * fz - rz * fy, rz * fx - rx * fz, rx * fy - ry * fx
+    return np.array([[rx, ry, rz, -(rx * ex + ry * ey + rz * ez)],
+                     [vx, vy, vz, -(vx * ex + vy * ey + vz * ez)],
+                     [-fx, -fy, -fz, fx * ex + fy * ey + fz * ez],
+                     [0.0, 0.0, 0.0, 1.0]], dtype=np.float32)
 
 
 def perspective(fov_y_deg: float, aspect: float, near: float, far: float) -> np.ndarray:
@@ -53,12 +57,17 @@ def project_points(points, view_proj: np.ndarray, width: int, height: int):
     ``image[int(y), int(x)]`` is the pixel the point lands on.
     """
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    clip = np.c_[p, np.ones(len(p))] @ np.asarray(view_proj, dtype=np.float64).T
+    homogeneous = np.empty((len(p), 4))
+    homogeneous[:, :3] = p
+    homogeneous[:, 3] = 1.0
+    clip = homogeneous @ np.asarray(view_proj, dtype=np.float64).T
     w = clip[:, 3]
     in_front = w > 1e-9
     safe_w = np.where(in_front, w, 1.0)
     ndc = clip[:, :3] / safe_w[:, None]
-    pixels = np.c_[(ndc[:, 0] + 1.0) * 0.5 * width, (1.0 - ndc[:, 1]) * 0.5 * height]
+    pixels = np.empty((len(p), 2))
+    pixels[:, 0] = (ndc[:, 0] + 1.0) * 0.5 * width
+    pixels[:, 1] = (1.0 - ndc[:, 1]) * 0.5 * height
     return pixels, ndc[:, 2], in_front
 
 
@@ -85,13 +94,18 @@ class OrbitCamera:
 
     def __post_init__(self):
         self.target = np.asarray(self.target, dtype=np.float64).copy()
+        self._view_key, self._view = None, None
 
     # ---- geometry ---------------------------------------------------------------------------
     @property
     def eye(self) -> np.ndarray:
-        yaw, pitch = np.radians(self.yaw_deg), np.radians(self.pitch_deg)
-        offset = np.array([np.cos(pitch) * np.sin(yaw), np.sin(pitch), np.cos(pitch) * np.cos(yaw)])
-        return self.target + self.distance * offset
+        return np.array(self._eye())
+
+    def _eye(self) -> tuple:
+        yaw, pitch = math.radians(self.yaw_deg), math.radians(self.pitch_deg)
+        t, d = self.target, self.distance
+        return (float(t[0]) + d * (math.cos(pitch) * math.sin(yaw)), float(t[1]) + d * math.sin(pitch),
+                float(t[2]) + d * (math.cos(pitch) * math.cos(yaw)))
 
     @property
     def near(self) -> float:
@@ -102,7 +116,14 @@ class OrbitCamera:
         return self.distance * self.far_ratio
 
     def view_matrix(self) -> np.ndarray:
-        return look_at(self.eye, self.target, _UP)
+        # computed once per camera placement (labels and the render both ask each frame); a copy, so
+        # callers may keep or change what they get
+        t = self.target
+        key = (float(t[0]), float(t[1]), float(t[2]), self.distance, self.yaw_deg, self.pitch_deg)
+        if self._view_key != key:
+            self._view = look_at(self._eye(), key[:3])
+            self._view_key = key
+        return self._view.copy()
 
     def projection_matrix(self, aspect: float) -> np.ndarray:
         return perspective(self.fov_y_deg, aspect, self.near, self.far)

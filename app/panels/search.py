@@ -97,8 +97,10 @@ def column_fractions(rows: list[dict], key: str, digits: int = 3) -> list[float]
 def rolling_agreement(searched, nn, got, window: int, tolerance: int = 0) -> np.ndarray:
     """Per tick, the agreement rate of the searches in the preceding ``window`` ticks (nan before the
     first search)."""
-    s = (np.asarray(searched) > 0.5) & np.isfinite(nn) & (np.asarray(nn) >= 0) & np.isfinite(got)
-    agree = s & (np.abs(np.nan_to_num(got) - np.nan_to_num(nn)) <= tolerance)
+    nn, got = np.asarray(nn), np.asarray(got)
+    with np.errstate(invalid="ignore"):   # rows with a NaN or inf are not searches (s is False there)
+        s = (np.asarray(searched) > 0.5) & np.isfinite(nn) & (nn >= 0) & np.isfinite(got)
+        agree = s & (np.abs(got - nn) <= tolerance)
     cs = np.concatenate([[0], np.cumsum(s)])
     ca = np.concatenate([[0], np.cumsum(agree)])
     idx = np.arange(1, len(s) + 1)

@@ -56,6 +56,7 @@ class MarkerBatch:
         self.spheres = viewer.Spheres(ctx, radius=0.04)
         self.arrows = viewer.Arrows(ctx, shaft_radius=0.011, head_radius=0.032, head_length=0.07)
         self.lines = viewer.Lines(ctx, width_px=2.5)
+        self._expanded: dict = {}
         self.clear()
 
     def renderables(self):
@@ -91,12 +92,19 @@ class MarkerBatch:
             self._segments.append(seg)
             self._segment_runs.append((len(seg), 0.0, tuple(color[:3])))
 
-    @staticmethod
-    def _repeat(runs):
-        """(per-item sizes (N,), per-item colours (N, 3)) of a list of (count, size, colour) runs."""
-        counts = [r[0] for r in runs]
-        return (np.repeat(np.array([r[1] for r in runs], np.float64), counts),
-                np.repeat(np.array([r[2] for r in runs], np.float64), counts, axis=0))
+    def _repeat(self, runs):
+        """(per-item sizes (N,), per-item colours (N, 3)) of a list of (count, size, colour) runs; the
+        runs are the same from frame to frame, so their expansions are kept (never written to)."""
+        key = tuple(runs)
+        hit = self._expanded.get(key)
+        if hit is None:
+            counts = [r[0] for r in runs]
+            hit = (np.repeat(np.array([r[1] for r in runs], np.float64), counts),
+                   np.repeat(np.array([r[2] for r in runs], np.float64), counts, axis=0))
+            if len(self._expanded) > 64:
+                self._expanded.clear()
+            self._expanded[key] = hit
+        return hit
 
     def flush(self) -> None:
         z3 = np.zeros((0, 3))
@@ -154,6 +162,60 @@ LEGEND = (("simulation object", SIM_COLOR), ("desired trajectory", (0.85, 0.85, 
           ("locked", LOCKED_COLOR), ("pose features", FEATURE_COLOR), ("ghost = matched pose", (0.75, 0.75, 0.8)))
 
 
+class FeaturePlan:
+    """Where :func:`feature_markers`' channels lie in a feature vector, as index arrays, so a frame's
+    markers are a few gathers and matrix products (the same numbers, in one call per kind)."""
+
+    def __init__(self, features, db):
+        def dims(kind, width):
+            idx = [np.arange(s.start, s.stop).reshape(-1, width) for ch, s in zip(features.layout, features.slices)
+                   if ch.kind == kind]
+            return np.concatenate(idx) if idx else np.zeros((0, width), np.intp)
+
+        bones = dict(_feature_bones(features, db))
+        position_bones = [ch.bone for ch in features.layout if ch.kind == "bone_position"]
+        self.positions = dims("bone_position", 3)
+        self.velocities, self.velocity_starts = [], []
+        # a velocity arrow starts at the bone's joint in the pose (index < J), else at its position feature
+        n_joints = len(db.parents)
+        for ch, s in zip(features.layout, features.slices):
+            if ch.kind != "bone_velocity":
+                continue
+            if ch.bone in bones:
+                start = bones[ch.bone]
+            elif ch.bone in position_bones:
+                start = n_joints + len(position_bones) - 1 - position_bones[::-1].index(ch.bone)
+            else:
+                continue
+            self.velocities.append(np.arange(s.start, s.stop))
+            self.velocity_starts.append(start)
+        self.velocities = np.array(self.velocities, np.intp).reshape(-1, 3)
+        self.velocity_starts = np.array(self.velocity_starts, np.intp)
+        self.trajectory = dims("trajectory_position", 2)
+        self.directions = dims("trajectory_direction", 2)
+        self.features, self.db = features, db
+
+
+_PLANS: dict = {}
+
+
+def _plan(features, db) -> FeaturePlan:
+    hit = _PLANS.get((id(features), id(db)))
+    if hit is None or hit.features is not features or hit.db is not db:
+        if len(_PLANS) > 16:
+            _PLANS.clear()
+        hit = _PLANS[(id(features), id(db))] = FeaturePlan(features, db)
+    return hit
+
+
+def _on_ground(xz, rot_t, origin=None):
+    """Ground points (x, z) of the root's frame in the world (``origin`` None: directions)."""
+    ground = np.zeros((len(xz), 3))
+    ground[:, 0], ground[:, 2] = xz[:, 0], xz[:, 1]
+    out = ground @ rot_t
+    return out if origin is None else origin + out
+
+
 def draw_character(d: CharacterDrawing, b: MarkerBatch, snap, off, show: dict, features, db, trail) -> None:
     """Update a character's skeleton and ghost and add its markers to the batch (``show``: toggle -> on;
     ``trail``: its recent root positions, or None)."""
@@ -164,48 +226,59 @@ def draw_character(d: CharacterDrawing, b: MarkerBatch, snap, off, show: dict, f
     d.ghost.visible = show["ghost"]
     if show["ghost"]:
         d.ghost.update(np.asarray(snap.matched_pose_positions, np.float64) + off)
-    lift = np.array([0.0, 0.02, 0.0])
     # simulation object and its predicted trajectory
     if show["trajectory"]:
-        sim = np.asarray(snap.simulation_position, np.float64) + off + lift
-        traj = np.asarray(snap.trajectory_positions, np.float64) + off + lift
-        b.add_polyline(np.vstack([sim[None], traj]), d.traj_color)
+        lift = off + _LIFT
+        sim = np.asarray(snap.simulation_position, np.float64) + lift
+        traj = np.asarray(snap.trajectory_positions, np.float64) + lift
+        # the trajectory's rotations and the simulation bone's in one conversion: their +Z axes
+        rots = np.concatenate([np.asarray(snap.trajectory_rotations, np.float64).reshape(-1, 4),
+                               np.asarray(snap.simulation_rotation, np.float64).reshape(1, 4)])
+        axes = quat.to_matrix(rots)[:, :, 2]
+        b.add_polyline(np.concatenate([sim[None], traj]), d.traj_color)
         b.add_spheres(traj, 0.045, d.traj_color)
-        dirs = quat.to_matrix(np.asarray(snap.trajectory_rotations, np.float64))[..., :, 2] * 0.35  # +Z axis
-        b.add_arrows(traj, dirs, d.traj_color)
+        b.add_arrows(traj, axes[:-1] * 0.35, d.traj_color)
         b.add_spheres(sim, 0.06, SIM_COLOR)
-        sim_dir = quat.to_matrix(np.asarray(snap.simulation_rotation, np.float64))[:, 2] * 0.5
-        b.add_arrows(np.array([sim, sim]), np.array([sim_dir, np.asarray(snap.desired_velocity) * 0.25]),
+        b.add_arrows(np.array([sim, sim]), np.array([axes[-1] * 0.5, np.asarray(snap.desired_velocity) * 0.25]),
                      SIM_COLOR)
-    root_pos, root_rot = g[0], np.asarray(pose.global_rotations[0], np.float64)
-    # where the matched frame's own future goes (its features, placed at the character)
-    if show["matched"] and features is not None:
-        m = feature_markers(features, snap.matched_features, root_pos, root_rot, {})
-        up = off + np.array([0.0, 0.035, 0.0])
-        b.add_spheres(m["traj"] + up, 0.028, MATCHED_COLOR)
-        n = min(len(m["traj"]), len(m["traj_dirs"]))
-        b.add_arrows(m["traj"][:n] + up, m["traj_dirs"][:n] * 0.28, MATCHED_COLOR)
-    # the pose features of the playing frame: foot positions and foot/hip velocities
-    if show["features"] and features is not None:
-        bones = {bone: g[j] for bone, j in _feature_bones(features, db)}
-        m = feature_markers(features, snap.current_features, root_pos, root_rot, bones)
-        b.add_spheres(m["points"] + off, 0.035, FEATURE_COLOR)
-        o, v = m["arrows"]
-        b.add_arrows(o + off, v, FEATURE_COLOR)
+    matched, current = show["matched"] and features is not None, show["features"] and features is not None
+    if matched or current:
+        plan = _plan(features, db)
+        root = g[0]
+        rot_t = quat.to_matrix(np.asarray(pose.global_rotations[0], np.float64)).T  # v @ R^T == R v
+        # where the matched frame's own future goes (its features, placed at the character)
+        if matched:
+            raw = features.denormalize(np.asarray(snap.matched_features, np.float32)).astype(np.float64)
+            up = off + _MATCHED_LIFT
+            n = min(len(plan.trajectory), len(plan.directions))
+            traj = _on_ground(raw[plan.trajectory], rot_t, root)
+            b.add_spheres(traj + up, 0.028, MATCHED_COLOR)
+            b.add_arrows(traj[:n] + up, _on_ground(raw[plan.directions[:n]], rot_t) * 0.28, MATCHED_COLOR)
+        # the pose features of the playing frame: foot positions and foot/hip velocities
+        if current:
+            raw = features.denormalize(np.asarray(snap.current_features, np.float32)).astype(np.float64)
+            points = root + raw[plan.positions] @ rot_t
+            b.add_spheres(points + off, 0.035, FEATURE_COLOR)
+            if len(plan.velocity_starts):
+                starts = np.concatenate([g, points])[plan.velocity_starts]
+                b.add_arrows(starts + off, (raw[plan.velocities] @ rot_t) * 0.1, FEATURE_COLOR)
     if show["contacts"]:
-        toes = g[_toe_bones(db)]
-        contacts = np.asarray(snap.foot_contacts, bool)
-        locked = np.asarray(snap.foot_locked, bool)
-        for i in range(2):
-            if contacts[i]:
-                b.add_spheres(toes[i] + off, 0.05, LOCKED_COLOR if locked[i] else CONTACT_COLOR)
+        contacts, locked = snap.foot_contacts, snap.foot_locked
+        if contacts[0] or contacts[1]:
+            toes = g[_toe_bones(db)]
+            for i in range(2):
+                if contacts[i]:
+                    b.add_spheres(toes[i] + off, 0.05, LOCKED_COLOR if locked[i] else CONTACT_COLOR)
     if trail is not None:
         if trail.ndim == 2:
             trail = trail[np.isfinite(trail).all(axis=1)]
             if len(trail) >= 2:
-                b.add_polyline(trail[::3] + off + np.array([0.0, 0.01, 0.0]), d.trail_color)
+                b.add_polyline(trail[::3] + (off + _TRAIL_LIFT), d.trail_color)
 
 
+_LIFT = np.array([0.0, 0.02, 0.0])
+_MATCHED_LIFT = np.array([0.0, 0.035, 0.0])
+_TRAIL_LIFT = np.array([0.0, 0.01, 0.0])
 _BONES: dict = {}
 
 

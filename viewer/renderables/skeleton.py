@@ -250,36 +250,29 @@ class Skeleton(Renderable):
         r[nb:nb + nl, 1] = radii[leaves] * end[leaves]
         r[nb + nl:nb + nl + nh] = radii[heads, None]
         r[nb + nl + nh:] = radii[lonely, None]
-        layout = {"parents": parents, "kids": kids, "leaves": leaves, "leaf_parents": self.parents[leaves],
-                  "leaf_ext": ext[leaves, None], "heads": heads, "head_parents": self.parents[heads],
-                  "head_offset": (body.HEAD_CENTER_OFFSET * radii[heads])[:, None], "lonely": lonely,
+        # every record's two ends as indices into the pose extended by the leaf ends and head centres
+        # (computed per pose from the directions below): one gather fills both end columns
+        J = self.n_joints
+        ext_rows = J + np.arange(nl + nh)
+        pairs = np.concatenate([np.stack([parents, kids], 1), np.stack([leaves, ext_rows[:nl]], 1),
+                                np.stack([ext_rows[nl:], ext_rows[nl:]], 1), np.stack([lonely, lonely], 1)])
+        layout = {"pairs": pairs.astype(np.intp), "dir_from": np.concatenate([leaves, heads]),
+                  "dir_parent": np.concatenate([self.parents[leaves], self.parents[heads]]),
+                  "dir_scale": np.concatenate([ext[leaves], body.HEAD_CENTER_OFFSET * radii[heads]])[:, None],
                   "radii": r}
         self._layout = (body_sizes, layout)
         return layout
 
     def _upload_capsules(self, p, rgba) -> None:
         L = self._capsule_layout()
-        parents, kids, leaves, heads, lonely = L["parents"], L["kids"], L["leaves"], L["heads"], L["lonely"]
-        d = p[leaves] - p[L["leaf_parents"]]
+        # leaf ends continue the parent bone past the leaf; head centres sit along the neck
+        start = p[L["dir_from"]]
+        d = start - p[L["dir_parent"]]
         norm = np.linalg.norm(d, axis=1, keepdims=True)
         d = np.where(norm > 1e-9, d / np.maximum(norm, 1e-12), [0.0, 1.0, 0.0])
-        hd = p[heads] - p[L["head_parents"]]
-        hn = np.linalg.norm(hd, axis=1, keepdims=True)
-        hd = np.where(hn > 1e-9, hd / np.maximum(hn, 1e-12), [0.0, 1.0, 0.0])
-        nb, nl, nh = len(kids), len(leaves), len(heads)
+        ends = np.concatenate([p, start + d * L["dir_scale"]])
         c = self._capsules.staging(len(L["radii"]))
-        c[:nb, 0:3] = p[parents]
-        c[:nb, 3:6] = p[kids]
-        s = slice(nb, nb + nl)
-        c[s, 0:3] = p[leaves]
-        c[s, 3:6] = p[leaves] + d * L["leaf_ext"]
-        s = slice(nb + nl, nb + nl + nh)
-        centre = p[heads] + hd * L["head_offset"]
-        c[s, 0:3] = centre
-        c[s, 3:6] = centre
-        s = slice(nb + nl + nh, None)
-        c[s, 0:3] = p[lonely]
-        c[s, 3:6] = p[lonely]
+        c[:, 0:6] = ends[L["pairs"]].reshape(-1, 6)
         c[:, 6:8] = L["radii"]
         c[:, 8:12] = rgba
         self._capsules.upload(c)
