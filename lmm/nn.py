@@ -240,24 +240,19 @@ class MLP:
         inputs = [first] + [buf for _, buf, _, _, _ in hidden]
         layers = [(h, m, val, zero) for h, (m, _, val, zero, _) in zip(inputs, hidden)]
         h_last = inputs[-1]
+        own_input = x_view if x1 is None else x1[:-1]
         if self.activation != "relu" or self.skip:
-            if x1 is None:
-                return lambda x: self._call_single(x, out)
-            view = x1[:-1]
-            return lambda: self._call_single(view, out)
-        if x1 is None:
-            def run(x):
+            def run(x=None):
+                return self._call_single(own_input if x is None else x, out)
+            return run
+
+        def run(x=None):
+            if x is not None:      # without x1: the input is copied into the plan's own buffer
                 x_view[...] = x
-                for h, m, val, zero in layers:
-                    dot(h, m, val)
-                    maximum(val, zero, out=val)
-                return dot(h_last, last, out)
-        else:
-            def run():
-                for h, m, val, zero in layers:
-                    dot(h, m, val)
-                    maximum(val, zero, out=val)
-                return dot(h_last, last, out)
+            for h, m, val, zero in layers:
+                dot(h, m, val)
+                maximum(val, zero, out=val)
+            return dot(h_last, last, out)
         return run
 
     def __call__(self, x: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
