@@ -82,6 +82,12 @@ def test_bench_json_sections(tmp_path):
     assert s["agreement"] == 1.0 and s["topk_agreement"] == 1.0
     assert s["bruteforce_us"] > s["accelerated_us"] > 0
     assert res["frame"]["mm_us"] > 0
+    # the networks against the C++ reference, measured in the same run wherever a compiler is
+    from app.commands.cpp_reference import compiler
+    f = res["frame"]
+    assert f["lmm_network_cpp_source"] == ("measured" if compiler() else "issue16")
+    for net in ("decompressor", "stepper", "projector"):
+        assert f[f"lmm_network_{net}_over_cpp"] == pytest.approx(f[f"lmm_network_{net}_us"] / f[f"lmm_network_{net}_cpp_us"])
     assert "[search]" in r.stdout
     r = cli("bench", "--sections", "nope")
     assert r.returncode == 2 and "unknown bench section" in r.stderr

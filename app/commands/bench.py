@@ -185,8 +185,9 @@ def bench_frame(db, features, n_queries: int = 2400, collected=None) -> dict:
             "mm_searches": int(search_us.size)}
 
 
-#: Per-call times (us) of the C++ reference demo's networks (``nnet.h``, -O3) on our weights, measured
-#: on this machine (issue 16); ``bench`` reports ours over these.
+#: Per-call times (us) of the C++ reference demo's networks (``nnet.h``, -O3) on our weights, as issue 16
+#: measured them on its machine: ``bench`` uses them only when it cannot build and run the same-run C++
+#: reference (:mod:`app.commands.cpp_reference`), and says so (``lmm_network_cpp_source``).
 CPP_NETWORK_US = {"decompressor": 8.5, "stepper": 12.1, "projector": 17.3}
 
 
@@ -219,7 +220,8 @@ def memory_figures(db, features, controllers: dict) -> dict:
 def benchmark_lmm(db, features, controller, inputs="builtin:random:1", steps: int = 600, warmup: int = 60) -> dict:
     """``frame.lmm_us`` (median learned-controller step, debug comparison off, through the one tick loop
     :func:`lmm.runner.step_controllers`), its advance and projector parts, and the networks alone at
-    batch 1 (``network.*_us``, as in the paper's table)."""
+    batch 1 (``network.*_us``, as in the paper's table) on the inputs the run gave them, with the C++
+    reference's times on the same inputs (``network.*_cpp_us``, see :mod:`app.commands.cpp_reference`)."""
     import numpy as np
 
     from lmm.data.inputs import open_input
@@ -230,34 +232,47 @@ def benchmark_lmm(db, features, controller, inputs="builtin:random:1", steps: in
     log = open_input(inputs, (steps + warmup) / 60.0 + 1.0)
     dt = 1.0 / 60.0
     step_us, adv_us, proj_us = [], [], []
+    states, queries = [], []       # the networks' real inputs, for the per-call figures below
     for i in range(steps + warmup):
         _, snaps, ms = step_controllers({"lmm": controller}, log.at(i * dt), dt)
         if i >= warmup:
             snap = snaps["lmm"]
             step_us.append(ms["lmm"] * 1e3)
             adv_us.append(snap.timings_us.get("advance", np.nan))
+            states.append(controller.state.copy())
             if "projector" in snap.timings_us:
                 proj_us.append(snap.timings_us["projector"])
-    state = np.zeros(nets.n_features + nets.n_latent, np.float32)
-    query = np.zeros(nets.n_features, np.float32)
+                queries.append(nets.to_network_space(controller.features.denormalize(snap.query)))
+    samples = {"decompressor": np.array(states, np.float32), "stepper": np.array(states, np.float32),
+               "projector": np.array(queries or [nets.to_network_space(controller.features.raw[0])], np.float32)}
 
-    def median_us(fn, n=300):
-        fn()
+    def median_us(net, xs, n=2000):
+        out = np.empty(net.n_out, np.float32)
+        for x in xs:                   # one pass over the inputs first, as the C++ reference does
+            net(x, out)
         ts = []
-        for _ in range(n):
+        for k in range(n):
+            x = xs[k % len(xs)]
             t0 = time.perf_counter()
-            fn()
+            net(x, out)
             ts.append((time.perf_counter() - t0) * 1e6)
         return float(np.median(ts))
 
-    return {
+    figures = {
         "frame.lmm_us": float(np.median(step_us)),
         "frame.lmm_advance_us": float(np.nanmedian(adv_us)),
         "frame.lmm_projector_us": float(np.median(proj_us)) if proj_us else float("nan"),
-        "network.decompressor_us": median_us(lambda: nets.decompressor(state)),
-        "network.stepper_us": median_us(lambda: nets.stepper(state)),
-        "network.projector_us": median_us(lambda: nets.projector(query)),
     }
+    figures.update({f"network.{name}_us": median_us(getattr(nets, name), xs) for name, xs in samples.items()})
+    from app.commands import cpp_reference
+    from lmm.data.database import default_cache_dir
+
+    cpp, why = cpp_reference.measure({name: getattr(nets, name) for name in samples}, samples, default_cache_dir())
+    if cpp is None:
+        print(f"note: C++ network reference not measured here ({why}); using issue 16's figures", file=sys.stderr)
+    figures["network.cpp_source"] = "measured" if cpp is not None else "issue16"
+    figures.update({f"network.{name}_cpp_us": (cpp or CPP_NETWORK_US)[name] for name in samples})
+    return figures
 
 
 def _lmm_figures(db, features) -> dict:
@@ -292,10 +307,9 @@ def bench_frame_with_lmm(db, features, n_queries: int = 2400, collected=None) ->
     fig = _lmm_figures(db, features)
     out.update({k.split(".", 1)[1]: v for k, v in fig.items() if k.startswith("frame.")})
     out.update({k.replace("network.", "lmm_network_"): v for k, v in fig.items() if k.startswith("network.")})
-    for net, cpp in CPP_NETWORK_US.items():
-        ours = out.get(f"lmm_network_{net}_us")
-        out[f"lmm_network_{net}_cpp_us"] = cpp
-        out[f"lmm_network_{net}_over_cpp"] = ours / cpp if ours is not None else None
+    for net in CPP_NETWORK_US:
+        ours, cpp = out.get(f"lmm_network_{net}_us"), out.get(f"lmm_network_{net}_cpp_us")
+        out[f"lmm_network_{net}_over_cpp"] = ours / cpp if ours is not None and cpp else None
     return out
 
 
