@@ -26,6 +26,8 @@ Subclasses decide only *how the next pose is chosen and produced*, through five 
     True when the source cannot keep playing (MM: the end of a clip range), which forces a search.
 
 Optional: ``_source_frame()`` (database frame shown in the debugger, default -1),
+``_calibration_frame()`` (a database frame of the take the source plays, for ground calibration; default
+``_source_frame()``),
 ``_on_features_changed()`` (feature weights changed: normalised features were rebuilt) and
 ``_snapshot_extras() -> dict`` (extra :class:`DebugSnapshot` fields, e.g. the LMM latent).
 
@@ -459,6 +461,9 @@ class CharacterController(Controller):
     def _source_frame(self) -> int:
         return -1
 
+    def _calibration_frame(self) -> int:
+        return self._source_frame()
+
     def _on_features_changed(self) -> None:
         pass
 
@@ -799,7 +804,7 @@ class CharacterController(Controller):
         ground calibration is off, or the source frame or its take's contact height is unknown)."""
         if not self.tuning.ik_ground_calibration:
             return 0.0
-        frame = self._source_frame()
+        frame = self._calibration_frame()
         if frame < 0 or frame >= len(self.db.contacts):
             return 0.0
         lo, hi, h = self._contact_height_span

@@ -10,9 +10,11 @@ from lmm.tuning import Tuning
 CONTROLLER_NAMES = ("mm", "lmm")
 
 
-def make_controller(name: str, db, features, tuning: Tuning | None = None, weights=None) -> Controller:
+def make_controller(name: str, db, features, tuning: Tuning | None = None, weights=None,
+                    debug_comparison: bool = True) -> Controller:
     """A controller by name: ``"mm"`` (motion matching) or ``"lmm"`` (learned motion matching with the
-    shipped networks, or those in ``weights``). Raises ``ValueError`` for another name and
+    shipped networks, or those in ``weights``; ``debug_comparison``: also run the exact nearest-neighbour
+    search beside the projector for the debugger, which never changes the motion). Raises ``ValueError`` for another name and
     :class:`lmm.data.weights.WeightsError` (or ``OSError``) for networks that cannot be used."""
     tuning = tuning if tuning is not None else Tuning()
     if name == "mm":
@@ -23,7 +25,8 @@ def make_controller(name: str, db, features, tuning: Tuning | None = None, weigh
         from lmm.learned import LearnedMotionMatchingController, load_default_networks
 
         networks = load_default_networks(db, features, path=weights)
-        return LearnedMotionMatchingController(db, features, tuning, networks=networks)
+        return LearnedMotionMatchingController(db, features, tuning, networks=networks,
+                                               compare_with_search=debug_comparison)
     raise ValueError(f"unknown controller {name!r} (choose one of {', '.join(CONTROLLER_NAMES)})")
 
 

@@ -264,6 +264,8 @@ class LearnedMotionMatchingController(CharacterController):
         self._idle = None            # (frames, their network states) of the idle set, built on first use
         self.idle_note = ""          # why the idle set cannot be used ("" when it can)
         self._idle_playing = False   # the state was last set from the idle set
+        self._calib_frame = -1       # a database frame like the playing state, for ground calibration
+        self._calib_table = None     # (normalised features it was built from, frames, their rows)
         super().__init__(db, features, tuning)
 
     # -- the networks ---------------------------------------------------------------------------
@@ -345,6 +347,7 @@ class LearnedMotionMatchingController(CharacterController):
         self.state[:] = self.nets.projector(self.nets.to_network_space(self.features.raw[frame]))
         self._source_raw = None
         self._nn_frame = frame
+        self._calib_frame = frame
         self._nn_cost = 0.0
         self._projected = self.features.normalize(self.nets.from_network_space(self.state[:self.nets.n_features]))
         self._projected_cost = float("nan")
@@ -361,6 +364,27 @@ class LearnedMotionMatchingController(CharacterController):
 
     def _source_frame(self) -> int:
         return int(self._nn_frame)
+
+    def _calibration_frame(self) -> int:
+        return self._calib_frame
+
+    #: every CALIBRATION_STRIDE-th database frame is a candidate for :meth:`_calibration_lookup`
+    CALIBRATION_STRIDE = 16
+
+    def _calibration_lookup(self, features_norm: np.ndarray) -> int:
+        """The database frame nearest ``features_norm`` among every :attr:`CALIBRATION_STRIDE`-th frame:
+        which take the state set from a projection looks like, so the ground calibration can use that
+        take's floor (the networks reproduce each take's own floor height). Always computed, whether or
+        not the debug comparison runs, so the motion never depends on it; a take-level answer is all
+        that is needed (the shift is a spring, and takes of one session share a floor), hence the
+        subsample: about 3,600 rows for the default data, a few tens of microseconds per jump."""
+        table = self._calib_table
+        if table is None or table[0] is not self.features.normalized:
+            frames = np.arange(0, self.db.n_frames, self.CALIBRATION_STRIDE)
+            table = self._calib_table = (self.features.normalized, frames,
+                                         np.ascontiguousarray(self.features.normalized[frames], np.float32))
+        d = table[2] - np.asarray(features_norm, np.float32)
+        return int(table[1][int(np.argmin(np.einsum("ij,ij->i", d, d)))])
 
     def _on_features_changed(self) -> None:
         if self._index is not None:
@@ -401,6 +425,7 @@ class LearnedMotionMatchingController(CharacterController):
             self._idle_playing = idle is not None
             self.state[:] = projected
             self._source_raw = None
+            self._calib_frame = idle[1] if idle is not None else self._calibration_lookup(proj_norm)
             t0 = time.perf_counter()
             target = self.decompress(self.state)
             timings["decompressor_transition"] = (time.perf_counter() - t0) * 1e6

@@ -109,6 +109,38 @@ def test_without_the_debug_comparison_nothing_is_searched(dbf, nets):
     assert all(s.projected_frame == -1 and "projected_frame_search" not in s.timings_us for s in snaps)
 
 
+def test_the_motion_does_not_depend_on_the_debug_comparison(dbf, nets):
+    """Ground calibration follows the take the state was projected from, looked up whether or not the
+    debug nearest-neighbour comparison runs: headless runs and the studio show the same motion."""
+    from lmm.data.inputs import open_input
+
+    db, features = dbf
+    log = open_input("builtin:random:1", 12.0)
+    runs = {}
+    for compare in (True, False):
+        ctrl = LearnedMotionMatchingController(db, features, networks=nets, compare_with_search=compare)
+        poses, calib = [], set()
+        for i in range(600):
+            pose, _ = ctrl.step(log.at(i / 60.0), 1.0 / 60.0)
+            poses.append(pose.global_positions.copy())
+            calib.add(ctrl._calibration_frame())
+        runs[compare] = (np.array(poses), calib)
+    assert np.array_equal(runs[True][0], runs[False][0])
+    assert runs[True][1] == runs[False][1] and len(runs[False][1]) > 3     # it follows the jumps
+
+
+def test_calibration_lookup_finds_the_take_of_a_database_frame(dbf, nets):
+    db, features = dbf
+    ctrl = LearnedMotionMatchingController(db, features, networks=nets, compare_with_search=False)
+    stride = ctrl.CALIBRATION_STRIDE
+    for frame in (0, stride * 7, stride * 400, (db.n_frames - 1) // stride * stride):
+        assert ctrl._calibration_lookup(features.normalized[frame]) == frame
+    # a frame between two candidates: one of the candidates of its own clip range
+    frame = stride * 300 + stride // 2
+    got = ctrl._calibration_lookup(features.normalized[frame])
+    assert got % stride == 0 and db.range_index(got) == db.range_index(frame)
+
+
 def test_no_torch_on_the_runtime_path():
     code = ("import sys\n"
             "from lmm.data.database import load_or_build\nfrom lmm.features import build_features\n"

@@ -88,7 +88,9 @@ def main(args) -> int:
     features = build_features(db)
     if preset is not None:  # now the channels are known: a misspelt feature_weights name is an error
         tuning = Tuning.from_preset(preset, args.tuning, channels=[ch.name for ch in features.layout])
-    controller = make_controller(args.controller, db, features, tuning, args.weights)
+    # headless: nothing shows the learned controller's debug nearest-neighbour comparison (the motion
+    # does not depend on it), so it is not computed
+    controller = make_controller(args.controller, db, features, tuning, args.weights, debug_comparison=False)
 
     recorder = writer = None
     if record_input is not None:
