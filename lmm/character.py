@@ -52,7 +52,8 @@ from lmm.data.derived import cached
 from lmm.controller import Candidates, Controller, DebugSnapshot, InputState, Pose
 from lmm.features import build_query_from_columns, trajectory_query_columns
 from lmm.ik import FootLockState, solve_leg_floats
-from lmm.inertialize import Offsets, inertialize_apply, inertialize_decay, inertialize_transition
+from lmm.inertialize import (Offsets, ShownPose, inertialize_apply_pose, inertialize_decay,
+                             inertialize_root_velocities, inertialize_transition)
 from lmm.springs import LN2, EPS
 from lmm.trajectory import (SimulationFloats, StickWorld, desired_rotation_floats, desired_velocity_floats,
                             simulation_update_floats, trajectory_in_root_space_floats,
@@ -591,14 +592,16 @@ class CharacterController(Controller):
         src = self._advance_pose(dt)
         self.source = src
         timings["advance"] = (time.perf_counter() - t0) * 1e6
-        self.offsets = inertialize_decay(self.offsets, tun.inertialization_halflife_s, dt)
-        pos, vel, rot, ang = inertialize_apply(self.offsets, src.positions, src.velocities, src.rotations,
-                                               src.angular_velocities)
-        self.shown = (pos, vel, rot, ang)
+        self.offsets = offsets = inertialize_decay(self.offsets, tun.inertialization_halflife_s, dt)
+        pos, rot = inertialize_apply_pose(offsets, src.positions, src.rotations)
+        # the shown velocities: bone 0's now (root integration), every bone's when a transition reads them
+        vel0, ang0 = inertialize_root_velocities(offsets, src.velocities[0].tolist(),
+                                                 src.angular_velocities[0].tolist())
+        self.shown = ShownPose(pos, rot, offsets, src.velocities, src.angular_velocities)
 
         # root integration (character space velocities -> world), in plain floats (one 3-vector/quaternion)
         root_vel_world, root_ang_world, root_pos, root_rot = _integrate_root_f(
-            self._root_position_t, self._root_rotation_t, vel[0].tolist(), ang[0].tolist(), dt)
+            self._root_position_t, self._root_rotation_t, vel0, ang0, dt)
         # the root arrays are replaced every tick, never written in place: no copies needed
         integrated = (np.array(root_pos), np.array(root_rot))
         self._synchronize(root_pos, root_rot, root_vel_world, root_ang_world, dt)

@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from lmm import quat
+from lmm import quat_scalar as qs
 from lmm.springs import halflife_to_damping
 
 
@@ -254,6 +255,54 @@ def inertialize_apply(offsets: Offsets, positions, velocities, rotations, angula
     rot = _normalize(_mul(offsets.rotations, rotations))
     return (positions + offsets.positions, velocities + offsets.velocities, rot,
             offsets.angular_velocities + _mul_vec(offsets.rotations, angular_velocities))
+
+
+def inertialize_apply_pose(offsets: Offsets, positions, rotations):
+    """The shown pose's positions and rotations alone (those of :func:`inertialize_apply`, the same
+    operations): the velocities are needed only at the next transition (:class:`ShownPose`)."""
+    return positions + offsets.positions, _normalize(_mul(offsets.rotations, rotations))
+
+
+def inertialize_root_velocities(offsets: Offsets, velocity, angular_velocity) -> tuple[list, tuple]:
+    """Bone 0's shown velocity and angular velocity (``velocity``/``angular_velocity``: the source's, 3
+    floats each) in plain floats: the values of :func:`inertialize_apply`'s row 0, bit for bit
+    (:func:`lmm.quat_scalar.mul_vec` sums the rotated vector's terms in the same order as
+    :func:`_mul_vec`)."""
+    ov = offsets.velocities[0].tolist()
+    oa = offsets.angular_velocities[0].tolist()
+    r = qs.mul_vec(tuple(offsets.rotations[0].tolist()), angular_velocity)
+    return [a + b for a, b in zip(velocity, ov)], (oa[0] + r[0], oa[1] + r[1], oa[2] + r[2])
+
+
+class ShownPose:
+    """The pose on screen as the 4-tuple (positions, velocities, rotations, angular velocities) that
+    :func:`inertialize_apply` returns, with the velocities worked out when first read (by the next
+    transition, which most ticks do not have) from the offsets and source pose they came from: the same
+    numpy operations on the same arrays (neither is written in place once made), so the same bits."""
+
+    __slots__ = ("_pos", "_rot", "_offsets", "_vel", "_ang", "_src_vel", "_src_ang")
+
+    def __init__(self, positions, rotations, offsets: Offsets, velocities, angular_velocities):
+        self._pos, self._rot, self._offsets = positions, rotations, offsets
+        self._src_vel, self._src_ang = velocities, angular_velocities
+        self._vel = self._ang = None
+
+    def _velocities(self):
+        if self._vel is None:
+            off = self._offsets
+            self._vel = self._src_vel + off.velocities
+            self._ang = off.angular_velocities + _mul_vec(off.rotations, self._src_ang)
+        return self._vel, self._ang
+
+    def __len__(self):
+        return 4
+
+    def __iter__(self):
+        vel, ang = self._velocities()
+        return iter((self._pos, vel, self._rot, ang))
+
+    def __getitem__(self, i):
+        return tuple(self)[i]
 
 
 def inertialize_update(offsets: Offsets, positions, velocities, rotations, angular_velocities,

@@ -111,3 +111,24 @@ def test_decay_of_decayed_offsets_equals_the_numpy_forms_bit_for_bit():
             if k == 4:
                 off.angular_velocities = off.angular_velocities * 0.5   # replaced: not the stacked view
                 ref = (ref[0], ref[1], ref[2], ref[3] * 0.5)
+
+
+def test_shown_pose_and_root_velocities_are_inertialize_apply_bit_for_bit():
+    """The step's split of :func:`inertialize_apply` (pose now, bone 0's velocities in floats, every
+    bone's velocities when a transition reads them) gives the same bits, after any number of decays."""
+    from lmm.inertialize import ShownPose, inertialize_apply_pose, inertialize_root_velocities
+
+    rng = np.random.default_rng(7)
+    off = inertialize_transition(*_pose(rng, 22), *_pose(rng, 22))
+    for _ in range(12):
+        off = inertialize_decay(off, 0.1, 1 / 60)
+        src = _pose(rng, 22)
+        want = inertialize_apply(off, *src)
+        pos, rot = inertialize_apply_pose(off, src[0], src[2])
+        shown = ShownPose(pos, rot, off, src[1], src[3])
+        vel0, ang0 = inertialize_root_velocities(off, src[1][0].tolist(), src[3][0].tolist())
+        assert len(shown) == 4
+        for a, b in zip(shown, want):
+            assert a.tobytes() == b.tobytes()
+        assert shown[1].tobytes() == want[1].tobytes() and shown[3].tobytes() == want[3].tobytes()
+        assert vel0 == want[1][0].tolist() and list(ang0) == want[3][0].tolist()
