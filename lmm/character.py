@@ -99,6 +99,37 @@ def database_source_pose(db, frame: int, root_local_velocity=None, root_local_an
     return SourcePose(pos, rot, vel, ang, db.contacts[frame].copy(), int(frame))
 
 
+class _SnapshotFeatures:
+    """A tick's debug-only feature values for :class:`lmm.controller.DebugSnapshot`'s lazy fields: the
+    playing pose's normalised features (``current``), their cost against the query (``cost``) and the
+    matched frame's normalised features (``matched``), each computed on first read with the operations
+    :meth:`lmm.features.Features.normalize` and the squared distance use. The feature scaling is taken
+    now (a weight change replaces those arrays, never writes them), as are the raw features and the
+    query (neither is written once made), so a later read gives this tick's values."""
+
+    __slots__ = ("_raw", "_mean", "_inv_scale", "_normalized", "_query", "_frame", "_current")
+
+    def __init__(self, features, raw, query, frame: int):
+        self._raw, self._query, self._frame = raw, query, int(frame)
+        self._mean, self._inv_scale, self._normalized = features.mean, features.inv_scale, features.normalized
+        self._current = None
+
+    def current(self) -> np.ndarray:
+        if self._current is None:
+            out = self._raw - self._mean
+            out *= self._inv_scale
+            self._current = out if out.dtype == np.float32 else out.astype(np.float32)
+        return self._current
+
+    def cost(self) -> float:
+        diff = self._query - self.current()
+        diff *= diff                    # the same squares as (query - current) ** 2
+        return float(diff.sum())
+
+    def matched(self) -> np.ndarray:
+        return self._normalized[self._frame].copy() if self._frame >= 0 else self.current()
+
+
 def root_local_velocities(db):
     """Every frame's root velocity and angular velocity in the root's own frame, (N, 3) each (cached
     beside the database file, see :mod:`lmm.data.derived`)."""
@@ -629,26 +660,25 @@ class CharacterController(Controller):
                     contacts=np.array(src.contacts, dtype=bool))
         self.tick += 1
         self.time_s = self.tick * dt if dt > 0 else self.time_s
-        current_norm = self.features.normalize(self._source_features())
         timings["total"] = (time.perf_counter() - t_start) * 1e6
         frame = self._source_frame()
+        # debug-only: the playing pose's normalised features, their cost against the query and the
+        # matched frame's features, worked out when a reader asks (see _SnapshotFeatures)
+        feats = _SnapshotFeatures(self.features, self._source_features(), query, frame)
         # the simulation's and the desired arrays are replaced every tick, never written in place: the
         # snapshot shares them (as it shares the trajectory and query arrays made this tick)
         sim = self.sim
-        diff = query - current_norm
-        diff *= diff                    # the same squares as (query - current_norm) ** 2
         snap = DebugSnapshot(
             controller=self.name, tick=self.tick, time_s=self.time_s, input=inp.copy(),
             simulation_position=sim.position, simulation_rotation=sim.rotation,
             simulation_velocity=sim.velocity, desired_velocity=des_vel,
             desired_rotation=des_rot, trajectory_positions=traj_pos, trajectory_rotations=traj_rot,
-            trajectory_offsets=self.traj_offsets.copy(), query=query, current_features=current_norm,
-            matched_frame=int(frame),
-            matched_features=(self.features.normalized[frame].copy() if frame >= 0 else current_norm),
+            trajectory_offsets=self.traj_offsets.copy(), query=query, current_features=feats.current,
+            matched_frame=int(frame), matched_features=feats.matched,
             candidates=self._last_candidates, searched=searched, forced_search=bool(searched and (forced or must)),
             transitioned=transitioned, best_cost=float(self._last_best_cost), pose=pose,
             matched_pose_positions=ghost, foot_contacts=pose.contacts.copy(),
-            foot_locked=locked, timings_us=timings, current_cost=float(diff.sum()),
+            foot_locked=locked, timings_us=timings, current_cost=feats.cost,
             **self._snapshot_extras())
         return pose, snap
 

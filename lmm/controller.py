@@ -60,14 +60,22 @@ class Candidates:
 class LazyField:
     """A dataclass field whose value may be given as a zero-argument function, called (once) on the
     first read: debug-only data that costs time to compute (the ghost pose's forward kinematics) is
-    computed only when a reader (the studio's viewport) asks for it, never in headless runs."""
+    computed only when a reader (the studio's viewport) asks for it, never in headless runs.
+    ``default``: the field's default value (without one the field is required)."""
+
+    _NO_DEFAULT = object()
+
+    def __init__(self, default=_NO_DEFAULT):
+        self._default = default
 
     def __set_name__(self, owner, name):
         self._key = "_lazy_" + name
 
     def __get__(self, obj, objtype=None):
         if obj is None:
-            raise AttributeError(self._key)  # no class-level default: the field stays required
+            if self._default is LazyField._NO_DEFAULT:
+                raise AttributeError(self._key)  # no class-level default: the field stays required
+            return self._default
         value = obj.__dict__[self._key]
         if callable(value):
             value = obj.__dict__[self._key] = value()
@@ -95,9 +103,9 @@ class DebugSnapshot:
     trajectory_offsets: np.ndarray       # (T,) frames ahead
     # matching
     query: np.ndarray                    # (D,) normalised query features
-    current_features: np.ndarray         # (D,) normalised features of the pose being played
+    current_features: np.ndarray = LazyField()  # (D,) normalised features of the pose being played
     matched_frame: int                   # database frame being played (MM) / nearest frame (LMM)
-    matched_features: np.ndarray         # (D,) normalised features of the matched frame
+    matched_features: np.ndarray = LazyField()  # (D,) normalised features of the matched frame
     candidates: Candidates
     searched: bool                       # a search (MM) / projection (LMM) ran this tick
     forced_search: bool                  # ... because the input changed sharply
@@ -122,7 +130,7 @@ class DebugSnapshot:
                                                   # latent table is attached: MotionMatchingController.set_latent_table)
     # cost of the playing pose's features against this tick's query (a per-tick cost timeline; best_cost
     # is the last search's best, carried between searches like ``candidates``)
-    current_cost: float = float("nan")
+    current_cost: float = LazyField(float("nan"))
     # a one-line warning about this tick's search (e.g. a tag filter that matched no frame, so every frame
     # was searched); empty when all is well
     search_note: str = ""

@@ -42,6 +42,27 @@ def test_snapshot_is_complete(db, features):
     assert np.isfinite(s.best_cost) and np.isfinite(s.current_cost)
 
 
+def test_lazy_snapshot_features_are_the_ticks_values(db, features):
+    """current_features, current_cost and matched_features are worked out when read, with the tick's own
+    feature scaling: a weight change after the tick (or reading late) does not change them."""
+    c = MotionMatchingController(db, features)
+    features = c.features                  # the controller's own copy (its weights are its own)
+    log = builtin("zigzag", 3.0)
+    snaps = [c.step(log.at(i * DT), DT)[1] for i in range(90)]
+    early = snaps[60]
+    want_cur = features.normalize(features.raw[early.matched_frame])
+    want_cost = float(np.sum((early.query - want_cur) ** 2, dtype=np.float32))
+    want_matched = features.normalized[early.matched_frame].copy()
+    c.tuning.feature_weights = {features.layout[0].name: 7.0}     # rescales on the next step
+    later = c.step(log.at(90 * DT), DT)[1]
+    assert not np.array_equal(features.normalized[early.matched_frame], want_matched)
+    assert early.current_features.tobytes() == want_cur.tobytes()
+    assert early.current_cost == pytest.approx(want_cost, rel=1e-6)
+    assert early.matched_features.tobytes() == want_matched.tobytes()
+    assert early.current_features is early.current_features                # computed once
+    assert np.isfinite(later.current_cost) and later.current_features.dtype == np.float32
+
+
 def _pair(db, features, warm_s=2.2, source="zigzag", until=None):
     """Two controllers in lockstep after ``warm_s`` seconds of the same input (and then until
     ``until(controller)`` holds)."""
