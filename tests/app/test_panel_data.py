@@ -100,6 +100,20 @@ def test_heat_image_is_row_per_dimension_newest_right():
     assert heat_image(v, 1.0, lut, columns=20, out=out) is out
 
 
+def test_heat_image_missing_cells_are_grey_and_the_rest_untouched():
+    lut = diverging_lut(256)
+    rng = np.random.default_rng(3)
+    v = rng.normal(size=(40, 5))
+    clean = heat_image(v, 1.5, lut, columns=40)
+    v[[2, 9, 30], [0, 4, 1]] = (np.nan, np.inf, -np.inf)
+    img = heat_image(v, 1.5, lut, columns=40)
+    bad = np.zeros((5, 40), bool)
+    bad[[0, 4, 1], [2, 9, 30]] = True
+    assert np.array_equal(img[bad], np.tile(np.float32((0.2, 0.2, 0.22, 1.0)), (3, 1)))
+    assert np.array_equal(img[~bad], clean[~bad])
+    assert lut.shape == (256, 4)                                # the caller's table is not extended
+
+
 def test_latent_scale():
     assert latent_scale(np.zeros((5, 3))) == 0.5
     assert latent_scale(np.full((5, 3), 4.0)) == pytest.approx(4.0)
