@@ -275,6 +275,29 @@ def test_recording_paths():
 
 # -- the session, headless ------------------------------------------------------------------------
 
+def test_tick_worker_works_out_the_newest_ghost_pose(dbf):
+    from app.session import TickWorker
+
+    db, features = dbf
+    tuning = Tuning()
+    controllers, _ = make_controllers(db, features, tuning, with_lmm=False)
+    worker = TickWorker(Session(db, features, tuning, controllers))
+    try:
+        worker.submit([InputState(left_y=1.0)] * 3)
+        ticks = [t for t, _ in worker.wait()]
+    finally:
+        worker.close()
+    assert len(ticks) == 3
+
+    def ghost_pending(tick):    # the lazy field still holds its function: nobody has read it yet
+        return callable(tick.snapshots["mm"].__dict__["_lazy_matched_pose_positions"])
+
+    # the newest tick (what a live view draws) has it, worked out on the worker; older ones stay lazy
+    assert not ghost_pending(ticks[-1]) and ghost_pending(ticks[0])
+    ghost = ticks[-1].snapshots["mm"].matched_pose_positions
+    assert ghost.shape == (len(db.parents), 3) and np.isfinite(ghost).all()
+
+
 def test_session_steps_records_and_replays(dbf, tmp_path):
     from lmm.data import bvh
     from lmm.data.inputs import load_input_csv
