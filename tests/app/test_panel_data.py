@@ -267,6 +267,27 @@ def test_scrub_target_and_frame_times_and_renderer_names():
     assert fmt_bytes(5 * 1024 * 1024) == "5.0 MB"
 
 
+def test_frame_time_median_and_percentile_are_numpys():
+    from app.frame_times import median, percentile
+
+    rng = np.random.default_rng(7)
+    for i in range(400):
+        a = rng.exponential(20.0, int(rng.integers(1, 260)))
+        if i % 4 == 0:
+            a = np.round(a)                                     # ties
+        for q in (0.0, 50.0, 95.0, 100.0, float(rng.uniform(0, 100))):
+            assert percentile(a, q) == float(np.percentile(a, q))
+        assert median(a) == float(np.median(a))
+    a[3] = np.nan
+    assert np.isnan(median(a)) and np.isnan(percentile(a, 95))
+    ft = FrameTimes(n=5)
+    assert np.isnan(ft.percentile(95))
+    for ms in (10, 20, 30, 40, 50, 60):                         # 10 has left the window
+        ft.add(ms, {"ui": ms / 2})
+    assert ft.percentile(95) == float(np.percentile([20, 30, 40, 50, 60], 95))
+    assert ft.percentile(50, "ui") == 20.0
+
+
 def test_recording_paths():
     p = recording_paths("/x/take.bvh", ("mm", "lmm"))
     assert p["mm"].name == "take_mm.bvh" and p["lmm"].name == "take_lmm.bvh" and p["input"].name == "take_input.csv"
