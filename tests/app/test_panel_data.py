@@ -288,6 +288,16 @@ def test_frame_time_median_and_percentile_are_numpys():
     assert ft.percentile(50, "ui") == 20.0
 
 
+def test_viewport_rotation_shortcuts_are_to_matrix():
+    from app.panels.viewport_scene import _rotation_t, _z_axes
+    from lmm import quat
+
+    q = quat.normalize(np.random.default_rng(5).normal(size=(300, 4)))
+    assert np.array_equal(_z_axes(q), quat.to_matrix(q)[:, :, 2])
+    for r in q.astype(np.float32)[:100]:            # poses hold float32 rotations
+        assert np.array_equal(_rotation_t(r), quat.to_matrix(np.asarray(r, np.float64)).T)
+
+
 def test_recording_paths():
     p = recording_paths("/x/take.bvh", ("mm", "lmm"))
     assert p["mm"].name == "take_mm.bvh" and p["lmm"].name == "take_lmm.bvh" and p["input"].name == "take_input.csv"
