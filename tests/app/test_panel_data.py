@@ -298,6 +298,27 @@ def test_viewport_rotation_shortcuts_are_to_matrix():
         assert np.array_equal(_rotation_t(r), quat.to_matrix(np.asarray(r, np.float64)).T)
 
 
+def test_rolling_agreement_is_the_windowed_rate_and_matches_agreement():
+    from app.history import agreement
+    from app.panels.search import search_masks
+
+    rng = np.random.default_rng(11)
+    for window in (0, 1, 7, 40, 500):
+        searched = (rng.random(300) < 0.3).astype(float)
+        nn = rng.integers(-1, 50, 300).astype(float)
+        got = nn + rng.integers(-2, 3, 300)
+        nn[rng.random(300) < 0.05] = np.nan
+        got[rng.random(300) < 0.05] = np.inf
+        r = rolling_agreement(searched, nn, got, window, tolerance=1)
+        for i in range(300):      # each tick by itself: the ticks (i - window, i]
+            lo = max(i - window + 1, 0)
+            rate, k = agreement(searched[lo:i + 1], nn[lo:i + 1], got[lo:i + 1], 1)
+            assert (np.isnan(r[i]) and k == 0) if k == 0 or window == 0 else r[i] == rate
+        s, agree = search_masks(searched, nn, got, 1)
+        rate, k = agreement(searched, nn, got, 1)
+        assert k == int(s.sum()) and rate == int(agree.sum()) / k
+
+
 def test_recording_paths():
     p = recording_paths("/x/take.bvh", ("mm", "lmm"))
     assert p["mm"].name == "take_mm.bvh" and p["lmm"].name == "take_lmm.bvh" and p["input"].name == "take_input.csv"
