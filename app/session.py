@@ -404,6 +404,10 @@ class TickWorker:
                 for inp in inputs:
                     tick = self.session.step(inp)
                     self._results.append((tick, dict(self.session.step_ms)))
+                # the newest tick is the one a live studio draws next: its ghost poses (forward kinematics
+                # run on the first read) are worked out here, while the GUI thread draws, not on it
+                for snap in tick.snapshots.values():
+                    getattr(snap, "matched_pose_positions", None)
             except BaseException as e:  # handed to the GUI thread by wait()
                 self._error = e
             finally:

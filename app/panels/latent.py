@@ -12,6 +12,7 @@ from .common import COLORS, seconds_axis
 
 COLUMNS = 200
 GAP = 2.0       # rows of space between the two maps
+MISSING_RGBA = (0.2, 0.2, 0.22, 1.0)   # a NaN cell: dark grey
 
 
 def diverging_lut(n: int = 256) -> np.ndarray:
@@ -41,14 +42,14 @@ def heat_image(values: np.ndarray, scale: float, lut: np.ndarray, columns: int =
     k *= 0.5
     k *= len(lut) - 1
     np.clip(k, 0, len(lut) - 1, out=k)
-    any_bad = bool(bad.any())
-    if any_bad:
-        k[bad] = 0.0
+    if bad.any():
+        # the NaN colour as one more row of the table: one gather colours every cell (setting the
+        # bad cells of the (L, columns, 4) image afterwards costs more than the rest of the map)
+        lut = np.concatenate([lut, np.asarray([MISSING_RGBA], lut.dtype)])
+        k[bad] = len(lut) - 1
     if out is None:
         out = np.empty((L, columns, lut.shape[1]), lut.dtype)
     np.take(lut, k.astype(np.intp), axis=0, out=out)
-    if any_bad:
-        out[bad] = (0.2, 0.2, 0.22, 1.0)
     return out
 
 

@@ -14,7 +14,6 @@ import re
 
 import numpy as np
 
-from app.history import agreement
 
 from .base import Panel, View
 from .common import COLORS, GOOD, SHORT, cost_color, decimate, fmt_num, seconds_axis, short_channel_name
@@ -94,21 +93,37 @@ def column_fractions(rows: list[dict], key: str, digits: int = 3) -> list[float]
     return [float((v - lo) / (hi - lo)) if np.isfinite(v) else 1.0 for v in shown]
 
 
-def rolling_agreement(searched, nn, got, window: int, tolerance: int = 0) -> np.ndarray:
-    """Per tick, the agreement rate of the searches in the preceding ``window`` ticks (nan before the
-    first search)."""
+def search_masks(searched, nn, got, tolerance: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Per tick: was it a search (a finite nearest neighbour and a finite chosen frame), and did the chosen
+    frame agree with the nearest neighbour within ``tolerance`` frames."""
     nn, got = np.asarray(nn), np.asarray(got)
     with np.errstate(invalid="ignore"):   # rows with a NaN or inf are not searches (s is False there)
         s = (np.asarray(searched) > 0.5) & np.isfinite(nn) & (nn >= 0) & np.isfinite(got)
         agree = s & (np.abs(got - nn) <= tolerance)
-    cs = np.concatenate([[0], np.cumsum(s)])
-    ca = np.concatenate([[0], np.cumsum(agree)])
-    idx = np.arange(1, len(s) + 1)
-    lo = np.maximum(idx - window, 0)
-    n = cs[idx] - cs[lo]
-    a = ca[idx] - ca[lo]
+    return s, agree
+
+
+def rolling_agreement(searched, nn, got, window: int, tolerance: int = 0) -> np.ndarray:
+    """Per tick, the agreement rate of the searches in the preceding ``window`` ticks (nan before the
+    first search)."""
+    return rolling_rate(*search_masks(searched, nn, got, tolerance), window)
+
+
+def rolling_rate(s: np.ndarray, agree: np.ndarray, window: int) -> np.ndarray:
+    """:func:`rolling_agreement` of the masks of :func:`search_masks`."""
+    n = _window_sums(s, window)
+    a = _window_sums(agree, window)
     with np.errstate(invalid="ignore", divide="ignore"):
         return np.where(n > 0, a / np.maximum(n, 1), np.nan)
+
+
+def _window_sums(mask: np.ndarray, window: int) -> np.ndarray:
+    """Per index i, how many of ``mask[max(i - window + 1, 0):i + 1]`` are set (differences of a running sum)."""
+    c = np.cumsum(mask)
+    out = c.copy()
+    if window < len(c):     # a window longer than the series: every index sums from the start
+        out[window:] -= c[:len(c) - window]
+    return out
 
 
 class SearchPanel(Panel):
@@ -209,7 +224,10 @@ class SearchPanel(Panel):
             if lmm.projected_features is not None and 0 <= nn_frame < db.n_frames:
                 features = self.ctx.engine.features_of("lmm")
                 dist = float(np.linalg.norm(np.asarray(lmm.projected_features) - features.normalized[nn_frame]))
-            rate, k = agreement(searched, nn, projected, self.tolerance)
+            # which ticks searched and agreed, once for the rate and its curve
+            masks = search_masks(searched, nn, projected, self.tolerance)
+            k = int(masks[0].sum())
+            rate = int(masks[1].sum()) / k if k else float("nan")
             agree = "-" if k == 0 else f"{100 * rate:.0f}% of {k} searches"
             cache.set("nn_status", "LMM projector vs exact nearest neighbour of the same query")
         else:
@@ -246,7 +264,7 @@ class SearchPanel(Panel):
         dpg.set_value("cost_transitions", [t[sel] if sel.any() else t[-1:],
                                            best_cost[sel] if sel.any() else np.zeros(1)])
         if lmm is not None:
-            ag = rolling_agreement(searched, nn, projected, int(2.0 / dt), self.tolerance)
+            ag = rolling_rate(*masks, int(2.0 / dt))
             ok = np.isfinite(ag)
             dpg.set_value("cost_agree", list(decimate(t[ok], ag[ok], 300)) if ok.any() else [t[-1:], np.zeros(1)])
         cache.configure("cost_agree", show=lmm is not None)

@@ -111,6 +111,6 @@ class StatsPanel(Panel):
                 yy = ft.series(part)
                 if len(yy):
                     dpg.set_value(tag, [np.arange(len(yy), dtype=np.float64) + (len(y) - len(yy)), yy])
-            dpg.set_axis_limits("stats_x", 0.0, float(ft.n))
-            top = float(np.percentile(y, 95)) * 1.3 if len(y) > 5 else 50.0
-            dpg.set_axis_limits("stats_y", 0.0, max(top, 20.0))
+            self.text.axis_limits("stats_x", 0.0, float(ft.n))
+            top = ft.percentile(95) * 1.3 if len(y) > 5 else 50.0
+            self.text.axis_limits("stats_y", 0.0, max(top, 20.0))

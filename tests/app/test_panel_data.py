@@ -100,6 +100,20 @@ def test_heat_image_is_row_per_dimension_newest_right():
     assert heat_image(v, 1.0, lut, columns=20, out=out) is out
 
 
+def test_heat_image_missing_cells_are_grey_and_the_rest_untouched():
+    lut = diverging_lut(256)
+    rng = np.random.default_rng(3)
+    v = rng.normal(size=(40, 5))
+    clean = heat_image(v, 1.5, lut, columns=40)
+    v[[2, 9, 30], [0, 4, 1]] = (np.nan, np.inf, -np.inf)
+    img = heat_image(v, 1.5, lut, columns=40)
+    bad = np.zeros((5, 40), bool)
+    bad[[0, 4, 1], [2, 9, 30]] = True
+    assert np.array_equal(img[bad], np.tile(np.float32((0.2, 0.2, 0.22, 1.0)), (3, 1)))
+    assert np.array_equal(img[~bad], clean[~bad])
+    assert lut.shape == (256, 4)                                # the caller's table is not extended
+
+
 def test_latent_scale():
     assert latent_scale(np.zeros((5, 3))) == 0.5
     assert latent_scale(np.full((5, 3), 4.0)) == pytest.approx(4.0)
@@ -253,6 +267,58 @@ def test_scrub_target_and_frame_times_and_renderer_names():
     assert fmt_bytes(5 * 1024 * 1024) == "5.0 MB"
 
 
+def test_frame_time_median_and_percentile_are_numpys():
+    from app.frame_times import median, percentile
+
+    rng = np.random.default_rng(7)
+    for i in range(400):
+        a = rng.exponential(20.0, int(rng.integers(1, 260)))
+        if i % 4 == 0:
+            a = np.round(a)                                     # ties
+        for q in (0.0, 50.0, 95.0, 100.0, float(rng.uniform(0, 100))):
+            assert percentile(a, q) == float(np.percentile(a, q))
+        assert median(a) == float(np.median(a))
+    a[3] = np.nan
+    assert np.isnan(median(a)) and np.isnan(percentile(a, 95))
+    ft = FrameTimes(n=5)
+    assert np.isnan(ft.percentile(95))
+    for ms in (10, 20, 30, 40, 50, 60):                         # 10 has left the window
+        ft.add(ms, {"ui": ms / 2})
+    assert ft.percentile(95) == float(np.percentile([20, 30, 40, 50, 60], 95))
+    assert ft.percentile(50, "ui") == 20.0
+
+
+def test_viewport_rotation_shortcuts_are_to_matrix():
+    from app.panels.viewport_scene import _rotation_t, _z_axes
+    from lmm import quat
+
+    q = quat.normalize(np.random.default_rng(5).normal(size=(300, 4)))
+    assert np.array_equal(_z_axes(q), quat.to_matrix(q)[:, :, 2])
+    for r in q.astype(np.float32)[:100]:            # poses hold float32 rotations
+        assert np.array_equal(_rotation_t(r), quat.to_matrix(np.asarray(r, np.float64)).T)
+
+
+def test_rolling_agreement_is_the_windowed_rate_and_matches_agreement():
+    from app.history import agreement
+    from app.panels.search import search_masks
+
+    rng = np.random.default_rng(11)
+    for window in (0, 1, 7, 40, 500):
+        searched = (rng.random(300) < 0.3).astype(float)
+        nn = rng.integers(-1, 50, 300).astype(float)
+        got = nn + rng.integers(-2, 3, 300)
+        nn[rng.random(300) < 0.05] = np.nan
+        got[rng.random(300) < 0.05] = np.inf
+        r = rolling_agreement(searched, nn, got, window, tolerance=1)
+        for i in range(300):      # each tick by itself: the ticks (i - window, i]
+            lo = max(i - window + 1, 0)
+            rate, k = agreement(searched[lo:i + 1], nn[lo:i + 1], got[lo:i + 1], 1)
+            assert (np.isnan(r[i]) and k == 0) if k == 0 or window == 0 else r[i] == rate
+        s, agree = search_masks(searched, nn, got, 1)
+        rate, k = agreement(searched, nn, got, 1)
+        assert k == int(s.sum()) and rate == int(agree.sum()) / k
+
+
 def test_recording_paths():
     p = recording_paths("/x/take.bvh", ("mm", "lmm"))
     assert p["mm"].name == "take_mm.bvh" and p["lmm"].name == "take_lmm.bvh" and p["input"].name == "take_input.csv"
@@ -260,6 +326,29 @@ def test_recording_paths():
 
 
 # -- the session, headless ------------------------------------------------------------------------
+
+def test_tick_worker_works_out_the_newest_ghost_pose(dbf):
+    from app.session import TickWorker
+
+    db, features = dbf
+    tuning = Tuning()
+    controllers, _ = make_controllers(db, features, tuning, with_lmm=False)
+    worker = TickWorker(Session(db, features, tuning, controllers))
+    try:
+        worker.submit([InputState(left_y=1.0)] * 3)
+        ticks = [t for t, _ in worker.wait()]
+    finally:
+        worker.close()
+    assert len(ticks) == 3
+
+    def ghost_pending(tick):    # the lazy field still holds its function: nobody has read it yet
+        return callable(tick.snapshots["mm"].__dict__["_lazy_matched_pose_positions"])
+
+    # the newest tick (what a live view draws) has it, worked out on the worker; older ones stay lazy
+    assert not ghost_pending(ticks[-1]) and ghost_pending(ticks[0])
+    ghost = ticks[-1].snapshots["mm"].matched_pose_positions
+    assert ghost.shape == (len(db.parents), 3) and np.isfinite(ghost).all()
+
 
 def test_session_steps_records_and_replays(dbf, tmp_path):
     from lmm.data import bvh

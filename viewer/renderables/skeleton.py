@@ -268,7 +268,7 @@ class Skeleton(Renderable):
         # leaf ends continue the parent bone past the leaf; head centres sit along the neck
         start = p[L["dir_from"]]
         d = start - p[L["dir_parent"]]
-        norm = np.linalg.norm(d, axis=1, keepdims=True)
+        norm = np.sqrt(np.add.reduce(d * d, axis=1, keepdims=True))   # np.linalg.norm's sum, without its overhead
         d = np.where(norm > 1e-9, d / np.maximum(norm, 1e-12), [0.0, 1.0, 0.0])
         ends = np.concatenate([p, start + d * L["dir_scale"]])
         c = self._capsules.staging(len(L["radii"]))
@@ -313,11 +313,11 @@ class Skeleton(Renderable):
         c = self._capsule_data
         if c is None or len(c) == 0:
             return None
-        ends = np.r_[c[:, 0:3], c[:, 3:6]].astype(np.float64)
+        ends = np.concatenate([c[:, 0:3], c[:, 3:6]]).astype(np.float64)
         flat = ends - direction * (np.maximum(ends[:, 1:2] - ground, 0.0) / direction[1])
         margin = float(c[:, 6:8].max()) * (1.0 + 1.0 / direction[1])
-        lo, hi = flat[:, [0, 2]].min(axis=0) - margin, flat[:, [0, 2]].max(axis=0) + margin
-        return lo[0], lo[1], hi[0], hi[1]
+        x, z = flat[:, 0], flat[:, 2]
+        return x.min() - margin, z.min() - margin, x.max() + margin, z.max() + margin
 
     def release(self) -> None:
         for obj in (self._joint_vao, self._bone_vao, self._capsule_vao, self._shadow_vao,
