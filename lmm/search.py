@@ -375,8 +375,13 @@ class SearchIndex:
     def _groups(self, group_masks):
         """Per-frame bias (inf: not a candidate) and group number, and the least bias of each small and
         large block (inf for a block without candidates), cached for the same (bias, mask) groups."""
-        key = tuple((float(b), id(m)) for b, m in group_masks)
         cached = getattr(self, "_group_cache", None)
+        # fast path, taken at run time (the controller passes the same list of tuples every search): the very
+        # same (bias, mask) tuples, which cannot have been rebound since
+        if cached is not None and len(cached[3]) == len(group_masks) and \
+                all(a is g for a, g in zip(cached[3], group_masks)):
+            return cached[2]
+        key = tuple((float(b), id(m)) for b, m in group_masks)
         if cached is not None and cached[0] == key and all(a is m for a, (_, m) in zip(cached[1], group_masks)):
             return cached[2]
         size = self.n_large * self.large_block
@@ -392,7 +397,8 @@ class SearchIndex:
         spread = max(abs(b) for b in biases) if biases else 0.0
         valid = np.isfinite(bias)                                                  # padded, like _valid
         out = (bias, group, small_min, large_min, valid, valid.copy(), spread)
-        self._group_cache = (key, [m for _, m in group_masks], out)
+        same = tuple(g for g in group_masks if type(g) is tuple)   # only tuples are safe to compare by identity
+        self._group_cache = (key, [m for _, m in group_masks], out, same if len(same) == len(group_masks) else (None,))
         return out
 
     def group_search(self, query: np.ndarray, group_masks, current: int = -1, transition_cost: float = 0.0,
@@ -404,7 +410,8 @@ class SearchIndex:
         of its candidate frames (blocks without candidates are skipped); the upper bound is the k-th best
         cost plus bias of real frames, widened by a relative 1e-5 so that float32 rounding of the totals
         can never drop a frame of the answer. The surviving frames are ranked per group as each group's own
-        search ranks them, and the groups merged as :func:`biased_search` merges them.
+        search ranks them, and the groups merged as :func:`biased_search` merges them (:func:`_rank_groups`:
+        both at once, over the few candidates that can reach the top K).
         """
         q = np.asarray(query, dtype=np.float32)
         k = max(int(top_k), 1)
@@ -413,21 +420,23 @@ class SearchIndex:
             lo_w, hi_w = max(current - exclude_window, 0), current + exclude_window + 1
             valid[lo_w:hi_w] = False
         try:
-            per_group, cont, evaluated = self._group_search(q, frame_bias, frame_group, small_min, large_min,
-                                                            valid, candidates, spread, len(group_masks),
-                                                            current, transition_cost, k, hint)
+            frames, costs, cont, in_group, evaluated = self._group_search(
+                q, frame_bias, small_min, large_min, valid, candidates, spread, current, transition_cost, k, hint)
         finally:
             if current >= 0:
                 valid[lo_w:hi_w] = candidates[lo_w:hi_w]
         slices = slices if slices is not None else [slice(0, self.n_dims)]
         if len(group_masks) == 1 and float(group_masks[0][0]) == 0.0:
-            f, total, bias = per_group[0]
-            return _result(self.X, q, slices, f, total, bias, current, cont, evaluated)
-        return _merge_groups(per_group, [b for b, _ in group_masks], current, k, self.X, q, slices, cont,
-                             evaluated)
+            f, total, bias = _rank(frames, costs, current, cont, transition_cost, k)
+        else:
+            f, total, bias = _rank_groups(frames, costs, frame_bias, frame_group, [b for b, _ in group_masks],
+                                          current, cont, in_group, transition_cost, k)
+        return _result(self.X, q, slices, f, total, bias, current, cont, evaluated)
 
-    def _group_search(self, q, frame_bias, frame_group, small_min, large_min, valid, candidates, spread,
-                      n_groups, current, transition_cost, k, hint):
+    def _group_search(self, q, frame_bias, small_min, large_min, valid, candidates, spread, current,
+                      transition_cost, k, hint):
+        """The surviving candidates (ascending frames, their feature costs), the playing frame's cost (NaN when
+        it may not compete) and whether it is a candidate, and the frames evaluated."""
         # 1. coarse lower bound of every large block (as in _search), plus its least candidate bias
         q1, gap = self._q1, self._g1
         np.copyto(q1, q[self.l1_dims, None])
@@ -468,15 +477,7 @@ class SearchIndex:
         frames = (small[:, None] * self.small_block + self._offsets).ravel()
         keep = valid[frames]
         evaluated += frames.size
-        frames, costs = frames[keep], costs[keep]
-        groups = frame_group[frames]
-        cur_group = int(frame_group[current]) if in_group else -1
-        per_group = []
-        for g in range(n_groups):
-            sel = groups == g
-            per_group.append(_rank(frames[sel], costs[sel], current, cont if g == cur_group else float("nan"),
-                                   transition_cost, k))
-        return per_group, cont, evaluated
+        return frames[keep], costs[keep], cont, in_group, evaluated
 
 
 def biased_search(search, mask: np.ndarray, frame_bias: np.ndarray | None, current: int = -1,
@@ -509,6 +510,55 @@ def biased_search(search, mask: np.ndarray, frame_bias: np.ndarray | None, curre
     features_norm, query, slices = first._breakdown
     return _merge_groups(per_group, [b for b, _ in group_masks], current, k, features_norm, query, slices, cont,
                          evaluated)
+
+
+def _rank_groups(frames, costs, frame_bias, frame_group, biases, current, cont_cost, in_group, transition_cost,
+                 top_k):
+    """Exactly ``_merge_groups`` of every group's ``_rank`` (same frames, totals, biases and order), for the
+    candidates ``frames`` (ascending) with feature ``costs``, from only the few that can reach the answer.
+
+    A candidate's merged total is ``key = (cost + transition_cost) + group bias`` (float32 sums, as the merge
+    makes them). Let ``kth`` be the k-th smallest key. Rounding is monotonic, so each group's own top-K holds
+    that group's smallest keys, and the groups' lists together hold k candidates with key <= kth: nothing above
+    ``kth`` can be in the answer, the playing frame included. The candidates with key <= kth are, in each
+    group, all those ranked before any of them (a lower cost never has a higher key), so each group's ranking
+    and cut at K over them alone is its full ranking's start. The playing frame, when its key is <= kth, goes
+    where the full ranking puts it: before the first of them whose total is not lower, else after them all
+    (any later candidate of its group has a higher key, so a total not lower).
+    """
+    tc = np.float32(transition_cost)
+    totals = costs + tc
+    keys = totals + frame_bias[frames]
+    kth = float("inf")
+    if keys.size > top_k:
+        kth = float(np.partition(keys, top_k - 1)[top_k - 1])
+        few = (keys <= kth).nonzero()[0]
+        frames, costs, totals, keys = frames[few], costs[few], totals[few], keys[few]
+    b32 = [np.float32(b) for b in biases]
+    cont_group = -1
+    if in_group and cont_cost == cont_cost:  # not NaN
+        cont_group = int(frame_group[current])
+        cont_key = float(np.float32(cont_cost) + b32[cont_group])
+    by_group = {}
+    for row in zip(costs.tolist(), frames.tolist(), totals.tolist(), keys.tolist(), frame_group[frames].tolist()):
+        by_group.setdefault(row[4], []).append(row)
+    if cont_group >= 0:
+        by_group.setdefault(cont_group, [])
+    rows = []
+    for g, members in by_group.items():
+        members.sort()
+        del members[top_k:]
+        bias = float(tc + b32[g])
+        group_rows = [(key, 1, f, bias) for _, f, _, key, _ in members]
+        if g == cont_group:
+            at = next((i for i, m in enumerate(members) if m[2] >= cont_cost), len(members))
+            group_rows.insert(at, (cont_key, 0, int(current), float(np.float32(0.0) + b32[g])))
+            del group_rows[top_k:]
+        rows += group_rows
+    rows.sort()
+    del rows[top_k:]
+    return (np.array([r[2] for r in rows], dtype=np.int64), np.array([r[0] for r in rows], dtype=np.float32),
+            np.array([r[3] for r in rows], dtype=np.float32))
 
 
 def _merge_groups(per_group, biases, current, k, features_norm, query, slices, cont, evaluated) -> SearchResult:

@@ -171,3 +171,29 @@ def test_a_filter_that_matches_nothing_is_reported_in_the_snapshot():
         _, snap = ctrl.step(InputState(), 1.0 / 60.0)
         _, snap = ctrl.step(InputState(), 1.0 / 60.0)
         assert snap.search_note == ""
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_one_pass_group_search_with_ties_everywhere(seed):
+    """Integer features (many equal costs) and a bias so large that float32 totals of different costs round to
+    the same value: the one-pass group search still ranks, cuts each group at K and merges exactly as one
+    brute-force search per group does, the playing frame included, in or out of the candidates."""
+    rng = np.random.default_rng(seed)
+    n = 700
+    X = rng.integers(0, 3, size=(n, 3)).astype(np.float32)
+    index = SearchIndex(X)
+    mask = candidate_mask(n, [0, 300], [300, n], 5)
+    label = rng.integers(0, 3, n)
+    # float32 steps are 2 at 2**24 and 4 at 2**25: totals a few apart round to one value, across groups too
+    biases = [float(2 ** 24), float(2 ** 24 + 2), float(2 ** 24 - 2)] if seed % 2 else \
+        [float(2 ** 25 + 4), float(2 ** 25), float(2 ** 25 - 4)]
+    groups = [(b, mask & (label == g)) for g, b in enumerate(biases)]
+    for i in range(40):
+        q = rng.integers(0, 3, 3).astype(np.float32) + np.float32(0.5 * (i % 2))
+        current = [-1, int(rng.integers(n)), 298][i % 3]
+        hint = None if i % 4 == 1 else rng.integers(0, n, 8)
+        args = dict(current=current, transition_cost=[0.0, 0.3, 1.0][i // 3 % 3],
+                    exclude_window=int(rng.integers(0, 4)), top_k=1 + i % 12)
+        one = index.group_search(q, groups, hint=hint, **args)
+        brute = biased_search(lambda **kw: brute_force_search(X, q, **kw), mask, None, group_masks=groups, **args)
+        assert _same(one, brute), (seed, i)
