@@ -396,7 +396,10 @@ class SearchIndex:
         biases = [float(b) for b, _ in group_masks]
         spread = max(abs(b) for b in biases) if biases else 0.0
         valid = np.isfinite(bias)                                                  # padded, like _valid
-        out = (bias, group, small_min, large_min, valid, valid.copy(), spread)
+        # the searched copies (bias, valid) get the exclusion window marked in them; their pristine copies
+        # restore it
+        out = (bias, group, small_min, large_min, valid, valid.copy(), spread, bias.copy(),
+               [np.float32(b) for b in biases])
         same = tuple(g for g in group_masks if type(g) is tuple)   # only tuples are safe to compare by identity
         self._group_cache = (key, [m for _, m in group_masks], out, same if len(same) == len(group_masks) else (None,))
         return out
@@ -415,28 +418,33 @@ class SearchIndex:
         """
         q = np.asarray(query, dtype=np.float32)
         k = max(int(top_k), 1)
-        frame_bias, frame_group, small_min, large_min, valid, candidates, spread = self._groups(group_masks)
+        frame_bias, frame_group, small_min, large_min, valid, candidates, spread, all_bias, b32 = \
+            self._groups(group_masks)
+        tc = np.float32(transition_cost)
         if current >= 0:  # exclude the window around the playing frame for this search only
             lo_w, hi_w = max(current - exclude_window, 0), current + exclude_window + 1
             valid[lo_w:hi_w] = False
+            frame_bias[lo_w:hi_w] = np.inf
         try:
-            frames, costs, cont, in_group, evaluated = self._group_search(
-                q, frame_bias, small_min, large_min, valid, candidates, spread, current, transition_cost, k, hint)
+            frames, costs, keys, cont, in_group, evaluated = self._group_search(
+                q, frame_bias, small_min, large_min, valid, candidates, spread, current, tc, k, hint)
         finally:
             if current >= 0:
                 valid[lo_w:hi_w] = candidates[lo_w:hi_w]
+                frame_bias[lo_w:hi_w] = all_bias[lo_w:hi_w]
         slices = slices if slices is not None else [slice(0, self.n_dims)]
         if len(group_masks) == 1 and float(group_masks[0][0]) == 0.0:
-            f, total, bias = _rank(frames, costs, current, cont, transition_cost, k)
+            ok = keys < np.inf
+            f, total, bias = _rank(frames[ok], costs[ok], current, cont, transition_cost, k)
         else:
-            f, total, bias = _rank_groups(frames, costs, frame_bias, frame_group, [b for b, _ in group_masks],
-                                          current, cont, in_group, transition_cost, k)
+            f, total, bias = _rank_groups(frames, costs, keys, frame_group, b32, current, cont, in_group, tc, k)
         return _result(self.X, q, slices, f, total, bias, current, cont, evaluated)
 
     def _group_search(self, q, frame_bias, small_min, large_min, valid, candidates, spread, current,
-                      transition_cost, k, hint):
-        """The surviving candidates (ascending frames, their feature costs), the playing frame's cost (NaN when
-        it may not compete) and whether it is a candidate, and the frames evaluated."""
+                      tc, k, hint):
+        """The frames evaluated (ascending) with their feature costs and totals ``(cost + tc) + bias`` (inf for
+        frames that are not candidates), the playing frame's cost (NaN when it may not compete) and whether it
+        is a candidate, and how many frames were evaluated."""
         # 1. coarse lower bound of every large block (as in _search), plus its least candidate bias
         q1, gap = self._q1, self._g1
         np.copyto(q1, q[self.l1_dims, None])
@@ -463,7 +471,7 @@ class SearchIndex:
         if seeds.size >= k:
             ub = np.partition(c + frame_bias[seeds], k - 1)[k - 1]
         # a frame whose box bound * (1 - 1e-5) + bias exceeds this cannot be in any group's answer
-        cut = np.float32(float(ub) + 1e-5 * (abs(float(ub)) + abs(float(transition_cost)) + spread)) \
+        cut = np.float32(float(ub) + 1e-5 * (abs(float(ub)) + abs(float(tc)) + spread)) \
             if ub < np.inf else np.float32(np.inf)
 
         # 3. surviving large blocks -> their small blocks' bounds -> frames' exact costs
@@ -475,9 +483,9 @@ class SearchIndex:
         d.reshape(len(small), -1).__isub__(q_tile[:self.small_block * self.n_dims])
         costs = np.einsum("ijk,ijk->ij", d, d).ravel()
         frames = (small[:, None] * self.small_block + self._offsets).ravel()
-        keep = valid[frames]
-        evaluated += frames.size
-        return frames[keep], costs[keep], cont, in_group, evaluated
+        keys = costs + tc
+        keys += frame_bias[frames]    # inf for frames that are not candidates (the window's included)
+        return frames, costs, keys, cont, in_group, evaluated + frames.size
 
 
 def biased_search(search, mask: np.ndarray, frame_bias: np.ndarray | None, current: int = -1,
@@ -512,50 +520,47 @@ def biased_search(search, mask: np.ndarray, frame_bias: np.ndarray | None, curre
                          evaluated)
 
 
-def _rank_groups(frames, costs, frame_bias, frame_group, biases, current, cont_cost, in_group, transition_cost,
-                 top_k):
+def _rank_groups(frames, costs, keys, frame_group, b32, current, cont_cost, in_group, tc, top_k):
     """Exactly ``_merge_groups`` of every group's ``_rank`` (same frames, totals, biases and order), for the
-    candidates ``frames`` (ascending) with feature ``costs``, from only the few that can reach the answer.
+    frames evaluated (ascending) with their feature ``costs`` and ``keys`` (the merge's totals,
+    ``(cost + tc) + group bias`` in float32, inf for frames that are not candidates), from only the few that
+    can reach the answer. ``b32``: the groups' biases (float32); ``tc`` the transition cost (float32).
 
-    A candidate's merged total is ``key = (cost + transition_cost) + group bias`` (float32 sums, as the merge
-    makes them). Let ``kth`` be the k-th smallest key. Rounding is monotonic, so each group's own top-K holds
-    that group's smallest keys, and the groups' lists together hold k candidates with key <= kth: nothing above
-    ``kth`` can be in the answer, the playing frame included. The candidates with key <= kth are, in each
-    group, all those ranked before any of them (a lower cost never has a higher key), so each group's ranking
-    and cut at K over them alone is its full ranking's start. The playing frame, when its key is <= kth, goes
-    where the full ranking puts it: before the first of them whose total is not lower, else after them all
-    (any later candidate of its group has a higher key, so a total not lower).
+    Let ``kth`` be the k-th smallest key. Rounding is monotonic, so each group's own top-K holds that group's
+    smallest keys, and the groups' lists together hold k candidates with key <= kth: nothing above ``kth``
+    can be in the answer, the playing frame included. The candidates with key <= kth are, in each group, all
+    those ranked before any of them (a lower cost never has a higher key), so each group's ranking and cut at
+    K over them alone is its full ranking's start. The playing frame goes where the full ranking puts it:
+    before the first of them whose total is not lower, else after them all (where, when a later candidate
+    of its group has a lower total, its key is above ``kth`` and it is cut in the merge either way).
     """
-    tc = np.float32(transition_cost)
-    totals = costs + tc
-    keys = totals + frame_bias[frames]
-    kth = float("inf")
     if keys.size > top_k:
-        kth = float(np.partition(keys, top_k - 1)[top_k - 1])
-        few = (keys <= kth).nonzero()[0]
-        frames, costs, totals, keys = frames[few], costs[few], totals[few], keys[few]
-    b32 = [np.float32(b) for b in biases]
+        kth = np.partition(keys, top_k - 1)[top_k - 1]
+        few = (keys <= kth).nonzero()[0] if kth < np.inf else (keys < np.inf).nonzero()[0]
+    else:
+        few = (keys < np.inf).nonzero()[0]
+    frames, costs, keys = frames[few], costs[few], keys[few]
+    fl = frames.tolist()
+    by_group = {}
+    for row in zip(costs.tolist(), fl, (costs + tc).tolist(), keys.tolist(), frame_group[frames].tolist()):
+        by_group.setdefault(row[4], []).append(row)
     cont_group = -1
     if in_group and cont_cost == cont_cost:  # not NaN
         cont_group = int(frame_group[current])
-        cont_key = float(np.float32(cont_cost) + b32[cont_group])
-    by_group = {}
-    for row in zip(costs.tolist(), frames.tolist(), totals.tolist(), keys.tolist(), frame_group[frames].tolist()):
-        by_group.setdefault(row[4], []).append(row)
-    if cont_group >= 0:
         by_group.setdefault(cont_group, [])
     rows = []
     for g, members in by_group.items():
-        members.sort()
+        members.sort()                      # each group's ranking: cost, then frame
         del members[top_k:]
         bias = float(tc + b32[g])
         group_rows = [(key, 1, f, bias) for _, f, _, key, _ in members]
         if g == cont_group:
             at = next((i for i, m in enumerate(members) if m[2] >= cont_cost), len(members))
-            group_rows.insert(at, (cont_key, 0, int(current), float(np.float32(0.0) + b32[g])))
+            group_rows.insert(at, (float(np.float32(cont_cost) + b32[g]), 0, int(current),
+                                   float(np.float32(0.0) + b32[g])))
             del group_rows[top_k:]
         rows += group_rows
-    rows.sort()
+    rows.sort()                             # the merge: total, the playing frame first, then frame
     del rows[top_k:]
     return (np.array([r[2] for r in rows], dtype=np.int64), np.array([r[0] for r in rows], dtype=np.float32),
             np.array([r[3] for r in rows], dtype=np.float32))
