@@ -48,10 +48,13 @@ _HINT_SPREAD = np.arange(-2, 3)  # a hinted frame and its neighbours seed the up
 _PAD = 2                          # the candidate mask's extra False tail (hint neighbours may step outside)
 
 
-def _hint_seeds(hint, valid: np.ndarray) -> np.ndarray:
-    """The frames around the hinted ones (``_HINT_SPREAD``), sorted, unique and valid: real frames whose
-    costs give an upper bound on the k-th best before the blocks are scanned."""
-    seeds = (np.asarray(hint, dtype=np.int64)[:, None] + _HINT_SPREAD).ravel()
+def _hint_seeds(hint, valid: np.ndarray, extra=None) -> np.ndarray:
+    """The frames around the hinted ones (``_HINT_SPREAD``) and the ``extra`` frames, sorted, unique and
+    valid: real frames whose costs give an upper bound on the k-th best before the blocks are scanned."""
+    seeds = (np.asarray(hint, dtype=np.int64)[:, None] + _HINT_SPREAD).ravel() if hint is not None \
+        else np.zeros(0, dtype=np.int64)
+    if extra is not None:
+        seeds = np.concatenate((seeds, extra))
     seeds.sort()
     ok = valid[seeds]
     ok[1:] &= seeds[1:] != seeds[:-1]
@@ -238,6 +241,7 @@ class SearchIndex:
         self.per_large, self.n_large = per, n_large
         self._offsets = np.arange(sb)
         self._per_offsets = np.arange(per)
+        self._large_offsets = np.arange(lb)
         self._tile_index = np.tile(np.arange(d), max(per, sb))   # q[_tile_index]: q repeated
         self._q1 = np.empty_like(self.l1_lo)
         self._g1 = np.empty_like(self.l1_lo)
@@ -248,7 +252,7 @@ class SearchIndex:
 
     # the arrays :meth:`update` builds (the per-mask cache of :meth:`_valid` is not part of the structure)
     _STRUCTURE = ("X", "l1_dims", "l1_lo", "l1_hi", "l2_lo", "l2_hi", "rows", "_offsets", "_per_offsets",
-                  "_tile_index", "_q1", "_g1", "_ones1", "_ones")
+                  "_large_offsets", "_tile_index", "_q1", "_g1", "_ones1", "_ones")
 
     def nbytes(self) -> int:
         """Bytes the index adds to the features it searches: its arrays, except those that are the
@@ -459,7 +463,13 @@ class SearchIndex:
         cont = float("nan")
         seeds = _hint_seeds(hint, valid) if hint is not None and len(hint) else None
         if seeds is None or seeds.size < k:
-            seeds = self._seed_frames(lb_large + large_min, q, valid, k)
+            # the hint lies mostly in the exclusion window (a jump to a frame whose neighbours were the other
+            # candidates): every frame of the most promising large block as well is usually enough, and
+            # much cheaper than the descent
+            best = int(np.argmin(lb_large + large_min))
+            seeds = _hint_seeds(hint, valid, best * self.large_block + self._large_offsets)
+            if seeds.size < k:
+                seeds = self._seed_frames(lb_large + large_min, q, valid, k)
         in_group = current >= 0 and candidates[current]
         rows = self.X[np.concatenate((seeds, (current,)))] if in_group else self.X[seeds]
         rows -= q
