@@ -549,14 +549,29 @@ def _rank_groups(frames, costs, keys, frame_group, b32, current, cont_cost, in_g
         few = (keys <= kth).nonzero()[0] if kth < np.inf else (keys < np.inf).nonzero()[0]
     else:
         few = (keys < np.inf).nonzero()[0]
-    frames, costs, keys = frames[few], costs[few], keys[few]
-    fl = frames.tolist()
+    f_few = frames[few]
+    key_list, group_list = keys[few].tolist(), frame_group[f_few].tolist()
+    cont_group = int(frame_group[current]) if in_group and cont_cost == cont_cost else -1  # NaN: not competing
+    if cont_group >= 0:
+        cont_row = (float(np.float32(cont_cost) + b32[cont_group]), 0, int(current),
+                    float(np.float32(0.0) + b32[cont_group]))
+    # usually no two of these keys are equal: then each group's ranking is its key order and the playing
+    # frame sits at its key's place in it, so every cut at K that the groups make only drops rows that K
+    # rows of the same group precede anyway: the merge is a plain sort by key
+    if len(set(key_list)) == len(key_list) and (cont_group < 0 or cont_row[0] not in key_list):
+        bias = {g: float(tc + b32[g]) for g in set(group_list)}
+        rows = [(key, 1, f, bias[g]) for key, f, g in zip(key_list, f_few.tolist(), group_list)]
+        if cont_group >= 0:
+            rows.append(cont_row)
+        rows.sort()
+        del rows[top_k:]
+        return (np.array([r[2] for r in rows], dtype=np.int64), np.array([r[0] for r in rows], dtype=np.float32),
+                np.array([r[3] for r in rows], dtype=np.float32))
+    costs = costs[few]
     by_group = {}
-    for row in zip(costs.tolist(), fl, (costs + tc).tolist(), keys.tolist(), frame_group[frames].tolist()):
+    for row in zip(costs.tolist(), f_few.tolist(), (costs + tc).tolist(), key_list, group_list):
         by_group.setdefault(row[4], []).append(row)
-    cont_group = -1
-    if in_group and cont_cost == cont_cost:  # not NaN
-        cont_group = int(frame_group[current])
+    if cont_group >= 0:
         by_group.setdefault(cont_group, [])
     rows = []
     for g, members in by_group.items():
@@ -566,8 +581,7 @@ def _rank_groups(frames, costs, keys, frame_group, b32, current, cont_cost, in_g
         group_rows = [(key, 1, f, bias) for _, f, _, key, _ in members]
         if g == cont_group:
             at = next((i for i, m in enumerate(members) if m[2] >= cont_cost), len(members))
-            group_rows.insert(at, (float(np.float32(cont_cost) + b32[g]), 0, int(current),
-                                   float(np.float32(0.0) + b32[g])))
+            group_rows.insert(at, cont_row)
             del group_rows[top_k:]
         rows += group_rows
     rows.sort()                             # the merge: total, the playing frame first, then frame

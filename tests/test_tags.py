@@ -197,3 +197,22 @@ def test_the_one_pass_group_search_with_ties_everywhere(seed):
         one = index.group_search(q, groups, hint=hint, **args)
         brute = biased_search(lambda **kw: brute_force_search(X, q, **kw), mask, None, group_masks=groups, **args)
         assert _same(one, brute), (seed, i)
+
+
+def test_a_playing_frame_tied_with_a_better_candidate_by_rounding_keeps_its_group_order():
+    """At bias 2**24 (float32 steps of 2) a candidate of cost 0.5 and the playing frame of cost 1 round to the
+    same total. The playing frame's group ranks the candidate first (lower total) and cuts at K = 1 before the
+    merge, whose tie rule (playing frame first) would otherwise pick the playing frame."""
+    X = np.full((96, 2), 10.0, np.float32)
+    X[10] = (0.5, 0.5)                      # cost 0.5
+    X[50] = (1.0, 0.0)                      # the playing frame, cost 1
+    mask = np.ones(96, bool)
+    far = np.zeros(96, bool)
+    far[80:] = True
+    groups = [(float(2 ** 24), mask & ~far), (float(2 ** 24 + 64), far)]
+    q = np.zeros(2, np.float32)
+    args = dict(current=50, transition_cost=0.0, exclude_window=0, top_k=1)
+    one = SearchIndex(X).group_search(q, groups, **args)
+    brute = biased_search(lambda **kw: brute_force_search(X, q, **kw), mask, None, group_masks=groups, **args)
+    assert list(brute.frames) == [10] and brute.costs[0] == np.float32(2 ** 24)
+    assert _same(one, brute)
