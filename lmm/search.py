@@ -437,7 +437,7 @@ class SearchIndex:
             frame_bias[lo_w:hi_w] = np.inf
         try:
             frames, costs, keys, cont, in_group, evaluated = self._group_search(
-                q, frame_bias, small_min, large_min, valid, candidates, spread, current, tc, k, hint)
+                q, frame_bias, all_bias, small_min, large_min, valid, candidates, spread, current, tc, k, hint)
         finally:
             if current >= 0:
                 valid[lo_w:hi_w] = candidates[lo_w:hi_w]
@@ -450,7 +450,7 @@ class SearchIndex:
             f, total, bias = _rank_groups(frames, costs, keys, frame_group, b32, current, cont, in_group, tc, k)
         return _result(self.X, q, slices, f, total, bias, current, cont, evaluated)
 
-    def _group_search(self, q, frame_bias, small_min, large_min, valid, candidates, spread, current,
+    def _group_search(self, q, frame_bias, all_bias, small_min, large_min, valid, candidates, spread, current,
                       tc, k, hint):
         """The frames evaluated (ascending) with their feature costs and totals ``(cost + tc) + bias`` (inf for
         frames that are not candidates), the playing frame's cost (NaN when it may not compete) and whether it
@@ -464,7 +464,10 @@ class SearchIndex:
         gap *= gap
         lb_large = self._ones1 @ gap
 
-        # 2. an upper bound on the k-th best cost + bias, from real frames
+        # 2. an upper bound on the k-th smallest merged total (counted without the transition cost, which every
+        #    candidate but the playing frame carries), from real rows of the answer: the hinted frames and their
+        #    neighbours, and the playing frame when it competes (its total less the transition cost): with it
+        #    among the k, at most k - 1 other frames can come before it
         evaluated = 0
         cont = float("nan")
         seeds = _hint_seeds(hint, valid, k=k) if hint is not None and len(hint) else None
@@ -477,15 +480,17 @@ class SearchIndex:
             if seeds.size < k:
                 seeds = self._seed_frames(lb_large + large_min, q, valid, k)
         in_group = current >= 0 and candidates[current]
-        rows = self.X[np.concatenate((seeds, (current,)))] if in_group else self.X[seeds]
+        idx = np.append(seeds, current) if in_group else seeds
+        rows = self.X[idx]
         rows -= q
         c = np.einsum("ij,ij->i", rows, rows)       # the brute force's reduction: the same value per row
         if in_group:
-            cont, c = float(c[-1]), c[:-1]
+            cont = float(c[-1])
+        c += all_bias[idx]
+        if in_group:
+            c[-1] -= tc
         evaluated += seeds.size
-        ub = np.float32(np.inf)
-        if seeds.size >= k:
-            ub = np.partition(c + frame_bias[seeds], k - 1)[k - 1]
+        ub = np.partition(c, k - 1)[k - 1] if c.size >= k else np.float32(np.inf)
         # a frame whose box bound * (1 - 1e-5) + bias exceeds this cannot be in any group's answer
         cut = np.float32(float(ub) + 1e-5 * (abs(float(ub)) + abs(float(tc)) + spread)) \
             if ub < np.inf else np.float32(np.inf)
