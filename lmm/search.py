@@ -247,6 +247,7 @@ class SearchIndex:
         self.per_large, self.n_large = per, n_large
         self._offsets = np.arange(sb)
         self._per_offsets = np.arange(per)
+        self._current = np.zeros(1, dtype=np.int64)   # the playing frame, appended to the seeds
         self._large_offsets = np.arange(lb)
         self._tile_index = np.tile(np.arange(d), max(per, sb))   # q[_tile_index]: q repeated
         self._q1 = np.empty_like(self.l1_lo)
@@ -258,7 +259,7 @@ class SearchIndex:
 
     # the arrays :meth:`update` builds (the per-mask cache of :meth:`_valid` is not part of the structure)
     _STRUCTURE = ("X", "l1_dims", "l1_lo", "l1_hi", "l2_lo", "l2_hi", "rows", "_offsets", "_per_offsets",
-                  "_large_offsets", "_tile_index", "_q1", "_g1", "_ones1", "_ones")
+                  "_large_offsets", "_current", "_tile_index", "_q1", "_g1", "_ones1", "_ones")
 
     def nbytes(self) -> int:
         """Bytes the index adds to the features it searches: its arrays, except those that are the
@@ -480,7 +481,11 @@ class SearchIndex:
             if seeds.size < k:
                 seeds = self._seed_frames(lb_large + large_min, q, valid, k)
         in_group = current >= 0 and candidates[current]
-        idx = np.append(seeds, current) if in_group else seeds
+        if in_group:
+            self._current[0] = current
+            idx = np.concatenate((seeds, self._current))
+        else:
+            idx = seeds
         rows = self.X[idx]
         rows -= q
         c = np.einsum("ij,ij->i", rows, rows)       # the brute force's reduction: the same value per row
