@@ -45,13 +45,22 @@ SMALL_BLOCK = 8   # frames per small box
 LARGE_BLOCK = 32  # frames per large box (a multiple of SMALL_BLOCK)
 _BOUND_SLACK = np.float32(1.0 - 1e-5)
 _HINT_SPREAD = np.arange(-2, 3)  # a hinted frame and its neighbours seed the upper bound
-_PAD = 2                          # the candidate mask's extra False tail (hint neighbours may step outside)
+# for a top-K search (K > 1), more neighbours: the K best come in runs of consecutive frames, so further ones
+# give a lower k-th cost, and fewer hints fall short of k valid seeds when the playing frame's exclusion
+# window covers some (measured: about 2% faster runtime calls than with the top-1 spread)
+_HINT_SPREAD_TOPK = np.arange(-4, 5)
+_PAD = 4                          # the candidate mask's extra False tail (hint neighbours may step outside)
 
 
-def _hint_seeds(hint, valid: np.ndarray) -> np.ndarray:
-    """The frames around the hinted ones (``_HINT_SPREAD``), sorted, unique and valid: real frames whose
-    costs give an upper bound on the k-th best before the blocks are scanned."""
-    seeds = (np.asarray(hint, dtype=np.int64)[:, None] + _HINT_SPREAD).ravel()
+def _hint_seeds(hint, valid: np.ndarray, extra=None, k: int = 1) -> np.ndarray:
+    """The frames around the hinted ones (``_HINT_SPREAD``, ``_HINT_SPREAD_TOPK`` for ``k`` > 1) and the
+    ``extra`` frames, sorted, unique and valid: real frames whose costs give an upper bound on the k-th best
+    before the blocks are scanned."""
+    spread = _HINT_SPREAD if k == 1 else _HINT_SPREAD_TOPK
+    seeds = (np.asarray(hint, dtype=np.int64)[:, None] + spread).ravel() if hint is not None \
+        else np.zeros(0, dtype=np.int64)
+    if extra is not None:
+        seeds = np.concatenate((seeds, extra))
     seeds.sort()
     ok = valid[seeds]
     ok[1:] &= seeds[1:] != seeds[:-1]
@@ -238,6 +247,8 @@ class SearchIndex:
         self.per_large, self.n_large = per, n_large
         self._offsets = np.arange(sb)
         self._per_offsets = np.arange(per)
+        self._current = np.zeros(1, dtype=np.int64)   # the playing frame, appended to the seeds
+        self._large_offsets = np.arange(lb)
         self._tile_index = np.tile(np.arange(d), max(per, sb))   # q[_tile_index]: q repeated
         self._q1 = np.empty_like(self.l1_lo)
         self._g1 = np.empty_like(self.l1_lo)
@@ -248,7 +259,7 @@ class SearchIndex:
 
     # the arrays :meth:`update` builds (the per-mask cache of :meth:`_valid` is not part of the structure)
     _STRUCTURE = ("X", "l1_dims", "l1_lo", "l1_hi", "l2_lo", "l2_hi", "rows", "_offsets", "_per_offsets",
-                  "_tile_index", "_q1", "_g1", "_ones1", "_ones")
+                  "_large_offsets", "_current", "_tile_index", "_q1", "_g1", "_ones1", "_ones")
 
     def nbytes(self) -> int:
         """Bytes the index adds to the features it searches: its arrays, except those that are the
@@ -257,7 +268,7 @@ class SearchIndex:
                        if not np.shares_memory(a, self.features_norm)))
 
     def _valid(self, mask: np.ndarray) -> np.ndarray:
-        """``mask`` padded with False to whole blocks plus two (so a hint's neighbours -2..n+1 index it
+        """``mask`` padded with False to whole blocks plus ``_PAD`` (so a hint's neighbours -4..n+3 index it
         safely; negative indices wrap onto the padding), cached per mask array."""
         if self._mask_key is not mask:
             padded = np.zeros(self.n_large * self.large_block + _PAD, dtype=bool)
@@ -301,7 +312,7 @@ class SearchIndex:
         evaluated = 0
         cont = float("nan")
         if hint is not None and len(hint):
-            seeds = _hint_seeds(hint, valid)
+            seeds = _hint_seeds(hint, valid, k=k)
             if seeds.size >= k:
                 if current >= 0:
                     c = self.X[np.concatenate((seeds, (current,)))]
@@ -375,8 +386,13 @@ class SearchIndex:
     def _groups(self, group_masks):
         """Per-frame bias (inf: not a candidate) and group number, and the least bias of each small and
         large block (inf for a block without candidates), cached for the same (bias, mask) groups."""
-        key = tuple((float(b), id(m)) for b, m in group_masks)
         cached = getattr(self, "_group_cache", None)
+        # fast path, taken at run time (the controller passes the same list of tuples every search): the very
+        # same (bias, mask) tuples, which cannot have been rebound since
+        if cached is not None and len(cached[3]) == len(group_masks) and \
+                all(a is g for a, g in zip(cached[3], group_masks)):
+            return cached[2]
+        key = tuple((float(b), id(m)) for b, m in group_masks)
         if cached is not None and cached[0] == key and all(a is m for a, (_, m) in zip(cached[1], group_masks)):
             return cached[2]
         size = self.n_large * self.large_block
@@ -391,8 +407,12 @@ class SearchIndex:
         biases = [float(b) for b, _ in group_masks]
         spread = max(abs(b) for b in biases) if biases else 0.0
         valid = np.isfinite(bias)                                                  # padded, like _valid
-        out = (bias, group, small_min, large_min, valid, valid.copy(), spread)
-        self._group_cache = (key, [m for _, m in group_masks], out)
+        # the searched copies (bias, valid) get the exclusion window marked in them; their pristine copies
+        # restore it
+        out = (bias, group, small_min, large_min, valid, valid.copy(), spread, bias.copy(),
+               [np.float32(b) for b in biases])
+        same = tuple(g for g in group_masks if type(g) is tuple)   # only tuples are safe to compare by identity
+        self._group_cache = (key, [m for _, m in group_masks], out, same if len(same) == len(group_masks) else (None,))
         return out
 
     def group_search(self, query: np.ndarray, group_masks, current: int = -1, transition_cost: float = 0.0,
@@ -404,30 +424,38 @@ class SearchIndex:
         of its candidate frames (blocks without candidates are skipped); the upper bound is the k-th best
         cost plus bias of real frames, widened by a relative 1e-5 so that float32 rounding of the totals
         can never drop a frame of the answer. The surviving frames are ranked per group as each group's own
-        search ranks them, and the groups merged as :func:`biased_search` merges them.
+        search ranks them, and the groups merged as :func:`biased_search` merges them (:func:`_rank_groups`:
+        both at once, over the few candidates that can reach the top K).
         """
         q = np.asarray(query, dtype=np.float32)
         k = max(int(top_k), 1)
-        frame_bias, frame_group, small_min, large_min, valid, candidates, spread = self._groups(group_masks)
+        frame_bias, frame_group, small_min, large_min, valid, candidates, spread, all_bias, b32 = \
+            self._groups(group_masks)
+        tc = np.float32(transition_cost)
         if current >= 0:  # exclude the window around the playing frame for this search only
             lo_w, hi_w = max(current - exclude_window, 0), current + exclude_window + 1
             valid[lo_w:hi_w] = False
+            frame_bias[lo_w:hi_w] = np.inf
         try:
-            per_group, cont, evaluated = self._group_search(q, frame_bias, frame_group, small_min, large_min,
-                                                            valid, candidates, spread, len(group_masks),
-                                                            current, transition_cost, k, hint)
+            frames, costs, keys, cont, in_group, evaluated = self._group_search(
+                q, frame_bias, all_bias, small_min, large_min, valid, candidates, spread, current, tc, k, hint)
         finally:
             if current >= 0:
                 valid[lo_w:hi_w] = candidates[lo_w:hi_w]
+                frame_bias[lo_w:hi_w] = all_bias[lo_w:hi_w]
         slices = slices if slices is not None else [slice(0, self.n_dims)]
         if len(group_masks) == 1 and float(group_masks[0][0]) == 0.0:
-            f, total, bias = per_group[0]
-            return _result(self.X, q, slices, f, total, bias, current, cont, evaluated)
-        return _merge_groups(per_group, [b for b, _ in group_masks], current, k, self.X, q, slices, cont,
-                             evaluated)
+            ok = keys < np.inf
+            f, total, bias = _rank(frames[ok], costs[ok], current, cont, transition_cost, k)
+        else:
+            f, total, bias = _rank_groups(frames, costs, keys, frame_group, b32, current, cont, in_group, tc, k)
+        return _result(self.X, q, slices, f, total, bias, current, cont, evaluated)
 
-    def _group_search(self, q, frame_bias, frame_group, small_min, large_min, valid, candidates, spread,
-                      n_groups, current, transition_cost, k, hint):
+    def _group_search(self, q, frame_bias, all_bias, small_min, large_min, valid, candidates, spread, current,
+                      tc, k, hint):
+        """The frames evaluated (ascending) with their feature costs and totals ``(cost + tc) + bias`` (inf for
+        frames that are not candidates), the playing frame's cost (NaN when it may not compete) and whether it
+        is a candidate, and how many frames were evaluated."""
         # 1. coarse lower bound of every large block (as in _search), plus its least candidate bias
         q1, gap = self._q1, self._g1
         np.copyto(q1, q[self.l1_dims, None])
@@ -437,24 +465,39 @@ class SearchIndex:
         gap *= gap
         lb_large = self._ones1 @ gap
 
-        # 2. an upper bound on the k-th best cost + bias, from real frames
+        # 2. an upper bound on the k-th smallest merged total (counted without the transition cost, which every
+        #    candidate but the playing frame carries), from real rows of the answer: the hinted frames and their
+        #    neighbours, and the playing frame when it competes (its total less the transition cost): with it
+        #    among the k, at most k - 1 other frames can come before it
         evaluated = 0
         cont = float("nan")
-        seeds = _hint_seeds(hint, valid) if hint is not None and len(hint) else None
+        seeds = _hint_seeds(hint, valid, k=k) if hint is not None and len(hint) else None
         if seeds is None or seeds.size < k:
-            seeds = self._seed_frames(lb_large + large_min, q, valid, k)
+            # the hint lies mostly in the exclusion window (a jump to a frame whose neighbours were the other
+            # candidates): every frame of the most promising large block as well is usually enough, and
+            # much cheaper than the descent
+            best = int(np.argmin(lb_large + large_min))
+            seeds = _hint_seeds(hint, valid, best * self.large_block + self._large_offsets, k)
+            if seeds.size < k:
+                seeds = self._seed_frames(lb_large + large_min, q, valid, k)
         in_group = current >= 0 and candidates[current]
-        rows = self.X[np.concatenate((seeds, (current,)))] if in_group else self.X[seeds]
+        if in_group:
+            self._current[0] = current
+            idx = np.concatenate((seeds, self._current))
+        else:
+            idx = seeds
+        rows = self.X[idx]
         rows -= q
         c = np.einsum("ij,ij->i", rows, rows)       # the brute force's reduction: the same value per row
         if in_group:
-            cont, c = float(c[-1]), c[:-1]
+            cont = float(c[-1])
+        c += all_bias[idx]
+        if in_group:
+            c[-1] -= tc
         evaluated += seeds.size
-        ub = np.float32(np.inf)
-        if seeds.size >= k:
-            ub = np.partition(c + frame_bias[seeds], k - 1)[k - 1]
+        ub = np.partition(c, k - 1)[k - 1] if c.size >= k else np.float32(np.inf)
         # a frame whose box bound * (1 - 1e-5) + bias exceeds this cannot be in any group's answer
-        cut = np.float32(float(ub) + 1e-5 * (abs(float(ub)) + abs(float(transition_cost)) + spread)) \
+        cut = np.float32(float(ub) + 1e-5 * (abs(float(ub)) + abs(float(tc)) + spread)) \
             if ub < np.inf else np.float32(np.inf)
 
         # 3. surviving large blocks -> their small blocks' bounds -> frames' exact costs
@@ -466,17 +509,9 @@ class SearchIndex:
         d.reshape(len(small), -1).__isub__(q_tile[:self.small_block * self.n_dims])
         costs = np.einsum("ijk,ijk->ij", d, d).ravel()
         frames = (small[:, None] * self.small_block + self._offsets).ravel()
-        keep = valid[frames]
-        evaluated += frames.size
-        frames, costs = frames[keep], costs[keep]
-        groups = frame_group[frames]
-        cur_group = int(frame_group[current]) if in_group else -1
-        per_group = []
-        for g in range(n_groups):
-            sel = groups == g
-            per_group.append(_rank(frames[sel], costs[sel], current, cont if g == cur_group else float("nan"),
-                                   transition_cost, k))
-        return per_group, cont, evaluated
+        keys = costs + tc
+        keys += frame_bias[frames]    # inf for frames that are not candidates (the window's included)
+        return frames, costs, keys, cont, in_group, evaluated + frames.size
 
 
 def biased_search(search, mask: np.ndarray, frame_bias: np.ndarray | None, current: int = -1,
@@ -509,6 +544,66 @@ def biased_search(search, mask: np.ndarray, frame_bias: np.ndarray | None, curre
     features_norm, query, slices = first._breakdown
     return _merge_groups(per_group, [b for b, _ in group_masks], current, k, features_norm, query, slices, cont,
                          evaluated)
+
+
+def _rank_groups(frames, costs, keys, frame_group, b32, current, cont_cost, in_group, tc, top_k):
+    """Exactly ``_merge_groups`` of every group's ``_rank`` (same frames, totals, biases and order), for the
+    frames evaluated (ascending) with their feature ``costs`` and ``keys`` (the merge's totals,
+    ``(cost + tc) + group bias`` in float32, inf for frames that are not candidates), from only the few that
+    can reach the answer. ``b32``: the groups' biases (float32); ``tc`` the transition cost (float32).
+
+    Let ``kth`` be the k-th smallest key. Rounding is monotonic, so each group's own top-K holds that group's
+    smallest keys, and the groups' lists together hold k candidates with key <= kth: nothing above ``kth``
+    can be in the answer, the playing frame included. The candidates with key <= kth are, in each group, all
+    those ranked before any of them (a lower cost never has a higher key), so each group's ranking and cut at
+    K over them alone is its full ranking's start. The playing frame goes where the full ranking puts it:
+    before the first of them whose total is not lower, else after them all (where, when a later candidate
+    of its group has a lower total, its key is above ``kth`` and it is cut in the merge either way).
+    """
+    if keys.size > top_k:
+        kth = np.partition(keys, top_k - 1)[top_k - 1]
+        few = (keys <= kth).nonzero()[0] if kth < np.inf else (keys < np.inf).nonzero()[0]
+    else:
+        few = (keys < np.inf).nonzero()[0]
+    f_few = frames[few]
+    key_list, group_list = keys[few].tolist(), frame_group[f_few].tolist()
+    cont_group = int(frame_group[current]) if in_group and cont_cost == cont_cost else -1  # NaN: not competing
+    if cont_group >= 0:
+        cont_row = (float(np.float32(cont_cost) + b32[cont_group]), 0, int(current),
+                    float(np.float32(0.0) + b32[cont_group]))
+    # usually no two of these keys are equal: then each group's ranking is its key order and the playing
+    # frame sits at its key's place in it, so every cut at K that the groups make only drops rows that K
+    # rows of the same group precede anyway: the merge is a plain sort by key
+    if len(set(key_list)) == len(key_list) and (cont_group < 0 or cont_row[0] not in key_list):
+        bias = {g: float(tc + b32[g]) for g in set(group_list)}
+        rows = [(key, 1, f, bias[g]) for key, f, g in zip(key_list, f_few.tolist(), group_list)]
+        if cont_group >= 0:
+            rows.append(cont_row)
+        rows.sort()
+        del rows[top_k:]
+        return (np.array([r[2] for r in rows], dtype=np.int64), np.array([r[0] for r in rows], dtype=np.float32),
+                np.array([r[3] for r in rows], dtype=np.float32))
+    costs = costs[few]
+    by_group = {}
+    for row in zip(costs.tolist(), f_few.tolist(), (costs + tc).tolist(), key_list, group_list):
+        by_group.setdefault(row[4], []).append(row)
+    if cont_group >= 0:
+        by_group.setdefault(cont_group, [])
+    rows = []
+    for g, members in by_group.items():
+        members.sort()                      # each group's ranking: cost, then frame
+        del members[top_k:]
+        bias = float(tc + b32[g])
+        group_rows = [(key, 1, f, bias) for _, f, _, key, _ in members]
+        if g == cont_group:
+            at = next((i for i, m in enumerate(members) if m[2] >= cont_cost), len(members))
+            group_rows.insert(at, cont_row)
+            del group_rows[top_k:]
+        rows += group_rows
+    rows.sort()                             # the merge: total, the playing frame first, then frame
+    del rows[top_k:]
+    return (np.array([r[2] for r in rows], dtype=np.int64), np.array([r[0] for r in rows], dtype=np.float32),
+            np.array([r[3] for r in rows], dtype=np.float32))
 
 
 def _merge_groups(per_group, biases, current, k, features_norm, query, slices, cont, evaluated) -> SearchResult:

@@ -171,3 +171,48 @@ def test_a_filter_that_matches_nothing_is_reported_in_the_snapshot():
         _, snap = ctrl.step(InputState(), 1.0 / 60.0)
         _, snap = ctrl.step(InputState(), 1.0 / 60.0)
         assert snap.search_note == ""
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_one_pass_group_search_with_ties_everywhere(seed):
+    """Integer features (many equal costs) and a bias so large that float32 totals of different costs round to
+    the same value: the one-pass group search still ranks, cuts each group at K and merges exactly as one
+    brute-force search per group does, the playing frame included, in or out of the candidates."""
+    rng = np.random.default_rng(seed)
+    n = 700
+    X = rng.integers(0, 3, size=(n, 3)).astype(np.float32)
+    index = SearchIndex(X)
+    mask = candidate_mask(n, [0, 300], [300, n], 5)
+    label = rng.integers(0, 3, n)
+    # float32 steps are 2 at 2**24 and 4 at 2**25: totals a few apart round to one value, across groups too
+    biases = [float(2 ** 24), float(2 ** 24 + 2), float(2 ** 24 - 2)] if seed % 2 else \
+        [float(2 ** 25 + 4), float(2 ** 25), float(2 ** 25 - 4)]
+    groups = [(b, mask & (label == g)) for g, b in enumerate(biases)]
+    for i in range(40):
+        q = rng.integers(0, 3, 3).astype(np.float32) + np.float32(0.5 * (i % 2))
+        current = [-1, int(rng.integers(n)), 298][i % 3]
+        hint = None if i % 4 == 1 else np.concatenate(([0, n - 1], rng.integers(0, n, 6)))  # ends: padding
+        args = dict(current=current, transition_cost=[0.0, 0.3, 1.0][i // 3 % 3],
+                    exclude_window=int(rng.integers(0, 4)), top_k=1 + i % 12)
+        one = index.group_search(q, groups, hint=hint, **args)
+        brute = biased_search(lambda **kw: brute_force_search(X, q, **kw), mask, None, group_masks=groups, **args)
+        assert _same(one, brute), (seed, i)
+
+
+def test_a_playing_frame_tied_with_a_better_candidate_by_rounding_keeps_its_group_order():
+    """At bias 2**24 (float32 steps of 2) a candidate of cost 0.5 and the playing frame of cost 1 round to the
+    same total. The playing frame's group ranks the candidate first (lower total) and cuts at K = 1 before the
+    merge, whose tie rule (playing frame first) would otherwise pick the playing frame."""
+    X = np.full((96, 2), 10.0, np.float32)
+    X[10] = (0.5, 0.5)                      # cost 0.5
+    X[50] = (1.0, 0.0)                      # the playing frame, cost 1
+    mask = np.ones(96, bool)
+    far = np.zeros(96, bool)
+    far[80:] = True
+    groups = [(float(2 ** 24), mask & ~far), (float(2 ** 24 + 64), far)]
+    q = np.zeros(2, np.float32)
+    args = dict(current=50, transition_cost=0.0, exclude_window=0, top_k=1)
+    one = SearchIndex(X).group_search(q, groups, **args)
+    brute = biased_search(lambda **kw: brute_force_search(X, q, **kw), mask, None, group_masks=groups, **args)
+    assert list(brute.frames) == [10] and brute.costs[0] == np.float32(2 ** 24)
+    assert _same(one, brute)
