@@ -57,8 +57,13 @@ def _hint_seeds(hint, valid: np.ndarray, extra=None, k: int = 1) -> np.ndarray:
     ``extra`` frames, sorted, unique and valid: real frames whose costs give an upper bound on the k-th best
     before the blocks are scanned."""
     spread = _HINT_SPREAD if k == 1 else _HINT_SPREAD_TOPK
-    seeds = (np.asarray(hint, dtype=np.int64)[:, None] + spread).ravel() if hint is not None \
-        else np.zeros(0, dtype=np.int64)
+    if hint is not None:
+        # a hint outside the frames (e.g. candidates advanced past the end by a long search interval)
+        # is clipped to them: only the speed depends on it
+        hint = np.clip(np.asarray(hint, dtype=np.int64), 0, len(valid) - _PAD - 1)
+        seeds = (hint[:, None] + spread).ravel()
+    else:
+        seeds = np.zeros(0, dtype=np.int64)
     if extra is not None:
         seeds = np.concatenate((seeds, extra))
     seeds.sort()

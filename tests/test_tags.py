@@ -191,7 +191,8 @@ def test_the_one_pass_group_search_with_ties_everywhere(seed):
     for i in range(40):
         q = rng.integers(0, 3, 3).astype(np.float32) + np.float32(0.5 * (i % 2))
         current = [-1, int(rng.integers(n)), 298][i % 3]
-        hint = None if i % 4 == 1 else np.concatenate(([0, n - 1], rng.integers(0, n, 6)))  # ends: padding
+        # the ends reach into the padding; frames past them (-n .. 2n) are clipped
+        hint = None if i % 4 == 1 else np.concatenate(([0, n - 1], rng.integers(-n, 2 * n, 6)))
         args = dict(current=current, transition_cost=[0.0, 0.3, 1.0][i // 3 % 3],
                     exclude_window=int(rng.integers(0, 4)), top_k=1 + i % 12)
         one = index.group_search(q, groups, hint=hint, **args)
