@@ -197,6 +197,20 @@ def brute_force_search(features_norm: np.ndarray, query: np.ndarray, mask: np.nd
     return _result(features_norm, query, slices, f, total, bias, current, cont, costs.size)
 
 
+def _padded_rows(X: np.ndarray, rows: int) -> np.ndarray:
+    """``X`` (N, D) followed by copies of its last row up to ``rows`` rows. Without a copy of ``X`` when it
+    is the start of a larger contiguous buffer whose next rows already are such copies (as
+    :class:`lmm.features.Features` keeps its normalised features), else concatenated."""
+    base = X.base
+    n = len(X)
+    if (isinstance(base, np.ndarray) and base.dtype == X.dtype and base.ndim == 2 and base.shape[1] == X.shape[1]
+            and base.shape[0] >= rows and base.flags.c_contiguous and X.flags.c_contiguous
+            and base.__array_interface__["data"][0] == X.__array_interface__["data"][0]
+            and np.array_equal(base[n:rows], np.broadcast_to(X[-1], (rows - n, X.shape[1])))):
+        return base[:rows]
+    return np.concatenate([X, np.repeat(X[-1:], rows - n, axis=0)])
+
+
 class SearchIndex:
     """Exact accelerated search over ``features_norm`` (N, D) with two levels of bounding boxes.
 
@@ -233,7 +247,7 @@ class SearchIndex:
         per = lb // sb
         n_large = max(-(-n // lb), 1)
         pad = n_large * lb - n
-        Xp = np.concatenate([X, np.repeat(X[-1:], pad, axis=0)]) if pad else X
+        Xp = _padded_rows(X, n_large * lb) if pad else X
         small = Xp.reshape(n_large * per, sb, d)
         lo, hi = small.min(axis=1), small.max(axis=1)                        # (n_small, D)
         lo_l = lo.reshape(n_large, per, d).min(axis=1)

@@ -131,3 +131,24 @@ def test_ten_thousand_run_queries_are_exact(db, features):
     assert mismatches == 0
     # the real speed figure comes from `lmm-studio bench`; here only a loose floor (shared CI machines)
     assert t_brute / t_fast > 3.0, (t_brute, t_fast)
+
+
+def test_the_index_reads_the_features_padded_buffer_without_a_copy(db, features):
+    """Features keep their normalised rows in a buffer padded with copies of the last row, which the
+    index's blocks read in place (51 MB less on the 0.5 M-frame set); any other array is padded by a
+    copy, with the same answers."""
+    feats = copy.copy(features)
+    feats.set_weights([1.0, 0.5, 1.0, 2.0, 1.0, 0.7, 1.5])        # a rescale: a new padded buffer
+    X = feats.normalized
+    assert len(X) == db.n_frames and X.base is not None and len(X.base) % feats.ROW_MULTIPLE == 0
+    assert (X.base[len(X):] == X[-1]).all()
+    index = SearchIndex(X)
+    assert np.shares_memory(index.rows, X) and index.nbytes() < X.nbytes / 2
+    copied = SearchIndex(X.copy())                                 # no padded buffer behind it
+    assert not np.shares_memory(copied.rows, X)
+    assert np.array_equal(copied.rows, index.rows)
+    rng = np.random.default_rng(5)
+    mask = np.ones(db.n_frames, bool)
+    for _ in range(20):
+        q = X[rng.integers(len(X))] + rng.normal(size=X.shape[1]).astype(np.float32) * 0.2
+        assert same(index.search(q, mask, top_k=4), copied.search(q, mask, top_k=4))
