@@ -25,8 +25,11 @@ Sections (later issues add theirs to ``SECTIONS``):
             them), over the same runs, with ``..._over_bruteforce`` its ratio to ``search.bruteforce_us``;
             ``mm_over_bruteforce`` / ``lmm_over_bruteforce``: the frame times over the brute force
             (issue 16's target: at most 0.2); ``lmm_network_*_us`` with ``*_over_cpp``: each network per
-            call over the C++ reference demo's ``nnet.h`` time measured on the same weights
-            (``CPP_NETWORK_US``; target at most 1.3).
+            call on the inputs a run gave it, over a plain C++ evaluation of the same network on the
+            same inputs (the reference demo's algorithm and release flags), built with the C++
+            compiler found and timed in the same run (``lmm_network_cpp_source`` "measured"; without a
+            compiler, "issue16": the figures the issue measured on another machine,
+            ``CPP_NETWORK_US``); target at most 1.3.
 
 Timings are wall-clock medians; every section also reports what it measured (counts, settings).
 """
