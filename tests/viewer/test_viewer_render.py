@@ -259,3 +259,44 @@ def test_bad_input_is_rejected(gl_ctx):
         line.update(np.zeros((3, 3)), mode="segments")
     with pytest.raises(ValueError, match="mode"):
         line.update(np.zeros((3, 3)), mode="loop")
+
+
+def test_capsule_records_keep_their_fixed_columns_until_colour_or_size_changes(gl_ctx):
+    """The radius and colour columns of the capsule records are written once and kept from pose to
+    pose; a new colour, alpha or thickness reaches them on the next update, and a new pose always does."""
+    skel = Skeleton(gl_ctx, TPOSE_PARENTS, color=(0.9, 0.5, 0.1), shadow=False)
+    skel.update(TPOSE_POSITIONS)
+    first = skel._capsule_data.copy()
+    assert np.allclose(first[:, 8:12], [0.9, 0.5, 0.1, 1.0])
+    # a marker in the colour column: an unchanged colour is not written again, so it stays
+    skel._capsule_data[:, 11] = 0.25
+    moved = TPOSE_POSITIONS + [0.5, 0.0, 0.0]
+    skel.update(moved)
+    c = skel._capsule_data
+    assert np.allclose(c[:, 11], 0.25)
+    assert np.allclose(c[:, 0:6], first[:, 0:6] + [0.5, 0.0, 0.0, 0.5, 0.0, 0.0], atol=1e-6)
+    assert np.array_equal(c[:, 6:8], first[:, 6:8])
+    skel.color = (0.1, 0.2, 0.9)
+    skel.update(moved)
+    assert np.allclose(skel._capsule_data[:, 8:12], [0.1, 0.2, 0.9, 1.0])
+    skel.alpha = 0.5
+    skel.update(moved)
+    assert np.allclose(skel._capsule_data[:, 11], 0.5)
+    skel.thickness = 2.0
+    skel.update(moved)
+    assert np.allclose(skel._capsule_data[:, 6:8], 2.0 * first[:, 6:8], atol=1e-6)
+    # sticks write other radii into the records; back to capsules, the capsule radii return
+    skel.style = "sticks"
+    skel.update(moved)
+    skel.style = "capsules"
+    skel.update(moved)
+    assert np.allclose(skel._capsule_data[:, 6:8], 2.0 * first[:, 6:8], atol=1e-6)
+
+
+def test_capsule_ends_follow_a_zero_length_leaf(gl_ctx):
+    """A leaf on top of its parent has no direction: its extension points up, as before the fast path."""
+    skel = Skeleton(gl_ctx, TPOSE_PARENTS, shadow=False)
+    p = TPOSE_POSITIONS.copy()
+    p[12] = p[11]                      # the left foot on its knee
+    skel.update(p)
+    assert np.isfinite(skel._capsule_data).all()

@@ -22,6 +22,9 @@ def radii_for_height(height: float) -> dict:
     return {"joint_radius": 0.016 * height, "bone_radius": 0.011 * height, "height": float(height)}
 
 
+_UP = np.array([0.0, 1.0, 0.0])   # the direction of a zero-length leaf or neck
+
+
 class Skeleton(Renderable):
     """``Skeleton(ctx, parents, color, alpha, joint_radius, bone_radius, names=None,
     style="capsules", shadow=True, height=None, thickness=1.0)``; ``update(positions)`` with
@@ -106,6 +109,8 @@ class Skeleton(Renderable):
         self._body_key = None
         self._layout = None        # (body sizes it was made for, capsule records' fixed part)
         self._uploaded_style = None
+        self._rgba = (None, None)  # ((colour, alpha), float32 RGBA) of the last upload
+        self._fixed = None         # (layout, RGBA array, staging array) whose fixed capsule columns are written
 
     @property
     def n_joints(self) -> int:
@@ -180,7 +185,10 @@ class Skeleton(Renderable):
     # -- instances --------------------------------------------------------------------------------
     def _upload(self) -> None:
         p = self._positions
-        rgba = as_rgba(self.color, alpha=self.alpha)
+        key = (self.color, self.alpha)
+        if self._rgba[0] != key:
+            self._rgba = (key, as_rgba(self.color, alpha=self.alpha))
+        rgba = self._rgba[1]
         if self.style == "sticks":
             self._upload_sticks(p, rgba)
             self._upload_capsules_of_sticks(p, rgba)
@@ -218,6 +226,7 @@ class Skeleton(Renderable):
         c[:, 8:12] = rgba
         self._capsules.upload(c)
         self._capsule_data = c
+        self._fixed = None    # the capsule records now hold the sticks' radii
 
     def _capsule_layout(self):
         """What of the capsule records does not depend on the pose, cached with the body sizes: which
@@ -256,8 +265,9 @@ class Skeleton(Renderable):
         ext_rows = J + np.arange(nl + nh)
         pairs = np.concatenate([np.stack([parents, kids], 1), np.stack([leaves, ext_rows[:nl]], 1),
                                 np.stack([ext_rows[nl:], ext_rows[nl:]], 1), np.stack([lonely, lonely], 1)])
-        layout = {"pairs": pairs.astype(np.intp), "dir_from": np.concatenate([leaves, heads]),
-                  "dir_parent": np.concatenate([self.parents[leaves], self.parents[heads]]),
+        layout = {"pairs": pairs.astype(np.intp),
+                  "dir_both": np.concatenate([leaves, heads, self.parents[leaves], self.parents[heads]]),
+                  "ends": np.empty((J + nl + nh, 3)),    # filled per pose (float64, as the sums are)
                   "dir_scale": np.concatenate([ext[leaves], body.HEAD_CENTER_OFFSET * radii[heads]])[:, None],
                   "radii": r}
         self._layout = (body_sizes, layout)
@@ -266,15 +276,30 @@ class Skeleton(Renderable):
     def _upload_capsules(self, p, rgba) -> None:
         L = self._capsule_layout()
         # leaf ends continue the parent bone past the leaf; head centres sit along the neck
-        start = p[L["dir_from"]]
-        d = start - p[L["dir_parent"]]
+        # (each numpy call costs a microsecond or two here, about what its arithmetic on a few rows
+        # costs: the steps below are as few calls as give the same numbers)
+        both = p[L["dir_both"]]                 # the leaves and heads, then their parents, in one gather
+        k = len(L["dir_scale"])
+        start = both[:k]
+        d = start - both[k:]
         norm = np.sqrt(np.add.reduce(d * d, axis=1, keepdims=True))   # np.linalg.norm's sum, without its overhead
-        d = np.where(norm > 1e-9, d / np.maximum(norm, 1e-12), [0.0, 1.0, 0.0])
-        ends = np.concatenate([p, start + d * L["dir_scale"]])
+        if k and norm.min() > 1e-9:
+            d /= norm                           # what the line below gives when no bone has zero length
+        else:
+            d = np.where(norm > 1e-9, d / np.maximum(norm, 1e-12), _UP)
+        ends = L["ends"]                        # the pose, then the leaf ends and head centres
+        ends[:len(p)] = p
+        np.multiply(d, L["dir_scale"], out=ends[len(p):])
+        ends[len(p):] += start
         c = self._capsules.staging(len(L["radii"]))
         c[:, 0:6] = ends[L["pairs"]].reshape(-1, 6)
-        c[:, 6:8] = L["radii"]
-        c[:, 8:12] = rgba
+        # the radius and colour columns stay in the staging array from pose to pose: rewritten only
+        # when the layout, the colour or the array itself changed
+        fixed = self._fixed
+        if fixed is None or fixed[0] is not L or fixed[1] is not rgba or fixed[2] is not c.base:
+            c[:, 6:8] = L["radii"]
+            c[:, 8:12] = rgba
+            self._fixed = (L, rgba, c.base)
         self._capsules.upload(c)
         self._capsule_data = c
 
