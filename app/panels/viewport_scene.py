@@ -246,9 +246,13 @@ def draw_character(d: CharacterDrawing, b: MarkerBatch, snap, off, show: dict, f
         plan = _plan(features, db)
         root = g[0]
         rot_t = _rotation_t(pose.global_rotations[0])  # v @ R^T == R v
+        # both vectors denormalised in one call: element by element the same arithmetic, half the
+        # numpy calls
+        wanted = ([snap.matched_features] if matched else []) + ([snap.current_features] if current else [])
+        raws = features.denormalize(np.asarray(wanted, np.float32)).astype(np.float64)
         # where the matched frame's own future goes (its features, placed at the character)
         if matched:
-            raw = features.denormalize(np.asarray(snap.matched_features, np.float32)).astype(np.float64)
+            raw = raws[0]
             up = off + _MATCHED_LIFT
             n = min(len(plan.trajectory), len(plan.directions))
             traj = _on_ground(raw[plan.trajectory], rot_t, root)
@@ -256,7 +260,7 @@ def draw_character(d: CharacterDrawing, b: MarkerBatch, snap, off, show: dict, f
             b.add_arrows(traj[:n] + up, _on_ground(raw[plan.directions[:n]], rot_t) * 0.28, MATCHED_COLOR)
         # the pose features of the playing frame: foot positions and foot/hip velocities
         if current:
-            raw = features.denormalize(np.asarray(snap.current_features, np.float32)).astype(np.float64)
+            raw = raws[-1]
             points = root + raw[plan.positions] @ rot_t
             b.add_spheres(points + off, 0.035, FEATURE_COLOR)
             if len(plan.velocity_starts):

@@ -288,6 +288,46 @@ def test_frame_time_median_and_percentile_are_numpys():
     assert ft.percentile(50, "ui") == 20.0
 
 
+def test_character_feature_markers_are_the_same_shown_together_or_alone(dbf):
+    """The matched frame's and the playing frame's features are denormalised together: each marker is
+    where it is when only its own toggle is on."""
+    from types import SimpleNamespace
+
+    from app.panels.viewport_scene import CharacterDrawing, MarkerBatch, draw_character
+
+    db, features = dbf
+
+    class Fake:
+        def __init__(self, *a, **k):
+            self.args, self.visible = None, True
+
+        def update(self, *a, **k):
+            self.args = a
+
+    viewer = SimpleNamespace(Skeleton=Fake, Spheres=Fake, Arrows=Fake, Lines=Fake)
+    rot = np.array([np.cos(0.3), 0.0, np.sin(0.3), 0.0])
+    J = len(db.parents)
+    pose = SimpleNamespace(global_positions=np.random.default_rng(3).normal(size=(J, 3)),
+                           global_rotations=np.tile(rot, (J, 1)))
+    snap = SimpleNamespace(pose=pose, matched_features=features.normalize(features.raw[1000]),
+                           current_features=features.normalize(features.raw[2000]))
+
+    def markers(matched, current):
+        batch = MarkerBatch(viewer, None)
+        d = CharacterDrawing(viewer, None, db.parents, (0.5, 0.5, 0.5))
+        show = {"ghost": False, "trajectory": False, "matched": matched, "features": current, "contacts": False}
+        draw_character(d, batch, snap, np.array([1.0, 0.0, 0.0]), show, features, db, None)
+        return batch._centers, batch._origins, batch._vectors
+
+    both, alone_m, alone_c = markers(True, True), markers(True, False), markers(False, True)
+    for b, m, c in zip(both, alone_m, alone_c):
+        assert len(b) == len(m) + len(c) and len(m) and len(c)
+        for x, y in zip(b, m + c):                  # matched first, then the playing frame's
+            assert np.array_equal(x, y)
+    # and where feature_markers puts the playing frame's foot positions
+    ref = feature_markers(features, snap.current_features, pose.global_positions[0], rot, {})
+    assert np.allclose(alone_c[0][0], ref["points"] + [1.0, 0.0, 0.0], atol=1e-9)
+
 def test_viewport_rotation_shortcuts_are_to_matrix():
     from app.panels.viewport_scene import _rotation_t, _z_axes
     from lmm import quat
