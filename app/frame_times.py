@@ -18,9 +18,11 @@ class FrameTimes:
         self.parts: dict[str, deque] = {}
         self.frames: deque = deque(maxlen=n)
         self._medians: dict = {}     # part -> median, until the next add (the menu asks every frame)
+        self._arrays: dict = {}      # part -> its times as an array, until the next add
 
     def add(self, frame_ms: float, parts: dict) -> None:
         self._medians.clear()
+        self._arrays.clear()
         self.frames.append(float(frame_ms))
         for k, v in parts.items():
             self.parts.setdefault(k, deque(maxlen=self.n)).append(float(v))
@@ -29,21 +31,27 @@ class FrameTimes:
         m = self._medians.get(part)
         if m is None:
             d = self.frames if part is None else self.parts.get(part)
-            m = self._medians[part] = median(np.asarray(d, np.float64)) if d else float("nan")
+            m = self._medians[part] = median(self.series(part)) if d else float("nan")
         return m
 
     def percentile(self, q: float, part: str | None = None) -> float:
         """The ``q``-th percentile (``np.percentile``'s linear interpolation) of the frame times or a part."""
         d = self.frames if part is None else self.parts.get(part)
-        return percentile(np.asarray(d, np.float64), q) if d else float("nan")
+        return percentile(self.series(part), q) if d else float("nan")
 
     def fps(self) -> float:
         m = self.median()
         return 1000.0 / m if m and np.isfinite(m) and m > 0 else float("nan")
 
     def series(self, part: str | None = None) -> np.ndarray:
-        d = self.frames if part is None else self.parts.get(part, ())
-        return np.asarray(d, np.float64)
+        """The frame times (or a part's), oldest first; one array per part until the next ``add``,
+        shared by every caller (never write to it): the Stats panel and its percentile read the same
+        series each frame."""
+        a = self._arrays.get(part)
+        if a is None:
+            d = self.frames if part is None else self.parts.get(part, ())
+            a = self._arrays[part] = np.asarray(d, np.float64)
+        return a
 
 
 # np.median and np.percentile cost tens of microseconds a call in argument handling, many times the

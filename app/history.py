@@ -101,6 +101,7 @@ class History:
         self.newest_tick = -1
         self._version = 0       # changes whenever the held ticks do (the window slots cache's key)
         self._slot_cache: dict = {}
+        self._oldest = (-1, -1)   # (version, oldest tick held): panels ask every frame, ticks come less often
 
     # -- appending ---------------------------------------------------------------------------
     def append(self, tick: Tick) -> None:
@@ -155,8 +156,12 @@ class History:
         """The oldest tick still held (-1 when empty)."""
         if self.newest_tick < 0:
             return -1
-        held = self._numbers[self._numbers >= 0]
-        return int(held.min()) if len(held) else -1
+        version, oldest = self._oldest
+        if version != self._version:
+            held = self._numbers[self._numbers >= 0]
+            oldest = int(held.min()) if len(held) else -1
+            self._oldest = (self._version, oldest)
+        return oldest
 
     def contains(self, tick: int) -> bool:
         return tick >= 0 and self._numbers[tick % self.capacity] == tick

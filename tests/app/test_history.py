@@ -99,3 +99,23 @@ def test_clear_and_capacity_checks():
     h.append(tick(1))
     h.clear()
     assert len(h) == 0 and h.newest_tick == -1 and h.latest() is None
+
+
+def test_oldest_tick_follows_every_append_and_clear():
+    """oldest_tick is kept between appends (panels ask every frame): each append that drops a tick, a gap
+    and clear() show in the next answer."""
+    h = History(4)
+    h.append(tick(1))
+    assert h.oldest_tick == 1
+    for i in range(2, 5):
+        h.append(tick(i))
+        assert h.oldest_tick == 1
+    h.append(tick(5))                  # the ring is full: tick 1 drops out
+    assert h.oldest_tick == 2
+    assert h.oldest_tick == 2          # asked again with nothing new: the same
+    h.append(tick(7))                  # a gap: 6 is never held, 2 and 3 drop out
+    assert h.oldest_tick == 4
+    h.clear()
+    assert h.oldest_tick == -1
+    h.append(tick(9))
+    assert h.oldest_tick == 9

@@ -288,6 +288,22 @@ def test_frame_time_median_and_percentile_are_numpys():
     assert ft.percentile(50, "ui") == 20.0
 
 
+def test_frame_time_series_are_kept_until_the_next_frame():
+    """series() hands out one array per part until the next add (the Stats panel, its percentile and
+    the medians share it); the next frame's time is in the next answer."""
+    ft = FrameTimes(n=3)
+    for ms in (10, 20, 30):
+        ft.add(ms, {"mm": ms / 10})
+    a = ft.series()
+    assert a.tolist() == [10.0, 20.0, 30.0] and ft.series() is a        # unchanged: not rebuilt
+    assert ft.series("mm").tolist() == [1.0, 2.0, 3.0]
+    assert ft.percentile(100) == 30.0 and ft.median() == 20.0
+    ft.add(40, {"ui": 5.0})                                           # a frame without an MM step
+    assert ft.series().tolist() == [20.0, 30.0, 40.0] and ft.series() is not a
+    assert ft.series("mm").tolist() == [1.0, 2.0, 3.0] and ft.series("ui").tolist() == [5.0]
+    assert ft.percentile(100) == 40.0 and ft.median() == 30.0
+    assert ft.series("nothing").tolist() == []
+
 def test_character_feature_markers_are_the_same_shown_together_or_alone(dbf):
     """The matched frame's and the playing frame's features are denormalised together: each marker is
     where it is when only its own toggle is on."""
