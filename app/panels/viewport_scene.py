@@ -101,6 +101,10 @@ class MarkerBatch:
             counts = [r[0] for r in runs]
             hit = (np.repeat(np.array([r[1] for r in runs], np.float64), counts),
                    np.repeat(np.array([r[2] for r in runs], np.float64), counts, axis=0))
+            # read-only: the renderables then know the same array means the same values and keep
+            # the columns they wrote from it
+            for a in hit:
+                a.flags.writeable = False
             if len(self._expanded) > 64:
                 self._expanded.clear()
             self._expanded[key] = hit

@@ -300,3 +300,53 @@ def test_capsule_ends_follow_a_zero_length_leaf(gl_ctx):
     p[12] = p[11]                      # the left foot on its knee
     skel.update(p)
     assert np.isfinite(skel._capsule_data).all()
+
+
+def test_marker_colours_and_sizes_are_kept_while_the_same_frozen_arrays_come_again(gl_ctx):
+    """Spheres, arrows and lines keep the colour (and size) columns written from read-only arrays while
+    the same arrays come again; other arrays, a writable one or other defaults are written again."""
+    def frozen(a):
+        a = np.array(a, np.float64)
+        a.flags.writeable = False
+        return a
+
+    pts = np.array([[0.0, 0, 0], [1, 0, 0], [2, 0, 0], [3, 0, 0]])
+    red, blue = frozen([[1.0, 0, 0]] * 4), frozen([[0, 0, 1.0]] * 4)
+    sizes = frozen([0.1, 0.2, 0.3, 0.4])
+    spheres, arrows, lines = Spheres(gl_ctx), Arrows(gl_ctx), Lines(gl_ctx)
+    bufs = (spheres._buf, arrows._shafts, lines._buf)
+
+    def update(colors, move=0.0, radii=sizes):
+        spheres.update(pts + move, radii, colors)
+        arrows.update(pts + move, np.ones_like(pts), colors)
+        lines.update(pts + move, mode="segments", colors=colors)
+
+    update(red)
+    colour_cols = (slice(7, 11), slice(7, 11), slice(6, 10))
+    for buf, cols in zip(bufs, colour_cols):
+        assert np.allclose(buf._staging[:1, cols], [1, 0, 0, 1])
+        buf._staging[:, cols.start] = 0.5           # a marker: kept while nothing changes
+    update(red, move=1.0)
+    for buf, cols in zip(bufs, colour_cols):
+        assert np.allclose(buf._staging[0, cols.start], 0.5)
+    assert np.allclose(spheres._buf._staging[:4, 0], pts[:, 0] + 1.0)         # the positions moved
+    assert np.allclose(lines._buf._staging[:2, 0], [1.0, 3.0])
+    assert np.allclose(spheres._buf._staging[:4, 6], [0.1, 0.2, 0.3, 0.4])
+    update(blue, move=1.0)                          # another array: written
+    for buf, cols in zip(bufs, colour_cols):
+        assert np.allclose(buf._staging[:1, cols], [0, 0, 1, 1])
+    spheres.update(pts, frozen([0.5] * 4), blue)    # other sizes, same colours
+    assert np.allclose(spheres._buf._staging[:4, 6], 0.5)
+    writable = np.array([[0, 1.0, 0]] * 4)
+    update(writable)
+    writable[:] = [1.0, 1.0, 0]                     # changed in place: a writable array is written again
+    update(writable)
+    for buf, cols in zip(bufs, colour_cols):
+        assert np.allclose(buf._staging[:1, cols], [1, 1, 0, 1])
+    spheres.update(pts, None, None)                 # back to the renderable's own colour and radius
+    assert np.allclose(spheres._buf._staging[:4, 6], spheres.radius)
+    assert np.allclose(spheres._buf._staging[:1, 7:10], spheres.color)
+    spheres.update(pts, None, frozen([[1.0, 0, 0, 0.5]] * 4))
+    assert spheres.transparent
+    spheres.update(pts, None, red)
+    assert not spheres.transparent

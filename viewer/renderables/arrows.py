@@ -5,7 +5,7 @@ import moderngl
 import numpy as np
 
 from .base import (MESH_INSTANCE_FLOATS, FrameState, InstanceBuffer, Renderable, Resources,
-                   as_rgba, draw_mesh_instances)
+                   as_rgba, draw_mesh_instances, same_fixed_inputs)
 
 
 class Arrows(Renderable):
@@ -26,6 +26,7 @@ class Arrows(Renderable):
         self._heads = InstanceBuffer(ctx, MESH_INSTANCE_FLOATS)
         self._shaft_vao = res.mesh_vao("cylinder", self._shafts.buffer)
         self._head_vao = res.mesh_vao("cone", self._heads.buffer)
+        self._fixed = None      # the inputs of the radius and colour columns the staging arrays hold
 
     def update(self, origins, directions, colors=None) -> None:
         o = np.asarray(origins, dtype=np.float32).reshape(-1, 3)
@@ -34,18 +35,23 @@ class Arrows(Renderable):
         head = np.minimum(self.head_length, 0.5 * length)
         unit = d / np.maximum(length, 1e-12)[:, None]
         neck = o + unit * (length - head)[:, None]
-        rgba = as_rgba(self.color if colors is None else colors)
         shafts = self._shafts.staging(len(o))
+        heads = self._heads.staging(len(o))
         shafts[:, 0:3] = o
         shafts[:, 3:6] = neck
-        shafts[:, 6] = self.shaft_radius
-        shafts[:, 7:11] = rgba
-        self._shafts.upload(shafts)
-        heads = self._heads.staging(len(o))
         heads[:, 0:3] = neck
         heads[:, 3:6] = o + d
-        heads[:, 6] = self.head_radius
-        heads[:, 7:11] = rgba
+        # unchanged colours (the same frozen array, the same default) and radii are still in the
+        # staging arrays: only the ends are written
+        fixed = ((shafts.base, heads.base), (colors, self.color, self.shaft_radius, self.head_radius, len(o)))
+        if not same_fixed_inputs(self._fixed, fixed):
+            rgba = as_rgba(self.color if colors is None else colors)
+            shafts[:, 6] = self.shaft_radius
+            shafts[:, 7:11] = rgba
+            heads[:, 6] = self.head_radius
+            heads[:, 7:11] = rgba
+            self._fixed = fixed
+        self._shafts.upload(shafts)
         self._heads.upload(heads)
 
     def draw(self, frame: FrameState) -> None:

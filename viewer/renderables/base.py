@@ -405,6 +405,25 @@ class InstanceBuffer:
         self.buffer.release()
 
 
+def same_fixed_inputs(old: tuple | None, new: tuple) -> bool:
+    """Whether an update's per-item inputs are those its staging arrays already hold the columns of.
+    ``old``/``new``: ``(staging arrays, inputs)``; the staging arrays must be the same objects, input
+    arrays the same read-only objects (a caller handing the same frozen array again means the same
+    values: MarkerBatch's sizes and colours), other inputs equal. A writable input array never counts
+    as the same: its owner may have changed it in place."""
+    if old is None or len(old[0]) != len(new[0]) or len(old[1]) != len(new[1]):
+        return False
+    if any(a is not b for a, b in zip(old[0], new[0])):
+        return False
+    for a, b in zip(old[1], new[1]):
+        if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+            if a is not b or b.flags.writeable:
+                return False
+        elif a != b:
+            return False
+    return True
+
+
 def as_rgba(color, n: int | None = None, alpha: float = 1.0) -> np.ndarray:
     """Colours as float32 RGBA: one colour (3|4,) -> (4,), or per item (n, 3|4) -> (n, 4)."""
     c = np.asarray(color, dtype=np.float32)

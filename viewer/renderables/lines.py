@@ -5,7 +5,7 @@ import moderngl
 import numpy as np
 
 from .base import (LINE_INSTANCE_FLOATS, FrameState, InstanceBuffer, Renderable, Resources, as_rgba,
-                   set_depth_write)
+                   same_fixed_inputs, set_depth_write)
 
 
 class Lines(Renderable):
@@ -22,6 +22,7 @@ class Lines(Renderable):
         self.visible = True
         self._buf = InstanceBuffer(ctx, LINE_INSTANCE_FLOATS)
         self._vao = Resources.of(ctx).line_vao(self._buf.buffer)
+        self._fixed = None      # the inputs of the colour columns the staging array holds
         self._transparent = False
 
     @property
@@ -30,10 +31,6 @@ class Lines(Renderable):
 
     def update(self, points, mode: str = "strip", colors=None) -> None:
         p = np.asarray(points, dtype=np.float32).reshape(-1, 3)
-        rgba = as_rgba(self.color if colors is None else colors)
-        per_point = rgba.ndim == 2
-        if per_point and len(rgba) != len(p):
-            raise ValueError(f"{len(rgba)} colours for {len(p)} points")
         if mode == "strip":
             i0 = np.arange(max(len(p) - 1, 0))
             i1 = i0 + 1
@@ -47,9 +44,19 @@ class Lines(Renderable):
         data = self._buf.staging(len(i0))
         data[:, 0:3] = p[i0]
         data[:, 3:6] = p[i1]
-        data[:, 6:10] = rgba[i0] if per_point else rgba
-        data[:, 10:14] = rgba[i1] if per_point else rgba
-        self._transparent = bool(len(data) and ((data[:, 9] < 1.0).any() or (data[:, 13] < 1.0).any()))
+        # unchanged colours (the same frozen array, the same default) for the same segments are still
+        # in the staging array: only the ends are written
+        fixed = ((data.base,), (colors, self.color, mode, len(p)))
+        if not same_fixed_inputs(self._fixed, fixed):
+            self._fixed = None
+            rgba = as_rgba(self.color if colors is None else colors)
+            per_point = rgba.ndim == 2
+            if per_point and len(rgba) != len(p):
+                raise ValueError(f"{len(rgba)} colours for {len(p)} points")
+            data[:, 6:10] = rgba[i0] if per_point else rgba
+            data[:, 10:14] = rgba[i1] if per_point else rgba
+            self._transparent = bool(len(data) and ((data[:, 9] < 1.0).any() or (data[:, 13] < 1.0).any()))
+            self._fixed = fixed
         self._buf.upload(data)
 
     def draw(self, frame: FrameState) -> None:

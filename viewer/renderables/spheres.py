@@ -5,7 +5,7 @@ import moderngl
 import numpy as np
 
 from .base import (MESH_INSTANCE_FLOATS, FrameState, InstanceBuffer, Renderable, Resources,
-                   as_rgba, draw_mesh_instances, set_depth_write)
+                   as_rgba, draw_mesh_instances, same_fixed_inputs, set_depth_write)
 
 
 class Spheres(Renderable):
@@ -20,6 +20,7 @@ class Spheres(Renderable):
         self._buf = InstanceBuffer(ctx, MESH_INSTANCE_FLOATS)
         self._vao = Resources.of(ctx).mesh_vao("sphere", self._buf.buffer)
         self._transparent = False
+        self._fixed = None      # the inputs of the radius and colour columns the staging array holds
 
     @property
     def transparent(self) -> bool:
@@ -30,10 +31,15 @@ class Spheres(Renderable):
         data = self._buf.staging(len(c))
         data[:, 0:3] = c
         data[:, 3:6] = c
-        data[:, 6] = self.radius if radii is None else np.broadcast_to(np.asarray(radii, np.float32), len(c))
-        rgba = as_rgba(self.color if colors is None else colors)
-        data[:, 7:11] = rgba
-        self._transparent = bool(len(c) and (data[:, 10] < 1.0).any())
+        # radii and colours that did not change (the same frozen arrays, the same defaults) are still
+        # in the staging array: only the centres are written
+        fixed = ((data.base,), (radii, colors, self.radius, self.color, len(c)))
+        if not same_fixed_inputs(self._fixed, fixed):
+            data[:, 6] = self.radius if radii is None else np.broadcast_to(np.asarray(radii, np.float32), len(c))
+            rgba = as_rgba(self.color if colors is None else colors)
+            data[:, 7:11] = rgba
+            self._transparent = bool(len(c) and (data[:, 10] < 1.0).any())
+            self._fixed = fixed
         self._buf.upload(data)
 
     def draw(self, frame: FrameState) -> None:
