@@ -253,8 +253,11 @@ class SearchPanel(Panel):
             if tag == "cost_mm":
                 best_cost = y
             ok = np.isfinite(y)
-            any_ok = bool(ok.any())
-            if any_ok:
+            held = int(np.count_nonzero(ok))
+            any_ok = held > 0
+            if held == len(y):     # every tick has a cost (the usual case): no masked copies to make
+                dpg.set_value(tag, list(decimate(t, y, 300)))
+            elif any_ok:
                 dpg.set_value(tag, list(decimate(t[ok], y[ok], 300)))
             else:
                 dpg.set_value(tag, [t[-1:], np.zeros(1)])

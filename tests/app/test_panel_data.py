@@ -717,3 +717,25 @@ def test_a_user_layout_that_killed_its_start_is_set_aside(tmp_path, monkeypatch)
     m.started()                                         # a start that worked leaves no marker
     assert m.layout.name == "user" and not (tmp_path / "layout.ini.starting").exists()
     m.close()
+
+
+def test_total_error_is_the_sum_of_channel_errors(dbf):
+    from types import SimpleNamespace
+
+    from app.panels.features import total_error
+
+    _, features = dbf
+    rng = np.random.default_rng(11)
+    for _ in range(50):
+        a, b = rng.normal(size=27), rng.normal(size=27)
+        assert total_error(features, a, b) == float(np.sum(channel_errors(features, a, b)))
+    # channels that do not tile the vector (a gap, or a longer vector): the per-channel sums
+    gap = SimpleNamespace(slices=[slice(0, 3), slice(4, 6)], layout=[None, None])
+    a, b = rng.normal(size=6), rng.normal(size=6)
+    assert total_error(gap, a, b) == float(np.sum(channel_errors(gap, a, b)))
+    assert total_error(gap, a, b) != float(np.sum((a - b) ** 2))
+    short = SimpleNamespace(slices=[slice(0, 3), slice(3, 6)], layout=[None, None])
+    a, b = rng.normal(size=8), rng.normal(size=8)
+    assert total_error(short, a, b) == float(np.sum(channel_errors(short, a, b)))
+    assert np.isclose(total_error(short, a, b), float(np.sum((a[:6] - b[:6]) ** 2)))
+    assert not np.isclose(total_error(short, a, b), float(np.sum((a - b) ** 2)))
