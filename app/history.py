@@ -241,9 +241,21 @@ def search_agreement(history: History, controller: str, end_tick: int, n: int,
 
 def agreement(searched: np.ndarray, nn: np.ndarray, got: np.ndarray, tolerance_frames: int = 0) -> tuple[float, int]:
     """:func:`search_agreement` of windows already gathered (``searched``, ``nn_frame`` and the chosen frame)."""
-    valid = (searched > 0.5) & np.isfinite(nn) & (nn >= 0) & np.isfinite(got)
-    k = int(valid.sum())
-    if k == 0:
-        return float("nan"), 0
-    agree = np.abs(got[valid] - nn[valid]) <= tolerance_frames
-    return float(agree.mean()), k
+    return masks_agreement(*search_masks(searched, nn, got, tolerance_frames))
+
+
+def search_masks(searched, nn, got, tolerance_frames: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Per tick: was it a search (a finite nearest neighbour and a finite chosen frame), and did the chosen
+    frame agree with the nearest neighbour within ``tolerance_frames`` frames."""
+    nn, got = np.asarray(nn), np.asarray(got)
+    with np.errstate(invalid="ignore"):   # rows with a NaN or inf are not searches (s is False there)
+        s = (np.asarray(searched) > 0.5) & np.isfinite(nn) & (nn >= 0) & np.isfinite(got)
+        agree = s & (np.abs(got - nn) <= tolerance_frames)
+    return s, agree
+
+
+def masks_agreement(searched: np.ndarray, agreed: np.ndarray) -> tuple[float, int]:
+    """(fraction of the searches that agreed, how many searches) of :func:`search_masks`; (nan, 0) without
+    searches."""
+    k = int(searched.sum())
+    return (int(agreed.sum()) / k, k) if k else (float("nan"), 0)

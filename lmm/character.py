@@ -50,7 +50,7 @@ from lmm import quat
 from lmm import quat_scalar as qs
 from lmm.data.derived import cached
 from lmm.controller import Candidates, Controller, DebugSnapshot, InputState, Pose
-from lmm.features import build_query_from_columns, trajectory_query_columns
+from lmm.features import build_query_from_columns, normalize_with, trajectory_query_columns
 from lmm.ik import FootLockState, solve_leg_floats
 from lmm.inertialize import (Offsets, ShownPose, inertialize_apply_pose, inertialize_decay,
                              inertialize_root_velocities, inertialize_transition)
@@ -116,9 +116,7 @@ class _SnapshotFeatures:
 
     def current(self) -> np.ndarray:
         if self._current is None:
-            out = self._raw - self._mean
-            out *= self._inv_scale
-            self._current = out if out.dtype == np.float32 else out.astype(np.float32)
+            self._current = normalize_with(self._raw, self._mean, self._inv_scale)
         return self._current
 
     def cost(self) -> float:

@@ -223,6 +223,14 @@ def compute_raw(db, layout: Sequence[Channel] = DEFAULT_LAYOUT) -> np.ndarray:
 _CHUNK_FRAMES = 8192
 
 
+def normalize_with(raw: np.ndarray, mean: np.ndarray, inv_scale: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """``(raw - mean) * inv_scale`` as float32 (:meth:`Features.normalize` with a given scaling, e.g. one
+    taken earlier), into ``out`` when given (float32 operands: the same float32 operations)."""
+    out = np.subtract(raw, mean, out=out)
+    out *= inv_scale  # in place: the same products as (raw - mean) * inv_scale, one array fewer
+    return out if out.dtype == np.float32 else out.astype(np.float32)
+
+
 @dataclass
 class Features:
     """Database features plus their normalisation; ``normalized`` is what search compares against."""
@@ -268,8 +276,7 @@ class Features:
         buf = np.empty((max(-(-n // self.ROW_MULTIPLE), 1) * self.ROW_MULTIPLE, d), np.float32)
         out = buf[:n]
         if self.raw.dtype == np.float32 and self.mean.dtype == np.float32:
-            np.subtract(self.raw, self.mean, out=out)   # the float32 operations of (raw - mean) * inv_scale
-            out *= self.inv_scale
+            normalize_with(self.raw, self.mean, self.inv_scale, out=out)
         else:
             out[...] = (self.raw - self.mean) * self.inv_scale
         if n:
@@ -296,9 +303,7 @@ class Features:
         return True
 
     def normalize(self, raw: np.ndarray) -> np.ndarray:
-        out = raw - self.mean
-        out *= self.inv_scale  # in place: the same products as (raw - mean) * inv_scale, one array fewer
-        return out if out.dtype == np.float32 else out.astype(np.float32)
+        return normalize_with(raw, self.mean, self.inv_scale)
 
     def denormalize(self, x: np.ndarray) -> np.ndarray:
         """Inverse of normalize for channels with non-zero weight (zero-weight dims come back as the mean)."""

@@ -252,8 +252,15 @@ def inertialize_decay(offsets: Offsets, halflife: float, dt: float) -> Offsets:
 
 def inertialize_apply(offsets: Offsets, positions, velocities, rotations, angular_velocities):
     """The shown pose: source + offsets. Returns (positions, velocities, rotations, angular velocities)."""
-    rot = _normalize(_mul(offsets.rotations, rotations))
-    return (positions + offsets.positions, velocities + offsets.velocities, rot,
+    pos, rot = inertialize_apply_pose(offsets, positions, rotations)
+    vel, ang = _apply_velocities(offsets, velocities, angular_velocities)
+    return pos, vel, rot, ang
+
+
+def _apply_velocities(offsets: Offsets, velocities, angular_velocities):
+    """The shown velocities and angular velocities: source + offsets (the offset rotation turns the
+    source's angular velocities)."""
+    return (velocities + offsets.velocities,
             offsets.angular_velocities + _mul_vec(offsets.rotations, angular_velocities))
 
 
@@ -289,9 +296,7 @@ class ShownPose:
 
     def _velocities(self):
         if self._vel is None:
-            off = self._offsets
-            self._vel = self._src_vel + off.velocities
-            self._ang = off.angular_velocities + _mul_vec(off.rotations, self._src_ang)
+            self._vel, self._ang = _apply_velocities(self._offsets, self._src_vel, self._src_ang)
         return self._vel, self._ang
 
     def __len__(self):

@@ -265,7 +265,7 @@ class LearnedMotionMatchingController(CharacterController):
         self.idle_note = ""          # why the idle set cannot be used ("" when it can)
         self._idle_playing = False   # the state was last set from the idle set
         self._calib_frame = -1       # a database frame like the playing state, for ground calibration
-        self._calib_table = None     # (normalised features it was built from, frames, their rows)
+        self._calib_table = None     # (normalised features it was built from, every stride-th row of them)
         super().__init__(db, features, tuning)
 
     # -- the networks ---------------------------------------------------------------------------
@@ -380,11 +380,10 @@ class LearnedMotionMatchingController(CharacterController):
         subsample: about 3,600 rows for the default data, a few tens of microseconds per jump."""
         table = self._calib_table
         if table is None or table[0] is not self.features.normalized:
-            frames = np.arange(0, self.db.n_frames, self.CALIBRATION_STRIDE)
-            table = self._calib_table = (self.features.normalized, frames,
-                                         np.ascontiguousarray(self.features.normalized[frames], np.float32))
-        d = table[2] - np.asarray(features_norm, np.float32)
-        return int(table[1][int(np.argmin(np.einsum("ij,ij->i", d, d)))])
+            table = self._calib_table = (self.features.normalized,
+                                         self.features.normalized[::self.CALIBRATION_STRIDE].copy())
+        d = table[1] - np.asarray(features_norm, np.float32)
+        return int(np.argmin(np.einsum("ij,ij->i", d, d))) * self.CALIBRATION_STRIDE
 
     def _on_features_changed(self) -> None:
         if self._index is not None:

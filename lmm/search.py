@@ -600,8 +600,7 @@ def _rank_groups(frames, costs, keys, frame_group, b32, current, cont_cost, in_g
             rows.append(cont_row)
         rows.sort()
         del rows[top_k:]
-        return (np.array([r[2] for r in rows], dtype=np.int64), np.array([r[0] for r in rows], dtype=np.float32),
-                np.array([r[3] for r in rows], dtype=np.float32))
+        return _rows_result(rows)
     costs = costs[few]
     by_group = {}
     for row in zip(costs.tolist(), f_few.tolist(), (costs + tc).tolist(), key_list, group_list):
@@ -621,6 +620,11 @@ def _rank_groups(frames, costs, keys, frame_group, b32, current, cont_cost, in_g
         rows += group_rows
     rows.sort()                             # the merge: total, the playing frame first, then frame
     del rows[top_k:]
+    return _rows_result(rows)
+
+
+def _rows_result(rows) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(frames, totals, biases) of ranked ``(total, order, frame, bias)`` rows."""
     return (np.array([r[2] for r in rows], dtype=np.int64), np.array([r[0] for r in rows], dtype=np.float32),
             np.array([r[3] for r in rows], dtype=np.float32))
 

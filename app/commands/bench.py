@@ -246,7 +246,8 @@ def benchmark_lmm(db, features, controller, inputs="builtin:random:1", steps: in
             if "projector" in snap.timings_us:
                 proj_us.append(snap.timings_us["projector"])
                 queries.append(nets.to_network_space(controller.features.denormalize(snap.query)))
-    samples = {"decompressor": np.array(states, np.float32), "stepper": np.array(states, np.float32),
+    states = np.array(states, np.float32)
+    samples = {"decompressor": states, "stepper": states,
                "projector": np.array(queries or [nets.to_network_space(controller.features.raw[0])], np.float32)}
 
     def median_us(net, xs, n=2000):

@@ -44,41 +44,34 @@ def bar_values(view: View) -> dict:
     }
 
 
+def _tiled_starts(features, n: int) -> list[int] | None:
+    """The channels' start indices when they tile a vector of ``n`` values end to end (one ``reduceat``
+    sums every channel), else None."""
+    starts = [s.start for s in features.slices]
+    if starts and all(s.stop == e for s, e in zip(features.slices, starts[1:] + [n])):
+        return starts
+    return None
+
+
 def channel_errors(features, a, b) -> list[float]:
     """Per-channel squared distance between two normalised vectors (nan when either is missing)."""
     if a is None or b is None:
         return [float("nan")] * len(features.layout)
     d = np.asarray(a, np.float64) - np.asarray(b, np.float64)
-    starts = [s.start for s in features.slices]
-    if starts and all(s.stop == e for s, e in zip(features.slices, starts[1:] + [len(d)])):
+    starts = _tiled_starts(features, len(d))
+    if starts is not None:
         return np.add.reduceat(d * d, starts).tolist()     # the channels tile the vector: one call
     return [float(np.sum(d[s] ** 2)) for s in features.slices]
 
 
 def total_error(features, a: np.ndarray, b: np.ndarray) -> float:
     """``np.sum(channel_errors(features, a, b))`` of two float64 vectors, without the per-channel list:
-    the same sums (each channel's squares, then numpy's sum of them) with the tiling check kept."""
+    the same sums (each channel's squares, then numpy's sum of them)."""
     d = a - b
-    starts, last, chained = _channel_starts(features)
-    if not (starts and chained and last == len(d)):
+    starts = _tiled_starts(features, len(d))
+    if starts is None:
         return float(np.sum(channel_errors(features, a, b)))
     return float(np.sum(np.add.reduceat(d * d, starts)))
-
-
-_STARTS: dict = {}
-
-
-def _channel_starts(features):
-    """(channel start indices, the last channel's stop, whether each channel ends where the next
-    starts) of a features object, kept per object (channel_errors' tiling check, less the length)."""
-    hit = _STARTS.get(id(features))
-    if hit is None or hit[0] is not features:
-        starts = [s.start for s in features.slices]
-        chained = all(s.stop == e for s, e in zip(features.slices, starts[1:]))
-        if len(_STARTS) > 16:
-            _STARTS.clear()
-        hit = _STARTS[id(features)] = (features, (starts, features.slices[-1].stop if starts else 0, chained))
-    return hit[1]
 
 
 class FeaturesPanel(Panel):

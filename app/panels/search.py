@@ -14,6 +14,7 @@ import re
 
 import numpy as np
 
+from app.history import masks_agreement, search_masks
 
 from .base import Panel, View
 from .common import COLORS, GOOD, SHORT, cost_color, decimate, fmt_num, seconds_axis, short_channel_name
@@ -91,16 +92,6 @@ def column_fractions(rows: list[dict], key: str, digits: int = 3) -> list[float]
     if hi - lo < 0.5 * 10.0 ** -digits:
         return [0.0 if np.isfinite(v) else 1.0 for v in shown]
     return [float((v - lo) / (hi - lo)) if np.isfinite(v) else 1.0 for v in shown]
-
-
-def search_masks(searched, nn, got, tolerance: int = 0) -> tuple[np.ndarray, np.ndarray]:
-    """Per tick: was it a search (a finite nearest neighbour and a finite chosen frame), and did the chosen
-    frame agree with the nearest neighbour within ``tolerance`` frames."""
-    nn, got = np.asarray(nn), np.asarray(got)
-    with np.errstate(invalid="ignore"):   # rows with a NaN or inf are not searches (s is False there)
-        s = (np.asarray(searched) > 0.5) & np.isfinite(nn) & (nn >= 0) & np.isfinite(got)
-        agree = s & (np.abs(got - nn) <= tolerance)
-    return s, agree
 
 
 def rolling_agreement(searched, nn, got, window: int, tolerance: int = 0) -> np.ndarray:
@@ -226,8 +217,7 @@ class SearchPanel(Panel):
                 dist = float(np.linalg.norm(np.asarray(lmm.projected_features) - features.normalized[nn_frame]))
             # which ticks searched and agreed, once for the rate and its curve
             masks = search_masks(searched, nn, projected, self.tolerance)
-            k = int(masks[0].sum())
-            rate = int(masks[1].sum()) / k if k else float("nan")
+            rate, k = masks_agreement(*masks)
             agree = "-" if k == 0 else f"{100 * rate:.0f}% of {k} searches"
             cache.set("nn_status", "LMM projector vs exact nearest neighbour of the same query")
         else:
