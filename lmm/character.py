@@ -105,7 +105,8 @@ class _SnapshotFeatures:
     matched frame's normalised features (``matched``), each computed on first read with the operations
     :meth:`lmm.features.Features.normalize` and the squared distance use. The feature scaling is taken
     now (a weight change replaces those arrays, never writes them), as are the raw features and the
-    query (neither is written once made), so a later read gives this tick's values."""
+    query (neither is written once made; the query may be given as :meth:`_TickQuery.query`), so a later
+    read gives this tick's values."""
 
     __slots__ = ("_raw", "_mean", "_inv_scale", "_normalized", "_query", "_frame", "_current")
 
@@ -120,7 +121,10 @@ class _SnapshotFeatures:
         return self._current
 
     def cost(self) -> float:
-        diff = self._query - self.current()
+        query = self._query
+        if callable(query):             # the tick's query worked out on first read (see _TickQuery)
+            query = self._query = query()
+        diff = query - self.current()
         diff *= diff                    # the same squares as (query - current) ** 2
         return float(diff.sum())
 
@@ -323,6 +327,51 @@ class _FKPlan:
             and parents[chain[0]] not in inside for chain in leg_chains)
         self.legs = [(tuple(chain), parents[chain[0]], [j for j in sub if j not in chain])
                      for chain, sub in zip(leg_chains, subtrees)] if ok else None
+
+
+class _TickQuery:
+    """One tick's predicted trajectory (world positions and rotations at the feature offsets) and its
+    query (normalised features: the pose channels from the playing pose, the trajectory channels from
+    the prediction seen from the character root, as every database frame's features are seen from its
+    own root, so a character lagging behind the simulation object asks for the motion that catches up).
+
+    A search needs the query and the debugger both; a tick that does not search needs neither, so each is
+    worked out on first call (:class:`lmm.controller.LazyField` takes the methods). Everything they read
+    is taken now: the simulation state and goals (tuples), the character root before this tick's
+    integration, the playing pose's raw features and the feature scaling (replaced, never written, when
+    they change), so a later call gives this tick's values, with the same float operations."""
+
+    __slots__ = ("_args", "_times", "_root", "_source", "_columns", "_mean", "_inv_scale", "_traj", "_query")
+
+    def __init__(self, controller, state, des_vel, des_rot, vel_halflife, rot_halflife):
+        self._args = (*state, des_vel, des_rot, vel_halflife, rot_halflife)
+        self._times = controller._traj_times
+        self._root = (controller._root_position_t, controller._root_rotation_t)
+        self._source = controller._source_features()
+        self._columns = controller._query_columns
+        features = controller.features
+        self._mean, self._inv_scale = features.mean, features.inv_scale
+        self._traj = self._query = None
+
+    def _trajectory(self) -> tuple:
+        traj = self._traj
+        if traj is None:
+            traj = self._traj = trajectory_predict_floats(*self._args, self._times)
+        return traj
+
+    def positions(self) -> np.ndarray:
+        return np.array(self._trajectory()[0])
+
+    def rotations(self) -> np.ndarray:
+        return np.array(self._trajectory()[1])
+
+    def query(self) -> np.ndarray:
+        if self._query is None:
+            traj_pos, traj_rot = self._trajectory()
+            local_pos, local_dir = trajectory_in_root_space_floats(traj_pos, traj_rot, *self._root)
+            raw = build_query_from_columns(self._source, self._columns, local_pos, local_dir)
+            self._query = normalize_with(raw, self._mean, self._inv_scale)
+        return self._query
 
 
 class _LazyRootShift:
@@ -581,17 +630,10 @@ class CharacterController(Controller):
         vel_halflife, rot_halflife = tun.simulation_velocity_halflife_s, tun.simulation_rotation_halflife_s
         state = simulation_update_floats(*sim_state, des_vel_t, des_rot_t, vel_halflife, rot_halflife, dt)
         self.sim = SimulationFloats(state)
-        traj_pos_t, traj_rot_t = trajectory_predict_floats(*state, des_vel_t, des_rot_t, vel_halflife,
-                                                           rot_halflife, self._traj_times)
-        traj_pos, traj_rot = np.array(traj_pos_t), np.array(traj_rot_t)
-
-        # query: pose channels from the playing pose; trajectory channels from the prediction, seen from
-        # the character root (as every database frame's features are seen from its own root), so a
-        # character lagging behind the simulation object asks for the motion that catches up
-        local_pos, local_dir = trajectory_in_root_space_floats(traj_pos_t, traj_rot_t, self._root_position_t,
-                                                               self._root_rotation_t)
-        query_raw = build_query_from_columns(self._source_features(), self._query_columns, local_pos, local_dir)
-        query = self.features.normalize(query_raw)
+        # the predicted trajectory and the query, made now on a tick that searches, else when a reader of
+        # the snapshot asks (see _TickQuery): only a search and the debugger use them
+        tick_query = _TickQuery(self, state, des_vel_t, des_rot_t, vel_halflife, rot_halflife)
+        query = tick_query.query
 
         # search when due
         # time since the last search against the interval read now, so a new interval acts at once
@@ -599,6 +641,7 @@ class CharacterController(Controller):
         searched = transitioned = False
         must = self._must_jump()
         if self._needs_search or forced or must or self._since_search >= tun.search_interval_s - 1e-6:
+            query = query()
             t0 = time.perf_counter()
             outcome = self._search(query, forced or must)
             timings["search"] = (time.perf_counter() - t0) * 1e6
@@ -670,7 +713,8 @@ class CharacterController(Controller):
             controller=self.name, tick=self.tick, time_s=self.time_s, input=inp.copy(),
             simulation_position=sim.position, simulation_rotation=sim.rotation,
             simulation_velocity=sim.velocity, desired_velocity=des_vel,
-            desired_rotation=des_rot, trajectory_positions=traj_pos, trajectory_rotations=traj_rot,
+            desired_rotation=des_rot, trajectory_positions=tick_query.positions,
+            trajectory_rotations=tick_query.rotations,
             trajectory_offsets=self.traj_offsets.copy(), query=query, current_features=feats.current,
             matched_frame=int(frame), matched_features=feats.matched,
             candidates=self._last_candidates, searched=searched, forced_search=bool(searched and (forced or must)),

@@ -59,8 +59,9 @@ class Candidates:
 
 class LazyField:
     """A dataclass field whose value may be given as a zero-argument function, called (once) on the
-    first read: debug-only data that costs time to compute (the ghost pose's forward kinematics) is
-    computed only when a reader (the studio's viewport) asks for it, never in headless runs.
+    first read: debug-only data that costs time to compute (the ghost pose's forward kinematics, the
+    trajectory and query of a tick that did not search) is computed only when a reader (the studio's
+    panels) asks for it, never in headless runs.
     ``default``: the field's default value (without one the field is required)."""
 
     _NO_DEFAULT = object()
@@ -98,11 +99,12 @@ class DebugSnapshot:
     simulation_velocity: np.ndarray      # (3,)
     desired_velocity: np.ndarray         # (3,)
     desired_rotation: np.ndarray         # (4,)
-    trajectory_positions: np.ndarray     # (T, 3) world, at the feature offsets
-    trajectory_rotations: np.ndarray     # (T, 4) world
+    # (the trajectory and the query are worked out on first read on a tick that did not search)
+    trajectory_positions: np.ndarray = LazyField()  # (T, 3) world, at the feature offsets
+    trajectory_rotations: np.ndarray = LazyField()  # (T, 4) world
     trajectory_offsets: np.ndarray       # (T,) frames ahead
     # matching
-    query: np.ndarray                    # (D,) normalised query features
+    query: np.ndarray = LazyField()      # (D,) normalised query features
     current_features: np.ndarray = LazyField()  # (D,) normalised features of the pose being played
     matched_frame: int                   # database frame being played (MM) / nearest frame (LMM)
     matched_features: np.ndarray = LazyField()  # (D,) normalised features of the matched frame

@@ -63,6 +63,38 @@ def test_lazy_snapshot_features_are_the_ticks_values(db, features):
     assert np.isfinite(later.current_cost) and later.current_features.dtype == np.float32
 
 
+def test_lazy_trajectory_and_query_are_the_ticks_values(db, features):
+    """On a tick that does not search, the trajectory and the query are worked out when read: read at
+    once or 90 ticks (and a feature-weight change) later, they are the same bytes; on a tick that
+    searches they are made at once."""
+    log = builtin("zigzag", 3.0)
+    fields = ("trajectory_positions", "trajectory_rotations", "query")
+    runs = []
+    for late in (False, True):
+        c = MotionMatchingController(db, features)
+        snaps = []
+        for i in range(90):
+            snap = c.step(log.at(i * DT), DT)[1]
+            if not late:
+                [getattr(snap, f) for f in fields]
+            snaps.append(snap)
+        if late:
+            c.tuning.feature_weights = {c.features.layout[0].name: 7.0}
+            c.step(log.at(90 * DT), DT)
+        runs.append(snaps)
+    searched = [s.searched for s in runs[1]]
+    assert any(searched) and not all(searched)
+    for now, later in zip(*runs):
+        if later.searched:
+            assert not callable(later.__dict__["_lazy_query"])
+        else:
+            assert callable(later.__dict__["_lazy_query"])
+        for f in fields:
+            a, b = getattr(now, f), getattr(later, f)
+            assert a.dtype == b.dtype and a.tobytes() == b.tobytes(), f
+        assert now.current_cost == later.current_cost
+
+
 def _pair(db, features, warm_s=2.2, source="zigzag", until=None):
     """Two controllers in lockstep after ``warm_s`` seconds of the same input (and then until
     ``until(controller)`` holds)."""
