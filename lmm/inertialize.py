@@ -221,21 +221,33 @@ def inertialize_decay(offsets: Offsets, halflife: float, dt: float) -> Offsets:
     spring on (2, J, 3) = [position offset, rotation offset's scaled angle axis].
 
     The result's fields are views of two (2, J, 3) arrays [position, rotation vector] and [velocity,
-    angular velocity] (each half contiguous); when the next decay finds them still so (the fields not replaced), it reads the
-    velocities as they are and writes the rotation log next to the positions, without gathering."""
+    angular velocity] (each half contiguous). When the next decay finds them still so (no field
+    replaced), it reads them as they are, without gathering, and takes the rotation vector the rotations
+    were made from instead of their logarithm (the same vector to rounding: a rotation vector differs
+    from the logarithm's by at most a few units in the last place, about 1e-16 rad, see
+    ``tests/test_inertialize.py``), unless a component is 1.8 rad or more, where the logarithm is taken
+    to keep the offset on the shorter way round."""
     n = len(offsets.positions)
     y, dt_, e = _spring_constants(halflife, dt, n)
     stack = offsets._stack
-    pos, vel, ang = offsets.positions, offsets.velocities, offsets.angular_velocities
-    if stack is not None and stack[0] is pos and stack[1] is vel and stack[2] is ang:
-        x, v = pos.base, vel.base       # the rotation-vector half of x is scratch: overwritten below
+    pos, vel, ang, rot = offsets.positions, offsets.velocities, offsets.angular_velocities, offsets.rotations
+    if stack is not None and stack[0] is pos and stack[1] is vel and stack[2] is ang and stack[3] is rot:
+        # x = [positions, the rotation vector the rotations were made from]: the logarithm of those
+        # rotations is that vector again (to rounding) while every component is under 1.8 rad (so its
+        # length is under pi: the exponential is then the shortest rotation, and abs_ changes nothing);
+        # else it is taken, which wraps a vector past pi to the shorter way round as before
+        x, v = pos.base, vel.base
+        scratch = stack[4]
+        np.abs(x[1], out=scratch)
+        if not scratch.max() < 1.8:     # (NaN: taken too)
+            _rotation_log2(rot, x[1])
     else:
         x = np.empty((2, n, 3))
         x[0] = pos
         v = np.empty((2, n, 3))
         v[0] = vel
         v[1] = ang
-    _rotation_log2(offsets.rotations, x[1])
+        _rotation_log2(rot, x[1])
     j1 = x * y
     j1 += v                             # v + x y
     x_new = j1 * dt_
@@ -246,7 +258,8 @@ def inertialize_decay(offsets: Offsets, halflife: float, dt: float) -> Offsets:
     np.subtract(v, v_new, out=v_new)
     v_new *= e                          # e (v - j1 y dt)
     out = Offsets(x_new[0], v_new[0], _rotation_exp2(x_new[1]), v_new[1])
-    out._stack = (out.positions, out.velocities, out.angular_velocities)
+    out._stack = (out.positions, out.velocities, out.angular_velocities, out.rotations,
+                  np.empty((n, 3)) if stack is None else stack[4])
     return out
 
 
