@@ -105,8 +105,9 @@ class _SnapshotFeatures:
     matched frame's normalised features (``matched``), each computed on first read with the operations
     :meth:`lmm.features.Features.normalize` and the squared distance use. The feature scaling is taken
     now (a weight change replaces those arrays, never writes them), as are the raw features and the
-    query (neither is written once made; the query may be given as :meth:`_TickQuery.query`), so a later
-    read gives this tick's values."""
+    query (neither is written once made; each may be given as a function that makes it, see
+    :meth:`CharacterController._source_features_later` and :meth:`_TickQuery.query`), so a later read
+    gives this tick's values."""
 
     __slots__ = ("_raw", "_mean", "_inv_scale", "_normalized", "_query", "_frame", "_current")
 
@@ -117,7 +118,8 @@ class _SnapshotFeatures:
 
     def current(self) -> np.ndarray:
         if self._current is None:
-            self._current = normalize_with(self._raw, self._mean, self._inv_scale)
+            raw = self._raw
+            self._current = normalize_with(raw() if callable(raw) else raw, self._mean, self._inv_scale)
         return self._current
 
     def cost(self) -> float:
@@ -343,11 +345,13 @@ class _TickQuery:
 
     __slots__ = ("_args", "_times", "_root", "_source", "_columns", "_mean", "_inv_scale", "_traj", "_query")
 
-    def __init__(self, controller, state, des_vel, des_rot, vel_halflife, rot_halflife):
+    def __init__(self, controller, state, des_vel, des_rot, vel_halflife, rot_halflife, source):
+        """``source``: the playing pose's raw features, or a function giving them (see
+        :meth:`CharacterController._source_features_later`)."""
         self._args = (*state, des_vel, des_rot, vel_halflife, rot_halflife)
         self._times = controller._traj_times
         self._root = (controller._root_position_t, controller._root_rotation_t)
-        self._source = controller._source_features()
+        self._source = source
         self._columns = controller._query_columns
         features = controller.features
         self._mean, self._inv_scale = features.mean, features.inv_scale
@@ -369,7 +373,9 @@ class _TickQuery:
         if self._query is None:
             traj_pos, traj_rot = self._trajectory()
             local_pos, local_dir = trajectory_in_root_space_floats(traj_pos, traj_rot, *self._root)
-            raw = build_query_from_columns(self._source, self._columns, local_pos, local_dir)
+            source = self._source
+            raw = build_query_from_columns(source() if callable(source) else source, self._columns, local_pos,
+                                           local_dir)
             self._query = normalize_with(raw, self._mean, self._inv_scale)
         return self._query
 
@@ -528,6 +534,11 @@ class CharacterController(Controller):
     def _source_features(self) -> np.ndarray:
         raise NotImplementedError
 
+    def _source_features_later(self):
+        """The playing pose's raw features as they are now, or a zero-argument function that gives them
+        later (the same values, for readers that may never ask: see :class:`_TickQuery`)."""
+        return self._source_features()
+
     def _search(self, query_norm: np.ndarray, forced: bool) -> SearchOutcome:
         raise NotImplementedError
 
@@ -632,15 +643,16 @@ class CharacterController(Controller):
         self.sim = SimulationFloats(state)
         # the predicted trajectory and the query, made now on a tick that searches, else when a reader of
         # the snapshot asks (see _TickQuery): only a search and the debugger use them
-        tick_query = _TickQuery(self, state, des_vel_t, des_rot_t, vel_halflife, rot_halflife)
-        query = tick_query.query
-
         # search when due
         # time since the last search against the interval read now, so a new interval acts at once
         self._since_search += dt
         searched = transitioned = False
         must = self._must_jump()
-        if self._needs_search or forced or must or self._since_search >= tun.search_interval_s - 1e-6:
+        search_now = self._needs_search or forced or must or self._since_search >= tun.search_interval_s - 1e-6
+        tick_query = _TickQuery(self, state, des_vel_t, des_rot_t, vel_halflife, rot_halflife,
+                                self._source_features() if search_now else self._source_features_later())
+        query = tick_query.query
+        if search_now:
             query = query()
             t0 = time.perf_counter()
             outcome = self._search(query, forced or must)
@@ -674,8 +686,8 @@ class CharacterController(Controller):
         # root integration (character space velocities -> world), in plain floats (one 3-vector/quaternion)
         root_vel_world, root_ang_world, root_pos, root_rot = _integrate_root_f(
             self._root_position_t, self._root_rotation_t, vel0, ang0, dt)
-        # the root arrays are replaced every tick, never written in place: no copies needed
-        integrated = (np.array(root_pos), np.array(root_rot))
+        # the integrated root as floats (tuples, never written): read by the foot locks' root shift
+        integrated = (root_pos, root_rot)
         self._synchronize(root_pos, root_rot, root_vel_world, root_ang_world, dt)
 
         # world pose, then foot locking: forward kinematics, foot locks, leg IK
@@ -705,7 +717,7 @@ class CharacterController(Controller):
         frame = self._source_frame()
         # debug-only: the playing pose's normalised features, their cost against the query and the
         # matched frame's features, worked out when a reader asks (see _SnapshotFeatures)
-        feats = _SnapshotFeatures(self.features, self._source_features(), query, frame)
+        feats = _SnapshotFeatures(self.features, self._source_features_later(), query, frame)
         # the simulation's and the desired arrays are replaced every tick, never written in place: the
         # snapshot shares them (as it shares the trajectory and query arrays made this tick)
         sim = self.sim

@@ -362,6 +362,15 @@ class LearnedMotionMatchingController(CharacterController):
             raw = self._source_raw = self.nets.from_network_space(self.state[:self.nets.n_features])
         return raw
 
+    def _source_features_later(self):
+        # the state changes every tick: its features are converted once a reader asks (a debug snapshot, a
+        # query on a tick that does not search), from a copy of the state taken now; the same operations
+        raw = self._source_raw
+        if raw is not None:
+            return raw
+        state = self.state[:self.nets.n_features].copy()
+        return functools.partial(self.nets.from_network_space, state)
+
     def _source_frame(self) -> int:
         return int(self._nn_frame)
 

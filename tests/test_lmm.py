@@ -129,6 +129,35 @@ def test_the_motion_does_not_depend_on_the_debug_comparison(dbf, nets):
     assert runs[True][1] == runs[False][1] and len(runs[False][1]) > 3     # it follows the jumps
 
 
+def test_lazy_query_and_features_are_the_ticks_values(dbf, nets):
+    """The learned state changes every tick: a snapshot's query, trajectory and current features (made
+    from a copy of the state when not searching) read late are the bytes read at once, and on a tick
+    that searches the current features are the state's, converted as the controller does."""
+    from lmm.data.inputs import open_input
+
+    db, features = dbf
+    log = open_input("builtin:random:1", 3.0)
+    fields = ("trajectory_positions", "trajectory_rotations", "query", "current_features")
+    runs = []
+    for late in (False, True):
+        ctrl = LearnedMotionMatchingController(db, features, networks=nets, compare_with_search=False)
+        snaps = []
+        for i in range(120):
+            snap = ctrl.step(log.at(i / 60.0), 1.0 / 60.0)[1]
+            if not late:
+                [getattr(snap, f) for f in fields]
+                want = ctrl.features.normalize(ctrl.nets.from_network_space(ctrl.state[:ctrl.nets.n_features]))
+                assert snap.current_features.tobytes() == want.tobytes()
+            snaps.append(snap)
+        runs.append(snaps)
+    assert any(s.searched for s in runs[1]) and not all(s.searched for s in runs[1])
+    for now, later in zip(*runs):
+        for f in fields:
+            a, b = getattr(now, f), getattr(later, f)
+            assert a.dtype == b.dtype and a.tobytes() == b.tobytes(), f
+        assert now.current_cost == later.current_cost
+
+
 def test_calibration_lookup_finds_the_take_of_a_database_frame(dbf, nets):
     db, features = dbf
     ctrl = LearnedMotionMatchingController(db, features, networks=nets, compare_with_search=False)
