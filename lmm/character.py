@@ -641,14 +641,15 @@ class CharacterController(Controller):
         vel_halflife, rot_halflife = tun.simulation_velocity_halflife_s, tun.simulation_rotation_halflife_s
         state = simulation_update_floats(*sim_state, des_vel_t, des_rot_t, vel_halflife, rot_halflife, dt)
         self.sim = SimulationFloats(state)
-        # the predicted trajectory and the query, made now on a tick that searches, else when a reader of
-        # the snapshot asks (see _TickQuery): only a search and the debugger use them
+
         # search when due
         # time since the last search against the interval read now, so a new interval acts at once
         self._since_search += dt
         searched = transitioned = False
         must = self._must_jump()
         search_now = self._needs_search or forced or must or self._since_search >= tun.search_interval_s - 1e-6
+        # the predicted trajectory and the query, made now on a tick that searches, else when a reader of
+        # the snapshot asks (see _TickQuery): only a search and the debugger use them
         tick_query = _TickQuery(self, state, des_vel_t, des_rot_t, vel_halflife, rot_halflife,
                                 self._source_features() if search_now else self._source_features_later())
         query = tick_query.query
