@@ -40,6 +40,7 @@ from __future__ import annotations
 
 import copy
 import math
+import struct
 import time
 import itertools
 from dataclasses import dataclass, field
@@ -329,6 +330,28 @@ class _FKPlan:
             and parents[chain[0]] not in inside for chain in leg_chains)
         self.legs = [(tuple(chain), parents[chain[0]], [j for j in sub if j not in chain])
                      for chain, sub in zip(leg_chains, subtrees)] if ok else None
+
+
+_PACKERS: dict = {}
+
+
+def _pack_rows(rows: list, n: int, width: int, dtype) -> np.ndarray:
+    """A new (n, width) array of ``dtype`` (float32 or float64) from ``n`` tuples of ``width`` floats: the
+    floats packed straight into the array's memory by one :mod:`struct` call (about half the time of
+    ``np.fromiter`` over the chained tuples). Each float is rounded to float32 as a C cast does, as numpy's
+    cast does (the same bits, ``tests/test_frame_cost.py``); with another dtype, or a Python whose packing
+    refuses an out-of-range float, numpy converts."""
+    dtype = np.dtype(dtype)
+    out = np.empty((n, width), dtype)
+    key = (n * width, dtype.char)
+    packer = _PACKERS.get(key)
+    if packer is None and dtype.char in "fd":
+        packer = _PACKERS[key] = struct.Struct(f"={n * width}{dtype.char}")
+    try:
+        packer.pack_into(out, 0, *itertools.chain.from_iterable(rows))
+    except (AttributeError, OverflowError, struct.error):
+        out[...] = np.fromiter(itertools.chain.from_iterable(rows), dtype, n * width).reshape(n, width)
+    return out
 
 
 class _TickQuery:
@@ -850,14 +873,11 @@ class CharacterController(Controller):
         locked = np.array([locks.is_locked(0), locks.is_locked(1)])
         self._prev_toe = toe_now
         n = len(g_rl)
-        flat = itertools.chain.from_iterable
-        local_rot = np.fromiter(flat(rl), dtype, 4 * n).reshape(n, 4)
+        local_rot = _pack_rows(rl, n, 4, dtype)
         local_pos = pos.astype(dtype)
         local_pos[0] = pl[0]
         local_pos[hips, 1] = hip_pos[1]
-        g_rot = np.fromiter(flat(g_rl), dtype, 4 * n).reshape(n, 4)
-        g_pos = np.fromiter(flat(g_pl), dtype, 3 * n).reshape(n, 3)
-        return local_rot, local_pos, g_rot, g_pos, locked
+        return local_rot, local_pos, _pack_rows(g_rl, n, 4, dtype), _pack_rows(g_pl, n, 3, dtype), locked
 
     def _root_shift(self, toes, position, rotation) -> list:
         """How far adjustment and clamping moved each toe this tick (two 3-tuples; ``toes`` two 3-tuples):

@@ -189,3 +189,21 @@ def test_fused_leg_update_and_float32_arrays_equal_the_generic_float64_form(db, 
         both_legs += int(not np.array_equal(want[0][c.leg_chains[0][0]], src[2][c.leg_chains[0][0]])
                          and not np.array_equal(want[0][c.leg_chains[1][0]], src[2][c.leg_chains[1][0]]))
     assert both_legs > 50  # the legs were solved (their local rotations changed)
+
+
+def test_packed_rows_are_numpys_cast_bit_for_bit():
+    """The pose arrays are packed by struct: the same bits as numpy's cast of the same floats, including
+    values that round, overflow to infinity, underflow to zero or are NaN; new writable arrays each call."""
+    from lmm.character import _pack_rows
+
+    rng = np.random.default_rng(3)
+    rows = [tuple(v) for v in (rng.standard_normal((23, 4)) * 10.0 ** rng.integers(-45, 45, (23, 4))).tolist()]
+    rows[3] = (float("nan"), float("inf"), -1e300, 5e-324)
+    rows[4] = (3.4028235677973366e38, -3.4028235e38 * 1.0000001, 1e-46, -0.0)
+    for dtype in (np.float32, np.float64, np.float16):    # float16: numpy's conversion
+        with np.errstate(over="ignore"):
+            want = np.array(rows).astype(dtype)
+            got = _pack_rows(rows, 23, 4, dtype)
+            again = _pack_rows(rows, 23, 4, dtype)
+        assert got.dtype == want.dtype and got.shape == (23, 4) and got.tobytes() == want.tobytes(), dtype
+        assert got.flags.writeable and not np.may_share_memory(got, again)
