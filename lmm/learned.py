@@ -99,81 +99,95 @@ def load_default_networks(db, features, path=None) -> LMMNetworks:
 
 # 4 |q_i|^2 = (+-m00 +-m11 +-m22) + 1: the signs, and the 1 as a fourth column (against a row of ones)
 _QUAT_DIAG_SIGNS = np.array([[1.0, 1.0, 1.0, 1.0], [1.0, -1.0, -1.0, 1.0], [-1.0, 1.0, -1.0, 1.0], [-1.0, -1.0, 1.0, 1.0]])
-# rows of the scratch matrix (22, n) of :class:`XformToQuat`: the rotation matrix's columns a (rows 0-5:
-# a0 a1 a2 a0 a1 a2), b (rows 6-11, the same) and c (rows 12-14), so that every cross product term and
-# the diagonal (a0, b1, c2: rows 0, 7, 14; with the ones of row 21) are slices
-_SIGN_ROWS = np.array([8, 12, 1, 13, 2, 6])    # (m21, m02, m10) = (b2, c0, a1) against (m12, m20, m01) = (c1, a2, b0)
+# rows of the scratch matrix (27, n) of :class:`XformToQuat`:
+#   0-2 a (the first axis, normalised in place)   3-5 b = (a x b_raw) x a, normalised
+#   6-10 c = a x b_raw, cyclic (c0 c1 c2 c0 c1), rows 6-8 normalised   11 unused   12 ones
+#   13-19 the first axis cyclic (a0 a1 a2 a0 a1 a2 a0)   20-26 the second axis cyclic (b0 b1 b2 b0 b1 b2 b0)
+# so that every cross product term is a slice, the matrix [a b c] is rows 0-8 and its diagonal (a0, b1,
+# c2, with the ones) rows 0, 4, 8, 12
+XFORM_ROWS = 27
+XFORM_A, XFORM_A7, XFORM_B7, XFORM_ONES = slice(0, 3), slice(13, 20), slice(20, 27), 12
+# the sums of the squares of each of a, b and c, repeated for each of their rows (rows 0-8 of the scratch)
+_GROUP_SUMS = np.kron(np.eye(3), np.ones((3, 3)))
+# (m21 - m12, m02 - m20, m10 - m01) = (b2 - c1, c0 - a2, a1 - b0) from rows 0-8
+_SIGN_DIFFERENCES = np.zeros((3, 9))
+for _row, (_plus, _minus) in enumerate(((5, 7), (6, 2), (1, 3))):
+    _SIGN_DIFFERENCES[_row, _plus], _SIGN_DIFFERENCES[_row, _minus] = 1.0, -1.0
+
+
+def xform_gather_rows(axis_a, axis_b, one, filler) -> np.ndarray:
+    """Gather indices (XFORM_ROWS, n) that fill :attr:`XformToQuat.x` from a flat vector: ``axis_a`` and
+    ``axis_b`` (3, n) index the two axes' components, ``one`` a slot holding 1.0 and ``filler`` any slot
+    (for the rows the conversion computes)."""
+    axis_a, axis_b = np.asarray(axis_a), np.asarray(axis_b)
+    rows = np.full((XFORM_ROWS, axis_a.shape[1]), filler)
+    rows[XFORM_A] = axis_a
+    rows[XFORM_A7] = axis_a[[0, 1, 2, 0, 1, 2, 0]]
+    rows[XFORM_B7] = axis_b[[0, 1, 2, 0, 1, 2, 0]]
+    rows[XFORM_ONES] = one
+    return rows
 
 
 class XformToQuat:
-    """2-axis rotations of ``n`` bones, component-major, -> unit quaternions via Gram-Schmidt, into
-    preallocated buffers with every view made once (a numpy call on a 3 x 23 block costs far more than its
-    arithmetic, so the work is about the number of calls).
+    """2-axis rotations of ``n`` bones, component-major, -> unit quaternions, into preallocated buffers
+    with every view made once (a numpy call on a 3 x 23 block costs far more than its arithmetic, so the
+    work is about the number of calls: 17 here).
 
-    Fill :attr:`x` (12, n), rows a0 a1 a2 a0 a1 a2 b0 b1 b2 b0 b1 b2 (the two axes, each written twice so
-    the cross product's cyclic terms are slices), then :meth:`__call__` writes the quaternions to ``out``
-    (4, n), e.g. the transposed view of a new (n, 4) array. The magnitudes come from the matrix diagonal,
-    the signs from the off-diagonal differences. Every element sees the float operations, in the order,
-    of the per-column version this replaced (``tests/test_nn_runtime.py``): the dot products summed as
-    ``np.einsum`` did on this numpy ((0 + 1) + 2, but (0 + 2) + 1 for ``b . b``), so it is bit-identical
-    (a NaN input still gives NaN, possibly of the other sign).
+    Fill :attr:`x` (see :func:`xform_gather_rows` for its rows: the two axes, the first also written at
+    rows 0-2, both cyclically so the cross products' terms are slices), then :meth:`__call__` writes the
+    quaternions to ``out`` (4, n), e.g. the transposed view of a new (n, 4) array.
+
+    The frame is Gram-Schmidt's without its sequence: c = a x b_raw, b = c x a (= |a|^2 times the part of
+    b_raw orthogonal to a), then a, b and c normalised together. The quaternion's magnitudes come from the
+    matrix diagonal, their signs from the off-diagonal differences, and 0.5 scales the result (the
+    magnitudes of an orthonormal frame's quaternion sum to one to rounding: it is not normalised again).
+    The same rotations as Gram-Schmidt and :func:`lmm.quat.from_xform_xy` to rounding (1e-12 tested in
+    ``tests/test_nn_runtime.py``); a degenerate frame (an axis of length zero, parallel axes) gives NaN.
     """
 
     def __init__(self, n: int):
-        self.x = x = np.empty((12, n))
-        self._m = m = np.empty((22, n))
-        m[21] = 1.0
-        p3, p4 = np.empty((3, n)), np.empty((4, n))
+        self.x = x = np.empty((XFORM_ROWS, n))
+        x[XFORM_ONES] = 1.0
         self._q = q = np.empty((4, n))
-        d = np.empty((6, n))
-        t, l3, r3, nrm = np.empty((6, n)), np.empty((3, n)), np.empty((3, n)), np.empty(n)
-        zeros = np.zeros((4, n))
-        xa3, xa6, xb3, xb6 = x[:3], x[:6], x[6:9], x[6:12]
-        a3, a6, b3, b6 = m[:3], m[:6], m[6:9], m[6:12]
-        a_1, b_2, a_2, b_1, c, diag = m[1:4], m[8:11], m[2:5], m[7:10], m[12:15], m[::7]
-        p0, p1, p2 = p3
-        s0, s1, s2, s3 = p4
-        d_plus, d_minus = d[:3], d[3:]
-        mul, add, div, sqrt, sub = np.multiply, np.add, np.divide, np.sqrt, np.subtract
-        # (function, positional arguments) in order; the output is the last positional argument (the
-        # ufuncs' and matmul's ``out``), except for np.maximum (a positional out is deprecated there)
+        t1, t2 = np.empty((5, n)), np.empty((5, n))
+        s9, lengths = np.empty((9, n)), np.empty((9, n))
+        d = np.empty((3, n))
+        zeros, half = np.zeros((4, n)), np.full((4, n), 0.5)
+        frame = x[0:9]
+        mul, sub, matmul = np.multiply, np.subtract, np.matmul
+        # (function, positional arguments) in order; the output is the last positional argument, except
+        # for np.maximum (a positional out is deprecated there); every operand contiguous (numpy's fast
+        # path) except the diagonal's rows
         self._ops = (
-            (mul, (xa3, xa3, p3)),                     # a = x_a / |x_a|
-            (add, (p0, p1, nrm)), (add, (nrm, p2, nrm)), (sqrt, (nrm, nrm)), (div, (xa6, nrm, a6)),
-            (mul, (a3, xb3, p3)),                      # b = x_b - (a . x_b) a, normalised
-            (add, (p0, p1, nrm)), (add, (nrm, p2, nrm)), (mul, (nrm, a6, t)), (sub, (xb6, t, b6)),
-            (mul, (b3, b3, p3)),
-            (add, (p0, p2, nrm)), (add, (nrm, p1, nrm)), (sqrt, (nrm, nrm)), (div, (b6, nrm, b6)),
-            (mul, (a_1, b_2, l3)), (mul, (a_2, b_1, r3)), (sub, (l3, r3, c)),   # c = a x b
-            (np.matmul, (_QUAT_DIAG_SIGNS, diag, q)),  # 4 |q_i|^2 from the diagonal
+            (mul, (x[14:19], x[22:27], t1)), (mul, (x[15:20], x[21:26], t2)), (sub, (t1, t2, x[6:11])),  # c
+            (mul, (x[7:10], x[15:18], t1[:3])), (mul, (x[8:11], x[14:17], t2[:3])),                  # b = c x a
+            (sub, (t1[:3], t2[:3], x[3:6])),
+            (mul, (frame, frame, s9)),                 # a, b and c normalised together
+            (matmul, (_GROUP_SUMS, s9, lengths)), (np.sqrt, (lengths, lengths)), (np.divide, (frame, lengths, frame)),
+            (matmul, (_QUAT_DIAG_SIGNS, x[0:13:4], q)),   # 4 |q_i|^2 from the diagonal
             (functools.partial(np.maximum, out=q), (q, zeros)),
-            # 2 |q_i|: the halving is left out, as it cancels in the normalisation below without
-            # changing a bit (every value is scaled by exact powers of two; 4 |q_i|^2 is 0 or at least
-            # 2^-53, so no square is subnormal)
-            (sqrt, (q, q)),
+            (np.sqrt, (q, q)),                         # 2 |q_i|
             # signs of (m21 - m12, m02 - m20, m10 - m01); + 0.0 makes a -0.0 difference +0.0 (not negative)
-            (m.take, (_SIGN_ROWS, 0, d, "clip")),
-            (sub, (d_plus, d_minus, d_plus)), (add, (d_plus, zeros[1:], d_plus)), (np.copysign, (q[1:], d_plus, q[1:])),
-            (mul, (q, q, p4)),
-            (add, (s0, s1, nrm)), (add, (nrm, s2, nrm)), (add, (nrm, s3, nrm)), (sqrt, (nrm, nrm)),
+            (matmul, (_SIGN_DIFFERENCES, frame, d)), (np.add, (d, zeros[1:], d)), (np.copysign, (q[1:], d, q[1:])),
         )
-        self._n = nrm
+        self._half = half
 
     def __call__(self, out: np.ndarray) -> np.ndarray:
         for f, args in self._ops:
             f(*args)
-        return np.divide(self._q, self._n, out=out)
+        return np.multiply(self._q, self._half, out=out)
 
 
 def xform_xy_to_quat(xy: np.ndarray) -> np.ndarray:
-    """2-axis rotations (J, 3, 2) -> unit quaternions (J, 4) via Gram-Schmidt, in few numpy calls.
+    """2-axis rotations (J, 3, 2) -> unit quaternions (J, 4) in few numpy calls.
 
-    Same rotations as :func:`lmm.quat.from_xform_xy` (up to sign), several times faster for one pose
-    (see :class:`XformToQuat`, which the pose decoding keeps and fills with its own gather)."""
+    Same rotations as :func:`lmm.quat.from_xform_xy` (up to sign and rounding), several times faster
+    for one pose (see :class:`XformToQuat`, which the pose decoding keeps and fills with its own gather)."""
     n = xy.shape[0]
     conv = XformToQuat(n)
-    a, b = xy[:, :, 0].T, xy[:, :, 1].T
-    conv.x[:] = np.concatenate([a, a, b, b])
+    flat = np.concatenate([xy[:, :, 0].T.ravel(), xy[:, :, 1].T.ravel(), [1.0]])
+    idx = np.arange(3 * n).reshape(3, n)
+    flat.take(xform_gather_rows(idx, idx + 3 * n, 6 * n, 6 * n), out=conv.x, mode="clip")
     out = np.empty((n, 4))
     conv(out.T)
     return out
@@ -207,11 +221,10 @@ class PoseDecoder:
         pva[2, 0], pva[2, 1:] = rows("root_angular_velocity", 3), rows("angular_velocities", (j, 3))
         self._pva = pva
         xy = rows("rotations", (j, 3, 2))
-        axes = np.full((12, n_bones), zero)
-        axes[[0, 3, 7, 10], 0] = one                   # bone 0: a = (1, 0, 0), b = (0, 1, 0)
-        for k in range(2):
-            axes[6 * k:6 * k + 3, 1:] = axes[6 * k + 3:6 * k + 6, 1:] = xy[:, :, k].T
-        self._axes = axes
+        axis_a, axis_b = np.full((3, n_bones), zero), np.full((3, n_bones), zero)
+        axis_a[0, 0] = axis_b[1, 0] = one              # bone 0: a = (1, 0, 0), b = (0, 1, 0)
+        axis_a[:, 1:], axis_b[:, 1:] = xy[:, :, 0].T, xy[:, :, 1].T
+        self._axes = xform_gather_rows(axis_a, axis_b, one, zero)
         self._to_quat = XformToQuat(n_bones)
 
     def __call__(self, y: np.ndarray) -> SourcePose:
