@@ -50,7 +50,7 @@ import numpy as np
 from lmm import quat
 from lmm import quat_scalar as qs
 from lmm.data.derived import cached
-from lmm.controller import Candidates, Controller, DebugSnapshot, InputState, Pose
+from lmm.controller import Candidates, Controller, DebugSnapshot, InputState, LazyField, Pose
 from lmm.features import build_query_from_columns, normalize_with, trajectory_query_columns
 from lmm.ik import FootLockState, solve_leg_floats
 from lmm.inertialize import (Offsets, ShownPose, inertialize_apply_pose, inertialize_decay,
@@ -64,13 +64,25 @@ from lmm.tuning import Tuning
 
 @dataclass
 class SourcePose:
-    """One pose of the source, database skeleton, local form (see the module doc)."""
+    """One pose of the source, database skeleton, local form (see the module doc). The velocities may be
+    given as a function that makes them (:class:`lmm.controller.LazyField`): only a transition reads them
+    (the learned controller's per-tick decoding leaves them to then); ``root_velocities`` then holds bone
+    0's (the root's velocity and angular velocity, 3 floats each), which every tick reads."""
     positions: np.ndarray           # (J, 3) local (bone 0 unused)
     rotations: np.ndarray           # (J, 4) local (bone 0 unused)
-    velocities: np.ndarray          # (J, 3) local; bone 0: root velocity in the root's frame
-    angular_velocities: np.ndarray  # (J, 3) local; bone 0: root angular velocity in the root's frame
+    velocities: np.ndarray = LazyField()          # (J, 3) local; bone 0: root velocity in the root's frame
+    angular_velocities: np.ndarray = LazyField()  # (J, 3) local; bone 0: root angular velocity in its frame
     contacts: np.ndarray            # (2,) bool
     frame: int = -1                 # database frame it came from, if any
+    root_velocities: tuple | None = None  # (bone 0's velocity, angular velocity) as float lists, when given
+
+    def root_velocity_floats(self) -> tuple[list, list]:
+        """Bone 0's velocity and angular velocity as lists of floats (from ``root_velocities`` when given,
+        else from the velocity arrays: the same values)."""
+        given = self.root_velocities
+        if given is not None:
+            return given
+        return self.velocities[0].tolist(), self.angular_velocities[0].tolist()
 
 
 @dataclass
@@ -703,9 +715,8 @@ class CharacterController(Controller):
         self.offsets = offsets = inertialize_decay(self.offsets, tun.inertialization_halflife_s, dt)
         pos, rot = inertialize_apply_pose(offsets, src.positions, src.rotations)
         # the shown velocities: bone 0's now (root integration), every bone's when a transition reads them
-        vel0, ang0 = inertialize_root_velocities(offsets, src.velocities[0].tolist(),
-                                                 src.angular_velocities[0].tolist())
-        self.shown = ShownPose(pos, rot, offsets, src.velocities, src.angular_velocities)
+        vel0, ang0 = inertialize_root_velocities(offsets, *src.root_velocity_floats())
+        self.shown = ShownPose(pos, rot, offsets, source=src)
 
         # root integration (character space velocities -> world), in plain floats (one 3-vector/quaternion)
         root_vel_world, root_ang_world, root_pos, root_rot = _integrate_root_f(

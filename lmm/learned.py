@@ -29,7 +29,7 @@ import numpy as np
 from lmm.character import CharacterController, SearchOutcome, SourcePose
 from lmm.controller import Candidates
 from lmm.mm import default_start_frame
-from lmm.nn import MLP, pose_vector_slices
+from lmm.nn import MLP, pose_vector_slices, pose_vector_tick_columns
 from lmm.search import SearchIndex
 from lmm.tuning import IDLE_TAG, Tuning
 from lmm.data.weights import WeightsError, load as load_weights
@@ -227,6 +227,20 @@ class PoseDecoder:
         self._axes = xform_gather_rows(axis_a, axis_b, one, zero)
         self._to_quat = XformToQuat(n_bones)
 
+        # the per-tick form (see tick): the tick columns only, in their order, then the two constant slots
+        cols = pose_vector_tick_columns(n_bones)
+        at = np.full(size + 2, -1)
+        at[cols] = np.arange(len(cols))
+        at[zero], at[one] = len(cols), len(cols) + 1
+        self._t = np.zeros(len(cols) + 2)
+        self._t[-1] = 1.0
+        self._t_head = self._t[:len(cols)]
+        self._t_pos = at[pva[0]]
+        self._t_axes = at[self._axes]
+        self._t_root_slices = tuple(slice(int(at[s[name].start]), int(at[s[name].start]) + 3)
+                                    for name in ("root_velocity", "root_angular_velocity"))
+        self._t_contacts = self._t[int(at[s["contacts"].start]):int(at[s["contacts"].start]) + 2]
+
     def __call__(self, y: np.ndarray) -> SourcePose:
         buf = self._y
         self._y_head[...] = y
@@ -235,6 +249,46 @@ class PoseDecoder:
         rot = np.empty((self.n_bones, 4))
         self._to_quat(rot.T)
         return SourcePose(pva[0], rot, pva[1], pva[2], np.greater(self._y_contacts, 0.5), -1)
+
+    def tick(self, y_tick: np.ndarray, velocities) -> SourcePose:
+        """The pose from the tick columns of a pose vector (:func:`lmm.nn.pose_vector_tick_columns`, in
+        that order), its velocities from ``velocities()`` (the vector's velocity columns,
+        :func:`lmm.nn.pose_vector_velocity_columns`) when first read: the values :meth:`__call__` gives
+        for the whole vector."""
+        buf = self._t
+        self._t_head[...] = y_tick
+        positions = buf.take(self._t_pos)
+        buf.take(self._t_axes, out=self._to_quat.x, mode="clip")
+        rot = np.empty((self.n_bones, 4))
+        self._to_quat(rot.T)
+        vel0, ang0 = self._t_root_slices
+        root = (buf[vel0].tolist(), buf[ang0].tolist())
+        later = _LaterVelocities(velocities, root, self.n_bones)
+        return SourcePose(positions, rot, later.velocities, later.angular_velocities,
+                          np.greater(self._t_contacts, 0.5), -1, root)
+
+
+class _LaterVelocities:
+    """A decoded pose's velocities and angular velocities (J, 3) each, float64, made on first read of
+    either from the velocity columns ``velocities()`` gives and bone 0's (``root``, float lists)."""
+    __slots__ = ("_fn", "_root", "_n", "_both")
+
+    def __init__(self, velocities, root, n_bones: int):
+        self._fn, self._root, self._n, self._both = velocities, root, n_bones, None
+
+    def _make(self):
+        if self._both is None:
+            both = np.empty((2, self._n, 3))
+            both[0, 0], both[1, 0] = self._root
+            both[:, 1:] = np.asarray(self._fn()).reshape(2, self._n - 1, 3)
+            self._both = both
+        return self._both
+
+    def velocities(self) -> np.ndarray:
+        return self._make()[0]
+
+    def angular_velocities(self) -> np.ndarray:
+        return self._make()[1]
 
 
 def decode_source_pose(y: np.ndarray, n_bones: int, slices: dict | None = None) -> SourcePose:
@@ -265,6 +319,12 @@ class LearnedMotionMatchingController(CharacterController):
         self._pose_vec = np.zeros(self.nets.decompressor.n_out, np.float32)
         self._run_stepper = self.nets.stepper.bind_single(self._deriv, self._state1)
         self._run_decompressor = self.nets.decompressor.bind_single(self._pose_vec, self._state1)
+        # per tick the decompressor computes the pose vector's tick columns only; the bones' velocities
+        # (a third of its last layer) from a copy of its hidden layer when a transition reads them
+        self._pose_tick = np.zeros(len(pose_vector_tick_columns(db.n_bones)), np.float32)
+        self._run_decompressor_tick, self._decompressor_hidden, self._decompressor_velocities = \
+            self.nets.decompressor.bind_single_split(pose_vector_tick_columns(db.n_bones), self._pose_tick,
+                                                     self._state1)
         self._dt32 = (None, None)    # (dt, np.float32(dt)) of the last tick
         self._source_raw = None      # from_network_space of the state's features (None: not computed since it changed)
         self._index: SearchIndex | None = None
@@ -464,8 +524,9 @@ class LearnedMotionMatchingController(CharacterController):
             np.multiply(deriv, dt32, deriv)
             np.add(self.state, deriv, self.state)
             self._source_raw = None
-        self._run_decompressor()
-        return self._decode(self._pose_vec)
+        self._run_decompressor_tick()
+        return self._decode.tick(self._pose_tick, functools.partial(np.dot, self._decompressor_hidden.copy(),
+                                                                    self._decompressor_velocities))
 
     def _snapshot_extras(self) -> dict:
         d = self.nets.n_features

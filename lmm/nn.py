@@ -42,6 +42,18 @@ def pose_vector_size(n_bones: int) -> int:
     return pose_vector_slices(n_bones)["contacts"].stop
 
 
+def pose_vector_velocity_columns(n_bones: int) -> np.ndarray:
+    """Indices of the pose vector's ``velocities`` and ``angular_velocities`` of bones 1.. (a pose's
+    velocities matter only when a transition reads them: a per-tick caller may leave them out)."""
+    s = pose_vector_slices(n_bones)
+    return np.arange(s["velocities"].start, s["angular_velocities"].stop)
+
+
+def pose_vector_tick_columns(n_bones: int) -> np.ndarray:
+    """Indices of every other entry (positions, rotations, the root's velocities, contacts), ascending."""
+    return np.setdiff1d(np.arange(pose_vector_size(n_bones)), pose_vector_velocity_columns(n_bones))
+
+
 def decode_pose_vector(y: np.ndarray, n_bones: int) -> dict[str, np.ndarray]:
     """Split pose vectors (..., P) into named arrays; rotations come back as unit quaternions (Gram-Schmidt)."""
     s = pose_vector_slices(n_bones)
@@ -254,6 +266,43 @@ class MLP:
                 maximum(val, zero, out=val)
             return dot(h_last, last, out)
         return run
+
+    def bind_single_split(self, columns, out: np.ndarray, x1: np.ndarray):
+        """:meth:`bind_single` reading the caller's ``x1`` whose last layer computes only the output
+        ``columns`` (ascending indices), into ``out`` (float32 (len(columns),)): for a caller that needs
+        the other outputs only now and then. Returns ``(run, hidden, rest)``: ``hidden`` is the last
+        layer's input ([h, 1], float32, overwritten by each ``run()``) and ``rest`` the last layer's
+        matrix for the other columns (ascending), so ``np.dot(hidden_copy, rest)`` gives them later.
+
+        A narrower matrix product sums each output in the same order but BLAS may group the terms
+        differently, so the outputs can differ from :meth:`bind_single`'s in the last float32 bit or
+        two (``tests/test_nn_runtime.py``). ReLU networks without a skip connection only."""
+        if self.activation != "relu" or self.skip:
+            raise ValueError(f"{self.name}: bind_single_split needs a ReLU network without a skip connection")
+        _, _, hidden, last, _ = self._single_plan()
+        columns = np.asarray(columns, dtype=np.int64)
+        if columns.ndim != 1 or not np.all(np.diff(columns) > 0) or len(columns) == 0 \
+                or columns[0] < 0 or columns[-1] >= self.n_out:
+            raise ValueError(f"{self.name}: columns must be ascending indices below {self.n_out}")
+        if out.dtype != np.float32 or out.shape != (len(columns),):
+            raise ValueError(f"{self.name}: bind_single_split needs a float32 ({len(columns)},) buffer, "
+                             f"got {out.dtype} {out.shape}")
+        if x1.dtype != np.float32 or x1.shape != (self.n_in + 1,) or x1[-1] != 1.0:
+            raise ValueError(f"{self.name}: x1 must be float32 ({self.n_in + 1},) ending with 1.0")
+        others = np.setdiff1d(np.arange(self.n_out), columns)
+        first = np.ascontiguousarray(last[:, columns])
+        rest = np.ascontiguousarray(last[:, others])
+        inputs = [x1] + [buf for _, buf, _, _, _ in hidden]
+        layers = [(h, m, val, zero) for h, (m, _, val, zero, _) in zip(inputs, hidden)]
+        h_last = inputs[-1]
+        dot, maximum = np.dot, np.maximum
+
+        def run():
+            for h, m, val, zero in layers:
+                dot(h, m, val)
+                maximum(val, zero, out=val)
+            return dot(h_last, first, out)
+        return run, h_last, rest
 
     def __call__(self, x: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """Evaluate on (D,) or (B, D); returns a new array (or writes into ``out``)."""

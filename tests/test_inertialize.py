@@ -181,6 +181,7 @@ def test_a_rotation_offset_past_the_threshold_takes_the_shorter_way_as_before():
 def test_shown_pose_and_root_velocities_are_inertialize_apply_bit_for_bit():
     """The step's split of :func:`inertialize_apply` (pose now, bone 0's velocities in floats, every
     bone's velocities when a transition reads them) gives the same bits, after any number of decays."""
+    from lmm.character import SourcePose
     from lmm.inertialize import ShownPose, inertialize_apply_pose, inertialize_root_velocities
 
     rng = np.random.default_rng(7)
@@ -197,3 +198,9 @@ def test_shown_pose_and_root_velocities_are_inertialize_apply_bit_for_bit():
             assert a.tobytes() == b.tobytes()
         assert shown[1].tobytes() == want[1].tobytes() and shown[3].tobytes() == want[3].tobytes()
         assert vel0 == want[1][0].tolist() and list(ang0) == want[3][0].tolist()
+        # the source pose given whole: its velocities (here made when read) are read only by a transition
+        made = []
+        source = SourcePose(src[0], src[2], lambda: made.append(1) or src[1], lambda: src[3], np.zeros(2, bool))
+        later = ShownPose(pos, rot, off, source=source)
+        assert made == []
+        assert all(a.tobytes() == b.tobytes() for a, b in zip(later, want)) and made == [1]
