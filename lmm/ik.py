@@ -393,7 +393,16 @@ def toe_clear_ground_floats(toe_y: float, q, toe_axis_local, toe_length: float, 
     as it is."""
     if toe_length <= 0.0:
         return None
-    d = _unit(_qrot(q, toe_axis_local))
+    # d = _unit(_qrot(q, toe_axis_local)), written out (the same operations in the same order): most
+    # ticks stop at the test below
+    w, x, y, z = q
+    v0, v1, v2 = toe_axis_local
+    t0, t1, t2 = 2.0 * (y * v2 - z * v1), 2.0 * (z * v0 - x * v2), 2.0 * (x * v1 - y * v0)
+    r0 = v0 + w * t0 + (y * t2 - z * t1)
+    r1 = v1 + w * t1 + (z * t0 - x * t2)
+    r2 = v2 + w * t2 + (x * t1 - y * t0)
+    n = math.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
+    d = (r0 / n, r1 / n, r2 / n) if n > 1e-9 else (1.0, 0.0, 0.0)
     if toe_y + toe_length * d[1] >= ground_height:
         return None
     want = _clamp1((ground_height - toe_y) / toe_length)
