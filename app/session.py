@@ -357,6 +357,10 @@ class Session:
         return RecordingResult(written, frames, seconds, f"recorded {seconds:.2f} s ({frames} frames) to {names}")
 
 
+#: a snapshot's fields made on their first read that the default layout's panels read every frame
+_DRAWN_LAZY_FIELDS = ("matched_pose_positions", "trajectory_positions", "trajectory_rotations", "query")
+
+
 class TickWorker:
     """Steps the session on a worker thread while the GUI draws.
 
@@ -404,10 +408,12 @@ class TickWorker:
                 for inp in inputs:
                     tick = self.session.step(inp)
                     self._results.append((tick, dict(self.session.step_ms)))
-                # the newest tick is the one a live studio draws next: its ghost poses (forward kinematics
-                # run on the first read) are worked out here, while the GUI thread draws, not on it
+                # the newest tick is the one a live studio draws next: what its panels read that is worked
+                # out on the first read (the ghost poses' forward kinematics, the trajectory and query of a
+                # tick that did not search) is worked out here, while the GUI thread draws, not on it
                 for snap in tick.snapshots.values():
-                    getattr(snap, "matched_pose_positions", None)
+                    for name in _DRAWN_LAZY_FIELDS:
+                        getattr(snap, name, None)
             except BaseException as e:  # handed to the GUI thread by wait()
                 self._error = e
             finally:

@@ -383,7 +383,7 @@ def test_recording_paths():
 
 # -- the session, headless ------------------------------------------------------------------------
 
-def test_tick_worker_works_out_the_newest_ghost_pose(dbf):
+def test_tick_worker_works_out_the_newest_ghost_pose_trajectory_and_query(dbf):
     from app.session import TickWorker
 
     db, features = dbf
@@ -391,17 +391,23 @@ def test_tick_worker_works_out_the_newest_ghost_pose(dbf):
     controllers, _ = make_controllers(db, features, tuning, with_lmm=False)
     worker = TickWorker(Session(db, features, tuning, controllers))
     try:
-        worker.submit([InputState(left_y=1.0)] * 3)
+        worker.submit([InputState(left_y=1.0)] * 8)
         ticks = [t for t, _ in worker.wait()]
     finally:
         worker.close()
-    assert len(ticks) == 3
+    assert len(ticks) == 8
 
-    def ghost_pending(tick):    # the lazy field still holds its function: nobody has read it yet
-        return callable(tick.snapshots["mm"].__dict__["_lazy_matched_pose_positions"])
+    def pending(tick, name="matched_pose_positions"):    # the lazy field still holds its function
+        return callable(tick.snapshots["mm"].__dict__["_lazy_" + name])
 
     # the newest tick (what a live view draws) has it, worked out on the worker; older ones stay lazy
-    assert not ghost_pending(ticks[-1]) and ghost_pending(ticks[0])
+    assert not pending(ticks[-1]) and pending(ticks[0])
+    # so are its trajectory and query (a tick that did not search makes them on the first read)
+    quiet = [t for t in ticks[:-1] if not t.snapshots["mm"].searched]
+    assert quiet
+    for name in ("trajectory_positions", "trajectory_rotations"):
+        assert not pending(ticks[-1], name) and all(pending(t, name) for t in quiet), name
+    assert not pending(ticks[-1], "query")      # (the session's history reads every tick's query cost)
     ghost = ticks[-1].snapshots["mm"].matched_pose_positions
     assert ghost.shape == (len(db.parents), 3) and np.isfinite(ghost).all()
 
