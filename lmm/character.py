@@ -39,6 +39,7 @@ to its parent, as in :class:`lmm.data.database.Database`.
 from __future__ import annotations
 
 import copy
+import functools
 import math
 import struct
 import time
@@ -520,6 +521,12 @@ def _radians(degrees: float) -> float:
     return r
 
 
+def _array_of(floats: tuple):
+    """A function making a new float64 array of ``floats`` (a tuple, never written): a snapshot field
+    made when read (see :class:`lmm.controller.LazyField`)."""
+    return functools.partial(np.array, floats)
+
+
 class CharacterController(Controller):
     """The shared pipeline; subclasses implement the source hooks (see the module doc)."""
 
@@ -527,6 +534,16 @@ class CharacterController(Controller):
     _toe_axes_floats = None  # toe_axes as tuples (filled on first use)
     _contact_height_span = (0, 0, 0.0)  # frames [lo, hi) of the last take looked up, its contact height
     _fk_plan = None  # _FKPlan of the skeleton (made on first use)
+
+    @property
+    def desired_velocity(self) -> np.ndarray:
+        """The last tick's desired velocity (3,), a new array."""
+        return np.array(self._desired_t[0])
+
+    @property
+    def desired_rotation(self) -> np.ndarray:
+        """The last tick's desired facing rotation (4,), a new array."""
+        return np.array(self._desired_t[1])
 
     def __init__(self, db, features, tuning: Tuning | None = None):
         self.db = db
@@ -604,9 +621,7 @@ class CharacterController(Controller):
         self._apply_feature_weights()
         p, q = tuple(position.tolist()), tuple(rotation.tolist())
         self.sim = SimulationFloats((p, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), q, (0.0, 0.0, 0.0)))
-        self.desired_rotation = rotation.copy()
-        self.desired_velocity = np.zeros(3)
-        self._desired_t = ((0.0, 0.0, 0.0), q)  # the two as float tuples
+        self._desired_t = ((0.0, 0.0, 0.0), q)  # the desired velocity and rotation as float tuples
         self._left_stick, self._right_stick = StickWorld(), StickWorld()
         self._set_root(position.tolist(), rotation.tolist())
         self.stick_released_s = 0.0  # time since the left stick was last outside its deadzone
@@ -669,8 +684,6 @@ class CharacterController(Controller):
                                             inp.camera_azimuth)
         forced = self._sharp_input_change(des_vel_t, des_rot_t, dt)
         self._desired_t = (des_vel_t, des_rot_t)
-        des_vel, des_rot = np.array(des_vel_t), np.array(des_rot_t)
-        self.desired_velocity, self.desired_rotation = des_vel, des_rot
 
         # simulation object and its predicted future
         vel_halflife, rot_halflife = tun.simulation_velocity_halflife_s, tun.simulation_rotation_halflife_s
@@ -753,14 +766,13 @@ class CharacterController(Controller):
         # debug-only: the playing pose's normalised features, their cost against the query and the
         # matched frame's features, worked out when a reader asks (see _SnapshotFeatures)
         feats = _SnapshotFeatures(self.features, self._source_features_later(), query, frame)
-        # the simulation's and the desired arrays are replaced every tick, never written in place: the
-        # snapshot shares them (as it shares the trajectory and query arrays made this tick)
-        sim = self.sim
+        # the simulation's and the desired vectors are float tuples (never written): the snapshot's
+        # arrays are made from them when read
         snap = DebugSnapshot(
             controller=self.name, tick=self.tick, time_s=self.time_s, input=inp.copy(),
-            simulation_position=sim.position, simulation_rotation=sim.rotation,
-            simulation_velocity=sim.velocity, desired_velocity=des_vel,
-            desired_rotation=des_rot, trajectory_positions=tick_query.positions,
+            simulation_position=_array_of(state[0]), simulation_rotation=_array_of(state[3]),
+            simulation_velocity=_array_of(state[1]), desired_velocity=_array_of(des_vel_t),
+            desired_rotation=_array_of(des_rot_t), trajectory_positions=tick_query.positions,
             trajectory_rotations=tick_query.rotations,
             trajectory_offsets=self.traj_offsets.copy(), query=query, current_features=feats.current,
             matched_frame=int(frame), matched_features=feats.matched,

@@ -93,12 +93,12 @@ class DebugSnapshot:
     tick: int
     time_s: float
     input: InputState
-    # simulation object (the 'desired' character) and its predicted future
-    simulation_position: np.ndarray      # (3,)
-    simulation_rotation: np.ndarray      # (4,)
-    simulation_velocity: np.ndarray      # (3,)
-    desired_velocity: np.ndarray         # (3,)
-    desired_rotation: np.ndarray         # (4,)
+    # simulation object (the 'desired' character) and its predicted future (made on first read)
+    simulation_position: np.ndarray = LazyField()  # (3,)
+    simulation_rotation: np.ndarray = LazyField()  # (4,)
+    simulation_velocity: np.ndarray = LazyField()  # (3,)
+    desired_velocity: np.ndarray = LazyField()     # (3,)
+    desired_rotation: np.ndarray = LazyField()     # (4,)
     # (the trajectory and the query are worked out on first read on a tick that did not search)
     trajectory_positions: np.ndarray = LazyField()  # (T, 3) world, at the feature offsets
     trajectory_rotations: np.ndarray = LazyField()  # (T, 4) world

@@ -64,11 +64,12 @@ def test_lazy_snapshot_features_are_the_ticks_values(db, features):
 
 
 def test_lazy_trajectory_and_query_are_the_ticks_values(db, features):
-    """On a tick that does not search, the trajectory and the query are worked out when read: read at
-    once or 90 ticks (and a feature-weight change) later, they are the same bytes; on a tick that
-    searches they are made at once."""
+    """On a tick that does not search, the trajectory and the query are worked out when read (the
+    simulation's and desired arrays on every tick): read at once or 90 ticks (and a feature-weight
+    change) later, they are the same bytes; on a tick that searches the query is made at once."""
     log = builtin("zigzag", 3.0)
-    fields = ("trajectory_positions", "trajectory_rotations", "query")
+    fields = ("trajectory_positions", "trajectory_rotations", "query", "simulation_position", "simulation_rotation",
+              "simulation_velocity", "desired_velocity", "desired_rotation")
     runs = []
     for late in (False, True):
         c = MotionMatchingController(db, features)
@@ -77,6 +78,8 @@ def test_lazy_trajectory_and_query_are_the_ticks_values(db, features):
             snap = c.step(log.at(i * DT), DT)[1]
             if not late:
                 [getattr(snap, f) for f in fields]
+                assert np.array_equal(snap.desired_velocity, c.desired_velocity)
+                assert np.array_equal(snap.simulation_position, c.sim.position)
             snaps.append(snap)
         if late:
             c.tuning.feature_weights = {c.features.layout[0].name: 7.0}
