@@ -366,9 +366,12 @@ class LearnedMotionMatchingController(CharacterController):
         return res.best_frame, res.best_cost, res
 
     def memory_bytes(self) -> dict[str, int]:
-        """The three runtime networks (weights, biases, normalisation); the debug comparison's search
-        index is not counted (it is off in a shipped runtime)."""
-        return {name: int(getattr(self.nets, name).nbytes()) for name in RUNTIME_NETWORKS}
+        """The three runtime networks (weights, biases, normalisation, the folded one-vector copies and
+        the decompressor's per-tick split of its last layer); the debug comparison's search index is
+        not counted (it is off in a shipped runtime)."""
+        out = {name: int(getattr(self.nets, name).nbytes()) for name in RUNTIME_NETWORKS}
+        out["decompressor"] += self._run_decompressor_tick.nbytes
+        return out
 
     # -- the idle set ------------------------------------------------------------------------------
     def idle_set_active(self) -> bool:

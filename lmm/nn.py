@@ -273,6 +273,7 @@ class MLP:
         the other outputs only now and then. Returns ``(run, hidden, rest)``: ``hidden`` is the last
         layer's input ([h, 1], float32, overwritten by each ``run()``) and ``rest`` the last layer's
         matrix for the other columns (ascending), so ``np.dot(hidden_copy, rest)`` gives them later.
+        ``run.nbytes``: the bytes of the two matrices (a copy of the last layer).
 
         A narrower matrix product sums each output in the same order but BLAS may group the terms
         differently, so the outputs can differ from :meth:`bind_single`'s in the last float32 bit or
@@ -302,6 +303,7 @@ class MLP:
                 dot(h, m, val)
                 maximum(val, zero, out=val)
             return dot(h_last, first, out)
+        run.nbytes = int(first.nbytes + rest.nbytes)   # the split copy of the last layer, for memory figures
         return run, h_last, rest
 
     def __call__(self, x: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:

@@ -97,7 +97,9 @@ def test_controller_runs_and_fills_the_snapshot(dbf, nets):
     assert snap.nn_cost == pytest.approx(float(np.sum((snap.query - features.normalized[snap.nn_frame]) ** 2)),
                                          rel=1e-4, abs=1e-5) or not snap.searched
     assert "advance" in snap.timings_us
-    assert ctrl.memory_bytes() == {"decompressor": nets.decompressor.nbytes(), "stepper": nets.stepper.nbytes(),
+    split = ctrl._run_decompressor_tick.nbytes      # the per-tick copy of the decompressor's last layer
+    assert split == nets.decompressor._single_plan()[3].nbytes
+    assert ctrl.memory_bytes() == {"decompressor": nets.decompressor.nbytes() + split, "stepper": nets.stepper.nbytes(),
                                    "projector": nets.projector.nbytes()}
 
 
