@@ -241,14 +241,19 @@ class PoseDecoder:
                                     for name in ("root_velocity", "root_angular_velocity"))
         self._t_contacts = self._t[int(at[s["contacts"].start]):int(at[s["contacts"].start]) + 2]
 
+    def _rotations(self, buf: np.ndarray, axes: np.ndarray) -> np.ndarray:
+        """A new (J, 4) array of the rotations whose axes ``axes`` gathers from ``buf``."""
+        buf.take(axes, out=self._to_quat.x, mode="clip")
+        rot = np.empty((self.n_bones, 4))
+        self._to_quat(rot.T)
+        return rot
+
     def __call__(self, y: np.ndarray) -> SourcePose:
         buf = self._y
         self._y_head[...] = y
         pva = buf.take(self._pva)
-        buf.take(self._axes, out=self._to_quat.x, mode="clip")
-        rot = np.empty((self.n_bones, 4))
-        self._to_quat(rot.T)
-        return SourcePose(pva[0], rot, pva[1], pva[2], np.greater(self._y_contacts, 0.5), -1)
+        return SourcePose(pva[0], self._rotations(buf, self._axes), pva[1], pva[2],
+                          np.greater(self._y_contacts, 0.5), -1)
 
     def tick(self, y_tick: np.ndarray, velocities) -> SourcePose:
         """The pose from the tick columns of a pose vector (:func:`lmm.nn.pose_vector_tick_columns`, in
@@ -258,9 +263,7 @@ class PoseDecoder:
         buf = self._t
         self._t_head[...] = y_tick
         positions = buf.take(self._t_pos)
-        buf.take(self._t_axes, out=self._to_quat.x, mode="clip")
-        rot = np.empty((self.n_bones, 4))
-        self._to_quat(rot.T)
+        rot = self._rotations(buf, self._t_axes)
         vel0, ang0 = self._t_root_slices
         root = (buf[vel0].tolist(), buf[ang0].tolist())
         later = _LaterVelocities(velocities, root, self.n_bones)

@@ -189,7 +189,6 @@ def test_learned_controller_with_the_folded_networks_stays_within_a_millimetre(d
     """The recordings' tolerance (issue 16): 30 s of builtin:random:1 through the learned controller with
     the folded batch-1 networks against the same run with the plain evaluation (what the recordings were
     made with before): every joint of every tick within 1 mm, and the same projector decisions."""
-    from lmm.data.inputs import builtin
     from lmm.learned import LearnedMotionMatchingController, load_default_networks
 
     def run(plain: bool):
@@ -202,13 +201,7 @@ def test_learned_controller_with_the_folded_networks_stays_within_a_millimetre(d
                 monkeypatch.setattr(mlp, "bind_single", lambda out, x1=None, m=mlp:
                                     lambda x=None: m._call_single(x1[:-1] if x is None else x, out))
         c = LearnedMotionMatchingController(db, features, networks=nets, compare_with_search=False)
-        log, dt = builtin("random:1", 30.0), 1.0 / 60.0
-        poses, frames = [], []
-        for i in range(1800):
-            pose, snap = c.step(log.at(i * dt), dt)
-            poses.append(pose.global_positions.astype(np.float64))
-            frames.append(snap.matched_frame)
-        return np.array(poses), frames
+        return _run_30s(c, "matched_frame")
 
     folded, f_frames = run(False)
     plain, p_frames = run(True)
@@ -216,6 +209,20 @@ def test_learned_controller_with_the_folded_networks_stays_within_a_millimetre(d
     assert err <= 1e-3, f"the folded networks move a joint by {err * 1000:.2f} mm"
     assert f_frames == p_frames
     assert err > 0  # the plain evaluation really ran (different bits): the comparison can fail
+
+
+def _run_30s(controller, field: str):
+    """30 s of builtin:random:1 through ``controller``: every tick's global positions (float64) and the
+    snapshots' ``field``."""
+    from lmm.data.inputs import builtin
+
+    log, dt = builtin("random:1", 30.0), 1.0 / 60.0
+    poses, values = [], []
+    for i in range(1800):
+        pose, snap = controller.step(log.at(i * dt), dt)
+        poses.append(pose.global_positions.astype(np.float64))
+        values.append(getattr(snap, field))
+    return np.array(poses), values
 
 
 def _plain_into(mlp, x, out):
@@ -324,7 +331,6 @@ def test_learned_controller_with_the_tick_decoding_stays_within_ten_micrometres(
     (what the recordings were made with before): every joint of every tick within 10 um, the same
     projector decisions."""
     from lmm.character import SourcePose
-    from lmm.data.inputs import builtin
     from lmm.learned import LearnedMotionMatchingController, load_default_networks
 
     def per_column(y):
@@ -347,13 +353,7 @@ def test_learned_controller_with_the_tick_decoding_stays_within_ten_micrometres(
                 c._run_decompressor()
                 return per_column(c._pose_vec)
             c._advance_pose = advance
-        log, dt = builtin("random:1", 30.0), 1.0 / 60.0
-        poses, jumps = [], []
-        for i in range(1800):
-            pose, snap = c.step(log.at(i * dt), dt)
-            poses.append(pose.global_positions.astype(np.float64))
-            jumps.append(snap.transitioned)
-        return np.array(poses), jumps
+        return _run_30s(c, "transitioned")
 
     fast, f_jumps = run(False)
     ref, r_jumps = run(True)
