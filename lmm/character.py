@@ -76,6 +76,7 @@ class SourcePose:
     contacts: np.ndarray            # (2,) bool
     frame: int = -1                 # database frame it came from, if any
     root_velocities: tuple | None = None  # (bone 0's velocity, angular velocity) as float lists, when given
+    unit_rotations: bool = False    # the rotations are of unit length to float64 rounding (not float32 data)
 
     def root_velocity_floats(self) -> tuple[list, list]:
         """Bone 0's velocity and angular velocity as lists of floats (from ``root_velocities`` when given,
@@ -726,7 +727,7 @@ class CharacterController(Controller):
         self.source = src
         timings["advance"] = (time.perf_counter() - t0) * 1e6
         self.offsets = offsets = inertialize_decay(self.offsets, tun.inertialization_halflife_s, dt)
-        pos, rot = inertialize_apply_pose(offsets, src.positions, src.rotations)
+        pos, rot = inertialize_apply_pose(offsets, src.positions, src.rotations, not src.unit_rotations)
         # the shown velocities: bone 0's now (root integration), every bone's when a transition reads them
         vel0, ang0 = inertialize_root_velocities(offsets, *src.root_velocity_floats())
         self.shown = ShownPose(pos, rot, offsets, source=src)

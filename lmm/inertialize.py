@@ -272,10 +272,16 @@ def _apply_velocities(offsets: Offsets, velocities, angular_velocities):
             offsets.angular_velocities + _mul_vec(offsets.rotations, angular_velocities))
 
 
-def inertialize_apply_pose(offsets: Offsets, positions, rotations):
+def inertialize_apply_pose(offsets: Offsets, positions, rotations, normalize: bool = True):
     """The shown pose's positions and rotations alone (those of :func:`inertialize_apply`, the same
-    operations): the velocities are needed only at the next transition (:class:`ShownPose`)."""
-    return positions + offsets.positions, _normalize(_mul(offsets.rotations, rotations))
+    operations): the velocities are needed only at the next transition (:class:`ShownPose`).
+
+    ``normalize=False`` leaves the product unnormalised: for source rotations of unit length to float64
+    rounding (the learned controller's decoded ones), since a decay's offsets are too (the exponential
+    of a rotation vector), so is their product, to a few units in the last place; rotations read from
+    float32 data (the database's) are unit only to about 1e-7 and are normalised."""
+    rot = _mul(offsets.rotations, rotations)
+    return positions + offsets.positions, _normalize(rot) if normalize else rot
 
 
 def inertialize_root_velocities(offsets: Offsets, velocity, angular_velocity) -> tuple[list, tuple]:

@@ -194,7 +194,8 @@ def xform_xy_to_quat(xy: np.ndarray) -> np.ndarray:
 
 
 class PoseDecoder:
-    """Decompressor output vectors (P,) -> :class:`SourcePose` (float64; bone 0 carries root velocities).
+    """Decompressor output vectors (P,) -> :class:`SourcePose` (float64; bone 0 carries root velocities;
+    rotations of unit length to float64 rounding, ``unit_rotations``).
 
     One gather builds positions, velocities and angular velocities of all bones (bone 0's position is a
     constant zero slot) and one the rotations' axes (bone 0's rotation is decoded from a constant identity
@@ -253,7 +254,7 @@ class PoseDecoder:
         self._y_head[...] = y
         pva = buf.take(self._pva)
         return SourcePose(pva[0], self._rotations(buf, self._axes), pva[1], pva[2],
-                          np.greater(self._y_contacts, 0.5), -1)
+                          np.greater(self._y_contacts, 0.5), -1, None, True)
 
     def tick(self, y_tick: np.ndarray, velocities) -> SourcePose:
         """The pose from the tick columns of a pose vector (:func:`lmm.nn.pose_vector_tick_columns`, in
@@ -268,7 +269,7 @@ class PoseDecoder:
         root = (buf[vel0].tolist(), buf[ang0].tolist())
         later = _LaterVelocities(velocities, root, self.n_bones)
         return SourcePose(positions, rot, later.velocities, later.angular_velocities,
-                          np.greater(self._t_contacts, 0.5), -1, root)
+                          np.greater(self._t_contacts, 0.5), -1, root, True)
 
 
 class _LaterVelocities:

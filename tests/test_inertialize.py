@@ -204,3 +204,22 @@ def test_shown_pose_and_root_velocities_are_inertialize_apply_bit_for_bit():
         later = ShownPose(pos, rot, off, source=source)
         assert made == []
         assert all(a.tobytes() == b.tobytes() for a, b in zip(later, want)) and made == [1]
+
+
+def test_apply_without_normalising_unit_rotations_stays_unit():
+    """Decayed offsets times rotations of unit length to float64 rounding need no normalisation: within a
+    few units in the last place of the normalised product, of unit length to 1e-15, over a chain of ticks."""
+    from lmm.inertialize import inertialize_apply_pose
+
+    rng = np.random.default_rng(21)
+    off = inertialize_transition(*_pose(rng, 23), *_pose(rng, 23))
+    worst = 0.0
+    for _ in range(60):
+        off = inertialize_decay(off, 0.1, 1 / 60)
+        src = _pose(rng, 23)
+        pos, rot = inertialize_apply_pose(off, src[0], src[2], normalize=False)
+        pos_n, rot_n = inertialize_apply_pose(off, src[0], src[2])
+        assert np.array_equal(pos, pos_n)
+        assert np.abs(np.sum(rot * rot, axis=1) - 1.0).max() <= 1e-15
+        worst = max(worst, float(np.abs(rot - rot_n).max()))
+    assert 0.0 < worst <= 1e-15
