@@ -289,10 +289,20 @@ def inertialize_root_velocities(offsets: Offsets, velocity, angular_velocity) ->
     floats each) in plain floats: the values of :func:`inertialize_apply`'s row 0, bit for bit
     (:func:`lmm.quat_scalar.mul_vec` sums the rotated vector's terms in the same order as
     :func:`_mul_vec`)."""
-    ov = offsets.velocities[0].tolist()
-    oa = offsets.angular_velocities[0].tolist()
-    r = qs.mul_vec(tuple(offsets.rotations[0].tolist()), angular_velocity)
-    return [a + b for a, b in zip(velocity, ov)], (oa[0] + r[0], oa[1] + r[1], oa[2] + r[2])
+    stack, vel, ang = offsets._stack, offsets.velocities, offsets.angular_velocities
+    if stack is not None and stack[1] is vel and stack[2] is ang:
+        ov, oa = vel.base[:, 0].tolist()   # both rows 0 of the stacked [velocities, angular velocities]
+    else:
+        ov, oa = vel[0].tolist(), ang[0].tolist()
+    # qs.mul_vec(offset rotation 0, angular_velocity), written out
+    w, x, y, z = offsets.rotations[0].tolist()
+    v0, v1, v2 = angular_velocity
+    t0 = 2.0 * (y * v2 - z * v1)
+    t1 = 2.0 * (z * v0 - x * v2)
+    t2 = 2.0 * (x * v1 - y * v0)
+    return ([velocity[0] + ov[0], velocity[1] + ov[1], velocity[2] + ov[2]],
+            (oa[0] + (v0 + w * t0 + (y * t2 - z * t1)), oa[1] + (v1 + w * t1 + (z * t0 - x * t2)),
+             oa[2] + (v2 + w * t2 + (x * t1 - y * t0))))
 
 
 class ShownPose:

@@ -186,6 +186,10 @@ def test_shown_pose_and_root_velocities_are_inertialize_apply_bit_for_bit():
 
     rng = np.random.default_rng(7)
     off = inertialize_transition(*_pose(rng, 22), *_pose(rng, 22))
+    src = _pose(rng, 22)                         # offsets not (yet) from a decay: separate arrays
+    want = inertialize_apply(off, *src)
+    vel0, ang0 = inertialize_root_velocities(off, src[1][0].tolist(), src[3][0].tolist())
+    assert off._stack is None and vel0 == want[1][0].tolist() and list(ang0) == want[3][0].tolist()
     for _ in range(12):
         off = inertialize_decay(off, 0.1, 1 / 60)
         src = _pose(rng, 22)
