@@ -388,21 +388,25 @@ def foot_lock_update(state: FootLockState, toe_positions, toe_velocities, contac
     return s, np.array(targets)
 
 
-def toe_clear_ground_floats(toe_y: float, q, toe_axis_local, toe_length: float, ground_height: float):
-    """:func:`toe_clear_ground` on floats (``q`` a 4-tuple, the axis a 3-tuple); None when the toe is left
-    as it is."""
-    if toe_length <= 0.0:
-        return None
-    # d = _unit(_qrot(q, toe_axis_local)), written out (the same operations in the same order): most
-    # ticks stop at the test below
+def _rotated_unit(q, v) -> tuple:
+    """``_unit(_qrot(q, v))`` written out: the same operations in the same order, without the helpers'
+    tuples (the toe's ground test runs it every tick for each locked foot)."""
     w, x, y, z = q
-    v0, v1, v2 = toe_axis_local
+    v0, v1, v2 = v
     t0, t1, t2 = 2.0 * (y * v2 - z * v1), 2.0 * (z * v0 - x * v2), 2.0 * (x * v1 - y * v0)
     r0 = v0 + w * t0 + (y * t2 - z * t1)
     r1 = v1 + w * t1 + (z * t0 - x * t2)
     r2 = v2 + w * t2 + (x * t1 - y * t0)
     n = math.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
-    d = (r0 / n, r1 / n, r2 / n) if n > 1e-9 else (1.0, 0.0, 0.0)
+    return (r0 / n, r1 / n, r2 / n) if n > 1e-9 else (1.0, 0.0, 0.0)
+
+
+def toe_clear_ground_floats(toe_y: float, q, toe_axis_local, toe_length: float, ground_height: float):
+    """:func:`toe_clear_ground` on floats (``q`` a 4-tuple, the axis a 3-tuple); None when the toe is left
+    as it is."""
+    if toe_length <= 0.0:
+        return None
+    d = _rotated_unit(q, toe_axis_local)
     if toe_y + toe_length * d[1] >= ground_height:
         return None
     want = _clamp1((ground_height - toe_y) / toe_length)

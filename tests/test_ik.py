@@ -283,33 +283,12 @@ def test_foot_lock_update_in_place_equals_the_functional_form_and_leaves_its_inp
     assert functional.locked.dtype == bool and functional.lock_position.shape == (2, 3)
 
 
-def _toe_clear_ground_with_helpers(toe_y, q, axis, toe_length, ground_height):
-    """toe_clear_ground_floats as written with the vector helpers (before the first steps were written out)."""
-    from lmm.ik import _axis_angle, _clamp1, _cross, _norm, _qmul, _qnormalize, _qrot, _unit
-    import math
-    if toe_length <= 0.0:
-        return None
-    d = _unit(_qrot(q, axis))
-    if toe_y + toe_length * d[1] >= ground_height:
-        return None
-    want = _clamp1((ground_height - toe_y) / toe_length)
-    angle = math.asin(want) - math.asin(_clamp1(d[1]))
-    a = _cross(d, (0.0, 1.0, 0.0))
-    if _norm(a) < 1e-9:
-        return None
-    return _qnormalize(_qmul(_axis_angle(_unit(a), angle), q))
-
-
-def test_toe_clear_ground_floats_is_the_helper_form_bit_for_bit():
-    from lmm.ik import toe_clear_ground_floats
+def test_rotated_unit_is_the_helper_form_bit_for_bit():
+    """The toe's ground test's direction, written out, against _unit(_qrot(q, v)) (null axes included)."""
+    from lmm.ik import _qrot, _rotated_unit, _unit
     rng = np.random.default_rng(5)
-    bent = 0
     for t in range(3000):
         q = rng.standard_normal(4)
         q = tuple((q / np.linalg.norm(q)).tolist())
-        axis = tuple(rng.standard_normal(3).tolist()) if t % 50 else (0.0, 0.0, 0.0)   # a null axis: fallback
-        args = (float(rng.uniform(-0.1, 0.2)), q, axis, float(rng.choice([0.0, 0.15, 0.3])), float(rng.uniform(0.0, 0.1)))
-        got, want = toe_clear_ground_floats(*args), _toe_clear_ground_with_helpers(*args)
-        assert got == want, t
-        bent += got is not None
-    assert 100 < bent < 2900
+        v = tuple((rng.standard_normal(3) * 10.0 ** rng.uniform(-12, 2)).tolist()) if t % 50 else (0.0, 0.0, 0.0)
+        assert _rotated_unit(q, v) == _unit(_qrot(q, v)), t
