@@ -358,7 +358,8 @@ class Session:
 
 
 #: a snapshot's fields made on their first read that the default layout's panels read every frame
-_DRAWN_LAZY_FIELDS = ("matched_pose_positions", "trajectory_positions", "trajectory_rotations", "query")
+_DRAWN_LAZY_FIELDS = ("matched_pose_positions", "trajectory_positions", "trajectory_rotations", "query",
+                      "simulation_position", "simulation_rotation")
 
 
 class TickWorker:

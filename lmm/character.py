@@ -114,6 +114,11 @@ def database_source_pose(db, frame: int, root_local_velocity=None, root_local_an
     return SourcePose(pos, rot, vel, ang, db.contacts[frame].copy(), int(frame))
 
 
+def _made(value):
+    """``value``, or what it makes when it is a zero-argument function (a value given for later)."""
+    return value() if callable(value) else value
+
+
 class _SnapshotFeatures:
     """A tick's debug-only feature values for :class:`lmm.controller.DebugSnapshot`'s lazy fields: the
     playing pose's normalised features (``current``), their cost against the query (``cost``) and the
@@ -133,14 +138,11 @@ class _SnapshotFeatures:
 
     def current(self) -> np.ndarray:
         if self._current is None:
-            raw = self._raw
-            self._current = normalize_with(raw() if callable(raw) else raw, self._mean, self._inv_scale)
+            self._current = normalize_with(_made(self._raw), self._mean, self._inv_scale)
         return self._current
 
     def cost(self) -> float:
-        query = self._query
-        if callable(query):             # the tick's query worked out on first read (see _TickQuery)
-            query = self._query = query()
+        query = self._query = _made(self._query)     # the tick's query, worked out on first read (_TickQuery)
         diff = query - self.current()
         diff *= diff                    # the same squares as (query - current) ** 2
         return float(diff.sum())
@@ -356,16 +358,18 @@ def _pack_rows(rows: list, n: int, width: int, dtype) -> np.ndarray:
     cast does (the same bits, ``tests/test_frame_cost.py``); with another dtype, or a Python whose packing
     refuses an out-of-range float, numpy converts."""
     dtype = np.dtype(dtype)
-    out = np.empty((n, width), dtype)
-    key = (n * width, dtype.char)
-    packer = _PACKERS.get(key)
-    if packer is None and dtype.char in "fd":
-        packer = _PACKERS[key] = struct.Struct(f"={n * width}{dtype.char}")
-    try:
-        packer.pack_into(out, 0, *itertools.chain.from_iterable(rows))
-    except (AttributeError, OverflowError, struct.error):
-        out[...] = np.fromiter(itertools.chain.from_iterable(rows), dtype, n * width).reshape(n, width)
-    return out
+    if dtype.char in "fd":
+        key = (n * width, dtype.char)
+        packer = _PACKERS.get(key)
+        if packer is None:
+            packer = _PACKERS[key] = struct.Struct(f"={n * width}{dtype.char}")
+        out = np.empty((n, width), dtype)
+        try:
+            packer.pack_into(out, 0, *itertools.chain.from_iterable(rows))
+            return out
+        except (OverflowError, struct.error):
+            pass
+    return np.fromiter(itertools.chain.from_iterable(rows), dtype, n * width).reshape(n, width)
 
 
 class _TickQuery:
@@ -410,9 +414,7 @@ class _TickQuery:
         if self._query is None:
             traj_pos, traj_rot = self._trajectory()
             local_pos, local_dir = trajectory_in_root_space_floats(traj_pos, traj_rot, *self._root)
-            source = self._source
-            raw = build_query_from_columns(source() if callable(source) else source, self._columns, local_pos,
-                                           local_dir)
+            raw = build_query_from_columns(_made(self._source), self._columns, local_pos, local_dir)
             self._query = normalize_with(raw, self._mean, self._inv_scale)
         return self._query
 
@@ -730,7 +732,7 @@ class CharacterController(Controller):
         pos, rot = inertialize_apply_pose(offsets, src.positions, src.rotations, not src.unit_rotations)
         # the shown velocities: bone 0's now (root integration), every bone's when a transition reads them
         vel0, ang0 = inertialize_root_velocities(offsets, *src.root_velocity_floats())
-        self.shown = ShownPose(pos, rot, offsets, source=src)
+        self.shown = ShownPose(pos, rot, offsets, src)
 
         # root integration (character space velocities -> world), in plain floats (one 3-vector/quaternion)
         root_vel_world, root_ang_world, root_pos, root_rot = _integrate_root_f(

@@ -24,7 +24,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from lmm import quat
-from lmm import quat_scalar as qs
 from lmm.springs import halflife_to_damping
 
 
@@ -309,24 +308,19 @@ class ShownPose:
     """The pose on screen as the 4-tuple (positions, velocities, rotations, angular velocities) that
     :func:`inertialize_apply` returns, with the velocities worked out when first read (by the next
     transition, which most ticks do not have) from the offsets and source pose they came from: the same
-    numpy operations on the same arrays (neither is written in place once made), so the same bits. The
-    source's velocities are given as arrays, or as ``source`` (a :class:`lmm.character.SourcePose`),
-    whose velocities are then read only then."""
+    numpy operations on the same arrays (neither is written in place once made), so the same bits.
+    ``source``: the source pose (a :class:`lmm.character.SourcePose`), whose velocities are read only then."""
 
-    __slots__ = ("_pos", "_rot", "_offsets", "_vel", "_ang", "_src_vel", "_src_ang", "_source")
+    __slots__ = ("_pos", "_rot", "_offsets", "_vel", "_ang", "_source")
 
-    def __init__(self, positions, rotations, offsets: Offsets, velocities=None, angular_velocities=None,
-                 source=None):
-        self._pos, self._rot, self._offsets = positions, rotations, offsets
-        self._src_vel, self._src_ang, self._source = velocities, angular_velocities, source
+    def __init__(self, positions, rotations, offsets: Offsets, source):
+        self._pos, self._rot, self._offsets, self._source = positions, rotations, offsets, source
         self._vel = self._ang = None
 
     def _velocities(self):
         if self._vel is None:
-            src_vel, src_ang = self._src_vel, self._src_ang
-            if self._source is not None:
-                src_vel, src_ang = self._source.velocities, self._source.angular_velocities
-            self._vel, self._ang = _apply_velocities(self._offsets, src_vel, src_ang)
+            src = self._source
+            self._vel, self._ang = _apply_velocities(self._offsets, src.velocities, src.angular_velocities)
         return self._vel, self._ang
 
     def __len__(self):

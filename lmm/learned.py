@@ -141,8 +141,9 @@ class XformToQuat:
     b_raw orthogonal to a), then a, b and c normalised together. The quaternion's magnitudes come from the
     matrix diagonal, their signs from the off-diagonal differences, and 0.5 scales the result (the
     magnitudes of an orthonormal frame's quaternion sum to one to rounding: it is not normalised again).
-    The same rotations as Gram-Schmidt and :func:`lmm.quat.from_xform_xy` to rounding (1e-12 tested in
-    ``tests/test_nn_runtime.py``); a degenerate frame (an axis of length zero, parallel axes) gives NaN.
+    The same rotations as Gram-Schmidt and :func:`lmm.quat.from_xform_xy` to rounding (typically 1e-16;
+    1e-8 bounds a component near zero, whose square root both take: ``tests/test_nn_runtime.py``); a
+    degenerate frame (an axis of length zero, parallel axes) gives NaN.
     """
 
     def __init__(self, n: int):
@@ -238,9 +239,13 @@ class PoseDecoder:
         self._t_head = self._t[:len(cols)]
         self._t_pos = at[pva[0]]
         self._t_axes = at[self._axes]
-        self._t_root_slices = tuple(slice(int(at[s[name].start]), int(at[s[name].start]) + 3)
-                                    for name in ("root_velocity", "root_angular_velocity"))
-        self._t_contacts = self._t[int(at[s["contacts"].start]):int(at[s["contacts"].start]) + 2]
+
+        def tick_slice(name):       # an entry of the pose vector, where the tick form holds it
+            start = int(at[s[name].start])
+            return slice(start, start + s[name].stop - s[name].start)
+
+        self._t_root_slices = (tick_slice("root_velocity"), tick_slice("root_angular_velocity"))
+        self._t_contacts = self._t[tick_slice("contacts")]
 
     def _rotations(self, buf: np.ndarray, axes: np.ndarray) -> np.ndarray:
         """A new (J, 4) array of the rotations whose axes ``axes`` gathers from ``buf``."""
@@ -325,10 +330,10 @@ class LearnedMotionMatchingController(CharacterController):
         self._run_decompressor = self.nets.decompressor.bind_single(self._pose_vec, self._state1)
         # per tick the decompressor computes the pose vector's tick columns only; the bones' velocities
         # (a third of its last layer) from a copy of its hidden layer when a transition reads them
-        self._pose_tick = np.zeros(len(pose_vector_tick_columns(db.n_bones)), np.float32)
+        tick_columns = pose_vector_tick_columns(db.n_bones)
+        self._pose_tick = np.zeros(len(tick_columns), np.float32)
         self._run_decompressor_tick, self._decompressor_hidden, self._decompressor_velocities = \
-            self.nets.decompressor.bind_single_split(pose_vector_tick_columns(db.n_bones), self._pose_tick,
-                                                     self._state1)
+            self.nets.decompressor.bind_single_split(tick_columns, self._pose_tick, self._state1)
         self._dt32 = (None, None)    # (dt, np.float32(dt)) of the last tick
         self._source_raw = None      # from_network_space of the state's features (None: not computed since it changed)
         self._index: SearchIndex | None = None

@@ -240,32 +240,52 @@ class MLP:
         With ``x1`` (float32 (n_in + 1,), its last element 1.0: the caller keeps its input vector in
         ``x1[:-1]``) the first layer reads ``x1`` directly and ``run()`` takes no argument: no copy of the
         input. ``out`` must not share memory with the input when the network has a skip connection."""
-        x_own, x_view, hidden, last, _ = self._single_plan()
-        if out.dtype != np.float32 or out.shape != (self.n_out,):
-            raise ValueError(f"{self.name}: bind_single needs a float32 ({self.n_out},) buffer, got {out.dtype} {out.shape}")
-        if x1 is not None and (x1.dtype != np.float32 or x1.shape != (self.n_in + 1,) or x1[-1] != 1.0):
-            raise ValueError(f"{self.name}: x1 must be float32 ({self.n_in + 1},) ending with 1.0")
+        x_own, x_view, _, last, _ = self._single_plan()
+        self._check_out(out, self.n_out, "bind_single")
+        if x1 is not None:
+            self._check_x1(x1)
         if self.skip and np.may_share_memory(out, x_own if x1 is None else x1):
             raise ValueError(f"{self.name}: with a skip connection out must not share the input's memory")
-        dot, maximum = np.dot, np.maximum
-        first = x_own if x1 is None else x1
-        inputs = [first] + [buf for _, buf, _, _, _ in hidden]
-        layers = [(h, m, val, zero) for h, (m, _, val, zero, _) in zip(inputs, hidden)]
-        h_last = inputs[-1]
         own_input = x_view if x1 is None else x1[:-1]
         if self.activation != "relu" or self.skip:
             def run(x=None):
                 return self._call_single(own_input if x is None else x, out)
             return run
+        forward = self._bound_relu(x_own if x1 is None else x1, last, out)
+        if x1 is not None:
+            return forward
 
         def run(x=None):
             if x is not None:      # without x1: the input is copied into the plan's own buffer
                 x_view[...] = x
+            return forward()
+        return run
+
+    def _check_out(self, out: np.ndarray, size: int, caller: str) -> None:
+        if out.dtype != np.float32 or out.shape != (size,):
+            raise ValueError(f"{self.name}: {caller} needs a float32 ({size},) buffer, got {out.dtype} {out.shape}")
+
+    def _check_x1(self, x1: np.ndarray) -> None:
+        if x1.dtype != np.float32 or x1.shape != (self.n_in + 1,) or x1[-1] != 1.0:
+            raise ValueError(f"{self.name}: x1 must be float32 ({self.n_in + 1},) ending with 1.0")
+
+    def _bound_relu(self, first: np.ndarray, last: np.ndarray, out: np.ndarray):
+        """The core of the bound calls: a function running the plan's hidden ReLU layers from the buffer
+        ``first`` ([x, 1]) and then ``last`` into ``out``; its ``hidden`` attribute is the last layer's
+        input buffer ([h, 1])."""
+        _, _, hidden, _, _ = self._single_plan()
+        inputs = [first] + [buf for _, buf, _, _, _ in hidden]
+        layers = [(h, m, val, zero) for h, (m, _, val, zero, _) in zip(inputs, hidden)]
+        h_last = inputs[-1]
+        dot, maximum = np.dot, np.maximum
+
+        def forward():
             for h, m, val, zero in layers:
                 dot(h, m, val)
                 maximum(val, zero, out=val)
             return dot(h_last, last, out)
-        return run
+        forward.hidden = h_last
+        return forward
 
     def bind_single_split(self, columns, out: np.ndarray, x1: np.ndarray):
         """:meth:`bind_single` reading the caller's ``x1`` whose last layer computes only the output
@@ -280,31 +300,18 @@ class MLP:
         two (``tests/test_nn_runtime.py``). ReLU networks without a skip connection only."""
         if self.activation != "relu" or self.skip:
             raise ValueError(f"{self.name}: bind_single_split needs a ReLU network without a skip connection")
-        _, _, hidden, last, _ = self._single_plan()
+        last = self._single_plan()[3]
         columns = np.asarray(columns, dtype=np.int64)
         if columns.ndim != 1 or not np.all(np.diff(columns) > 0) or len(columns) == 0 \
                 or columns[0] < 0 or columns[-1] >= self.n_out:
             raise ValueError(f"{self.name}: columns must be ascending indices below {self.n_out}")
-        if out.dtype != np.float32 or out.shape != (len(columns),):
-            raise ValueError(f"{self.name}: bind_single_split needs a float32 ({len(columns)},) buffer, "
-                             f"got {out.dtype} {out.shape}")
-        if x1.dtype != np.float32 or x1.shape != (self.n_in + 1,) or x1[-1] != 1.0:
-            raise ValueError(f"{self.name}: x1 must be float32 ({self.n_in + 1},) ending with 1.0")
-        others = np.setdiff1d(np.arange(self.n_out), columns)
+        self._check_out(out, len(columns), "bind_single_split")
+        self._check_x1(x1)
         first = np.ascontiguousarray(last[:, columns])
-        rest = np.ascontiguousarray(last[:, others])
-        inputs = [x1] + [buf for _, buf, _, _, _ in hidden]
-        layers = [(h, m, val, zero) for h, (m, _, val, zero, _) in zip(inputs, hidden)]
-        h_last = inputs[-1]
-        dot, maximum = np.dot, np.maximum
-
-        def run():
-            for h, m, val, zero in layers:
-                dot(h, m, val)
-                maximum(val, zero, out=val)
-            return dot(h_last, first, out)
+        rest = np.ascontiguousarray(last[:, np.setdiff1d(np.arange(self.n_out), columns)])
+        run = self._bound_relu(x1, first, out)
         run.nbytes = int(first.nbytes + rest.nbytes)   # the split copy of the last layer, for memory figures
-        return run, h_last, rest
+        return run, run.hidden, rest
 
     def __call__(self, x: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         """Evaluate on (D,) or (B, D); returns a new array (or writes into ``out``)."""

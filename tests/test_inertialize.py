@@ -195,7 +195,7 @@ def test_shown_pose_and_root_velocities_are_inertialize_apply_bit_for_bit():
         src = _pose(rng, 22)
         want = inertialize_apply(off, *src)
         pos, rot = inertialize_apply_pose(off, src[0], src[2])
-        shown = ShownPose(pos, rot, off, src[1], src[3])
+        shown = ShownPose(pos, rot, off, SourcePose(src[0], src[2], src[1], src[3], np.zeros(2, bool)))
         vel0, ang0 = inertialize_root_velocities(off, src[1][0].tolist(), src[3][0].tolist())
         assert len(shown) == 4
         for a, b in zip(shown, want):
@@ -205,7 +205,7 @@ def test_shown_pose_and_root_velocities_are_inertialize_apply_bit_for_bit():
         # the source pose given whole: its velocities (here made when read) are read only by a transition
         made = []
         source = SourcePose(src[0], src[2], lambda: made.append(1) or src[1], lambda: src[3], np.zeros(2, bool))
-        later = ShownPose(pos, rot, off, source=source)
+        later = ShownPose(pos, rot, off, source)
         assert made == []
         assert all(a.tobytes() == b.tobytes() for a, b in zip(later, want)) and made == [1]
 
