@@ -382,17 +382,21 @@ class TickWorker:
         self._idle.set()
         self._results: list = []
         self._error: BaseException | None = None
+        self.prepared = None
         self._thread = threading.Thread(target=self._loop, name="studio-ticks", daemon=True)
         self._thread.start()
 
-    def submit(self, inputs: list[InputState]) -> None:
+    def submit(self, inputs: list[InputState], prepare=None) -> None:
+        """Step ``inputs``; then, when given, call ``prepare(newest tick)`` on the worker too (the panels'
+        numeric work for the next frame, see ``Studio``): its result is ``prepared`` after ``wait``."""
         if not inputs:
             return
         self._idle.clear()
-        self._jobs.put(list(inputs))
+        self._jobs.put((list(inputs), prepare))
 
     def wait(self) -> list[tuple[Tick, dict]]:
-        """The ticks finished since the last call, with each one's per-controller milliseconds."""
+        """The ticks finished since the last call, with each one's per-controller milliseconds
+        (``prepared`` then holds what the last job's ``prepare`` returned, or None)."""
         self._idle.wait()
         if self._error is not None:
             err, self._error = self._error, None
@@ -400,11 +404,18 @@ class TickWorker:
         out, self._results = self._results, []
         return out
 
+    def take_prepared(self):
+        """What the last job's ``prepare`` returned (once; None when there was none or it failed)."""
+        out, self.prepared = self.prepared, None
+        return out
+
     def _loop(self) -> None:
         while True:
-            inputs = self._jobs.get()
-            if inputs is None:
+            job = self._jobs.get()
+            if job is None:
                 return
+            inputs, prepare = job
+            self.prepared = None
             try:
                 for inp in inputs:
                     tick = self.session.step(inp)
@@ -417,6 +428,12 @@ class TickWorker:
                         getattr(snap, name, None)
             except BaseException as e:  # handed to the GUI thread by wait()
                 self._error = e
+            else:
+                if prepare is not None:
+                    try:
+                        self.prepared = prepare(tick)
+                    except Exception:    # the GUI thread works it out itself, and reports what fails
+                        self.prepared = None
             finally:
                 self._idle.set()
 

@@ -37,6 +37,7 @@ from .panels.errors import ErrorDialog
 from .playback import Playback
 from .scripting import Screenshots, Script, StateDump
 from .engine import StudioOptions, load_session
+from .prepared import Preparer
 from .session import TickWorker
 from .theme import OPAQUE, WINDOW_BG, Theme
 
@@ -142,6 +143,7 @@ class Studio(SessionActions):
                     TimelinePanel, RecordingPanel, DatabasePanel, CoveragePanel,
                     MotionSearchPanel, PhysicsPanel):
             self.panels[cls.key] = cls(ctx)
+        self.preparer = Preparer(self.panels)
         self.menu.build()
         for key, panel in self.panels.items():
             panel.build(self.layouts.window_kwargs(key))
@@ -281,6 +283,7 @@ class Studio(SessionActions):
         if self.session.recording_error:     # a write failed (full disk): the recording stopped itself
             self.stop_recording()
             self.errors.show("Recording", self.last_recording)
+        self.preparer.receive(self.worker.take_prepared())
         step_ms = per_tick_ms(finished, self.session.names)
         if self.dump is not None:
             self.dump.ticks(finished)
@@ -294,11 +297,17 @@ class Studio(SessionActions):
         tuning_seen = self.session.tuning.to_dict() if self.dump is not None and n else None
         t1 = time.perf_counter()
         view = self.view(live)
-        self.viewport.update(view)
+        prep = self.preparer
+        self.viewport.update(view, prep.result("viewport", view))
         t2 = time.perf_counter()
+        shown = {"viewport"}
         for key, panel in self.panels.items():
             if key != "viewport" and dpg.is_item_shown(panel.tag):
-                panel.update(view)
+                shown.add(key)
+                if key in prep.panels:
+                    panel.update(view, prep.result(key, view))
+                else:
+                    panel.update(view)
         self.menu.update(view)
         if self.frame_index % 10 == 0:
             self.theme.backgrounds()
@@ -314,7 +323,7 @@ class Studio(SessionActions):
         self.script.captures.clear()
         # the next ticks are stepped on the worker while dearpygui draws (it releases the GIL);
         # from here to the next wait() nothing may touch the session
-        self.worker.submit(inputs)
+        self.worker.submit(inputs, prep.job(view, shown, self.frame_index + 1))
         dpg.render_dearpygui_frame()
         t4 = time.perf_counter()
         vp = self.viewport
@@ -425,6 +434,7 @@ class Studio(SessionActions):
             lmm_problem=self.lmm_problem, errors=list(self.errors.shown), layout=self.layouts.name,
             layout_switches=self.layouts.switches, final=self.panel_state(),
             frame_times={"median_ms": ft.median(), "parts_ms": {k: ft.median(k) for k in ft.parts}},
+            prepared=self.preparer.state(),
             user_layout=str(layout_files.user_layout_path()))
 
 

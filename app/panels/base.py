@@ -177,5 +177,17 @@ class Panel:
     def update(self, view: View) -> None:
         pass
 
+    # a panel whose update does numeric work (history windows, images, markers) can split it off:
+    # ``prepare`` does it, ``update(view, prepared)`` shows a result (None: prepare it now). The studio
+    # calls ``prepare`` on the tick worker for the next frame (see app.prepared).
+    def prepare_key(self, view: View) -> tuple:
+        """The panel's own settings that ``prepare`` reads (a result made with others is not used)."""
+        return ()
+
+    def prepare(self, view: View) -> Any:
+        """What ``update`` shows of ``view``, worked out from the view, the history and the panel's
+        settings only: no dearpygui call, no change to the panel (it may run on another thread)."""
+        return None
+
     def state(self) -> dict:
         return dict(self.last)

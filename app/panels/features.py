@@ -103,7 +103,20 @@ class FeaturesPanel(Panel):
         theme.series("feat_projected", COLORS["lmm"], bar=True)
         theme.series("feat_sep", (0.45, 0.45, 0.5), weight=1.0)
 
-    def update(self, view: View) -> None:
+    def prepare(self, view: View) -> dict:
+        """The plotted vectors and each controller's distance from its own query to its answer (the
+        projector answered LMM's query, the search MM's; None when there is none)."""
+        features = self.ctx.engine.features
+        vals = bar_values(view)
+        mm, lmm = view.snap_of("mm"), view.snap_of("lmm")
+        total_m = total_p = None
+        if mm is not None and vals["matched"] is not None:
+            total_m = total_error(features, np.asarray(mm.query, np.float64), vals["matched"])
+        if lmm is not None and vals["projected"] is not None:
+            total_p = total_error(features, np.asarray(lmm.query, np.float64), vals["projected"])
+        return {"vals": vals, "total_m": total_m, "total_p": total_p}
+
+    def update(self, view: View, prepared: dict | None = None) -> None:
         dpg = self.dpg
         features = self.ctx.engine.features
         weights = tuple(float(self.ctx.tuning.feature_weights.get(ch.name, w))
@@ -113,7 +126,8 @@ class FeaturesPanel(Panel):
             labels = [f"{short_channel_name(ch.name)}\nw {w:.2f}" for ch, w in zip(features.layout, weights)]
             dpg.set_axis_ticks("feat_x", tuple(zip(labels, self.layout["centres"])))
             self.layout["labels"] = labels
-        vals = bar_values(view)
+        p = prepared if prepared is not None else self.prepare(view)
+        vals = p["vals"]
         x = self.layout["x"]
         if self._bar_x is None:
             self._bar_x = {shift: x + shift for shift in (-BAR_WIDTH, 0.0, BAR_WIDTH)}
@@ -124,16 +138,14 @@ class FeaturesPanel(Panel):
             dpg.set_value(tag, [self._bar_x[shift], self._zeros if v is None else v])
         inspected = SHORT.get(view.inspected, view.inspected)
         self.text.configure("feat_query", label=f"query ({inspected})")
-        # each controller's own query: the projector answered LMM's query, the search MM's
-        mm, lmm = view.snap_of("mm"), view.snap_of("lmm")
-        total_m = total_p = float("nan")
+        total_m, total_p = p["total_m"], p["total_p"]
         summary = f"query of {inspected}"
-        if mm is not None and vals["matched"] is not None:
-            total_m = total_error(features, np.asarray(mm.query, np.float64), vals["matched"])
+        if total_m is not None:
             summary += f"   |   MM: |query - matched|^2 = {total_m:.3f}"
-        if lmm is not None and vals["projected"] is not None:
-            total_p = total_error(features, np.asarray(lmm.query, np.float64), vals["projected"])
+        if total_p is not None:
             summary += f"   |   LMM: |query - projected|^2 = {total_p:.3f}"
+        total_m = float("nan") if total_m is None else total_m
+        total_p = float("nan") if total_p is None else total_p
         self.text.set("feat_summary", summary)
         self.last = {"query": vals["query"], "matched": vals["matched"], "projected": vals["projected"],
                      "cost_matched": total_m, "cost_projected": total_p}

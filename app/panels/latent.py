@@ -128,8 +128,12 @@ class LatentPanel(Panel):
         L = float(self.n_latent)
         return (L + GAP, 2 * L + GAP) if key == "lmm" else (0.0, L)
 
-    def update(self, view: View) -> None:
-        dpg = self.dpg
+    def prepare_key(self, view: View) -> tuple:
+        return (self.seconds, self.dim, tuple(self._scale.items()))
+
+    def prepare(self, view: View) -> dict:
+        """The windows of both latents, their colour ranges after this frame's smoothing step, their heat
+        images and the chosen dimension's curves."""
         h = view.history
         dt = self.ctx.engine.dt
         n = max(int(self.seconds / dt), 2)
@@ -139,18 +143,38 @@ class LatentPanel(Panel):
         for key, field in (("lmm", "latent"), ("mm", "matched_latent")):   # the controllers report them
             if h.has_series(key, field):
                 series[key] = h.window(key, field, end, n)
+        scale = dict(self._scale)
         for key, v in series.items():  # each map's colour range follows its recent values smoothly
             if v.ndim == 2 and view.frame % 6 == 0:
-                self._scale[key] = 0.7 * self._scale[key] + 0.3 * latent_scale(v[-60:])
-        cache = self.text
+                scale[key] = 0.7 * scale[key] + 0.3 * latent_scale(v[-60:])
+        images, curves = {}, {}
+        dim = self.dim
         for key in ("lmm", "mm"):
             v = series.get(key)
+            ok_map = v is not None and v.ndim == 2 and v.shape[1] == self.n_latent
+            images[key] = heat_image(v, scale[key], self.lut, COLUMNS) if ok_map else None
+            if v is None or v.ndim != 2 or dim >= v.shape[1]:
+                curves[key] = [t[-1:], np.zeros(1)]
+            else:
+                y = v[:, dim]
+                ok = np.isfinite(y)
+                curves[key] = [t, np.ascontiguousarray(y)] if ok.all() else [t[ok], y[ok]]
+        return {"n": n, "t": t, "series": series, "scale": scale, "images": images, "curves": curves}
+
+    def update(self, view: View, prepared: dict | None = None) -> None:
+        dpg = self.dpg
+        p = prepared if prepared is not None else self.prepare(view)
+        n, t, series = p["n"], p["t"], p["series"]
+        end = view.tick_number
+        self._scale.update(p["scale"])
+        cache = self.text
+        for key in ("lmm", "mm"):
             tag = f"lat_heat_{key}"
-            if v is None or v.ndim != 2 or v.shape[1] != self.n_latent:
+            image = p["images"][key]
+            if image is None:
                 cache.configure(tag, show=False)
                 continue
-            sc = self._scale[key]
-            heat_image(v, sc, self.lut, COLUMNS, out=self.images[key])   # in place: the texture shows it
+            np.copyto(self.images[key], image)   # in place: the texture shows it
             lo, hi = self._rows(key)
             cache.configure(tag, show=True, bounds_min=(float(t[0]), lo), bounds_max=(0.0, hi))
         labels = tuple(f"{k.upper()} ±{self._scale[k]:.1f}" for k in ("mm", "lmm"))
@@ -161,13 +185,7 @@ class LatentPanel(Panel):
         cache.axis_limits("lat_x", float(t[0]), 0.0)
         dim = self.dim
         for key, tag, label in (("lmm", "lat_curve_lmm", "LMM latent"), ("mm", "lat_curve_mm", "MM matched latent")):
-            v = series.get(key)
-            if v is None or v.ndim != 2 or dim >= v.shape[1]:
-                dpg.set_value(tag, [t[-1:], np.zeros(1)])
-            else:
-                y = v[:, dim]
-                ok = np.isfinite(y)
-                dpg.set_value(tag, [t, np.ascontiguousarray(y)] if ok.all() else [t[ok], y[ok]])
+            dpg.set_value(tag, p["curves"][key])
             cache.configure(tag, label=f"{label}[{dim}]")
         cache.axis_limits("lat_curve_x", float(t[0]), 0.0)
         missing = [k for k in ("lmm", "mm") if k not in series]

@@ -190,9 +190,12 @@ class SearchPanel(Panel):
             self._labels[frame] = cells
         return cells
 
-    def update(self, view: View) -> None:
-        dpg = self.dpg
-        cache = self.text
+    def prepare_key(self, view: View) -> tuple:
+        return (self.seconds, self.tolerance)
+
+    def prepare(self, view: View) -> dict:
+        """The table's numbers, the agreement and the cost plot's series of the window ending at the
+        view's tick."""
         db = self.ctx.engine.db
         h = view.history
         dt = self.ctx.engine.dt
@@ -201,6 +204,7 @@ class SearchPanel(Panel):
         t = seconds_axis(n, dt)
         lmm, mm = view.snap_of("lmm"), view.snap_of("mm")
         shown = {}
+        out = {"shown": shown, "end": end, "t": t, "lmm": lmm is not None}
         if lmm is not None:
             # each series is gathered once: the table, the agreement and its curve share them
             searched = h.window("lmm", "searched", end, n)
@@ -218,24 +222,15 @@ class SearchPanel(Panel):
             # which ticks searched and agreed, once for the rate and its curve
             masks = search_masks(searched, nn, projected, self.tolerance)
             rate, k = masks_agreement(*masks)
-            agree = "-" if k == 0 else f"{100 * rate:.0f}% of {k} searches"
-            cache.set("nn_status", "LMM projector vs exact nearest neighbour of the same query")
+            ag = rolling_rate(*masks, int(2.0 / dt))
+            ok = np.isfinite(ag)
+            out["agree_curve"] = list(decimate(t[ok], ag[ok], 300)) if ok.any() else [t[-1:], np.zeros(1)]
         else:
             dist, rate, k = float("nan"), float("nan"), 0
-            agree = "-"
-            reason = view.problems.get("lmm") or "LMM is not running"
-            cache.set("nn_status", reason)
         if mm is not None:
             shown["mm"] = (int(mm.matched_frame), float(mm.best_cost))
-        for col in ("nn", "proj", "mm"):
-            frame, cost = shown.get(col, (-1, float("nan")))
-            frame_cell, clip_cell = self._label(frame)
-            cache.set(f"nn_{col}_frame", frame_cell)
-            cache.set(f"nn_{col}_clip", clip_cell)
-            cache.set(f"nn_{col}_cost", fmt_num(cost))
-        cache.set("nn_distance", fmt_num(dist))
-        cache.set("nn_agreement", agree)
-        # cost timeline
+        out.update(dist=dist, rate=rate, k=k)
+        curves = {}
         best_cost = None
         for name, field, tag in (("mm", "best_cost", "cost_mm"), ("lmm", "nn_cost", "cost_nn"),
                                  ("lmm", "projected_cost", "cost_proj")):
@@ -244,23 +239,47 @@ class SearchPanel(Panel):
                 best_cost = y
             ok = np.isfinite(y)
             held = int(np.count_nonzero(ok))
-            any_ok = held > 0
             if held == len(y):     # every tick has a cost (the usual case): no masked copies to make
-                dpg.set_value(tag, list(decimate(t, y, 300)))
-            elif any_ok:
-                dpg.set_value(tag, list(decimate(t[ok], y[ok], 300)))
+                curves[tag] = list(decimate(t, y, 300))
+            elif held:
+                curves[tag] = list(decimate(t[ok], y[ok], 300))
             else:
-                dpg.set_value(tag, [t[-1:], np.zeros(1)])
-            cache.configure(tag, show=any_ok)
+                curves[tag] = (False, [t[-1:], np.zeros(1)])
+                continue
+            curves[tag] = (True, curves[tag])
+        out["curves"] = curves
         tr = h.window("mm", "transitioned", end, n) > 0.5
         sel = tr & np.isfinite(best_cost)
-        dpg.set_value("cost_transitions", [t[sel] if sel.any() else t[-1:],
-                                           best_cost[sel] if sel.any() else np.zeros(1)])
-        if lmm is not None:
-            ag = rolling_rate(*masks, int(2.0 / dt))
-            ok = np.isfinite(ag)
-            dpg.set_value("cost_agree", list(decimate(t[ok], ag[ok], 300)) if ok.any() else [t[-1:], np.zeros(1)])
-        cache.configure("cost_agree", show=lmm is not None)
+        out["transitions"] = ([t[sel], best_cost[sel]] if sel.any() else [t[-1:], np.zeros(1)])
+        return out
+
+    def update(self, view: View, prepared: dict | None = None) -> None:
+        dpg = self.dpg
+        cache = self.text
+        p = prepared if prepared is not None else self.prepare(view)
+        shown, t, end = p["shown"], p["t"], p["end"]
+        dist, rate, k = p["dist"], p["rate"], p["k"]
+        if p["lmm"]:
+            agree = "-" if k == 0 else f"{100 * rate:.0f}% of {k} searches"
+            cache.set("nn_status", "LMM projector vs exact nearest neighbour of the same query")
+        else:
+            agree = "-"
+            cache.set("nn_status", view.problems.get("lmm") or "LMM is not running")
+        for col in ("nn", "proj", "mm"):
+            frame, cost = shown.get(col, (-1, float("nan")))
+            frame_cell, clip_cell = self._label(frame)
+            cache.set(f"nn_{col}_frame", frame_cell)
+            cache.set(f"nn_{col}_clip", clip_cell)
+            cache.set(f"nn_{col}_cost", fmt_num(cost))
+        cache.set("nn_distance", fmt_num(dist))
+        cache.set("nn_agreement", agree)
+        for tag, (any_ok, curve) in p["curves"].items():
+            dpg.set_value(tag, curve)
+            cache.configure(tag, show=any_ok)
+        dpg.set_value("cost_transitions", p["transitions"])
+        if p["lmm"]:
+            dpg.set_value("cost_agree", p["agree_curve"])
+        cache.configure("cost_agree", show=p["lmm"])
         cache.axis_limits("cost_x", float(t[0]), 0.0)
         self.last = {"tick": end, "nn_frame": shown.get("nn", (-1,))[0], "nn_cost": shown.get("nn", (0, None))[1],
                      "projected_frame": shown.get("proj", (-1,))[0],

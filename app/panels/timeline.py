@@ -56,11 +56,26 @@ class TimelinePanel(Panel):
     def _on_slider(self, sender, value):
         self.ctx.actions.scrub_to(int(value))
 
-    def update(self, view: View) -> None:
+    def prepare_key(self, view: View) -> tuple:
+        return tuple(self.ctx.engine.controller_names())
+
+    def prepare(self, view: View) -> dict:
+        """The speed curves of every tick held (they do not follow the scrubbed tick)."""
+        h = view.history
+        names = self.ctx.engine.controller_names()
+        newest, oldest = h.newest_tick, h.oldest_tick
+        n = h.capacity
+        t = seconds_axis(n, self.ctx.engine.dt)
+        first = max(0, n - (newest - oldest + 1))
+        speeds = {name: list(decimate(t[first:], h.window(name, "speed", newest, n)[first:], 400))
+                  for name in COLORS if name in names}
+        desired = list(decimate(t[first:], h.window(names[0], "desired_speed", newest, n)[first:], 400))
+        return {"speeds": speeds, "desired": desired, "t0": float(t[0])}
+
+    def update(self, view: View, prepared: dict | None = None) -> None:
         dpg = self.dpg
         h = view.history
         dt = self.ctx.engine.dt
-        names = self.ctx.engine.controller_names()
         newest = h.newest_tick
         if newest < 0:
             return
@@ -79,18 +94,14 @@ class TimelinePanel(Panel):
         if line != want:
             dpg.set_value("tl_drag", want)
         self._line_value = want
-        n = h.capacity
-        t = seconds_axis(n, dt)
-        first = max(0, n - (newest - oldest + 1))
+        p = prepared if prepared is not None else self.prepare(view)
         for name in COLORS:
-            running = name in names
-            self.text.configure(f"tl_speed_{name}", show=running)
-            if running:
-                y = h.window(name, "speed", newest, n)
-                dpg.set_value(f"tl_speed_{name}", list(decimate(t[first:], y[first:], 400)))
-        name0 = names[0]
-        dpg.set_value("tl_desired", list(decimate(t[first:], h.window(name0, "desired_speed", newest, n)[first:], 400)))
-        self.text.axis_limits("tl_x", float(t[0]), 0.0)
+            curve = p["speeds"].get(name)
+            self.text.configure(f"tl_speed_{name}", show=curve is not None)
+            if curve is not None:
+                dpg.set_value(f"tl_speed_{name}", curve)
+        dpg.set_value("tl_desired", p["desired"])
+        self.text.axis_limits("tl_x", p["t0"], 0.0)
         self.text.configure("tl_play", label="Play" if view.paused else "Pause")
         held = (newest - oldest + 1) * dt
         mode = view.mode

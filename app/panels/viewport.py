@@ -16,11 +16,13 @@ import numpy as np
 
 from .base import Panel, PanelContext, View
 from .common import COLORS, RAGDOLL_COLOR, SHORT
-from .viewport_scene import LEGEND, CharacterDrawing, MarkerBatch, PreviewDrawings, draw_character
+from .viewport_scene import (LEGEND, CharacterDrawing, MarkerBatch, Markers, PreviewDrawings, apply_character,
+                             character_parts)
 
 FORWARD = np.array([0.0, 0.0, 1.0])
 SIDE_OFFSET_M = 1.6
 TRAIL_SECONDS = 4.0
+_ALL_MARKERS, _RAGDOLL, _HEADS = " markers", " ragdoll", " heads"    # prepared entries beside the controllers' names
 LABEL_CHAR_PX, LABEL_HEIGHT_PX = 8.5, 17.0      # a character label's size per character at font size 16
 BYTE_TO_UNIT = np.float32(1.0 / 255.0)          # an 8-bit colour channel to the raw texture's 0..1
 
@@ -327,7 +329,35 @@ class ViewportPanel(Panel):
         i = names.index(name) if name in names else 0
         return np.array([SIDE_OFFSET_M * i, 0.0, 0.0])
 
-    def update(self, view: View) -> None:
+    def prepare_key(self, view: View) -> tuple:
+        return (tuple(self.drawings), tuple(sorted(self.show.items())), self.side_by_side,
+                tuple(sorted(view.ragdoll.items())), self.ragdoll_skeleton is not None,
+                self.reference is not None and self.reference_skeleton is not None)
+
+    def prepare(self, view: View) -> dict:
+        """Each shown character's skeleton, ghost and markers at the view's tick (see
+        :func:`character_parts`): the numpy share of :meth:`update`, safe on the tick worker."""
+        out = {}
+        tick = view.tick
+        if self.renderer is None or tick is None:
+            return out
+        markers, heads = Markers(), {}
+        for name, d in self.drawings.items():
+            snap = tick.snapshots.get(name)
+            if snap is not None:
+                out[name] = parts = self._character_parts(d, name, snap, self.offset_of(name), view)
+                markers.extend(parts.markers)
+                heads[name] = self._label_anchor(name, snap)
+        out[_HEADS] = heads
+        # every character's markers joined in drawing order: what update adds when it uses them all
+        out[_ALL_MARKERS] = markers.compacted()
+        ragdoll = self.ragdoll_pose(view) if self.ragdoll_skeleton is not None else None
+        if ragdoll is not None:
+            name, positions, off = ragdoll
+            out[_RAGDOLL] = (name, positions, off, self.ragdoll_skeleton.prepare(positions + off))
+        return out
+
+    def update(self, view: View, prepared: dict | None = None) -> None:
         if self.renderer is None:
             return
         import time
@@ -342,17 +372,28 @@ class ViewportPanel(Panel):
         roots = []
         self.drawn = {"tick": view.tick_number, "roots": {}, "offsets": {}}
         self.batch.clear()
+        all_prepared = prepared is not None
+        markers = []
         for name, d in self.drawings.items():
             snap = tick.snapshots.get(name) if tick is not None else None
             if snap is None:
                 d.hide()
                 continue
             off = self.offset_of(name)
-            self._update_character(d, name, snap, off, view)
+            parts = prepared.get(name) if prepared is not None else None
+            all_prepared = all_prepared and parts is not None
+            parts = parts or self._character_parts(d, name, snap, off, view)
+            apply_character(d, None, parts)
+            markers.append(parts.markers)
             root = np.asarray(snap.pose.global_positions[0], np.float64) + off
             roots.append(root)
             self.drawn["roots"][name] = [float(x) for x in snap.pose.global_positions[0]]
             self.drawn["offsets"][name] = [float(x) for x in off]
+        if all_prepared and markers:
+            self.batch.extend(prepared[_ALL_MARKERS])
+        else:
+            for m in markers:
+                self.batch.extend(m)
         if self.reference is not None and self.reference_skeleton is not None:
             positions, off, frame = self.reference_pose(view)
             self.reference_skeleton.update(positions + off)
@@ -361,13 +402,13 @@ class ViewportPanel(Panel):
             if frame >= 0:       # the camera keeps the reference in view with the characters
                 self.drawn["reference"]["root_path"] = [float(x) for x in self.followed.root_at(view.tick_number)]
                 roots.append(np.asarray(positions[0], np.float64) + off)
-        self._update_ragdoll(view, roots)
+        self._update_ragdoll(view, roots, None if prepared is None else prepared.get(_RAGDOLL))
         self._update_previews(view, roots)
         self.batch.flush()
         if roots and self.follow:
             centre = np.mean(roots, axis=0)
             self.camera.follow(centre, blend=0.12 if view.live else 1.0)
-        self._labels(view, roots)
+        self._labels(view, roots, None if prepared is None else prepared.get(_HEADS))
         t0 = time.perf_counter()
         self.renderer.render_to(self.scene, self.camera)
         t1 = time.perf_counter()
@@ -395,17 +436,21 @@ class ViewportPanel(Panel):
         off = np.array([-SIDE_OFFSET_M * slots, 0.0, 0.0])
         return name, np.asarray(poses[name], np.float64), off
 
-    def _update_ragdoll(self, view: View, roots: list) -> None:
+    def _update_ragdoll(self, view: View, roots: list, prepared=None) -> None:
         sk = self.ragdoll_skeleton
-        drawn = self.ragdoll_pose(view) if sk is not None else None
-        if drawn is None:
-            if sk is not None:
-                sk.visible = False
-            self.drawn["ragdoll"] = None
-            return
-        name, positions, off = drawn
+        if prepared is not None and sk is not None:
+            name, positions, off, pose = prepared
+        else:
+            drawn = self.ragdoll_pose(view) if sk is not None else None
+            if drawn is None:
+                if sk is not None:
+                    sk.visible = False
+                self.drawn["ragdoll"] = None
+                return
+            name, positions, off = drawn
+            pose = positions + off
         sk.visible = True
-        sk.update(positions + off)
+        sk.update(pose)
         roots.append(positions[0] + off)
         self.drawn["ragdoll"] = {"controller": name, "root": [float(x) for x in positions[0]],
                                  "offset": [float(x) for x in off]}
@@ -425,17 +470,22 @@ class ViewportPanel(Panel):
         if drawn and roots:   # the camera keeps the first ghost in view with the characters
             roots.append(np.asarray(drawn[0]["root"]))
 
-    def _update_character(self, d: CharacterDrawing, name: str, snap, off, view: View) -> None:
+    def _character_parts(self, d: CharacterDrawing, name: str, snap, off, view: View):
         trail = None
         if self.show["trail"]:
             n = int(TRAIL_SECONDS / self.ctx.engine.dt)
             trail = view.history.window(name, "root_position", view.tick_number, n)
-        draw_character(d, self.batch, snap, off, self.show, self._features_of(name), self.ctx.engine.db, trail)
+        return character_parts(d, snap, off, self.show, self._features_of(name), self.ctx.engine.db, trail)
 
     def _features_of(self, name: str):
         return self.ctx.engine.features_of(name)
 
-    def _labels(self, view: View, roots) -> None:
+    def _label_anchor(self, name: str, snap) -> np.ndarray:
+        """Where a character's name label hangs: above its highest joint."""
+        g = np.asarray(snap.pose.global_positions, np.float64)
+        return g[g[:, 1].argmax()] + self.offset_of(name) + [0, 0.25, 0]
+
+    def _labels(self, view: View, roots, heads: dict | None = None) -> None:
         """Name labels over the characters' (and the ragdoll's and the preview ghosts') heads, and the
         overlay line. Only changed label options reach dearpygui (positions move, texts rarely do)."""
         dpg = self.dpg
@@ -452,9 +502,9 @@ class ViewportPanel(Panel):
             if snap is None:
                 cache.configure(tag, show=False)
                 continue
-            g = np.asarray(snap.pose.global_positions, np.float64)
             text = SHORT.get(name, name) + (" (inspected)" if name == view.inspected and len(self.drawings) > 1 else "")
-            wanted.append((name, tag, text, g[g[:, 1].argmax()] + self.offset_of(name) + [0, 0.25, 0]))
+            head = heads.get(name) if heads is not None else None
+            wanted.append((name, tag, text, self._label_anchor(name, snap) if head is None else head))
         rag = self.drawn.get("ragdoll")
         if rag is not None:
             _, positions, off = self.ragdoll_pose(view)

@@ -2,6 +2,8 @@
 (trajectories, features, contacts, trails) batched into one sphere, one arrow and one line renderable."""
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from lmm import quat
@@ -48,19 +50,13 @@ def feature_markers(features, normalized, root_pos, root_rot, bone_positions: di
             "traj": np.concatenate(traj) if traj else z3, "traj_dirs": np.concatenate(dirs) if dirs else z3}
 
 
-class MarkerBatch:
-    """Every marker of every character, gathered per frame and drawn with one sphere, one arrow and
-    one line renderable (few draw calls matter on software GL, where each costs about a millisecond)."""
+class Markers:
+    """Spheres, arrows and polylines gathered as arrays with (count, size, colour) runs: what
+    :class:`MarkerBatch` draws; a character's own markers can be gathered apart (on the tick worker,
+    see :func:`character_parts`) and added to the batch in one call."""
 
-    def __init__(self, viewer, ctx):
-        self.spheres = viewer.Spheres(ctx, radius=0.04)
-        self.arrows = viewer.Arrows(ctx, shaft_radius=0.011, head_radius=0.032, head_length=0.07)
-        self.lines = viewer.Lines(ctx, width_px=2.5)
-        self._expanded: dict = {}
+    def __init__(self):
         self.clear()
-
-    def renderables(self):
-        return [self.lines, self.spheres, self.arrows]
 
     def clear(self) -> None:
         # each add keeps its points and one (count, size, colour) run; flush repeats the runs
@@ -92,6 +88,45 @@ class MarkerBatch:
             self._segments.append(seg)
             self._segment_runs.append((len(seg), 0.0, tuple(color[:3])))
 
+    def compacted(self) -> "Markers":
+        """The same markers with each kind's arrays joined into one (``flush`` then copies nothing)."""
+        out = Markers()
+        for name in ("_centers", "_origins", "_vectors", "_segments"):
+            arrays = getattr(self, name)
+            setattr(out, name, [np.concatenate(arrays)] if len(arrays) > 1 else list(arrays))
+        out._sphere_runs, out._arrow_runs = list(self._sphere_runs), list(self._arrow_runs)
+        out._segment_runs = list(self._segment_runs)
+        return out
+
+    def extend(self, other: "Markers") -> None:
+        """Add every marker of ``other`` (after this one's)."""
+        self._centers += other._centers
+        self._sphere_runs += other._sphere_runs
+        self._origins += other._origins
+        self._vectors += other._vectors
+        self._arrow_runs += other._arrow_runs
+        self._segments += other._segments
+        self._segment_runs += other._segment_runs
+
+
+def _joined(arrays: list) -> np.ndarray:
+    return arrays[0] if len(arrays) == 1 else np.concatenate(arrays)
+
+
+class MarkerBatch(Markers):
+    """Every marker of every character, gathered per frame and drawn with one sphere, one arrow and
+    one line renderable (few draw calls matter on software GL, where each costs about a millisecond)."""
+
+    def __init__(self, viewer, ctx):
+        self.spheres = viewer.Spheres(ctx, radius=0.04)
+        self.arrows = viewer.Arrows(ctx, shaft_radius=0.011, head_radius=0.032, head_length=0.07)
+        self.lines = viewer.Lines(ctx, width_px=2.5)
+        self._expanded: dict = {}
+        super().__init__()
+
+    def renderables(self):
+        return [self.lines, self.spheres, self.arrows]
+
     def _repeat(self, runs):
         """(per-item sizes (N,), per-item colours (N, 3)) of a list of (count, size, colour) runs; the
         runs are the same from frame to frame, so their expansions are kept (never written to)."""
@@ -114,17 +149,15 @@ class MarkerBatch:
         z3 = np.zeros((0, 3))
         if self._centers:
             radii, colors = self._repeat(self._sphere_runs)
-            self.spheres.update(np.concatenate(self._centers), radii, colors)
+            self.spheres.update(_joined(self._centers), radii, colors)
         else:
             self.spheres.update(z3)
         if self._origins:
-            self.arrows.update(np.concatenate(self._origins), np.concatenate(self._vectors),
-                               self._repeat(self._arrow_runs)[1])
+            self.arrows.update(_joined(self._origins), _joined(self._vectors), self._repeat(self._arrow_runs)[1])
         else:
             self.arrows.update(z3, z3)
         if self._segments:
-            self.lines.update(np.concatenate(self._segments), mode="segments",
-                              colors=self._repeat(self._segment_runs)[1])
+            self.lines.update(_joined(self._segments), mode="segments", colors=self._repeat(self._segment_runs)[1])
         else:
             self.lines.update(z3, mode="segments")
 
@@ -220,16 +253,41 @@ def _on_ground(xz, rot_t, origin=None):
     return out if origin is None else origin + out
 
 
+@dataclass(frozen=True)
+class CharacterParts:
+    """What the 3D view draws of a character at a tick, worked out without GL (:func:`character_parts`):
+    its skeleton's and ghost's poses (the ghost None when hidden) and its markers."""
+    skeleton: object          # viewer SkeletonPose
+    ghost: object | None
+    markers: Markers
+
+
 def draw_character(d: CharacterDrawing, b: MarkerBatch, snap, off, show: dict, features, db, trail) -> None:
     """Update a character's skeleton and ghost and add its markers to the batch (``show``: toggle -> on;
     ``trail``: its recent root positions, or None)."""
+    apply_character(d, b, character_parts(d, snap, off, show, features, db, trail))
+
+
+def apply_character(d: CharacterDrawing, b: MarkerBatch | None, parts: CharacterParts) -> None:
+    """Hand a character's worked-out parts to its renderables and the batch (the GL thread's share;
+    ``b`` None: its markers are added by the caller)."""
+    d.skeleton.visible = True
+    d.skeleton.update(parts.skeleton)
+    d.ghost.visible = parts.ghost is not None
+    if parts.ghost is not None:
+        d.ghost.update(parts.ghost)
+    if b is not None:
+        b.extend(parts.markers)
+
+
+def character_parts(d: CharacterDrawing, snap, off, show: dict, features, db, trail) -> CharacterParts:
+    """A character's skeleton and ghost poses and markers at a snapshot: numpy only, no GL and no change
+    to ``d``, so the studio's tick worker can work it out for the next frame while the GUI draws."""
+    b = Markers()
     pose = snap.pose
     g = np.asarray(pose.global_positions, np.float64)
-    d.skeleton.visible = True
-    d.skeleton.update(g + off)
-    d.ghost.visible = show["ghost"]
-    if show["ghost"]:
-        d.ghost.update(np.asarray(snap.matched_pose_positions, np.float64) + off)
+    skeleton = d.skeleton.prepare(g + off)
+    ghost = d.ghost.prepare(np.asarray(snap.matched_pose_positions, np.float64) + off) if show["ghost"] else None
     # simulation object and its predicted trajectory
     if show["trajectory"]:
         lift = off + _LIFT
@@ -282,6 +340,7 @@ def draw_character(d: CharacterDrawing, b: MarkerBatch, snap, off, show: dict, f
             trail = trail[np.isfinite(trail).all(axis=1)]
             if len(trail) >= 2:
                 b.add_polyline(trail[::3] + (off + _TRAIL_LIFT), d.trail_color)
+    return CharacterParts(skeleton, ghost, b)
 
 
 def _z_axes(q: np.ndarray) -> np.ndarray:

@@ -92,11 +92,15 @@ def run_studio(xvfb_display, studio_cache, tmp_path):
             script_path = tmp_path / f"script-{time.monotonic_ns()}.json"
             script_path.write_text(json.dumps({"actions": script}))
             cmd += ["--script", str(script_path)]
+        # every run checks what the tick worker prepared for a frame against the GUI thread's own (app.prepared)
         env = dict(os.environ, DISPLAY=xvfb_display, LMM_STUDIO_CONFIG=str(config),
-                   LMM_STUDIO_CACHE=str(studio_cache), PYTHONPATH=str(ROOT), LP_NUM_THREADS="0")
+                   LMM_STUDIO_CACHE=str(studio_cache), PYTHONPATH=str(ROOT), LP_NUM_THREADS="0",
+                   LMM_STUDIO_CHECK_PREPARED="1")
         env.update(env_extra or {})
         proc = subprocess.run(cmd, cwd=tmp_path, env=env, capture_output=True, text=True, timeout=timeout)
         data = json.loads(dump.read_text()) if dump.exists() else None
+        if data is not None and "prepared" in data:
+            assert data["prepared"]["checked"] and not data["prepared"]["mismatches"], data["prepared"]
         return StudioRun(proc.returncode, proc.stdout, proc.stderr, data, config, tmp_path)
 
     return run

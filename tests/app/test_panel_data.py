@@ -320,6 +320,9 @@ def test_character_feature_markers_are_the_same_shown_together_or_alone(dbf):
         def update(self, *a, **k):
             self.args = a
 
+        def prepare(self, positions):
+            return positions
+
     viewer = SimpleNamespace(Skeleton=Fake, Spheres=Fake, Arrows=Fake, Lines=Fake)
     rot = np.array([np.cos(0.3), 0.0, np.sin(0.3), 0.0])
     J = len(db.parents)

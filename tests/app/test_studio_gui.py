@@ -48,7 +48,8 @@ def circle_run(xvfb_display, studio_cache, lmm_weights, tmp_path_factory):
     (tmp / "script.json").write_text(json.dumps({"actions": script}))
     dump_path = tmp / "dump.json"
     env = dict(os.environ, DISPLAY=xvfb_display, LMM_STUDIO_CONFIG=str(tmp / "config"),
-               LMM_STUDIO_CACHE=str(studio_cache), PYTHONPATH=str(ROOT), LP_NUM_THREADS="0")
+               LMM_STUDIO_CACHE=str(studio_cache), PYTHONPATH=str(ROOT), LP_NUM_THREADS="0",
+               LMM_STUDIO_CHECK_PREPARED="1")
     proc = subprocess.run([sys.executable, "-m", "app.cli", *map(str, args), "--script", str(tmp / "script.json"),
                            "--dump-state", str(dump_path), "--no-gamepads"],
                           cwd=tmp, env=env, capture_output=True, text=True, timeout=240)
@@ -136,6 +137,17 @@ def test_panels_show_the_live_tick(circle_run):
         assert p["search"]["projected_frame"] >= 0 and p["search"]["distance"] is not None
         # inspecting LMM: the query bars are LMM's
         assert np.allclose(p["features"]["query"], end["snapshot_query"]["lmm"], atol=1e-5)
+
+
+def test_the_tick_worker_prepares_what_the_panels_show(circle_run):
+    """The numeric share of the 3D view and the plot panels is worked out on the tick worker for the next
+    frame; with LMM_STUDIO_CHECK_PREPARED every used result was compared with the GUI thread's own and
+    none differed (slider changes, a change of the inspected controller and recording on the way)."""
+    prep = circle_run["dump"]["prepared"]
+    assert prep["checked"] and prep["mismatches"] == []
+    for key in ("viewport", "features", "latent", "search", "timeline"):
+        assert prep["used"].get(key, 0) >= 120, prep        # of 150 frames: nearly all of them
+        assert prep["inline"].get(key, 0) >= 1, prep        # the first frame has nothing prepared
 
 
 # -----------------------------------------------------------------------------------------------

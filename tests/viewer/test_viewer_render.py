@@ -350,3 +350,33 @@ def test_marker_colours_and_sizes_are_kept_while_the_same_frozen_arrays_come_aga
     assert spheres.transparent
     spheres.update(pts, None, red)
     assert not spheres.transparent
+
+
+def test_a_prepared_pose_gives_the_records_of_a_direct_update(gl_ctx):
+    """``Skeleton.prepare`` (run on the studio's tick worker) makes the capsule records ``update`` would
+    make, bit for bit, without touching the skeleton; a pose prepared before the body changed is made
+    again by ``update`` for the new body."""
+    rng = np.random.default_rng(2)
+    skel = Skeleton(gl_ctx, TPOSE_PARENTS, color=(0.9, 0.5, 0.1), shadow=False)
+    direct = Skeleton(gl_ctx, TPOSE_PARENTS, color=(0.9, 0.5, 0.1), shadow=False)
+    assert skel.prepare(TPOSE_POSITIONS).records is None           # no body before the first pose
+    skel.update(TPOSE_POSITIONS)
+    direct.update(TPOSE_POSITIONS)
+    for _ in range(5):
+        pose = TPOSE_POSITIONS + rng.normal(scale=0.05, size=TPOSE_POSITIONS.shape)
+        before = skel._capsule_data.copy()
+        prepared = skel.prepare(pose)
+        assert prepared.records is not None and np.array_equal(skel._capsule_data, before)
+        skel.update(prepared)
+        direct.update(pose)
+        assert np.array_equal(skel._capsule_data, direct._capsule_data)
+    # the body changes after the pose was prepared: its records are not used
+    pose = TPOSE_POSITIONS + [0.3, 0.0, 0.0]
+    prepared = skel.prepare(pose)
+    skel.thickness = direct.thickness = 1.5
+    skel.update(prepared)
+    direct.update(pose)
+    assert np.array_equal(skel._capsule_data, direct._capsule_data)
+    # sticks style makes no capsule records ahead
+    skel.style = "sticks"
+    assert skel.prepare(pose).records is None

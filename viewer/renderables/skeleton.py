@@ -1,6 +1,8 @@
 """A skeleton drawn as a shaded body of capsules (default) or as sticks, with a ground shadow."""
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import moderngl
 import numpy as np
 
@@ -23,6 +25,16 @@ def radii_for_height(height: float) -> dict:
 
 
 _UP = np.array([0.0, 1.0, 0.0])   # the direction of a zero-length leaf or neck
+
+
+@dataclass(frozen=True)
+class SkeletonPose:
+    """A pose worked out for :meth:`Skeleton.update` away from the GL thread (:meth:`Skeleton.prepare`):
+    the positions, and the capsule records' end points made for the body ``layout`` of that moment
+    (``records`` None when there was none yet: ``update`` then makes them)."""
+    positions: np.ndarray             # (J, 3) float32
+    layout: object = None
+    records: np.ndarray | None = None  # (R, 6) float32
 
 
 class Skeleton(Renderable):
@@ -141,15 +153,32 @@ class Skeleton(Renderable):
                 self.height, radii)
 
     def update(self, global_positions) -> None:
-        """Set the pose: global joint positions (J, 3) in scene units."""
-        p = np.asarray(global_positions, dtype=np.float32).reshape(-1, 3)
+        """Set the pose: global joint positions (J, 3) in scene units, or a :class:`SkeletonPose` from
+        :meth:`prepare` (its records are used when the body has not changed since)."""
+        prepared = global_positions if isinstance(global_positions, SkeletonPose) else None
+        if prepared is not None:
+            p = prepared.positions
+        else:
+            p = np.asarray(global_positions, dtype=np.float32).reshape(-1, 3)
         if len(p) != self.n_joints:
             raise ValueError(f"Skeleton has {self.n_joints} joints, got positions for {len(p)}")
         self._positions = p
         if self._lengths is None:   # bones touching a hidden joint do not count for the body's size
             shown_bone = self._shown & self._shown[np.maximum(self.parents, 0)]
             self._lengths = body.bone_lengths(self.parents, p) * shown_bone
-        self._upload()
+        self._upload(prepared)
+
+    def prepare(self, global_positions) -> SkeletonPose:
+        """What :meth:`update` works out of a pose, without touching GL or this skeleton: safe on another
+        thread while the GL thread draws. The capsule records are made for the body layout of the last
+        update (none before the first, or in sticks style); ``update`` checks that it is still the
+        same layout."""
+        p = np.asarray(global_positions, dtype=np.float32).reshape(-1, 3)
+        layout = self._layout
+        if len(p) != self.n_joints or layout is None or self.style != "capsules" or layout[0] is not self._body:
+            return SkeletonPose(p)
+        L = layout[1]
+        return SkeletonPose(p, L, self._capsule_ends(p, L, np.empty_like(L["ends"])).astype(np.float32))
 
     # -- body proportions -------------------------------------------------------------------------
     def body_height(self) -> float:
@@ -183,7 +212,7 @@ class Skeleton(Renderable):
         return self._body
 
     # -- instances --------------------------------------------------------------------------------
-    def _upload(self) -> None:
+    def _upload(self, prepared: SkeletonPose | None = None) -> None:
         p = self._positions
         key = (self.color, self.alpha)
         if self._rgba[0] != key:
@@ -193,7 +222,7 @@ class Skeleton(Renderable):
             self._upload_sticks(p, rgba)
             self._upload_capsules_of_sticks(p, rgba)
         else:
-            self._upload_capsules(p, rgba)
+            self._upload_capsules(p, rgba, prepared)
         self._uploaded_style = self._style()
 
     def _upload_sticks(self, p, rgba) -> None:
@@ -273,8 +302,26 @@ class Skeleton(Renderable):
         self._layout = (body_sizes, layout)
         return layout
 
-    def _upload_capsules(self, p, rgba) -> None:
+    def _upload_capsules(self, p, rgba, prepared: SkeletonPose | None = None) -> None:
         L = self._capsule_layout()
+        c = self._capsules.staging(len(L["radii"]))
+        if prepared is not None and prepared.layout is L and prepared.records is not None:
+            c[:, 0:6] = prepared.records
+        else:
+            c[:, 0:6] = self._capsule_ends(p, L, L["ends"])
+        # the radius and colour columns stay in the staging array from pose to pose: rewritten only
+        # when the layout, the colour or the array itself changed
+        fixed = self._fixed
+        if fixed is None or fixed[0] is not L or fixed[1] is not rgba or fixed[2] is not c.base:
+            c[:, 6:8] = L["radii"]
+            c[:, 8:12] = rgba
+            self._fixed = (L, rgba, c.base)
+        self._capsules.upload(c)
+        self._capsule_data = c
+
+    @staticmethod
+    def _capsule_ends(p, L: dict, ends: np.ndarray) -> np.ndarray:
+        """(R, 6) float64 end points of the capsule records of pose ``p`` (``ends``: scratch rows)."""
         # leaf ends continue the parent bone past the leaf; head centres sit along the neck
         # (each numpy call costs a microsecond or two here, about what its arithmetic on a few rows
         # costs: the steps below are as few calls as give the same numbers)
@@ -287,21 +334,10 @@ class Skeleton(Renderable):
             d /= norm                           # what the line below gives when no bone has zero length
         else:
             d = np.where(norm > 1e-9, d / np.maximum(norm, 1e-12), _UP)
-        ends = L["ends"]                        # the pose, then the leaf ends and head centres
-        ends[:len(p)] = p
+        ends[:len(p)] = p                       # the pose, then the leaf ends and head centres
         np.multiply(d, L["dir_scale"], out=ends[len(p):])
         ends[len(p):] += start
-        c = self._capsules.staging(len(L["radii"]))
-        c[:, 0:6] = ends[L["pairs"]].reshape(-1, 6)
-        # the radius and colour columns stay in the staging array from pose to pose: rewritten only
-        # when the layout, the colour or the array itself changed
-        fixed = self._fixed
-        if fixed is None or fixed[0] is not L or fixed[1] is not rgba or fixed[2] is not c.base:
-            c[:, 6:8] = L["radii"]
-            c[:, 8:12] = rgba
-            self._fixed = (L, rgba, c.base)
-        self._capsules.upload(c)
-        self._capsule_data = c
+        return ends[L["pairs"]].reshape(-1, 6)
 
     # -- drawing ----------------------------------------------------------------------------------
     def draw(self, frame: FrameState) -> None:

@@ -1,0 +1,87 @@
+"""What the tick worker prepares for the next frame (app.prepared): when a result is used, when the
+GUI thread works it out itself, and the check that compares the two."""
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+
+from app.history import History
+from app.panels.base import Panel, View
+from app.prepared import Preparer, same
+
+
+class Counting(Panel):
+    """A panel whose result is its setting and the tick number (or, broken, a random number)."""
+    key = "stats"
+
+    def __init__(self, broken=False):
+        self.setting, self.broken, self.calls = 1, broken, 0
+
+    def prepare_key(self, view):
+        return (self.setting,)
+
+    def prepare(self, view):
+        self.calls += 1
+        value = np.random.random() if self.broken else float(view.tick.tick)
+        return {"x": np.array([value, np.nan]), "setting": self.setting}
+
+
+class Plain(Panel):
+    key = "menu"
+
+    def __init__(self):
+        pass
+
+
+def _view(tick, frame, **kw):
+    return View(tick=tick, history=History(10), live=kw.pop("live", True), paused=False, inspected="mm",
+                frame=frame, **kw)
+
+
+def test_same_is_deep_equality_with_nan():
+    a = {"x": np.array([1.0, np.nan]), "y": [1, (2.0, "a")], "z": SimpleNamespace(v=np.zeros(2))}
+    b = {"x": np.array([1.0, np.nan]), "y": [1, (2.0, "a")], "z": SimpleNamespace(v=np.zeros(2))}
+    assert same(a, b) and same(float("nan"), float("nan"))
+    assert not same(np.zeros(2, np.float32), np.zeros(2))                  # dtype
+    assert not same(np.zeros(2), np.zeros(3)) and not same(np.zeros(2), [0.0, 0.0])
+    assert not same([1, 2], (1, 2)) and not same({"a": 1}, {"a": 1, "b": 2})
+    b["z"].v[1] = 1e-12
+    assert not same(a, b)
+
+
+def test_a_prepared_result_is_used_only_for_the_frame_it_was_made_for():
+    panel = Counting()
+    prep = Preparer({"stats": panel, "menu": Plain()})
+    assert list(prep.panels) == ["stats"]                  # only panels that override prepare
+    tick = SimpleNamespace(tick=7)
+    view = _view(tick, frame=3)
+    job = prep.job(view, {"stats"}, next_frame=4)
+    made = job(tick)                                       # on the worker, after stepping tick 7
+    assert made.frame == 4 and made.parts["stats"][1]["x"][0] == 7.0
+    prep.receive(made)
+    nxt = _view(tick, frame=4)
+    assert same(prep.result("stats", nxt), made.parts["stats"][1]) and prep.used["stats"] == 1
+    assert prep.result("menu", nxt) is None and prep.inline["menu"] == 0       # not a preparing panel
+    # a different frame, tick, view or setting: the panel works it out itself
+    for other in (_view(tick, frame=5), _view(SimpleNamespace(tick=7), frame=4),
+                  _view(tick, frame=4, problems={"lmm": "off"}), _view(tick, frame=4, latent_status="x")):
+        assert prep.result("stats", other) is None
+    panel.setting = 2
+    assert prep.result("stats", nxt) is None
+    assert prep.inline["stats"] == 5 and prep.used["stats"] == 1
+    # nothing is prepared when the next frame will not show the newest tick, or for hidden panels
+    assert prep.job(_view(tick, frame=3, live=False), {"stats"}, 4) is None
+    assert prep.job(view, set(), 4)(tick).parts == {}
+
+
+def test_the_check_finds_a_result_that_differs_from_the_gui_threads(monkeypatch):
+    monkeypatch.setenv("LMM_STUDIO_CHECK_PREPARED", "1")
+    tick = SimpleNamespace(tick=1)
+    for broken, expected in ((False, []), (True, [("stats", 2)])):
+        panel = Counting(broken=broken)
+        prep = Preparer({"stats": panel})
+        prep.receive(prep.job(_view(tick, frame=1), {"stats"}, 2)(tick))
+        assert prep.result("stats", _view(tick, frame=2)) is not None
+        assert prep.mismatches == expected and panel.calls == 2
+        assert prep.state()["checked"] and prep.state()["mismatches"] == [list(m) for m in expected]
