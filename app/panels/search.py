@@ -177,7 +177,8 @@ class SearchPanel(Panel):
         theme.series("cost_agree", GOOD, weight=1.5)
 
     def _label(self, frame: int) -> tuple[str, str]:
-        """The frame and clip cells of a database frame (cached: a frame's clip never changes)."""
+        """The frame and clip cells of a database frame (a frame's clip never changes: the cache is
+        read anywhere, written by ``_keep_label`` on the GUI thread)."""
         cells = self._labels.get(frame)
         if cells is None:
             db = self.ctx.engine.db
@@ -185,10 +186,13 @@ class SearchPanel(Panel):
             tags = frame_tags(db, frame)
             cells = ("-" if frame < 0 else str(frame) + (f" [{tags}]" if tags else ""),
                      "-" if frame < 0 else f"{clip[:22]} {tc:5.2f}s")
+        return cells
+
+    def _keep_label(self, frame: int, cells: tuple[str, str]) -> None:
+        if frame not in self._labels:
             if len(self._labels) > 4096:
                 self._labels.clear()
             self._labels[frame] = cells
-        return cells
 
     def prepare_key(self, view: View) -> tuple:
         return (self.seconds, self.tolerance)
@@ -230,6 +234,7 @@ class SearchPanel(Panel):
         if mm is not None:
             shown["mm"] = (int(mm.matched_frame), float(mm.best_cost))
         out.update(dist=dist, rate=rate, k=k)
+        out["cells"] = {col: self._label(shown.get(col, (-1,))[0]) for col in ("nn", "proj", "mm")}
         curves = {}
         best_cost = None
         for name, field, tag in (("mm", "best_cost", "cost_mm"), ("lmm", "nn_cost", "cost_nn"),
@@ -267,7 +272,8 @@ class SearchPanel(Panel):
             cache.set("nn_status", view.problems.get("lmm") or "LMM is not running")
         for col in ("nn", "proj", "mm"):
             frame, cost = shown.get(col, (-1, float("nan")))
-            frame_cell, clip_cell = self._label(frame)
+            frame_cell, clip_cell = p["cells"][col]
+            self._keep_label(frame, p["cells"][col])
             cache.set(f"nn_{col}_frame", frame_cell)
             cache.set(f"nn_{col}_clip", clip_cell)
             cache.set(f"nn_{col}_cost", fmt_num(cost))

@@ -3,6 +3,7 @@ network parts, the 3D render and readback, panel updates, dearpygui's own frame)
 motion matching and learned motion matching keep."""
 from __future__ import annotations
 
+import functools
 import os
 
 import numpy as np
@@ -23,6 +24,14 @@ def rss_bytes() -> int:
             return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE")
     except (OSError, ValueError, IndexError):
         return 0
+
+
+@functools.lru_cache(maxsize=64)
+def _axis(start: int, stop: int) -> np.ndarray:
+    """``np.arange(start, stop)`` as floats, shared (never written to): the plot's x values."""
+    x = np.arange(start, stop, dtype=np.float64)
+    x.flags.writeable = False
+    return x
 
 
 class StatsPanel(Panel):
@@ -104,13 +113,12 @@ class StatsPanel(Panel):
                          "parts_ms": {p: ft.median(p) for p in PARTS},
                          "memory": {n: dict(p) for n, p in memory.items()}}
         y = ft.series()
-        x = np.arange(len(y), dtype=np.float64)
         if len(y):
-            dpg.set_value("stats_frame", [x, y])
+            dpg.set_value("stats_frame", [_axis(0, len(y)), y])
             for part, tag in (("mm", "stats_mm"), ("lmm", "stats_lmm")):
                 yy = ft.series(part)
                 if len(yy):
-                    dpg.set_value(tag, [np.arange(len(yy), dtype=np.float64) + (len(y) - len(yy)), yy])
+                    dpg.set_value(tag, [_axis(len(y) - len(yy), len(y)), yy])
             self.text.axis_limits("stats_x", 0.0, float(ft.n))
             top = ft.percentile(95) * 1.3 if len(y) > 5 else 50.0
             self.text.axis_limits("stats_y", 0.0, max(top, 20.0))

@@ -62,6 +62,8 @@ class ViewportPanel(Panel):
     def __init__(self, ctx: PanelContext, samples: int = -1, render_scale: float = 1.0):
         super().__init__(ctx)
         self.gl = None
+        self._screen_fbo = None
+        self._window_rect = None
         self.renderer = None
         self.scene = None
         self.camera = None
@@ -237,6 +239,10 @@ class ViewportPanel(Panel):
     def _ensure_size(self) -> None:
         dpg = self.dpg
         avail = dpg.get_item_rect_size(self.tag)
+        # the drawing's place in the window moves only when the window's size does (its toolbar wraps)
+        if avail == self._window_rect and self.texture is not None:
+            return
+        self._window_rect = avail
         pos = dpg.get_item_pos("vp_drawlist") if dpg.does_item_exist("vp_drawlist") else (0, 0)
         w = int(avail[0]) - 16
         h = int(avail[1]) - int(pos[1]) - 8
@@ -350,7 +356,7 @@ class ViewportPanel(Panel):
                 heads[name] = self._label_anchor(name, snap)
         out[_HEADS] = heads
         # every character's markers joined in drawing order: what update adds when it uses them all
-        out[_ALL_MARKERS] = markers.compacted()
+        out[_ALL_MARKERS] = self.batch.prepare_arrows(markers)
         ragdoll = self.ragdoll_pose(view) if self.ragdoll_skeleton is not None else None
         if ragdoll is not None:
             name, positions, off = ragdoll
@@ -417,7 +423,9 @@ class ViewportPanel(Panel):
         self.renderer.read(dtype=np.uint8, out=self._read_bytes, flip=False)
         np.multiply(self._read_bytes, BYTE_TO_UNIT, out=self.tex_array)
         t2 = time.perf_counter()
-        self.gl.detect_framebuffer(0).use()
+        if self._screen_fbo is None:     # dearpygui's own framebuffer: the same one every frame
+            self._screen_fbo = self.gl.detect_framebuffer(0)
+        self._screen_fbo.use()
         self.render_ms = (t1 - t0) * 1e3
         self.readback_ms = (t2 - t1) * 1e3
 

@@ -127,6 +127,25 @@ class MarkerBatch(Markers):
     def renderables(self):
         return [self.lines, self.spheres, self.arrows]
 
+    def clear(self) -> None:
+        super().clear()
+        self._arrow_geometry = None
+
+    def prepare_arrows(self, markers: Markers) -> Markers:
+        """``markers`` compacted, with its arrows' geometry worked out for this batch's arrows (see
+        ``Arrows.prepare``): safe on another thread; ``extend`` by it, and ``flush`` uses that geometry
+        when no other arrow was added."""
+        out = markers.compacted()
+        if out._origins:
+            out.arrow_geometry = (out._origins[0], self.arrows.prepare(out._origins[0], out._vectors[0]))
+        return out
+
+    def extend(self, other: Markers) -> None:
+        had = bool(self._origins)
+        super().extend(other)
+        if other._origins:
+            self._arrow_geometry = None if had else getattr(other, "arrow_geometry", None)
+
     def _repeat(self, runs):
         """(per-item sizes (N,), per-item colours (N, 3)) of a list of (count, size, colour) runs; the
         runs are the same from frame to frame, so their expansions are kept (never written to)."""
@@ -153,7 +172,11 @@ class MarkerBatch(Markers):
         else:
             self.spheres.update(z3)
         if self._origins:
-            self.arrows.update(_joined(self._origins), _joined(self._vectors), self._repeat(self._arrow_runs)[1])
+            geometry = self._arrow_geometry
+            if geometry is not None and (len(self._origins) != 1 or geometry[0] is not self._origins[0]):
+                geometry = None     # arrows were added after the prepared ones
+            self.arrows.update(_joined(self._origins), _joined(self._vectors), self._repeat(self._arrow_runs)[1],
+                               prepared=None if geometry is None else geometry[1])
         else:
             self.arrows.update(z3, z3)
         if self._segments:

@@ -28,19 +28,26 @@ class Arrows(Renderable):
         self._head_vao = res.mesh_vao("cone", self._heads.buffer)
         self._fixed = None      # the inputs of the radius and colour columns the staging arrays hold
 
-    def update(self, origins, directions, colors=None) -> None:
+    def prepare(self, origins, directions) -> tuple:
+        """``(origins, necks, tips)`` float32 (N, 3) of the arrows: what ``update`` computes of them, without
+        GL or a change to this object (safe on another thread; pass it to ``update`` as ``prepared``)."""
         o = np.asarray(origins, dtype=np.float32).reshape(-1, 3)
         d = np.broadcast_to(np.asarray(directions, dtype=np.float32).reshape(-1, 3), o.shape)
         length = np.sqrt(np.add.reduce(d * d, axis=1))   # np.linalg.norm's sum, without its overhead
         head = np.minimum(self.head_length, 0.5 * length)
         unit = d / np.maximum(length, 1e-12)[:, None]
-        neck = o + unit * (length - head)[:, None]
+        return o, o + unit * (length - head)[:, None], o + d
+
+    def update(self, origins, directions, colors=None, prepared: tuple | None = None) -> None:
+        """``prepared``: ``prepare(origins, directions)`` made with this head length (then the two arrays
+        are not read again)."""
+        o, neck, tip = self.prepare(origins, directions) if prepared is None else prepared
         shafts = self._shafts.staging(len(o))
         heads = self._heads.staging(len(o))
         shafts[:, 0:3] = o
         shafts[:, 3:6] = neck
         heads[:, 0:3] = neck
-        heads[:, 3:6] = o + d
+        heads[:, 3:6] = tip
         # unchanged colours (the same frozen array, the same default) and radii are still in the
         # staging arrays: only the ends are written
         fixed = ((shafts.base, heads.base), (colors, self.color, self.shaft_radius, self.head_radius, len(o)))
