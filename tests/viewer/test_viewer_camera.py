@@ -25,6 +25,19 @@ def test_perspective_maps_near_and_far_to_ndc_depth_bounds():
     assert np.isclose(c[1] / c[3], 1.0, atol=1e-5)
 
 
+def test_perspective_in_floats_is_the_numpy_matrix_bit_for_bit():
+    """perspective() works in Python floats; the float32 matrix is the one numpy's arithmetic gives."""
+    rng = np.random.default_rng(4)
+    for _ in range(2000):
+        fov, aspect = float(rng.uniform(10, 120)), float(rng.uniform(0.2, 5))
+        near, far = float(rng.uniform(1e-3, 1)), float(rng.uniform(10, 1e4))
+        f = 1.0 / np.tan(np.radians(fov) / 2.0)
+        m = np.zeros((4, 4))
+        m[0, 0], m[1, 1] = f / aspect, f
+        m[2, 2], m[2, 3], m[3, 2] = (far + near) / (near - far), 2.0 * far * near / (near - far), -1.0
+        assert np.array_equal(perspective(fov, aspect, near, far), m.astype(np.float32))
+
+
 def test_project_known_points():
     cam = OrbitCamera(target=[0, 1, 0], distance=5.0, yaw_deg=0.0, pitch_deg=0.0, fov_y_deg=90.0)
     w, h = 800, 600
