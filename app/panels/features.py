@@ -144,11 +144,11 @@ class FeaturesPanel(Panel):
             summary += f"   |   MM: |query - matched|^2 = {total_m:.3f}"
         if total_p is not None:
             summary += f"   |   LMM: |query - projected|^2 = {total_p:.3f}"
-        total_m = float("nan") if total_m is None else total_m
-        total_p = float("nan") if total_p is None else total_p
         self.text.set("feat_summary", summary)
+        nan = float("nan")
         self.last = {"query": vals["query"], "matched": vals["matched"], "projected": vals["projected"],
-                     "cost_matched": total_m, "cost_projected": total_p}
+                     "cost_matched": nan if total_m is None else total_m,
+                     "cost_projected": nan if total_p is None else total_p}
 
     def state(self) -> dict:
         return {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in self.last.items()}

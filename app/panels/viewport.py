@@ -16,8 +16,8 @@ import numpy as np
 
 from .base import Panel, PanelContext, View
 from .common import COLORS, RAGDOLL_COLOR, SHORT
-from .viewport_scene import (LEGEND, CharacterDrawing, MarkerBatch, Markers, PreviewDrawings, apply_character,
-                             character_parts)
+from .viewport_scene import (LEGEND, CharacterDrawing, CharacterParts, MarkerBatch, Markers, PreviewDrawings,
+                             apply_character, character_parts)
 
 FORWARD = np.array([0.0, 0.0, 1.0])
 SIDE_OFFSET_M = 1.6
@@ -347,16 +347,15 @@ class ViewportPanel(Panel):
         tick = view.tick
         if self.renderer is None or tick is None:
             return out
-        markers, heads = Markers(), {}
+        heads = {}
         for name, d in self.drawings.items():
             snap = tick.snapshots.get(name)
             if snap is not None:
-                out[name] = parts = self._character_parts(d, name, snap, self.offset_of(name), view)
-                markers.extend(parts.markers)
+                out[name] = self._character_parts(d, name, snap, self.offset_of(name), view)
                 heads[name] = self._label_anchor(name, snap)
         out[_HEADS] = heads
         # every character's markers joined in drawing order: what update adds when it uses them all
-        out[_ALL_MARKERS] = self.batch.prepare_arrows(markers)
+        out[_ALL_MARKERS] = self._all_markers(p.markers for p in out.values() if isinstance(p, CharacterParts))
         ragdoll = self.ragdoll_pose(view) if self.ragdoll_skeleton is not None else None
         if ragdoll is not None:
             name, positions, off = ragdoll
@@ -378,7 +377,7 @@ class ViewportPanel(Panel):
         roots = []
         self.drawn = {"tick": view.tick_number, "roots": {}, "offsets": {}}
         self.batch.clear()
-        all_prepared = prepared is not None
+        all_prepared = prepared is not None and _ALL_MARKERS in prepared
         markers = []
         for name, d in self.drawings.items():
             snap = tick.snapshots.get(name) if tick is not None else None
@@ -389,17 +388,13 @@ class ViewportPanel(Panel):
             parts = prepared.get(name) if prepared is not None else None
             all_prepared = all_prepared and parts is not None
             parts = parts or self._character_parts(d, name, snap, off, view)
-            apply_character(d, None, parts)
+            apply_character(d, parts)
             markers.append(parts.markers)
             root = np.asarray(snap.pose.global_positions[0], np.float64) + off
             roots.append(root)
             self.drawn["roots"][name] = [float(x) for x in snap.pose.global_positions[0]]
             self.drawn["offsets"][name] = [float(x) for x in off]
-        if all_prepared and markers:
-            self.batch.extend(prepared[_ALL_MARKERS])
-        else:
-            for m in markers:
-                self.batch.extend(m)
+        self.batch.extend(prepared[_ALL_MARKERS] if all_prepared else self._all_markers(markers))
         if self.reference is not None and self.reference_skeleton is not None:
             positions, off, frame = self.reference_pose(view)
             self.reference_skeleton.update(positions + off)
@@ -484,6 +479,13 @@ class ViewportPanel(Panel):
             n = int(TRAIL_SECONDS / self.ctx.engine.dt)
             trail = view.history.window(name, "root_position", view.tick_number, n)
         return character_parts(d, snap, off, self.show, self._features_of(name), self.ctx.engine.db, trail)
+
+    def _all_markers(self, markers) -> Markers:
+        """The characters' markers joined in drawing order, with their arrows' geometry."""
+        joined = Markers()
+        for m in markers:
+            joined.extend(m)
+        return self.batch.prepare_arrows(joined)
 
     def _features_of(self, name: str):
         return self.ctx.engine.features_of(name)

@@ -285,27 +285,20 @@ class CharacterParts:
     markers: Markers
 
 
-def draw_character(d: CharacterDrawing, b: MarkerBatch, snap, off, show: dict, features, db, trail) -> None:
-    """Update a character's skeleton and ghost and add its markers to the batch (``show``: toggle -> on;
-    ``trail``: its recent root positions, or None)."""
-    apply_character(d, b, character_parts(d, snap, off, show, features, db, trail))
-
-
-def apply_character(d: CharacterDrawing, b: MarkerBatch | None, parts: CharacterParts) -> None:
-    """Hand a character's worked-out parts to its renderables and the batch (the GL thread's share;
-    ``b`` None: its markers are added by the caller)."""
+def apply_character(d: CharacterDrawing, parts: CharacterParts) -> None:
+    """Hand a character's worked-out skeleton and ghost to its renderables (the GL thread's share; its
+    markers go into the batch with the other characters')."""
     d.skeleton.visible = True
     d.skeleton.update(parts.skeleton)
     d.ghost.visible = parts.ghost is not None
     if parts.ghost is not None:
         d.ghost.update(parts.ghost)
-    if b is not None:
-        b.extend(parts.markers)
 
 
 def character_parts(d: CharacterDrawing, snap, off, show: dict, features, db, trail) -> CharacterParts:
-    """A character's skeleton and ghost poses and markers at a snapshot: numpy only, no GL and no change
-    to ``d``, so the studio's tick worker can work it out for the next frame while the GUI draws."""
+    """A character's skeleton and ghost poses and markers at a snapshot (``show``: toggle -> on;
+    ``trail``: its recent root positions, or None): numpy only, no GL and no change to ``d``, so the
+    studio's tick worker can work it out for the next frame while the GUI draws."""
     b = Markers()
     pose = snap.pose
     g = np.asarray(pose.global_positions, np.float64)

@@ -309,7 +309,7 @@ def test_character_feature_markers_are_the_same_shown_together_or_alone(dbf):
     where it is when only its own toggle is on."""
     from types import SimpleNamespace
 
-    from app.panels.viewport_scene import CharacterDrawing, MarkerBatch, draw_character
+    from app.panels.viewport_scene import CharacterDrawing, character_parts
 
     db, features = dbf
 
@@ -332,10 +332,9 @@ def test_character_feature_markers_are_the_same_shown_together_or_alone(dbf):
                            current_features=features.normalize(features.raw[2000]))
 
     def markers(matched, current):
-        batch = MarkerBatch(viewer, None)
         d = CharacterDrawing(viewer, None, db.parents, (0.5, 0.5, 0.5))
         show = {"ghost": False, "trajectory": False, "matched": matched, "features": current, "contacts": False}
-        draw_character(d, batch, snap, np.array([1.0, 0.0, 0.0]), show, features, db, None)
+        batch = character_parts(d, snap, np.array([1.0, 0.0, 0.0]), show, features, db, None).markers
         return batch._centers, batch._origins, batch._vectors
 
     both, alone_m, alone_c = markers(True, True), markers(True, False), markers(False, True)
