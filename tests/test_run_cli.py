@@ -82,6 +82,9 @@ def test_bench_json_sections(tmp_path):
     assert s["agreement"] == 1.0 and s["topk_agreement"] == 1.0
     assert s["bruteforce_us"] > s["accelerated_us"] > 0
     assert res["frame"]["mm_us"] > 0
+    # the learned controller stepped the same inputs as motion matching, interleaved with it
+    assert res["frame"]["lmm_us"] > 0 and res["frame"]["lmm_steps"] == res["frame"]["mm_steps"]
+    assert res["frame"]["lmm_over_bruteforce"] == pytest.approx(res["frame"]["lmm_us"] / s["bruteforce_us"])
     # the networks against the C++ reference, measured in the same run wherever a compiler is
     from app.commands.cpp_reference import compiler
     f = res["frame"]

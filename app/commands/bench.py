@@ -20,6 +20,10 @@ Sections (later issues add theirs to ``SECTIONS``):
             top-1, no playing frame, the hint), with the runtime call's ratios to both (issue 16's target:
             within 1.2x of the plain query).
 ``frame``   ``mm_us``: median time of one motion matching controller step over the same runs;
+            ``lmm_us``: median time of one learned controller step (shipped networks, debug
+            comparison off) over the same inputs, stepped right after each 10 s chunk of motion
+            matching steps, so both medians come from the same minutes of a machine whose speed
+            drifts (with ``lmm_advance_us`` and ``lmm_projector_us``, its parts);
             ``mm_search_in_controller_us``: median time of the search as the controller makes it
             (exclusion window, tag groups, top-K, inside a tick, caches as other per-tick work left
             them), over the same runs, with ``..._over_bruteforce`` its ratio to ``search.bruteforce_us``;
@@ -52,9 +56,33 @@ def add_arguments(p) -> None:
     p.add_argument("--manifest", help="dataset manifest (default: the shipped LAFAN1 locomotion set)")
 
 
-def collect_queries(db, features, n_queries: int, scenarios=None, tuning=None):
+class Runs:
+    """What :func:`collect_queries` gathered: the search queries with the state they were made in, every
+    motion matching step's time and every in-controller search's time, and, when a learned controller was
+    stepped beside it, that controller's :class:`LearnedRuns`."""
+
+    def __init__(self, queries, step_us, search_us, learned=None):
+        self.queries, self.step_us, self.search_us, self.learned = queries, step_us, search_us, learned
+
+
+class LearnedRuns:
+    """The learned controller's steps over the same inputs as the motion matching runs, interleaved with
+    them chunk by chunk: step times (us), each step's ``advance`` part, the projector's time on the steps
+    that projected, and the networks' real inputs (states, and queries in the networks' space)."""
+
+    def __init__(self):
+        self.step_us, self.advance_us, self.projector_us, self.states, self.queries = [], [], [], [], []
+        self.nets = None
+
+
+def collect_queries(db, features, n_queries: int, scenarios=None, tuning=None, learned=None) -> Runs:
     """Run the MM controller on every built-in scenario in turn (round robin, 10 s at a time) until
-    ``n_queries`` searches have been made. Returns (queries, step times in us, masks/args per query)."""
+    ``n_queries`` searches have been made.
+
+    ``learned``: a function making a learned controller (see :func:`learned_factory`). One per scenario
+    then steps the same inputs right after each motion matching chunk, so that both controllers' step
+    times are medians over the same inputs and the same minutes of a machine whose speed changes from
+    minute to minute."""
     import numpy as np
 
     from lmm.data.inputs import builtin, builtin_names
@@ -64,9 +92,10 @@ def collect_queries(db, features, n_queries: int, scenarios=None, tuning=None):
 
     scenarios = scenarios or builtin_names((1, 2))
     chunk_s, dt = 10.0, 1.0 / 60.0
-    controllers, logs, ticks = {}, {}, {}
+    chunk = int(chunk_s / dt)
+    controllers, learners, logs, ticks = {}, {}, {}, {}
     queries, step_us, search_us = [], [], []
-    round_ = 0
+    lr = LearnedRuns() if learned is not None else None
     while len(queries) < n_queries:
         for name in scenarios:
             if name not in controllers:
@@ -74,19 +103,40 @@ def collect_queries(db, features, n_queries: int, scenarios=None, tuning=None):
                 c.search_log = []
                 controllers[name], ticks[name] = c, 0
                 logs[name] = builtin(name, 3600.0)
-            c, log = controllers[name], logs[name]
-            for _ in range(int(chunk_s / dt)):
-                _, snaps, ms = step_controllers({name: c}, log.at(ticks[name] * dt), dt)
+                if lr is not None:
+                    learners[name] = learned()
+                    learners[name].reset()
+            c, log, start = controllers[name], logs[name], ticks[name]
+            for i in range(start, start + chunk):
+                _, snaps, ms = step_controllers({name: c}, log.at(i * dt), dt)
                 step_us.append(ms[name] * 1e3)
                 if snaps[name].searched:
                     search_us.append(snaps[name].timings_us["search"])
-                ticks[name] += 1
+            ticks[name] = start + chunk
             for query, frame, hint in c.search_log:
                 queries.append((query, frame, hint, c))
             c.search_log.clear()
-        round_ += 1
-    collect_queries.search_us = np.asarray(search_us)  # in-controller search times of the same runs
-    return queries[:n_queries], np.asarray(step_us)
+            if lr is not None:
+                _step_learned(learners[name], log, start, chunk, dt, lr)
+    return Runs(queries[:n_queries], np.asarray(step_us), np.asarray(search_us), lr)
+
+
+def _step_learned(controller, log, start: int, count: int, dt: float, into: LearnedRuns) -> None:
+    """Step a learned controller over ticks ``start .. start + count`` of ``log``, into ``into``."""
+    from lmm.runner import step_controllers
+
+    nets = into.nets = controller.nets
+    for i in range(start, start + count):
+        _, snaps, ms = step_controllers({"lmm": controller}, log.at(i * dt), dt)
+        snap = snaps["lmm"]
+        into.step_us.append(ms["lmm"] * 1e3)
+        into.advance_us.append(snap.timings_us.get("advance", float("nan")))
+        if len(into.states) < 2000:
+            into.states.append(controller.state.copy())
+        if "projector" in snap.timings_us:
+            into.projector_us.append(snap.timings_us["projector"])
+            if len(into.queries) < 2000:
+                into.queries.append(nets.to_network_space(controller.features.denormalize(snap.query)))
 
 
 def bench_search(db, features, n_queries: int = 2400, collected=None) -> dict:
@@ -94,7 +144,7 @@ def bench_search(db, features, n_queries: int = 2400, collected=None) -> dict:
 
     from lmm.search import SearchIndex, brute_force_search
 
-    queries, _ = collected or collect_queries(db, features, n_queries)
+    queries = (collected or collect_queries(db, features, n_queries)).queries
     c0 = queries[0][3]
     tun = c0.tuning
     args = dict(transition_cost=tun.transition_cost, exclude_window=int(tun.exclude_current_window_frames),
@@ -180,8 +230,8 @@ def _cost_pass_us(X, queries) -> dict:
 def bench_frame(db, features, n_queries: int = 2400, collected=None) -> dict:
     import numpy as np
 
-    _, step_us = collected or collect_queries(db, features, n_queries)
-    search_us = getattr(collect_queries, "search_us", np.zeros(0))
+    runs = collected or collect_queries(db, features, n_queries)
+    step_us, search_us = runs.step_us, runs.search_us
     return {"mm_us": float(np.median(step_us)), "mm_p90_us": float(np.percentile(step_us, 90)),
             "mm_steps": int(step_us.size),
             "mm_search_in_controller_us": float(np.median(search_us)) if search_us.size else float("nan"),
@@ -199,6 +249,28 @@ SECTIONS = {"search": bench_search, "frame": bench_frame}
 
 
 # -- learned motion matching (issue 4): frame.lmm_us and the paper's Table 3 memory figures ----------
+
+def learned_factory(db, features):
+    """A function making learned controllers with the shipped networks (loaded once, shared) as the
+    benchmarks run them: debug nearest-neighbour comparison off. None, with a note, when the shipped
+    networks do not fit this database."""
+    cached = getattr(learned_factory, "cache", None)
+    if cached is not None and cached[0] is db and cached[1] is features:
+        return cached[2]
+    from lmm.data.weights import WeightsError
+    from lmm.learned import LearnedMotionMatchingController, load_default_networks
+
+    try:
+        nets = load_default_networks(db, features)
+    except WeightsError as e:
+        print(f"note: no learned-controller figures ({e})", file=sys.stderr)
+        make = None
+    else:
+        def make():
+            return LearnedMotionMatchingController(db, features, networks=nets, compare_with_search=False)
+    learned_factory.cache = (db, features, make)
+    return make
+
 
 def memory_figures(db, features, controllers: dict) -> dict:
     """``memory.*``: what each controller's :meth:`lmm.controller.Controller.memory_bytes` reports (the
@@ -220,35 +292,18 @@ def memory_figures(db, features, controllers: dict) -> dict:
     return out
 
 
-def benchmark_lmm(db, features, controller, inputs="builtin:random:1", steps: int = 600, warmup: int = 60) -> dict:
+def benchmark_lmm(runs: LearnedRuns, nets) -> dict:
     """``frame.lmm_us`` (median learned-controller step, debug comparison off, through the one tick loop
-    :func:`lmm.runner.step_controllers`), its advance and projector parts, and the networks alone at
-    batch 1 (``network.*_us``, as in the paper's table) on the inputs the run gave them, with the C++
-    reference's times on the same inputs (``network.*_cpp_us``, see :mod:`app.commands.cpp_reference`)."""
+    :func:`lmm.runner.step_controllers`, over the same inputs as the motion matching steps and
+    interleaved with them: see :func:`collect_queries`), its advance and projector parts, and the
+    networks alone at batch 1 (``network.*_us``, as in the paper's table) on the inputs the runs gave
+    them, with the C++ reference's times on the same inputs (``network.*_cpp_us``, see
+    :mod:`app.commands.cpp_reference`)."""
     import numpy as np
 
-    from lmm.data.inputs import open_input
-    from lmm.runner import step_controllers
-
-    nets = controller.nets
-    controller.reset()
-    log = open_input(inputs, (steps + warmup) / 60.0 + 1.0)
-    dt = 1.0 / 60.0
-    step_us, adv_us, proj_us = [], [], []
-    states, queries = [], []       # the networks' real inputs, for the per-call figures below
-    for i in range(steps + warmup):
-        _, snaps, ms = step_controllers({"lmm": controller}, log.at(i * dt), dt)
-        if i >= warmup:
-            snap = snaps["lmm"]
-            step_us.append(ms["lmm"] * 1e3)
-            adv_us.append(snap.timings_us.get("advance", np.nan))
-            states.append(controller.state.copy())
-            if "projector" in snap.timings_us:
-                proj_us.append(snap.timings_us["projector"])
-                queries.append(nets.to_network_space(controller.features.denormalize(snap.query)))
-    states = np.array(states, np.float32)
-    samples = {"decompressor": states, "stepper": states,
-               "projector": np.array(queries or [nets.to_network_space(controller.features.raw[0])], np.float32)}
+    states = np.array(runs.states, np.float32)
+    queries = runs.queries or [np.zeros(nets.projector.n_in, np.float32)]
+    samples = {"decompressor": states, "stepper": states, "projector": np.array(queries, np.float32)}
 
     def median_us(net, xs, n=2000):
         out = np.empty(net.n_out, np.float32)
@@ -263,9 +318,11 @@ def benchmark_lmm(db, features, controller, inputs="builtin:random:1", steps: in
         return float(np.median(ts))
 
     figures = {
-        "frame.lmm_us": float(np.median(step_us)),
-        "frame.lmm_advance_us": float(np.nanmedian(adv_us)),
-        "frame.lmm_projector_us": float(np.median(proj_us)) if proj_us else float("nan"),
+        "frame.lmm_us": float(np.median(runs.step_us)),
+        "frame.lmm_p90_us": float(np.percentile(runs.step_us, 90)),
+        "frame.lmm_steps": len(runs.step_us),
+        "frame.lmm_advance_us": float(np.nanmedian(runs.advance_us)),
+        "frame.lmm_projector_us": float(np.median(runs.projector_us)) if runs.projector_us else float("nan"),
     }
     figures.update({f"network.{name}_us": median_us(getattr(nets, name), xs) for name, xs in samples.items()})
     from app.commands import cpp_reference
@@ -279,36 +336,33 @@ def benchmark_lmm(db, features, controller, inputs="builtin:random:1", steps: in
     return figures
 
 
-def _lmm_figures(db, features) -> dict:
-    """Benchmark figures of the learned controller with the shipped networks and the memory of both
-    controllers (computed once per run)."""
-    cached = getattr(_lmm_figures, "cache", None)
+def _memory(db, features) -> dict:
+    """The memory figures of both controllers (computed once per run)."""
+    cached = getattr(_memory, "cache", None)
     if cached is not None and cached[0] is db:
         return cached[1]
-    from lmm.data.weights import WeightsError
-    from lmm.learned import LearnedMotionMatchingController, load_default_networks
     from lmm.mm import MotionMatchingController
 
     controllers = {"mm": MotionMatchingController(db, features)}
-    try:
-        controllers["lmm"] = LearnedMotionMatchingController(db, features, networks=load_default_networks(db, features),
-                                                             compare_with_search=False)
-    except WeightsError as e:
-        print(f"note: no learned-controller figures ({e})", file=sys.stderr)
+    make = learned_factory(db, features)
+    if make is not None:
+        controllers["lmm"] = make()
     figures = memory_figures(db, features, controllers)
-    if "lmm" in controllers:
-        figures.update(benchmark_lmm(db, features, controllers["lmm"]))
-    else:
-        figures["frame.lmm_us"] = None
-    _lmm_figures.cache = (db, figures)
+    _memory.cache = (db, figures)
     return figures
 
 
 def bench_frame_with_lmm(db, features, n_queries: int = 2400, collected=None) -> dict:
     """``frame``: the motion matching step (above) plus ``lmm_us``, the median learned-controller step
-    (shipped networks, builtin:random:1, debug nearest-neighbour comparison off), and its parts."""
-    out = bench_frame(db, features, n_queries, collected)
-    fig = _lmm_figures(db, features)
+    (shipped networks, debug nearest-neighbour comparison off) over the same inputs, interleaved with
+    the motion matching steps, and its parts; None without networks for this database."""
+    make = learned_factory(db, features)
+    runs = collected or collect_queries(db, features, n_queries, learned=make)
+    out = bench_frame(db, features, n_queries, runs)
+    if runs.learned is None or not runs.learned.step_us:
+        out["lmm_us"] = None
+        return out
+    fig = benchmark_lmm(runs.learned, runs.learned.nets)
     out.update({k.split(".", 1)[1]: v for k, v in fig.items() if k.startswith("frame.")})
     out.update({k.replace("network.", "lmm_network_"): v for k, v in fig.items() if k.startswith("network.")})
     for net in CPP_NETWORK_US:
@@ -320,7 +374,7 @@ def bench_frame_with_lmm(db, features, n_queries: int = 2400, collected=None) ->
 def bench_memory(db, features, n_queries: int = 2400, collected=None) -> dict:
     """``memory``: ``mm_bytes`` (features + pose database + search structure at run time) and
     ``lmm_bytes`` (decompressor + stepper + projector), as in the paper's Table 3."""
-    fig = _lmm_figures(db, features)
+    fig = _memory(db, features)
     return {k.split(".", 1)[1]: v for k, v in fig.items() if k.startswith("memory.")}
 
 
@@ -365,7 +419,10 @@ def main(args) -> int:
     collected = None
     if {"search", "frame"} & set(names):
         print(f"collecting {args.queries} search queries from runs of the built-in scenarios...", file=sys.stderr)
-        collected = collect_queries(db, features, args.queries)
+        learned = learned_factory(db, features) if "frame" in names else None
+        if learned is not None:
+            print("  with the learned controller stepping the same inputs, interleaved", file=sys.stderr)
+        collected = collect_queries(db, features, args.queries, learned=learned)
     results = {}
     for name in names:
         results[name] = SECTIONS[name](db, features, args.queries, collected)
