@@ -93,7 +93,7 @@ class SearchOutcome:
     target: SourcePose | None       # the pose the source jumped to, None when it keeps playing
     best_frame: int = -1
     best_cost: float = float("nan")
-    candidates: Candidates | None = None
+    candidates: Candidates | None = None   # or a function making them when first read (see DebugSnapshot)
     timings_us: dict = field(default_factory=dict)
 
 

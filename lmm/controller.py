@@ -108,7 +108,7 @@ class DebugSnapshot:
     current_features: np.ndarray = LazyField()  # (D,) normalised features of the pose being played
     matched_frame: int                   # database frame being played (MM) / nearest frame (LMM)
     matched_features: np.ndarray = LazyField()  # (D,) normalised features of the matched frame
-    candidates: Candidates
+    candidates: Candidates = LazyField()  # the last search's ranked top K (MM: searched on first read)
     searched: bool                       # a search (MM) / projection (LMM) ran this tick
     forced_search: bool                  # ... because the input changed sharply
     transitioned: bool                   # the played frame jumped (inertialization started)

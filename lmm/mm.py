@@ -167,33 +167,41 @@ class MotionMatchingController(CharacterController):
         """Where the last search's candidates are now: a good first guess for the next search."""
         return None if self._hint is None else self._hint + self._frames_since
 
-    def search(self, query_norm: np.ndarray, accelerated: bool | None = None, hint=None):
-        """Run the search for a normalised query from the current state (no side effects)."""
+    def search(self, query_norm: np.ndarray, accelerated: bool | None = None, hint=None, top_k: int | None = None,
+               near: int = 0):
+        """Run the search for a normalised query from the current state (no side effects): the ranked top
+        ``top_k`` (default: the tuning's, as the debugger shows them). ``near``: see
+        :meth:`lmm.search.SearchIndex.group_search` (the accelerated search only)."""
         tun = self.tuning
         if self.index is None:
             self.index = SearchIndex(self.features.normalized)
         self.index.update(self.features.normalized)
         accelerated = tun.accelerated_search if accelerated is None else accelerated
         args = dict(current=int(self.frame), transition_cost=tun.transition_cost,
-                    exclude_window=int(tun.exclude_current_window_frames), top_k=int(tun.top_k),
-                    slices=self.features.slices)
+                    exclude_window=int(tun.exclude_current_window_frames),
+                    top_k=int(tun.top_k) if top_k is None else int(top_k), slices=self.features.slices)
         groups = self.tag_groups()
         if accelerated:  # every tag group in one pass (the same answer as one search per group)
             hint = self.search_hint() if hint is None else hint
-            return self.index.group_search(query_norm, groups, hint=hint, **args)
+            return self.index.group_search(query_norm, groups, hint=hint, near=near, **args)
         return biased_search(lambda **kw: brute_force_search(self.features.normalized, query_norm, **kw),
                              groups[0][1], None, group_masks=groups, **args)
 
     def _search(self, query_norm: np.ndarray, forced: bool) -> SearchOutcome:
+        hint = self.search_hint()
         if self.search_log is not None:
-            hint = self.search_hint()
             self.search_log.append((np.array(query_norm, copy=True), int(self.frame),
                                     None if hint is None else hint.copy()))
-        res = self.search(query_norm)
+        # the tick needs the best frame only; the debugger's ranked top K is searched when read
+        top_k = int(self.tuning.top_k)
+        res = self.search(query_norm, hint=hint, top_k=1, near=top_k)
+        ranked = _RankedLater(self, query_norm, hint, top_k) if top_k > 1 else None
         self.last_search = res
-        self._hint, self._frames_since = res.frames, 0
-        cands = Candidates(frames=res.frames, costs=res.costs, channel_costs=res.channel_costs, bias=res.bias,
-                           channel_names=self.features.names)
+        near = res.near_frames
+        self._hint, self._frames_since = (near if near is not None and near.size else res.frames), 0
+        cands = ranked if ranked is not None else Candidates(
+            frames=res.frames, costs=res.costs, channel_costs=res.channel_costs, bias=res.bias,
+            channel_names=self.features.names)
         best = res.best_frame
         target = None
         if best >= 0 and best != self.frame:
@@ -221,3 +229,38 @@ class MotionMatchingController(CharacterController):
 
     def _pose(self, frame: int) -> SourcePose:
         return database_source_pose(self.db, frame, self._root_vel, self._root_ang)
+
+
+class _RankedLater:
+    """A search's ranked top K for the debugger (:class:`lmm.controller.Candidates`), searched on the first
+    call and kept: the controller's tick searches for the best frame only, and a headless run never asks
+    for the rest. Everything the search reads is taken at the tick (the features, the tag groups, the
+    playing frame and the tuning; none of them is written once made, a change replaces them), so a later
+    call gives the top K the tick would have found: from the index while it still indexes those features,
+    else by brute force (the same answer, exactly)."""
+
+    __slots__ = ("_index", "_norm", "_query", "_groups", "_args", "_hint", "_accelerated", "_names", "_value")
+
+    def __init__(self, controller: MotionMatchingController, query_norm: np.ndarray, hint, top_k: int):
+        tun = controller.tuning
+        self._index, self._norm = controller.index, controller.features.normalized
+        self._query, self._hint = query_norm, hint
+        self._groups = controller.tag_groups()
+        self._args = dict(current=int(controller.frame), transition_cost=tun.transition_cost,
+                          exclude_window=int(tun.exclude_current_window_frames), top_k=int(top_k),
+                          slices=controller.features.slices)
+        self._accelerated = bool(tun.accelerated_search)
+        self._names = controller.features.names
+        self._value = None
+
+    def __call__(self) -> Candidates:
+        if self._value is None:
+            index, norm, query = self._index, self._norm, self._query
+            if self._accelerated and index is not None and index.features_norm is norm:
+                res = index.group_search(query, self._groups, hint=self._hint, **self._args)
+            else:
+                res = biased_search(lambda **kw: brute_force_search(norm, query, **kw), self._groups[0][1], None,
+                                    group_masks=self._groups, **self._args)
+            self._value = Candidates(frames=res.frames, costs=res.costs, channel_costs=res.channel_costs,
+                                     bias=res.bias, channel_names=self._names)
+        return self._value

@@ -85,6 +85,9 @@ class SearchResult:
     continuing_frame: int = -1  # the playing frame, -1 when none
     continuing_cost: float = float("nan")  # its feature cost, NaN when it could not compete
     evaluated: int = 0          # frames whose exact cost was computed
+    # (group_search with ``near``) up to ``near`` evaluated frames of least total away from the playing
+    # frame and the answer, unordered: the next search's hint (cheaper than ranking a top K for it)
+    near_frames: np.ndarray | None = None
     _breakdown: tuple | None = field(default=None, repr=False)   # (features_norm, query, slices)
     _channel_costs: np.ndarray | None = field(default=None, repr=False)
 
@@ -357,7 +360,8 @@ class SearchIndex:
         small = (large[:, None] * self.per_large + self._per_offsets).ravel()           # ascending
         small = small[self._small_bounds(large, q_tile) <= cut]
         d = self.rows[small]                                    # (S, sb, D)
-        d.reshape(len(small), -1).__isub__(q_tile[:self.small_block * self.n_dims])      # same values
+        width = self.small_block * self.n_dims       # a block's rows as one row (explicit: there may be none)
+        d.reshape(len(small), width).__isub__(q_tile[:width])                           # same values
         costs = np.einsum("ijk,ijk->ij", d, d).ravel()          # the brute force's reduction, bit for bit
         frames = (small[:, None] * self.small_block + self._offsets).ravel()
         keep = valid[frames]
@@ -435,7 +439,7 @@ class SearchIndex:
         return out
 
     def group_search(self, query: np.ndarray, group_masks, current: int = -1, transition_cost: float = 0.0,
-                     exclude_window: int = 20, top_k: int = 1, slices=None, hint=None) -> SearchResult:
+                     exclude_window: int = 20, top_k: int = 1, slices=None, hint=None, near: int = 0) -> SearchResult:
         """Exactly ``biased_search(lambda **kw: self.search(query, hint=hint, **kw), ..., group_masks=...)``
         (same frames, totals and biases), in one pass over the index instead of one search per group.
 
@@ -445,6 +449,11 @@ class SearchIndex:
         can never drop a frame of the answer. The surviving frames are ranked per group as each group's own
         search ranks them, and the groups merged as :func:`biased_search` merges them (:func:`_rank_groups`:
         both at once, over the few candidates that can reach the top K).
+
+        ``near`` > ``top_k``: the result's ``near_frames`` holds up to that many of the frames evaluated with
+        the least totals, unordered, outside the exclusion windows of the playing frame and of the answer
+        (which plays next: its neighbours advance with it and stay in its window): the controller's top-1
+        search at a tick keeps them as the next search's hint, in place of a ranked top K.
         """
         q = np.asarray(query, dtype=np.float32)
         k = max(int(top_k), 1)
@@ -456,7 +465,7 @@ class SearchIndex:
             valid[lo_w:hi_w] = False
             frame_bias[lo_w:hi_w] = np.inf
         try:
-            frames, costs, keys, cont, in_group, evaluated = self._group_search(
+            frames, costs, keys, cont, in_group, evaluated, seeds = self._group_search(
                 q, frame_bias, all_bias, small_min, large_min, valid, candidates, spread, current, tc, k, hint)
         finally:
             if current >= 0:
@@ -468,13 +477,26 @@ class SearchIndex:
             f, total, bias = _rank(frames[ok], costs[ok], current, cont, transition_cost, k)
         else:
             f, total, bias = _rank_groups(frames, costs, keys, frame_group, b32, current, cont, in_group, tc, k)
-        return _result(self.X, q, slices, f, total, bias, current, cont, evaluated)
+        result = _result(self.X, q, slices, f, total, bias, current, cont, evaluated)
+        if near > k:
+            # from the frames evaluated in blocks and the seeds (frames the hint kept, often far from the answer),
+            # both ascending; ``keys`` is not read again, the seeds' totals are a new array
+            if f.size and f[0] != current:
+                # the answer plays next: its exclusion window will cover its neighbours at the next search
+                # (they advance with it), so they make no seeds there
+                lo, hi = int(f[0]) - exclude_window, int(f[0]) + exclude_window
+                for part, part_keys in ((frames, keys), seeds):
+                    part_keys[part.searchsorted(lo):part.searchsorted(hi, "right")] = np.inf
+            result.near_frames = _least(np.concatenate((frames, seeds[0])), np.concatenate((keys, seeds[1])),
+                                        int(near))
+        return result
 
     def _group_search(self, q, frame_bias, all_bias, small_min, large_min, valid, candidates, spread, current,
                       tc, k, hint):
-        """The frames evaluated (ascending) with their feature costs and totals ``(cost + tc) + bias`` (inf for
-        frames that are not candidates), the playing frame's cost (NaN when it may not compete) and whether it
-        is a candidate, and how many frames were evaluated."""
+        """The frames evaluated in blocks (ascending) with their feature costs and totals ``(cost + tc) + bias``
+        (inf for frames that are not candidates), the playing frame's cost (NaN when it may not compete) and
+        whether it is a candidate, how many frames were evaluated, and the seeds (the bound's frames:
+        candidates, ascending) with their totals."""
         # 1. coarse lower bound of every large block (as in _search), plus its least candidate bias
         q1, gap = self._q1, self._g1
         np.copyto(q1, q[self.l1_dims, None])
@@ -498,7 +520,7 @@ class SearchIndex:
             best = int(np.argmin(lb_large + large_min))
             seeds = _hint_seeds(hint, valid, best * self.large_block + self._large_offsets, k)
             if seeds.size < k:
-                seeds = self._seed_frames(lb_large + large_min, q, valid, k)
+                seeds = np.sort(self._seed_frames(lb_large + large_min, q, valid, k))
         in_group = current >= 0 and candidates[current]
         if in_group:
             self._current[0] = current
@@ -525,12 +547,13 @@ class SearchIndex:
         small = (large[:, None] * self.per_large + self._per_offsets).ravel()
         small = small[self._small_bounds(large, q_tile) * _BOUND_SLACK + small_min[small] <= cut]
         d = self.rows[small]
-        d.reshape(len(small), -1).__isub__(q_tile[:self.small_block * self.n_dims])
+        width = self.small_block * self.n_dims       # a block's rows as one row (explicit: there may be none)
+        d.reshape(len(small), width).__isub__(q_tile[:width])
         costs = np.einsum("ijk,ijk->ij", d, d).ravel()
         frames = (small[:, None] * self.small_block + self._offsets).ravel()
         keys = costs + tc
         keys += frame_bias[frames]    # inf for frames that are not candidates (the window's included)
-        return frames, costs, keys, cont, in_group, evaluated + frames.size
+        return frames, costs, keys, cont, in_group, evaluated + frames.size, (seeds, c[:seeds.size] + tc)
 
 
 def biased_search(search, mask: np.ndarray, frame_bias: np.ndarray | None, current: int = -1,
@@ -579,6 +602,21 @@ def _rank_groups(frames, costs, keys, frame_group, b32, current, cont_cost, in_g
     before the first of them whose total is not lower, else after them all (where, when a later candidate
     of its group has a lower total, its key is above ``kth`` and it is cut in the merge either way).
     """
+    cont_group = int(frame_group[current]) if in_group and cont_cost == cont_cost else -1  # NaN: not competing
+    if top_k == 1 and keys.size:
+        # the controller's tick search: usually one least key, and the playing frame's total differs from
+        # it; then the ranking below keeps that frame and the playing frame and sorts the two, which is
+        # what this does without building it (a tie falls through to the full ranking)
+        i = int(keys.argmin())
+        least = keys[i]
+        if least < np.inf and np.count_nonzero(keys == least) == 1:
+            row = (float(least), 1, int(frames[i]), float(tc + b32[frame_group[frames[i]]]))
+            if cont_group < 0:
+                return _rows_result([row])
+            cont_total = float(np.float32(cont_cost) + b32[cont_group])
+            if cont_total != row[0]:
+                return _rows_result([row if row[0] < cont_total else
+                                     (cont_total, 0, int(current), float(np.float32(0.0) + b32[cont_group]))])
     if keys.size > top_k:
         kth = np.partition(keys, top_k - 1)[top_k - 1]
         few = (keys <= kth).nonzero()[0] if kth < np.inf else (keys < np.inf).nonzero()[0]
@@ -586,7 +624,6 @@ def _rank_groups(frames, costs, keys, frame_group, b32, current, cont_cost, in_g
         few = (keys < np.inf).nonzero()[0]
     f_few = frames[few]
     key_list, group_list = keys[few].tolist(), frame_group[f_few].tolist()
-    cont_group = int(frame_group[current]) if in_group and cont_cost == cont_cost else -1  # NaN: not competing
     if cont_group >= 0:
         cont_row = (float(np.float32(cont_cost) + b32[cont_group]), 0, int(current),
                     float(np.float32(0.0) + b32[cont_group]))
@@ -621,6 +658,14 @@ def _rank_groups(frames, costs, keys, frame_group, b32, current, cont_cost, in_g
     rows.sort()                             # the merge: total, the playing frame first, then frame
     del rows[top_k:]
     return _rows_result(rows)
+
+
+def _least(frames: np.ndarray, keys: np.ndarray, n: int) -> np.ndarray:
+    """Up to ``n`` of ``frames`` with the least finite ``keys``, unordered."""
+    if keys.size > n:
+        pick = keys.argpartition(n - 1)[:n]
+        frames, keys = frames[pick], keys[pick]
+    return frames[keys < np.inf]
 
 
 def _rows_result(rows) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -317,3 +317,43 @@ def test_ground_calibration_shifts_each_take_to_foot_height_without_popping(db, 
     assert len(np.unique(np.round(targets, 4))) > 1 and np.abs(shift).max() > 0.005
     assert np.abs(np.diff(shift[:, 1])).max() < 0.004
     assert np.abs(shift[-1, 1] - targets[-1]) < 0.01
+
+
+def test_the_ranked_candidates_are_the_ticks_top_k_searched_when_read(db, features):
+    """A tick searches for the best frame only; the snapshot's ranked top K is searched when first read,
+    from what the tick searched with: the same frames, totals, biases and channel costs as a ranked
+    search made at the tick, read right away, after later searches, and after a weight change that
+    rebuilt the index (then by brute force). Ticks between two searches share one ranking."""
+    c = MotionMatchingController(db, features)
+    c.reset()
+    log = builtin("zigzag", 10.0)
+    eager, tick_search = [], c._search
+
+    def spy(query, forced):
+        eager.append(c.search(query, hint=c.search_hint()))     # the ranked top K (the tuning's), no side effects
+        return tick_search(query, forced)
+
+    c._search = spy
+    snaps = [c.step(log.at(i * DT), DT)[1] for i in range(240)]
+    searched = [s for s in snaps if s.searched]
+    assert len(searched) == len(eager) >= 20
+    first_read = searched[1::2]                 # read now; the others after the weight change below
+    for s, e in zip(searched[1::2], eager[1::2]):
+        _assert_same_ranking(s.candidates, e, c.tuning.top_k)
+    for a, b in zip(snaps, snaps[1:]):
+        if not b.searched:
+            assert b.candidates is a.candidates
+    assert all(s.best_cost == s.candidates.costs[0] for s in first_read)
+    old_norm = c.features.normalized
+    c.tuning.feature_weights["trajectory_position"] = 3.0
+    for i in range(240, 300):
+        c.step(log.at(i * DT), DT)
+    assert c.features.normalized is not old_norm and c.index.features_norm is not old_norm
+    for s, e in zip(searched[::2], eager[::2]):
+        _assert_same_ranking(s.candidates, e, c.tuning.top_k)
+
+
+def _assert_same_ranking(cands, res, k):
+    assert len(cands.frames) == min(k, len(res.frames)) == len(res.frames)
+    assert np.array_equal(cands.frames, res.frames) and np.array_equal(cands.costs, res.costs)
+    assert np.array_equal(cands.bias, res.bias) and np.array_equal(cands.channel_costs, res.channel_costs)

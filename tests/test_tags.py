@@ -217,3 +217,57 @@ def test_a_playing_frame_tied_with_a_better_candidate_by_rounding_keeps_its_grou
     brute = biased_search(lambda **kw: brute_force_search(X, q, **kw), mask, None, group_masks=groups, **args)
     assert list(brute.frames) == [10] and brute.costs[0] == np.float32(2 ** 24)
     assert _same(one, brute)
+
+
+def test_a_top_1_group_search_that_no_block_survives_keeps_playing(features, db):
+    """With a transition cost so large that the playing frame beats every other frame's bound, no block
+    survives the cut: the top-1 search (the controller's tick search) keeps the playing frame, as the brute
+    force does, and its near frames are the hint's seeds (the hinted frame and its neighbours), the only
+    frames evaluated."""
+    X = features.normalized
+    index = SearchIndex(X)
+    mask = candidate_mask(db.n_frames, db.range_starts, db.range_stops, 10)
+    groups = [(0.0, mask & (db.frame_tags[:, 0] == 0)), (1.0, mask & (db.frame_tags[:, 0] != 0))]
+    current = int(np.flatnonzero(mask)[len(np.flatnonzero(mask)) // 2])
+    q = X[current].copy()
+    args = dict(current=current, transition_cost=1e6, exclude_window=20, top_k=1, slices=features.slices)
+    one = index.group_search(q, groups, hint=np.array([current + 100]), near=8, **args)
+    brute = biased_search(lambda **kw: brute_force_search(X, q, **kw), mask, None, group_masks=groups, **args)
+    assert _same(one, brute) and list(one.frames) == [current]
+    assert sorted(one.near_frames.tolist()) == list(range(current + 98, current + 103))
+
+
+def test_the_near_frames_of_a_top_1_search_make_the_next_hint(features, db):
+    """``near``: up to that many candidate frames of least total among those evaluated (block frames and
+    the hint's seeds), outside the playing frame's exclusion window and the answer's (the answer plays
+    next, and its neighbours advance with it: they would make no seeds). Fed back as the next search's
+    hint, as the controller does, they keep giving seeds: the search seldom falls back to its descent."""
+    from lmm.search import _least
+
+    keys = np.array([5.0, np.inf, 1.0, 3.0, np.inf, 2.0], np.float32)
+    frames = np.arange(10, 16)
+    assert sorted(_least(frames, keys, 3)) == [12, 13, 15]
+    assert sorted(_least(frames, keys, 6)) == [10, 12, 13, 15]      # the infinite keys left out
+    assert sorted(_least(frames, keys, 20)) == [10, 12, 13, 15]
+    rng = np.random.default_rng(5)
+    X = features.normalized
+    index = SearchIndex(X)
+    mask = candidate_mask(db.n_frames, db.range_starts, db.range_stops, 10)
+    groups = [(0.0, mask & (db.frame_tags[:, 0] == 0)), (1.0, mask & (db.frame_tags[:, 0] != 0))]
+    window, hint, current, carried = 20, None, int(rng.integers(db.n_frames)), 0
+    for i in range(40):
+        q = X[min(current + 10, db.n_frames - 1)] + rng.normal(0, 0.05, X.shape[1]).astype(np.float32)
+        args = dict(current=current, transition_cost=0.02, exclude_window=window, slices=features.slices)
+        one = index.group_search(q, groups, top_k=1, near=8, hint=hint, **args)
+        brute = biased_search(lambda **kw: brute_force_search(X, q, **kw), mask, None, group_masks=groups, top_k=1,
+                              **args)
+        assert _same(one, brute)
+        near, best = one.near_frames, one.best_frame
+        assert near.size <= 8 and mask[near].all() and np.all(np.abs(near - current) > window)
+        if best != current:
+            assert np.all(np.abs(near - best) > window)
+        carried += near.size > 0
+        # the controller: the answer plays on for 10 frames, the near frames advance with it
+        current = best + 10 if best + 10 < db.n_frames and mask[best + 10] else int(rng.integers(db.n_frames))
+        hint = near + 10 if near.size else None
+    assert carried >= 36, carried
