@@ -168,10 +168,11 @@ class MotionMatchingController(CharacterController):
         return None if self._hint is None else self._hint + self._frames_since
 
     def search(self, query_norm: np.ndarray, accelerated: bool | None = None, hint=None, top_k: int | None = None,
-               near: int = 0):
+               near: int = 0, groups=None):
         """Run the search for a normalised query from the current state (no side effects): the ranked top
         ``top_k`` (default: the tuning's, as the debugger shows them). ``near``: see
-        :meth:`lmm.search.SearchIndex.group_search` (the accelerated search only)."""
+        :meth:`lmm.search.SearchIndex.group_search` (the accelerated search only); ``groups``: the
+        :meth:`tag_groups` when the caller has them."""
         tun = self.tuning
         if self.index is None:
             self.index = SearchIndex(self.features.normalized)
@@ -180,7 +181,7 @@ class MotionMatchingController(CharacterController):
         args = dict(current=int(self.frame), transition_cost=tun.transition_cost,
                     exclude_window=int(tun.exclude_current_window_frames),
                     top_k=int(tun.top_k) if top_k is None else int(top_k), slices=self.features.slices)
-        groups = self.tag_groups()
+        groups = self.tag_groups() if groups is None else groups
         if accelerated:  # every tag group in one pass (the same answer as one search per group)
             hint = self.search_hint() if hint is None else hint
             return self.index.group_search(query_norm, groups, hint=hint, near=near, **args)
@@ -194,8 +195,9 @@ class MotionMatchingController(CharacterController):
                                     None if hint is None else hint.copy()))
         # the tick needs the best frame only; the debugger's ranked top K is searched when read
         top_k = int(self.tuning.top_k)
-        res = self.search(query_norm, hint=hint, top_k=1, near=top_k)
-        ranked = _RankedLater(self, query_norm, hint, top_k) if top_k > 1 else None
+        groups = self.tag_groups()
+        res = self.search(query_norm, hint=hint, top_k=1, near=top_k, groups=groups)
+        ranked = _RankedLater(self, query_norm, hint, top_k, groups) if top_k > 1 else None
         self.last_search = res
         near = res.near_frames
         self._hint, self._frames_since = (near if near is not None and near.size else res.frames), 0
@@ -241,11 +243,11 @@ class _RankedLater:
 
     __slots__ = ("_index", "_norm", "_query", "_groups", "_args", "_hint", "_accelerated", "_names", "_value")
 
-    def __init__(self, controller: MotionMatchingController, query_norm: np.ndarray, hint, top_k: int):
+    def __init__(self, controller: MotionMatchingController, query_norm: np.ndarray, hint, top_k: int, groups):
         tun = controller.tuning
         self._index, self._norm = controller.index, controller.features.normalized
         self._query, self._hint = query_norm, hint
-        self._groups = controller.tag_groups()
+        self._groups = groups           # the tick's tag groups (each made once, never written)
         self._args = dict(current=int(controller.frame), transition_cost=tun.transition_cost,
                           exclude_window=int(tun.exclude_current_window_frames), top_k=int(top_k),
                           slices=controller.features.slices)
