@@ -13,7 +13,10 @@ Sections (later issues add theirs to ``SECTIONS``):
             The brute force is :func:`lmm.search.brute_force_search`, whose cost pass is the fastest
             vectorised form found (``einsum``, about twice as fast as ``np.sum((X - q) ** 2, 1)``;
             both cost passes alone are reported too). Each search is timed in its own pass over the
-            queries, as at run time; the accelerated one gets the hint the controller gave it.
+            queries, as at run time: the brute force chunk by chunk while the queries are collected,
+            right after the controllers' steps of the same chunk (so that the ``frame`` ratios to it
+            compare the same minutes), the accelerated one afterwards, with the hint the controller
+            gave it.
             ``runtime_call_us``: the call the controller makes at a tick (every tag group in one pass,
             the playing frame and its exclusion window, the best frame only, keeping the K frames of
             least cost it evaluated as the next hint, the hint), back to back;
@@ -63,8 +66,9 @@ class Runs:
     motion matching step's time and every in-controller search's time, and, when a learned controller was
     stepped beside it, that controller's :class:`LearnedRuns`."""
 
-    def __init__(self, queries, step_us, search_us, learned=None):
+    def __init__(self, queries, step_us, search_us, learned=None, brute=None):
         self.queries, self.step_us, self.search_us, self.learned = queries, step_us, search_us, learned
+        self.brute = brute      # per query (brute-force result, seconds), or None
 
 
 class LearnedRuns:
@@ -77,14 +81,17 @@ class LearnedRuns:
         self.nets = None
 
 
-def collect_queries(db, features, n_queries: int, scenarios=None, tuning=None, learned=None) -> Runs:
+def collect_queries(db, features, n_queries: int, scenarios=None, tuning=None, learned=None,
+                    brute: bool = False) -> Runs:
     """Run the MM controller on every built-in scenario in turn (round robin, 10 s at a time) until
     ``n_queries`` searches have been made.
 
     ``learned``: a function making a learned controller (see :func:`learned_factory`). One per scenario
-    then steps the same inputs right after each motion matching chunk, so that both controllers' step
-    times are medians over the same inputs and the same minutes of a machine whose speed changes from
-    minute to minute."""
+    then steps the same inputs right after each motion matching chunk; with ``brute`` each chunk's
+    queries are then searched by brute force (:func:`lmm.search.brute_force_search`, timed, one pass
+    over the chunk's queries). So the step times and the brute-force times, whose ratios issue 16 sets
+    targets on, are medians over the same minutes of a machine whose speed changes from minute to
+    minute."""
     import numpy as np
 
     from lmm.data.inputs import builtin, builtin_names
@@ -96,7 +103,7 @@ def collect_queries(db, features, n_queries: int, scenarios=None, tuning=None, l
     chunk_s, dt = 10.0, 1.0 / 60.0
     chunk = int(chunk_s / dt)
     controllers, learners, logs, ticks = {}, {}, {}, {}
-    queries, step_us, search_us = [], [], []
+    queries, step_us, search_us, brute_runs = [], [], [], [] if brute else None
     lr = LearnedRuns() if learned is not None else None
     while len(queries) < n_queries:
         for name in scenarios:
@@ -115,12 +122,35 @@ def collect_queries(db, features, n_queries: int, scenarios=None, tuning=None, l
                 if snaps[name].searched:
                     search_us.append(snaps[name].timings_us["search"])
             ticks[name] = start + chunk
-            for query, frame, hint in c.search_log:
-                queries.append((query, frame, hint, c))
+            new = [(query, frame, hint, c) for query, frame, hint in c.search_log]
+            queries += new
             c.search_log.clear()
             if lr is not None:
                 _step_learned(learners[name], log, start, chunk, dt, lr)
-    return Runs(queries[:n_queries], np.asarray(step_us), np.asarray(search_us), lr)
+            if brute_runs is not None:
+                brute_runs += _time_brute_force(new, features)
+    return Runs(queries[:n_queries], np.asarray(step_us), np.asarray(search_us), lr,
+                None if brute_runs is None else brute_runs[:n_queries])
+
+
+def brute_force_args(controller, features) -> dict:
+    """The search arguments a benchmark query is searched with: the controller's tuning."""
+    tun = controller.tuning
+    return dict(transition_cost=tun.transition_cost, exclude_window=int(tun.exclude_current_window_frames),
+                top_k=int(tun.top_k), slices=features.slices)
+
+
+def _time_brute_force(queries, features) -> list:
+    """(result, seconds) of the brute-force search of each of ``queries`` (query, frame, hint, controller)."""
+    from lmm.search import brute_force_search
+
+    out = []
+    for query, frame, _, c in queries:
+        X, mask, args = c.features.normalized, c.candidate_mask(), brute_force_args(c, features)
+        t0 = time.perf_counter()
+        r = brute_force_search(X, query, mask, current=frame, **args)
+        out.append((r, time.perf_counter() - t0))
+    return out
 
 
 def _step_learned(controller, log, start: int, count: int, dt: float, into: LearnedRuns) -> None:
@@ -144,24 +174,22 @@ def _step_learned(controller, log, start: int, count: int, dt: float, into: Lear
 def bench_search(db, features, n_queries: int = 2400, collected=None) -> dict:
     import numpy as np
 
-    from lmm.search import SearchIndex, brute_force_search
+    from lmm.search import SearchIndex
 
-    queries = (collected or collect_queries(db, features, n_queries)).queries
+    runs = collected or collect_queries(db, features, n_queries, brute=True)
+    queries = runs.queries
     c0 = queries[0][3]
-    tun = c0.tuning
-    args = dict(transition_cost=tun.transition_cost, exclude_window=int(tun.exclude_current_window_frames),
-                top_k=int(tun.top_k), slices=features.slices)
+    args = brute_force_args(c0, features)
     mask = c0.candidate_mask()
     X = c0.features.normalized
     index = SearchIndex(X)
-    # each search timed on its own pass over all queries (as at run time, not interleaved with the other)
-    brute, fast = [], []
-    t_brute, t_fast = [], []
-    for query, frame, hint, _ in queries:
-        t0 = time.perf_counter()
-        r = brute_force_search(X, query, mask, current=frame, **args)
-        t_brute.append(time.perf_counter() - t0)
-        brute.append(r)
+    # each search timed on its own pass over the queries (as at run time, not interleaved with the other):
+    # the brute force chunk by chunk while they were collected (see collect_queries), else here
+    if runs.brute is None:
+        runs.brute = _time_brute_force(queries, features)
+    brute = [r for r, _ in runs.brute]
+    t_brute = [t for _, t in runs.brute]
+    fast, t_fast = [], []
     for query, frame, hint, _ in queries:
         t0 = time.perf_counter()
         r = index.search(query, mask, current=frame, hint=hint, **args)
@@ -197,7 +225,7 @@ def bench_search(db, features, n_queries: int = 2400, collected=None) -> dict:
         "frames": int(X.shape[0]),
         "dims": int(X.shape[1]),
         "queries": len(queries),
-        "top_k": int(tun.top_k),
+        "top_k": int(args["top_k"]),
         "bruteforce_us": bru,
         "accelerated_us": acc,
         "speedup": bru / acc if acc > 0 else float("nan"),
@@ -430,7 +458,7 @@ def main(args) -> int:
         learned = learned_factory(db, features) if "frame" in names else None
         if learned is not None:
             print("  with the learned controller stepping the same inputs, interleaved", file=sys.stderr)
-        collected = collect_queries(db, features, args.queries, learned=learned)
+        collected = collect_queries(db, features, args.queries, learned=learned, brute="search" in names)
     results = {}
     for name in names:
         results[name] = SECTIONS[name](db, features, args.queries, collected)
