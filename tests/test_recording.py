@@ -339,3 +339,43 @@ def test_run_record_on_a_real_full_disk(tmp_path):
             assert load_input_csv(csv).n_rows >= 1
     finally:
         subprocess.run(["umount", str(mnt)], check=False)
+
+
+def test_appended_frames_never_cross_a_page_so_a_kill_leaves_whole_lines(db, tmp_path):
+    """Linux stops a write at a page boundary when the process is killed. Appended chunks keep each frame
+    line inside one page of the file (blanks before a line that would cross), so the file cut at any page
+    boundary past its first chunk (what such a kill leaves) still opens in Blender's importer, whole
+    frames only, and loads after the count repair; the motion read back is the one written."""
+    from lmm.data.stream import PAGE, lines_within_pages
+
+    lines = b"".join(b"%d %s\n" % (i, b"7" * (i * 37 % 300)) for i in range(200))
+    laid = lines_within_pages(lines, 1000, page=512)
+    assert laid.split() == lines.split() and len(laid) > len(lines)     # blanks added, nothing else
+    pos = 1000
+    for line in laid.splitlines(keepends=True):
+        if line.strip():
+            start = pos + len(line) - len(line.lstrip(b" "))           # the line's first non-blank
+            assert start // 512 == (pos + len(line) - 1) // 512      # ... and its newline: one page
+        pos += len(line)
+    path = tmp_path / "p.bvh"
+    rows = _rows(db, 400)
+    rec = BVHRecorder(path, db, flush_interval_s=1e9)
+    first_chunk = None
+    for i, row in enumerate(rows):
+        rec.write_row(row)
+        if i % 50 == 49:
+            rec.flush()
+            first_chunk = first_chunk or path.stat().st_size     # written whole, then renamed
+    rec.close()
+    full = path.read_bytes()
+    anim = bvh.load(path)
+    assert anim.n_frames == 400 and np.allclose(anim.motion, rows, atol=1e-6)
+    cut_points = [c for c in range(PAGE, len(full), PAGE) if c > first_chunk]
+    assert len(cut_points) >= 10
+    for c in cut_points:
+        cut = tmp_path / "cut.bvh"
+        cut.write_bytes(full[:c])
+        assert _blender_valid(cut), c
+        repair(cut)
+        got = bvh.load(cut)
+        assert 50 <= got.n_frames < 400 and np.allclose(got.motion, rows[:got.n_frames], atol=1e-6)

@@ -79,7 +79,8 @@ class BVHRecorder:
         self.skeleton = recording_skeleton(db, scale)
         header = bvh.header_text(self.skeleton, n_frames=0, frame_time=1.0 / fps, precision=precision)
         self._stream = StreamFile(self.path, header.encode("utf-8"), overwrite=overwrite, unit="frames",
-                                  count_offset=bvh.frames_field_offset(header), format_count=_count_field)
+                                  count_offset=bvh.frames_field_offset(header), format_count=_count_field,
+                                  page_lines=True)
         self.frames = 0           # written or pending
         self._pending: list[np.ndarray] = []
         self._last_flush = self._clock()

@@ -19,12 +19,21 @@ keeps these rules, which hold after a ``kill -9`` at any moment and on a full di
   file fsynced. Between the append and the rewrite (two consecutive system calls, once per flush) the
   count is lower than the frames present; :func:`repair_count` fixes such a file (and a partial last
   line a kill inside a ``write`` can leave).
+* **No partial line after a kill** (``page_lines``, the BVH recordings). Linux stops a ``write`` to a
+  file at a page boundary when the process is killed, so a chunk written in one call can end up cut
+  inside a line. With ``page_lines`` an appended chunk is laid out so that no line crosses a page
+  boundary of the file (a line that would is moved to the next page, after spaces: leading blanks that
+  line readers split away) and is written one page at a time, each ``pwrite`` inside one page: a kill
+  leaves whole lines, possibly followed by blanks. Lines longer than a page are written as they are.
 """
 from __future__ import annotations
 
 import errno
+import mmap
 import os
 from pathlib import Path
+
+PAGE = mmap.PAGESIZE
 
 
 class StreamWriteError(OSError):
@@ -43,16 +52,19 @@ class StreamFile:
     ``unit``: what a record is called in error messages.
     ``overwrite``: replace an existing file of the same name at the first chunk (``run --record``);
     with ``False`` an existing name is refused at the start (the studio never overwrites a file).
+    ``page_lines``: records are lines that may carry leading blanks; appended chunks keep every line
+    inside one page (see the module doc).
     """
 
     def __init__(self, path, header: bytes, *, count_offset: int | None = None, format_count=None,
-                 overwrite: bool = True, unit: str = "records"):
+                 overwrite: bool = True, unit: str = "records", page_lines: bool = False):
         self.path = Path(path)
         self.unit = unit          # what a record is called in messages ("frames", "rows")
         self.header = bytes(header)
         self.count_offset = count_offset
         self.format_count = format_count
         self.overwrite = overwrite
+        self.page_lines = page_lines
         self.records = 0          # complete records on disk under self.path
         self.exists = False       # whether self.path was created by this stream
         self._fd: int | None = None
@@ -130,7 +142,11 @@ class StreamFile:
 
     def _append(self, data: bytes, n_records: int) -> None:
         try:
-            _write_all(self._fd, data, self._size)
+            if self.page_lines:
+                data = lines_within_pages(data, self._size)
+                _write_by_page(self._fd, data, self._size)
+            else:
+                _write_all(self._fd, data, self._size)
             count = self.records + n_records
             if self.count_offset is not None:
                 os.pwrite(self._fd, self.format_count(count), self.count_offset)
@@ -159,6 +175,30 @@ class StreamFile:
                 os.close(self._fd)
             finally:
                 self._fd = None
+
+
+def lines_within_pages(data: bytes, offset: int, page: int = PAGE) -> bytes:
+    """``data`` (whole lines) as written at file ``offset`` with no line crossing a ``page`` boundary: a line
+    that would is preceded by spaces up to the boundary (lines longer than a page are left as they are)."""
+    out, pos = [], offset
+    for line in data.splitlines(keepends=True):
+        room = page - pos % page
+        if room < len(line) <= page:
+            out.append(b" " * room)
+            pos += room
+        out.append(line)
+        pos += len(line)
+    return b"".join(out)
+
+
+def _write_by_page(fd: int, data: bytes, offset: int, page: int = PAGE) -> None:
+    """``data`` written at ``offset`` one page of the file at a time (a kill stops a write only between
+    pages, so each call is whole or not at all)."""
+    view = memoryview(data)
+    while view:
+        n = page - offset % page
+        _write_all(fd, view[:n], offset)
+        view, offset = view[n:], offset + n
 
 
 def _write_all(fd: int, data: bytes, offset: int | None = None) -> None:
