@@ -178,15 +178,17 @@ class MotionMatchingController(CharacterController):
             self.index = SearchIndex(self.features.normalized)
         self.index.update(self.features.normalized)
         accelerated = tun.accelerated_search if accelerated is None else accelerated
-        args = dict(current=int(self.frame), transition_cost=tun.transition_cost,
-                    exclude_window=int(tun.exclude_current_window_frames),
-                    top_k=int(tun.top_k) if top_k is None else int(top_k), slices=self.features.slices)
-        groups = self.tag_groups() if groups is None else groups
-        if accelerated:  # every tag group in one pass (the same answer as one search per group)
-            hint = self.search_hint() if hint is None else hint
-            return self.index.group_search(query_norm, groups, hint=hint, near=near, **args)
-        return biased_search(lambda **kw: brute_force_search(self.features.normalized, query_norm, **kw),
-                             groups[0][1], None, group_masks=groups, **args)
+        hint = self.search_hint() if hint is None else hint
+        return _run_search(self.index if accelerated else None, self.features.normalized, query_norm,
+                           self.tag_groups() if groups is None else groups, hint,
+                           self._search_args(int(tun.top_k) if top_k is None else int(top_k)), near)
+
+    def _search_args(self, top_k: int) -> dict:
+        """The search's arguments from the playing frame and the tuning, as they are now."""
+        tun = self.tuning
+        return dict(current=int(self.frame), transition_cost=tun.transition_cost,
+                    exclude_window=int(tun.exclude_current_window_frames), top_k=top_k,
+                    slices=self.features.slices)
 
     def _search(self, query_norm: np.ndarray, forced: bool) -> SearchOutcome:
         hint = self.search_hint()
@@ -201,9 +203,7 @@ class MotionMatchingController(CharacterController):
         self.last_search = res
         near = res.near_frames
         self._hint, self._frames_since = (near if near is not None and near.size else res.frames), 0
-        cands = ranked if ranked is not None else Candidates(
-            frames=res.frames, costs=res.costs, channel_costs=res.channel_costs, bias=res.bias,
-            channel_names=self.features.names)
+        cands = ranked if ranked is not None else _candidates(res, self.features.names)
         best = res.best_frame
         target = None
         if best >= 0 and best != self.frame:
@@ -233,6 +233,20 @@ class MotionMatchingController(CharacterController):
         return database_source_pose(self.db, frame, self._root_vel, self._root_ang)
 
 
+def _run_search(index, features_norm, query, groups, hint, args, near: int = 0):
+    """One search of ``features_norm``: through ``index`` (every tag group in one pass, the same answer as
+    one search per group) when it indexes those features, else by brute force."""
+    if index is not None and index.features_norm is features_norm:
+        return index.group_search(query, groups, hint=hint, near=near, **args)
+    return biased_search(lambda **kw: brute_force_search(features_norm, query, **kw), groups[0][1], None,
+                         group_masks=groups, **args)
+
+
+def _candidates(res, names) -> Candidates:
+    return Candidates(frames=res.frames, costs=res.costs, channel_costs=res.channel_costs, bias=res.bias,
+                      channel_names=names)
+
+
 class _RankedLater:
     """A search's ranked top K for the debugger (:class:`lmm.controller.Candidates`), searched on the first
     call and kept: the controller's tick searches for the best frame only, and a headless run never asks
@@ -241,28 +255,18 @@ class _RankedLater:
     call gives the top K the tick would have found: from the index while it still indexes those features,
     else by brute force (the same answer, exactly)."""
 
-    __slots__ = ("_index", "_norm", "_query", "_groups", "_args", "_hint", "_accelerated", "_names", "_value")
+    __slots__ = ("_index", "_norm", "_query", "_groups", "_args", "_hint", "_names", "_value")
 
     def __init__(self, controller: MotionMatchingController, query_norm: np.ndarray, hint, top_k: int, groups):
-        tun = controller.tuning
-        self._index, self._norm = controller.index, controller.features.normalized
-        self._query, self._hint = query_norm, hint
+        self._index = controller.index if controller.tuning.accelerated_search else None
+        self._norm, self._query, self._hint = controller.features.normalized, query_norm, hint
         self._groups = groups           # the tick's tag groups (each made once, never written)
-        self._args = dict(current=int(controller.frame), transition_cost=tun.transition_cost,
-                          exclude_window=int(tun.exclude_current_window_frames), top_k=int(top_k),
-                          slices=controller.features.slices)
-        self._accelerated = bool(tun.accelerated_search)
+        self._args = controller._search_args(int(top_k))
         self._names = controller.features.names
         self._value = None
 
     def __call__(self) -> Candidates:
         if self._value is None:
-            index, norm, query = self._index, self._norm, self._query
-            if self._accelerated and index is not None and index.features_norm is norm:
-                res = index.group_search(query, self._groups, hint=self._hint, **self._args)
-            else:
-                res = biased_search(lambda **kw: brute_force_search(norm, query, **kw), self._groups[0][1], None,
-                                    group_masks=self._groups, **self._args)
-            self._value = Candidates(frames=res.frames, costs=res.costs, channel_costs=res.channel_costs,
-                                     bias=res.bias, channel_names=self._names)
+            res = _run_search(self._index, self._norm, self._query, self._groups, self._hint, self._args)
+            self._value = _candidates(res, self._names)
         return self._value

@@ -480,14 +480,16 @@ class SearchIndex:
         result = _result(self.X, q, slices, f, total, bias, current, cont, evaluated)
         if near > k:
             # from the frames evaluated in blocks and the seeds (frames the hint kept, often far from the answer),
-            # both ascending; ``keys`` is not read again, the seeds' totals are a new array
+            # both ascending; ``keys`` is not read again, the seeds' totals (with the transition cost, as the
+            # keys have it) are a new array
+            seed_frames, seed_keys = seeds[0], seeds[1] + tc
             if f.size and f[0] != current:
                 # the answer plays next: its exclusion window will cover its neighbours at the next search
                 # (they advance with it), so they make no seeds there
                 lo, hi = int(f[0]) - exclude_window, int(f[0]) + exclude_window
-                for part, part_keys in ((frames, keys), seeds):
+                for part, part_keys in ((frames, keys), (seed_frames, seed_keys)):
                     part_keys[part.searchsorted(lo):part.searchsorted(hi, "right")] = np.inf
-            result.near_frames = _least(np.concatenate((frames, seeds[0])), np.concatenate((keys, seeds[1])),
+            result.near_frames = _least(np.concatenate((frames, seed_frames)), np.concatenate((keys, seed_keys)),
                                         int(near))
         return result
 
@@ -496,7 +498,7 @@ class SearchIndex:
         """The frames evaluated in blocks (ascending) with their feature costs and totals ``(cost + tc) + bias``
         (inf for frames that are not candidates), the playing frame's cost (NaN when it may not compete) and
         whether it is a candidate, how many frames were evaluated, and the seeds (the bound's frames:
-        candidates, ascending) with their totals."""
+        candidates, ascending) with their totals less the transition cost."""
         # 1. coarse lower bound of every large block (as in _search), plus its least candidate bias
         q1, gap = self._q1, self._g1
         np.copyto(q1, q[self.l1_dims, None])
@@ -553,7 +555,7 @@ class SearchIndex:
         frames = (small[:, None] * self.small_block + self._offsets).ravel()
         keys = costs + tc
         keys += frame_bias[frames]    # inf for frames that are not candidates (the window's included)
-        return frames, costs, keys, cont, in_group, evaluated + frames.size, (seeds, c[:seeds.size] + tc)
+        return frames, costs, keys, cont, in_group, evaluated + frames.size, (seeds, c[:seeds.size])
 
 
 def biased_search(search, mask: np.ndarray, frame_bias: np.ndarray | None, current: int = -1,

@@ -74,7 +74,8 @@ class Runs:
 class LearnedRuns:
     """The learned controller's steps over the same inputs as the motion matching runs, interleaved with
     them chunk by chunk: step times (us), each step's ``advance`` part, the projector's time on the steps
-    that projected, and the networks' real inputs (states, and queries in the networks' space)."""
+    that projected, the networks' real inputs (states, and queries in the networks' space) and the
+    networks."""
 
     def __init__(self):
         self.step_us, self.advance_us, self.projector_us, self.states, self.queries = [], [], [], [], []
@@ -328,7 +329,7 @@ def memory_figures(db, features, controllers: dict) -> dict:
     return out
 
 
-def benchmark_lmm(runs: LearnedRuns, nets) -> dict:
+def benchmark_lmm(runs: LearnedRuns) -> dict:
     """``frame.lmm_us`` (median learned-controller step, debug comparison off, through the one tick loop
     :func:`lmm.runner.step_controllers`, over the same inputs as the motion matching steps and
     interleaved with them: see :func:`collect_queries`), its advance and projector parts, and the
@@ -337,6 +338,7 @@ def benchmark_lmm(runs: LearnedRuns, nets) -> dict:
     :mod:`app.commands.cpp_reference`)."""
     import numpy as np
 
+    nets = runs.nets
     states = np.array(runs.states, np.float32)
     queries = runs.queries or [np.zeros(nets.projector.n_in, np.float32)]
     samples = {"decompressor": states, "stepper": states, "projector": np.array(queries, np.float32)}
@@ -398,7 +400,7 @@ def bench_frame_with_lmm(db, features, n_queries: int = 2400, collected=None) ->
     if runs.learned is None or not runs.learned.step_us:
         out["lmm_us"] = None
         return out
-    fig = benchmark_lmm(runs.learned, runs.learned.nets)
+    fig = benchmark_lmm(runs.learned)
     out.update({k.split(".", 1)[1]: v for k, v in fig.items() if k.startswith("frame.")})
     out.update({k.replace("network.", "lmm_network_"): v for k, v in fig.items() if k.startswith("network.")})
     for net in CPP_NETWORK_US:
