@@ -351,25 +351,37 @@ class _FKPlan:
 _PACKERS: dict = {}
 
 
-def _pack_rows(rows: list, n: int, width: int, dtype) -> np.ndarray:
-    """A new (n, width) array of ``dtype`` (float32 or float64) from ``n`` tuples of ``width`` floats: the
-    floats packed straight into the array's memory by one :mod:`struct` call (about half the time of
-    ``np.fromiter`` over the chained tuples). Each float is rounded to float32 as a C cast does, as numpy's
-    cast does (the same bits, ``tests/test_frame_cost.py``); with another dtype, or a Python whose packing
-    refuses an out-of-range float, numpy converts."""
+def _pack_rows(blocks, n: int, dtype) -> tuple:
+    """New (n, width) arrays of ``dtype`` (float32 or float64), one per ``(rows, width)`` of ``blocks``
+    (``rows``: ``n`` tuples of ``width`` floats), as views of one new buffer: every float packed straight
+    into its memory by one :mod:`struct` call (about half the time of ``np.fromiter`` over the chained
+    tuples, and one call for a whole pose's arrays). Each float is rounded to float32 as a C cast does, as
+    numpy's cast does (the same bits, ``tests/test_frame_cost.py``); with another dtype, or a Python whose
+    packing refuses an out-of-range float, numpy converts."""
     dtype = np.dtype(dtype)
+    widths = tuple(w for _, w in blocks)
+    total = n * sum(widths)
+    every = []
+    for r, _ in blocks:
+        every += r
+    flat = None
     if dtype.char in "fd":
-        key = (n * width, dtype.char)
+        key = (total, dtype.char)
         packer = _PACKERS.get(key)
         if packer is None:
-            packer = _PACKERS[key] = struct.Struct(f"={n * width}{dtype.char}")
-        out = np.empty((n, width), dtype)
+            packer = _PACKERS[key] = struct.Struct(f"={total}{dtype.char}")
+        flat = np.empty(total, dtype)
         try:
-            packer.pack_into(out, 0, *itertools.chain.from_iterable(rows))
-            return out
+            packer.pack_into(flat, 0, *itertools.chain.from_iterable(every))
         except (OverflowError, struct.error):
-            pass
-    return np.fromiter(itertools.chain.from_iterable(rows), dtype, n * width).reshape(n, width)
+            flat = None
+    if flat is None:
+        flat = np.fromiter(itertools.chain.from_iterable(every), dtype, total)
+    out, start = [], 0
+    for w in widths:
+        out.append(flat[start:start + n * w].reshape(n, w))
+        start += n * w
+    return tuple(out)
 
 
 class _TickQuery:
@@ -749,9 +761,9 @@ class CharacterController(Controller):
 
         # ghost: the source pose without offsets, placed at the character root; debug only, so its forward
         # kinematics runs when a reader of the snapshot asks for it (never in headless runs)
-        # (a source pose and the root arrays are new every tick, never written in place: the function may
+        # (a source pose and the root tuples are new every tick, never written in place: the function may
         # read them whenever it is called)
-        parents, root_rot, root_pos = self.parents, self.root_rotation, self.root_position
+        parents, root_rot, root_pos = self.parents, self._root_rotation_t, self._root_position_t
 
         def ghost():
             ghost_rot = src.rotations.copy()
@@ -898,12 +910,11 @@ class CharacterController(Controller):
             self.foot_lock = locks = FootLockState()
         locked = np.array([locks.is_locked(0), locks.is_locked(1)])
         self._prev_toe = toe_now
-        n = len(g_rl)
-        local_rot = _pack_rows(rl, n, 4, dtype)
+        local_rot, g_rot, g_pos = _pack_rows(((rl, 4), (g_rl, 4), (g_pl, 3)), len(g_rl), dtype)
         local_pos = pos.astype(dtype)
         local_pos[0] = pl[0]
         local_pos[hips, 1] = hip_pos[1]
-        return local_rot, local_pos, _pack_rows(g_rl, n, 4, dtype), _pack_rows(g_pl, n, 3, dtype), locked
+        return local_rot, local_pos, g_rot, g_pos, locked
 
     def _root_shift(self, toes, position, rotation) -> list:
         """How far adjustment and clamping moved each toe this tick (two 3-tuples; ``toes`` two 3-tuples):
@@ -1012,8 +1023,17 @@ class CharacterController(Controller):
         self._set_root((px, py, pz), (rw, rx, ry, rz))
 
     def _set_root(self, position, rotation) -> None:
-        """Set the character root (3 and 4 floats): the arrays the pipeline reads and their float copies."""
+        """Set the character root (3 and 4 floats, kept as tuples; :attr:`root_position` and
+        :attr:`root_rotation` are arrays made from them when read)."""
         self._root_position_t = tuple(position)
         self._root_rotation_t = tuple(rotation)
-        self.root_position = np.array(self._root_position_t)
-        self.root_rotation = np.array(self._root_rotation_t)
+
+    @property
+    def root_position(self) -> np.ndarray:
+        """The character root's position, (3,) float64 (a new array)."""
+        return np.array(self._root_position_t)
+
+    @property
+    def root_rotation(self) -> np.ndarray:
+        """The character root's rotation, (4,) float64 (a new array)."""
+        return np.array(self._root_rotation_t)

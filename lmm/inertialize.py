@@ -105,18 +105,13 @@ def _mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     p = a.ravel().take(mul_a)
     p *= sign
     p *= b.ravel().take(mul_b)
-    out = p[0] + p[1]
-    out += p[2]
-    out += p[3]
-    return out
+    return np.add.reduce(p, 0)          # p[0] + p[1] + p[2] + p[3], left to right
 
 
 def _normalize(q: np.ndarray) -> np.ndarray:
     """:func:`lmm.quat.normalize` of (J, 4), in place (numpy sums a 4-wide last axis left to right)."""
     sq = q * q
-    n = sq[:, 0] + sq[:, 1]
-    n += sq[:, 2]
-    n += sq[:, 3]
+    n = np.add.reduce(sq, 1)            # each row's four squares, left to right
     np.sqrt(n, out=n)
     np.maximum(n, 1e-10, out=n)
     q /= n[:, None]
@@ -143,14 +138,6 @@ def _mul_vec(q: np.ndarray, v: np.ndarray) -> np.ndarray:
     return out
 
 
-def _norm3(v: np.ndarray) -> np.ndarray:
-    """np.linalg.norm(v, axis=-1) of (J, 3): the squares summed left to right."""
-    sq = v * v
-    n = sq[:, 0] + sq[:, 1]
-    n += sq[:, 2]
-    return np.sqrt(n, out=n)
-
-
 def _rotation_log2(q: np.ndarray, out: np.ndarray, eps: float = 1e-8) -> None:
     """``quat.to_scaled_angle_axis(quat.abs_(q))`` of (J, 4) into ``out`` (J, 3).
 
@@ -175,19 +162,25 @@ def _rotation_log2(q: np.ndarray, out: np.ndarray, eps: float = 1e-8) -> None:
     out *= 2.0
 
 
-def _rotation_exp2(v: np.ndarray, eps: float = 1e-8) -> np.ndarray:
-    """``quat.from_scaled_angle_axis(v)`` of (J, 3): a new (J, 4) array, without its final normalisation:
-    (cos |h|, sin |h| h / |h|) has length cos^2 + sin^2 = 1 to rounding (1 + |h|^2 with |h| < 1e-8 in the
-    small-angle branch, 1 in float64), so the quotient by that length changes the last bit or two at
-    most (within the decay's tested tolerance), and whoever applies the offsets normalises the product."""
-    h = v * 0.5
-    half = _norm3(h)
+_ONES3 = np.ones(3)
+
+
+def _rotation_exp2(v: np.ndarray) -> np.ndarray:
+    """``quat.from_scaled_angle_axis(v)`` of (J, 3): a new (J, 4) array (cos(|v| / 2), sin(|v| / 2) v / |v|),
+    in ten numpy calls, without the final normalisation: the length is cos^2 + sin^2 = 1 to rounding, so
+    the quotient by it would change the last bit or two at most (within the decay's tested tolerance), and
+    whoever applies the offsets normalises the product. |v| is summed by a matrix product (the reference
+    halves v first and sums left to right: the same value to a unit in the last place). Near zero
+    sin(|v| / 2) / |v| is 1/2 to rounding; at zero the clamped divisor gives 0 times a zero vector."""
+    length = np.dot(v * v, _ONES3)
+    np.sqrt(length, out=length)
+    half = length * 0.5
     q = np.empty((len(v), 4))
     np.cos(half, out=q[:, 0])
     s = np.sin(half)
-    scale = np.ones(len(v))             # the small-angle branch keeps h
-    np.divide(s, half, out=scale, where=half >= eps)
-    np.multiply(h, scale[:, None], out=q[:, 1:])
+    np.maximum(length, 1e-300, out=length)
+    s /= length
+    np.multiply(v, s[:, None], out=q[:, 1:])
     return q
 
 
@@ -195,9 +188,9 @@ _SPRING_CONSTANTS: dict = {}
 
 
 def _spring_constants(halflife: float, dt: float, n: int):
-    """(y, dt, e) with y = damping / 2 and e = exp(-y dt) as the springs compute them, each as a full
-    (2, n, 3) array (an operation on same-shaped arrays is numpy's fast path, a scalar operand is not),
-    remembered per (halflife, dt, n)."""
+    """(y, -y, dt, e) with y = damping / 2 and e = exp(-y dt) as the springs compute them: y and -y as
+    (2, n, 3) arrays, dt and e as (2, 2, n, 3) arrays (an operation on same-shaped arrays is numpy's fast
+    path, a scalar operand is not), remembered per (halflife, dt, n)."""
     key = (halflife, dt, n)
     c = _SPRING_CONSTANTS.get(key)
     if c is None:
@@ -205,53 +198,56 @@ def _spring_constants(halflife: float, dt: float, n: int):
             _SPRING_CONSTANTS.clear()
         y = float(halflife_to_damping(halflife) / 2.0)
         e = float(np.exp(-y * dt))
-        c = _SPRING_CONSTANTS[key] = tuple(np.full((2, n, 3), k) for k in (y, float(dt), e))
+        c = _SPRING_CONSTANTS[key] = (np.full((2, n, 3), y), np.full((2, n, 3), -y),
+                                      np.full((2, 2, n, 3), float(dt)), np.full((2, 2, n, 3), e))
     return c
 
 
 def inertialize_decay(offsets: Offsets, halflife: float, dt: float) -> Offsets:
     """The offsets ``dt`` seconds later: :func:`lmm.springs.decay_spring_damper_exact` on the position
     offsets and :func:`lmm.springs.decay_spring_damper_exact_quat` on the rotation offsets, run as one
-    spring on (2, J, 3) = [position offset, rotation offset's scaled angle axis].
+    spring on the (2, 2, J, 3) stack [[position offset, rotation offset's scaled angle axis],
+    [velocity, angular velocity]].
 
-    The result's fields are views of two (2, J, 3) arrays [position, rotation vector] and [velocity,
-    angular velocity] (each half contiguous). When the next decay finds them still so (no field
-    replaced), it reads them as they are, without gathering, and takes the rotation vector the rotations
+    With j1 = v + x y the spring is x' = e (x + j1 dt) and v' = e (v - j1 y dt); both halves are made by
+    the same three operations on the stack, [j1, -(j1 y)] * dt + [x, v], then * e: the reference's float
+    operations (negation is exact), so the positions and velocities are its bits.
+
+    The result's fields are views of that new stack. When the next decay finds them still so (no field
+    replaced), it reads the stack as it is, without gathering, and takes the rotation vector the rotations
     were made from instead of their logarithm (the same vector to rounding: a rotation vector differs
     from the logarithm's by at most a few units in the last place, about 1e-16 rad, see
     ``tests/test_inertialize.py``), unless a component is 1.8 rad or more, where the logarithm is taken
     to keep the offset on the shorter way round."""
     n = len(offsets.positions)
-    y, dt_, e = _spring_constants(halflife, dt, n)
+    y, neg_y, dt_, e = _spring_constants(halflife, dt, n)
     stack = offsets._stack
     pos, vel, ang, rot = offsets.positions, offsets.velocities, offsets.angular_velocities, offsets.rotations
     if stack is not None and stack[0] is pos and stack[1] is vel and stack[2] is ang and stack[3] is rot:
-        # x = [positions, the rotation vector the rotations were made from]: the logarithm of those
-        # rotations is that vector again (to rounding) while every component is under 1.8 rad (so its
-        # length is under pi: the exponential is then the shortest rotation, and abs_ changes nothing);
-        # else it is taken, which wraps a vector past pi to the shorter way round as before
-        x, v = pos.base, vel.base
+        # the rotation vector the rotations were made from: their logarithm again (to rounding) while
+        # every component is under 1.8 rad (its length is then under pi: the exponential is the shortest
+        # rotation, and abs_ changes nothing); else it is taken, which wraps a vector past pi to the
+        # shorter way round as before
+        s = pos.base
         scratch = stack[4]
-        np.abs(x[1], out=scratch)
+        np.abs(s[0, 1], out=scratch)
         if not scratch.max() < 1.8:     # (NaN: taken too)
-            _rotation_log2(rot, x[1])
+            _rotation_log2(rot, s[0, 1])
     else:
-        x = np.empty((2, n, 3))
-        x[0] = pos
-        v = np.empty((2, n, 3))
-        v[0] = vel
-        v[1] = ang
-        _rotation_log2(rot, x[1])
-    j1 = x * y
-    j1 += v                             # v + x y
-    x_new = j1 * dt_
-    x_new += x
-    x_new *= e                          # e (x + j1 dt)
-    v_new = j1 * y
-    v_new *= dt_
-    np.subtract(v, v_new, out=v_new)
-    v_new *= e                          # e (v - j1 y dt)
-    out = Offsets(x_new[0], v_new[0], _rotation_exp2(x_new[1]), v_new[1])
+        s = np.empty((2, 2, n, 3))
+        s[0, 0] = pos
+        s[1, 0] = vel
+        s[1, 1] = ang
+        _rotation_log2(rot, s[0, 1])
+    t = np.empty((2, 2, n, 3))
+    j1 = t[0]
+    np.multiply(s[0], y, out=j1)
+    j1 += s[1]                          # v + x y
+    np.multiply(j1, neg_y, out=t[1])    # -(j1 y)
+    t *= dt_
+    t += s
+    t *= e                              # [e (x + j1 dt), e (v - j1 y dt)]
+    out = Offsets(t[0, 0], t[1, 0], _rotation_exp2(t[0, 1]), t[1, 1])
     out._stack = (out.positions, out.velocities, out.angular_velocities, out.rotations,
                   np.empty((n, 3)) if stack is None else stack[4])
     return out
@@ -290,7 +286,7 @@ def inertialize_root_velocities(offsets: Offsets, velocity, angular_velocity) ->
     :func:`_mul_vec`)."""
     stack, vel, ang = offsets._stack, offsets.velocities, offsets.angular_velocities
     if stack is not None and stack[1] is vel and stack[2] is ang:
-        ov, oa = vel.base[:, 0].tolist()   # both rows 0 of the stacked [velocities, angular velocities]
+        ov, oa = vel.base[1, :, 0].tolist()   # both rows 0 of the stacked [velocities, angular velocities]
     else:
         ov, oa = vel[0].tolist(), ang[0].tolist()
     # qs.mul_vec(offset rotation 0, angular_velocity), written out

@@ -169,7 +169,7 @@ def test_a_rotation_offset_past_the_threshold_takes_the_shorter_way_as_before():
     ref = (off.positions, off.velocities, off.rotations, off.angular_velocities)
     wrapped = False
     for k in range(30):
-        kept = off._stack is not None and np.abs(off.positions.base[1]).max() < 1.8
+        kept = off._stack is not None and np.abs(off.positions.base[0, 1]).max() < 1.8
         off = inertialize_decay(off, 0.5, 1 / 60)
         ref = _reference_decay(Offsets(*ref), 0.5, 1 / 60)
         wrapped |= k > 0 and not kept
