@@ -1,9 +1,35 @@
 """Rolling frame times: how long each part of a studio frame took, in milliseconds (no GUI)."""
 from __future__ import annotations
 
-from collections import deque
-
 import numpy as np
+
+
+class _Ring:
+    """The last ``n`` floats in a preallocated array: appending writes one slot, and reading them oldest
+    first is one copy (not a conversion of a deque's Python floats, which the Stats panel asked for
+    three times a frame)."""
+
+    __slots__ = ("_buf", "_head", "_count")
+
+    def __init__(self, n: int):
+        self._buf = np.empty(n)
+        self._head = self._count = 0
+
+    def append(self, value: float) -> None:
+        n = len(self._buf)
+        self._buf[self._head] = value
+        self._head = (self._head + 1) % n
+        if self._count < n:
+            self._count += 1
+
+    def __len__(self) -> int:
+        return self._count
+
+    def array(self) -> np.ndarray:
+        """A new array of the values, oldest first."""
+        if self._count < len(self._buf):
+            return self._buf[:self._count].copy()
+        return np.concatenate((self._buf[self._head:], self._buf[:self._head]))
 
 
 class FrameTimes:
@@ -15,8 +41,8 @@ class FrameTimes:
 
     def __init__(self, n: int = 240):
         self.n = n
-        self.parts: dict[str, deque] = {}
-        self.frames: deque = deque(maxlen=n)
+        self.parts: dict[str, _Ring] = {}
+        self.frames = _Ring(n)
         self._medians: dict = {}     # part -> median, until the next add (the menu asks every frame)
         self._arrays: dict = {}      # part -> its times as an array, until the next add
 
@@ -25,7 +51,10 @@ class FrameTimes:
         self._arrays.clear()
         self.frames.append(float(frame_ms))
         for k, v in parts.items():
-            self.parts.setdefault(k, deque(maxlen=self.n)).append(float(v))
+            ring = self.parts.get(k)
+            if ring is None:
+                ring = self.parts[k] = _Ring(self.n)
+            ring.append(float(v))
 
     def median(self, part: str | None = None) -> float:
         m = self._medians.get(part)
@@ -49,8 +78,8 @@ class FrameTimes:
         series each frame."""
         a = self._arrays.get(part)
         if a is None:
-            d = self.frames if part is None else self.parts.get(part, ())
-            a = self._arrays[part] = np.asarray(d, np.float64)
+            d = self.frames if part is None else self.parts.get(part)
+            a = self._arrays[part] = d.array() if d is not None else np.zeros(0)
         return a
 
 

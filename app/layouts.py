@@ -31,6 +31,7 @@ class LayoutManager:
         self.switches: list[dict] = []          # {"frame", "layout"} for the test dump
         self._working_ini: Path | None = None
         self._starting_marker: Path | None = None
+        self._shown: dict[str, bool] = {}       # window key -> shown, as last asked of dearpygui
 
     @property
     def name(self) -> str:
@@ -135,6 +136,7 @@ class LayoutManager:
 
     def apply(self, layout: Layout, at_start: bool = False) -> None:
         dpg = self.dpg
+        self._shown.clear()
         viewport = self._viewport_size()
         for key in built_windows(dpg):
             tag = window_tag(key)
@@ -156,6 +158,7 @@ class LayoutManager:
         dpg = self.dpg
         path = Path(path)
         scratch = None
+        self.forget_shown()     # what dearpygui shows now, not what a recent frame saw
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
             scratch = Path(tempfile.mkdtemp(prefix="lmm-studio-save-")) / "layout.ini"
@@ -173,10 +176,24 @@ class LayoutManager:
 
     def show_window(self, key: str, show: bool) -> None:
         self.dpg.configure_item(window_tag(key), show=bool(show))
+        self._shown.pop(key, None)
+
+    def shown(self, key: str) -> bool:
+        """Whether window ``key`` is shown, remembered between frames: dearpygui's answer builds the
+        window's whole configuration (several microseconds a window, each frame). What this manager shows
+        or hides is forgotten at once; the studio forgets the rest (:meth:`forget_shown`) after any
+        callback (a menu check, a layout) and every few frames (a window closed by its own x button)."""
+        found = self._shown.get(key)
+        if found is None:
+            found = self._shown[key] = bool(self.dpg.is_item_shown(window_tag(key)))
+        return found
+
+    def forget_shown(self) -> None:
+        self._shown.clear()
 
     def hidden(self) -> list[str]:
         """Keys of the windows not shown now."""
-        return [k for k in built_windows(self.dpg) if not self.dpg.is_item_shown(window_tag(k))]
+        return [k for k in built_windows(self.dpg) if not self.shown(k)]
 
     def window_state(self) -> dict:
         dpg = self.dpg

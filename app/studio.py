@@ -285,16 +285,26 @@ class Studio(SessionActions):
             self.errors.show("Recording", self.last_recording)
         self.preparer.receive(self.worker.take_prepared())
         step_ms = per_tick_ms(finished, self.session.names)
+        dump_s = 0.0      # the state dump's own work (a test and benchmark instrument): not the studio's
         if self.dump is not None:
+            td = time.perf_counter()
             self.dump.ticks(finished)
+            dump_s = time.perf_counter() - td
         # events and actions may change the session now: the worker is idle until submit()
-        dpg.run_callbacks(dpg.get_callback_queue())
+        queue = dpg.get_callback_queue()
+        if queue or self.frame_index % 10 == 0:
+            self.layouts.forget_shown()     # a callback may show or hide a window; the x button is seen here
+        dpg.run_callbacks(queue)
         self.script.run(self, self.frame_index)
         self._keys()
         live = self._live_input(self.session.dt if self.fixed_step else frame_dt)
         n = self.playback.ticks_due(frame_dt)
         inputs = [self.session.input_for_next_tick(live, ahead=k) for k in range(n)]
-        tuning_seen = self.session.tuning.to_dict() if self.dump is not None and n else None
+        tuning_seen = None
+        if self.dump is not None and n:
+            td = time.perf_counter()
+            tuning_seen = self.session.tuning.to_dict()
+            dump_s += time.perf_counter() - td
         t1 = time.perf_counter()
         view = self.view(live)
         prep = self.preparer
@@ -302,7 +312,7 @@ class Studio(SessionActions):
         t2 = time.perf_counter()
         shown = {"viewport"}
         for key, panel in self.panels.items():
-            if key != "viewport" and dpg.is_item_shown(panel.tag):
+            if key != "viewport" and self.layouts.shown(key):
                 shown.add(key)
                 if key in prep.panels:
                     panel.update(view, prep.result(key, view))
@@ -314,6 +324,8 @@ class Studio(SessionActions):
             self.menu.sync_window_checks()   # a window closed with its own x button
             self._hidden = tuple(self.layouts.hidden())
         t3 = time.perf_counter()
+        self.viewport.finish()          # the 3D view's pixels, once the panels are done (see there)
+        t_read = time.perf_counter()
         record = None
         if self.dump is not None:
             record = self.dump.frame(self.frame_index, view, self.session, n, tuning_seen,
@@ -327,9 +339,11 @@ class Studio(SessionActions):
         dpg.render_dearpygui_frame()
         t4 = time.perf_counter()
         vp = self.viewport
-        parts = {"input": (t1 - t0) * 1e3, "viewport": (t2 - t1) * 1e3 - vp.render_ms - vp.readback_ms,
+        parts = {"input": (t1 - t0 - dump_s) * 1e3, "viewport": (t2 - t1) * 1e3 - vp.render_ms,
                  "render": vp.render_ms, "readback": vp.readback_ms, "panels": (t3 - t2) * 1e3,
-                 "ui": (t4 - t3) * 1e3}
+                 "ui": (t4 - t_read) * 1e3}
+        if self.dump is not None:
+            parts["dump"] = dump_s * 1e3
         parts.update(step_ms)   # per-tick controller time of the ticks finished for this frame (in parallel)
         self.frame_times.add((t4 - t0) * 1e3, parts)
         if record is not None:

@@ -111,7 +111,7 @@ def main() -> int:
     print(f"  controllers per frame: {out['controllers_ms_median']:.2f} ms median")
     labels = {"input": "input", "mm": "MM step", "lmm": "LMM step", "viewport": "3D scene update (Python)",
               "render": "3D render (GL)", "readback": "3D readback", "panels": "panels (Python)",
-              "ui": "dearpygui frame (UI raster + swap)"}
+              "ui": "dearpygui frame (UI raster + swap)", "dump": "state dump (this benchmark's, not counted)"}
     for k, v in out["parts_ms_median"].items():
         print(f"    {labels.get(k, k):38s} {v:7.2f} ms")
     print(f"  3D view {out['viewport_3d']} rendered at {out['render_3d']}, load average {out['load_average'][0]:.2f} on {out['cpu_count']} CPUs")

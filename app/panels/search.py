@@ -357,7 +357,22 @@ class CandidatesPanel(Panel):
         self.sort_key, self.descending = key, descending
         self._shown_for = None
 
-    def update(self, view: View) -> None:
+    def prepare_key(self, view: View) -> tuple:
+        return (self.sort_key, self.descending)
+
+    def prepare(self, view: View) -> dict | None:
+        """The sorted rows of the inspected controller's candidates and their colour fractions. Reading
+        the candidates runs motion matching's ranked search when the tick's search left it for the first
+        reader (see :class:`lmm.mm.MotionMatchingController`): on the tick worker, not the GUI thread."""
+        snap = view.snap()
+        if snap is None:
+            return None
+        cands = snap.candidates
+        rows = sort_rows(candidate_rows(cands, self.ctx.engine.db), self.sort_key, self.descending)
+        fractions = {k: column_fractions(rows, k) for k in self.columns if k == "total" or k.startswith("ch")}
+        return {"candidates": cands, "rows": rows, "fractions": fractions}
+
+    def update(self, view: View, prepared: dict | None = None) -> None:
         dpg = self.dpg
         snap = view.snap()
         cands = None if snap is None else snap.candidates
@@ -377,9 +392,10 @@ class CandidatesPanel(Panel):
         if key == self._shown_for:
             return
         self._shown_for = key
-        rows = sort_rows(candidate_rows(cands, self.ctx.engine.db), self.sort_key, self.descending)
+        if prepared is None or prepared["candidates"] is not cands:
+            prepared = self.prepare(view)
+        rows, fractions = prepared["rows"], prepared["fractions"]
         self.rows = rows
-        fractions = {k: column_fractions(rows, k) for k in self.columns if k == "total" or k.startswith("ch")}
         for r in range(MAX_ROWS):
             show = r < len(rows)
             dpg.configure_item(f"cand_row_{r}", show=show)

@@ -37,6 +37,7 @@ def _axis(start: int, stop: int) -> np.ndarray:
 class StatsPanel(Panel):
     key = "stats"
     _last_text_frame = -100
+    _last_limit_frame = -100
 
     def build(self, window_kwargs: dict) -> None:
         dpg = self.dpg
@@ -120,5 +121,8 @@ class StatsPanel(Panel):
                 if len(yy):
                     dpg.set_value(tag, [_axis(len(y) - len(yy), len(y)), yy])
             self.text.axis_limits("stats_x", 0.0, float(ft.n))
-            top = ft.percentile(95) * 1.3 if len(y) > 5 else 50.0
-            self.text.axis_limits("stats_y", 0.0, max(top, 20.0))
+            if view.frame - self._last_limit_frame >= 15 or len(y) <= 5:
+                # the y range follows the 95th percentile, as the text, 4 times a second
+                self._last_limit_frame = view.frame
+                top = ft.percentile(95) * 1.3 if len(y) > 5 else 50.0
+                self.text.axis_limits("stats_y", 0.0, max(top, 20.0))

@@ -12,6 +12,8 @@ to the left of the inspected character, facing its way, labelled.
 """
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
 from .base import Panel, PanelContext, View
@@ -83,6 +85,7 @@ class ViewportPanel(Panel):
         self.drawn: dict = {}
         self.render_ms = 0.0
         self.readback_ms = 0.0
+        self._unread = False          # update() rendered a view that finish() has not read yet
         self.gl_error = None
         self._texture_counter = 0
         self._legend_items: list[str] = []
@@ -365,8 +368,6 @@ class ViewportPanel(Panel):
     def update(self, view: View, prepared: dict | None = None) -> None:
         if self.renderer is None:
             return
-        import time
-
         self._ensure_size()
         if view.inspected != self._inspected_shown:
             self._inspected_shown = view.inspected
@@ -412,17 +413,28 @@ class ViewportPanel(Panel):
         self._labels(view, roots, None if prepared is None else prepared.get(_HEADS))
         t0 = time.perf_counter()
         self.renderer.render_to(self.scene, self.camera)
+        if self._screen_fbo is None:     # dearpygui's own framebuffer: the same one every frame
+            self._screen_fbo = self.gl.detect_framebuffer(0)
+        self._screen_fbo.use()
+        self.render_ms = (time.perf_counter() - t0) * 1e3
+        self.readback_ms = 0.0
+        self._unread = True
+
+    def finish(self) -> None:
+        """Read the 3D view rendered by :meth:`update` into the texture dearpygui shows. The studio
+        calls it after the other panels' updates: those run before the read's megabytes of pixels go
+        through the caches, and the GL driver (software GL rasterises on its own threads) has had that
+        time to draw. Does nothing when nothing new was rendered."""
+        if not self._unread:
+            return
+        self._unread = False
         t1 = time.perf_counter()
         # read bytes and scale them here: several times cheaper than the driver's float read on
         # software GL, and the same numbers (x * float32(1/255) is what llvmpipe computes)
         self.renderer.read(dtype=np.uint8, out=self._read_bytes, flip=False)
         np.multiply(self._read_bytes, BYTE_TO_UNIT, out=self.tex_array)
-        t2 = time.perf_counter()
-        if self._screen_fbo is None:     # dearpygui's own framebuffer: the same one every frame
-            self._screen_fbo = self.gl.detect_framebuffer(0)
         self._screen_fbo.use()
-        self.render_ms = (t1 - t0) * 1e3
-        self.readback_ms = (t2 - t1) * 1e3
+        self.readback_ms = (time.perf_counter() - t1) * 1e3
 
     def ragdoll_pose(self, view: View):
         """The ragdoll the 3D view draws at the displayed tick: ``(controller, positions (J, 3), offset (3,))``,

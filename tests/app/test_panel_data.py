@@ -303,6 +303,9 @@ def test_frame_time_series_are_kept_until_the_next_frame():
     assert ft.series("mm").tolist() == [1.0, 2.0, 3.0] and ft.series("ui").tolist() == [5.0]
     assert ft.percentile(100) == 40.0 and ft.median() == 30.0
     assert ft.series("nothing").tolist() == []
+    for ms in (50, 60, 70, 80):                                      # round the window again
+        ft.add(ms, {"mm": ms / 10})
+    assert ft.series().tolist() == [60.0, 70.0, 80.0] and ft.series("mm").tolist() == [6.0, 7.0, 8.0]
 
 def test_character_feature_markers_are_the_same_shown_together_or_alone(dbf):
     """The matched frame's and the playing frame's features are denormalised together: each marker is

@@ -140,12 +140,13 @@ def test_panels_show_the_live_tick(circle_run):
 
 
 def test_the_tick_worker_prepares_what_the_panels_show(circle_run):
-    """The numeric share of the 3D view and the plot panels is worked out on the tick worker for the next
-    frame; with LMM_STUDIO_CHECK_PREPARED every used result was compared with the GUI thread's own and
-    none differed (slider changes, a change of the inspected controller and recording on the way)."""
+    """The numeric share of the 3D view, the plot panels and the candidates table (motion matching's
+    ranked search included) is worked out on the tick worker for the next frame; with
+    LMM_STUDIO_CHECK_PREPARED every used result was compared with the GUI thread's own and none differed
+    (slider changes, a change of the inspected controller and recording on the way)."""
     prep = circle_run["dump"]["prepared"]
     assert prep["checked"] and prep["mismatches"] == []
-    for key in ("viewport", "features", "latent", "search", "timeline"):
+    for key in ("viewport", "features", "latent", "search", "timeline", "candidates"):
         assert prep["used"].get(key, 0) >= 120, prep        # of 150 frames: nearly all of them
         assert prep["inline"].get(key, 0) >= 1, prep        # the first frame has nothing prepared
 
