@@ -68,6 +68,24 @@ def project_points(points, view_proj: np.ndarray, width: int, height: int):
     return pixels, ndc[:, 2], in_front
 
 
+def project_points_floats(points, view_proj: np.ndarray, width: int, height: int) -> list:
+    """:func:`project_points` for a few points in plain floats (labels: three or four a frame, where
+    numpy's per-call cost is most of the work): ``[(x, y, in_front), ...]`` with the same pixel
+    convention, equal to its pixels to float64 rounding."""
+    (a0, a1, a2, a3), (b0, b1, b2, b3), _, (d0, d1, d2, d3) = np.asarray(view_proj, np.float64).tolist()
+    half_w, half_h = 0.5 * width, 0.5 * height
+    out = []
+    for p in points:
+        x, y, z = float(p[0]), float(p[1]), float(p[2])
+        w = d0 * x + d1 * y + d2 * z + d3
+        front = w > 1e-9
+        if not front:
+            w = 1.0
+        out.append(((( a0 * x + a1 * y + a2 * z + a3) / w + 1.0) * half_w,
+                    (1.0 - (b0 * x + b1 * y + b2 * z + b3) / w) * half_h, front))
+    return out
+
+
 @dataclass
 class OrbitCamera:
     """A camera orbiting ``target`` at ``distance``.

@@ -514,7 +514,7 @@ class ViewportPanel(Panel):
         cache = self.text
         w, h = self.size
         vp = self.camera.view_projection(w / max(h, 1))
-        from viewer.camera import project_points
+        from viewer.camera import project_points_floats
 
         # every label's anchor above a head, projected in one call
         wanted = []     # (label key, item tag, text, world point)
@@ -547,8 +547,8 @@ class ViewportPanel(Panel):
             cache.configure(f"vp_preview_label_{i}", show=False)
         anchors, sizes, texts, tags = {}, {}, {}, {}
         if wanted:
-            px, _, front = project_points(np.array([wt[3] for wt in wanted]), vp, w, h)
-            for (key, tag, text, _), (x, y), ok in zip(wanted, px, front):
+            for (key, tag, text, _), (x, y, ok) in zip(wanted, project_points_floats([wt[3] for wt in wanted],
+                                                                                     vp, w, h)):
                 if ok and 0 <= x < w and 0 <= y < h:
                     texts[key], tags[key] = text, tag
                     anchors[key] = (float(x) - 12, float(y) - 18)

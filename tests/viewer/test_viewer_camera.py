@@ -114,3 +114,20 @@ def test_fit_puts_every_point_in_view_at_any_scale(scale, aspect):
     span = (px.max(axis=0) - px.min(axis=0)) / [w, h]
     assert span.max() > 0.3
     assert cam.near < cam.distance - np.linalg.norm(pts - cam.target, axis=1).max()
+
+
+def test_projecting_a_few_points_in_floats_equals_the_numpy_form():
+    """The labels' plain-float projection gives project_points' pixels and in-front flags (points behind
+    the eye included)."""
+    from viewer.camera import project_points_floats
+
+    rng = np.random.default_rng(4)
+    cam = OrbitCamera(yaw_deg=40.0, pitch_deg=25.0, distance=3.0)
+    w, h = 754, 492
+    vp = cam.view_projection(w / h)
+    pts = rng.normal(size=(40, 3)) * 4.0
+    pts[0] = cam.eye + (cam.eye - cam.target)          # behind the eye
+    px, _, front = project_points(pts, vp, w, h)
+    got = project_points_floats(pts, vp, w, h)
+    assert [g[2] for g in got] == front.tolist() and not got[0][2]
+    assert np.allclose(np.array([g[:2] for g in got]), px, rtol=1e-12, atol=1e-9)
