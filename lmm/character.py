@@ -536,6 +536,26 @@ def _radians(degrees: float) -> float:
     return r
 
 
+def _rotation_distance_f(a, b) -> float:
+    """``qs.norm(qs.to_scaled_angle_axis(qs.abs_(qs.mul_inv(a, b))))`` (the angle from rotation ``b`` to
+    ``a``, radians) written out: the same float operations in the same order (tests/test_frame_cost.py)."""
+    aw, ax, ay, az = a
+    bw, bx, by, bz = b
+    bx, by, bz = -bx, -by, -bz          # conj(b)
+    w = aw * bw - ax * bx - ay * by - az * bz
+    x = aw * bx + ax * bw + ay * bz - az * by
+    y = aw * by - ax * bz + ay * bw + az * bx
+    z = aw * bz + ax * by - ay * bx + az * bw
+    if w < 0.0:
+        w, x, y, z = -w, -x, -y, -z
+    length = math.sqrt(x * x + y * y + z * z)
+    if length >= 1e-8:
+        k = float(qs._arctan2(length, -1.0 if w < -1.0 else 1.0 if w > 1.0 else w)) / length
+        x, y, z = k * x, k * y, k * z
+    x, y, z = 2.0 * x, 2.0 * y, 2.0 * z
+    return math.sqrt(x * x + y * y + z * z)
+
+
 def _array_of(floats: tuple):
     """A function making a new float64 array of ``floats`` (a tuple, never written): a snapshot field
     made when read (see :class:`lmm.controller.LazyField`)."""
@@ -809,13 +829,14 @@ class CharacterController(Controller):
             return False
         threshold = self.tuning.forced_search_threshold
         prev_vel, prev_rot = self._desired_t
-        vel_rate = qs.norm([a - b for a, b in zip(des_vel, prev_vel)]) / dt
+        d0, d1, d2 = des_vel[0] - prev_vel[0], des_vel[1] - prev_vel[1], des_vel[2] - prev_vel[2]
+        vel_rate = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2) / dt
         if des_rot == prev_rot and threshold * dt > 1e-12:
             # unchanged: q * conj(q)'s vector part is zero up to a rounding or two of its products (under
             # 1e-15), so its rate stays under the threshold; skip the logarithm
             rot_rate = 0.0
         else:
-            rot_rate = qs.norm(qs.to_scaled_angle_axis(qs.abs_(qs.mul_inv(tuple(des_rot), prev_rot)))) / dt
+            rot_rate = _rotation_distance_f(des_rot, prev_rot) / dt
         forced = False
         if vel_rate > threshold:
             self._velocity_change_high = True

@@ -212,3 +212,26 @@ def test_packed_rows_are_numpys_cast_bit_for_bit():
             assert g.dtype == w.dtype and g.shape == w.shape and g.tobytes() == w.tobytes(), dtype
             assert g.flags.writeable and g.flags.c_contiguous
         assert not np.may_share_memory(got[0], got[1]) and not np.may_share_memory(got[0], again[0])
+
+
+def test_rotation_distance_floats_is_the_quat_scalar_composition_bit_for_bit():
+    """The sharp-input test's rotation rate: the written-out angle between two rotations is the
+    quat_scalar composition it replaced, bit for bit (negative w, tiny and half-turn differences)."""
+    from lmm import quat_scalar as qs
+    from lmm.character import _rotation_distance_f
+
+    rng = np.random.default_rng(8)
+    for i in range(3000):
+        a = rng.normal(size=4)
+        a /= np.linalg.norm(a)
+        kind = i % 4
+        if kind == 0:
+            b = -a                                            # the same rotation, other sign
+        elif kind == 1:
+            b = a + rng.normal(size=4) * 1e-10                # a tiny difference (the small branch)
+        else:
+            b = rng.normal(size=4)
+            b /= np.linalg.norm(b)
+        a, b = tuple(a.tolist()), tuple(b.tolist())
+        want = qs.norm(qs.to_scaled_angle_axis(qs.abs_(qs.mul_inv(a, b))))
+        assert _rotation_distance_f(a, b) == want
