@@ -537,22 +537,9 @@ def _radians(degrees: float) -> float:
 
 
 def _rotation_distance_f(a, b) -> float:
-    """``qs.norm(qs.to_scaled_angle_axis(qs.abs_(qs.mul_inv(a, b))))`` (the angle from rotation ``b`` to
-    ``a``, radians) written out: the same float operations in the same order (tests/test_frame_cost.py)."""
-    aw, ax, ay, az = a
-    bw, bx, by, bz = b
-    bx, by, bz = -bx, -by, -bz          # conj(b)
-    w = aw * bw - ax * bx - ay * by - az * bz
-    x = aw * bx + ax * bw + ay * bz - az * by
-    y = aw * by - ax * bz + ay * bw + az * bx
-    z = aw * bz + ax * by - ay * bx + az * bw
-    if w < 0.0:
-        w, x, y, z = -w, -x, -y, -z
-    length = math.sqrt(x * x + y * y + z * z)
-    if length >= 1e-8:
-        k = float(qs._arctan2(length, -1.0 if w < -1.0 else 1.0 if w > 1.0 else w)) / length
-        x, y, z = k * x, k * y, k * z
-    x, y, z = 2.0 * x, 2.0 * y, 2.0 * z
+    """``qs.norm(qs.to_scaled_angle_axis(qs.abs_(qs.mul_inv(a, b))))``: the angle from rotation ``b`` to
+    ``a`` (radians), in plain floats (the same operations, tests/test_frame_cost.py)."""
+    x, y, z = _log_mul_inv_f(*a, *b)
     return math.sqrt(x * x + y * y + z * z)
 
 
