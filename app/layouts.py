@@ -136,7 +136,7 @@ class LayoutManager:
 
     def apply(self, layout: Layout, at_start: bool = False) -> None:
         dpg = self.dpg
-        self._shown.clear()
+        self.forget_shown()
         viewport = self._viewport_size()
         for key in built_windows(dpg):
             tag = window_tag(key)

@@ -181,10 +181,11 @@ class MotionMatchingController(CharacterController):
         hint = self.search_hint() if hint is None else hint
         return _run_search(self.index if accelerated else None, self.features.normalized, query_norm,
                            self.tag_groups() if groups is None else groups, hint,
-                           self._search_args(int(tun.top_k) if top_k is None else int(top_k)), near)
+                           self.search_args(int(tun.top_k) if top_k is None else int(top_k)), near)
 
-    def _search_args(self, top_k: int) -> dict:
-        """The search's arguments from the playing frame and the tuning, as they are now."""
+    def search_args(self, top_k: int) -> dict:
+        """The search's arguments from the playing frame and the tuning, as they are now (``top_k``
+        ranked frames)."""
         tun = self.tuning
         return dict(current=int(self.frame), transition_cost=tun.transition_cost,
                     exclude_window=int(tun.exclude_current_window_frames), top_k=top_k,
@@ -261,7 +262,7 @@ class _RankedLater:
         self._index = controller.index if controller.tuning.accelerated_search else None
         self._norm, self._query, self._hint = controller.features.normalized, query_norm, hint
         self._groups = groups           # the tick's tag groups (each made once, never written)
-        self._args = controller._search_args(int(top_k))
+        self._args = controller.search_args(int(top_k))
         self._names = controller.features.names
         self._value = None
 

@@ -605,6 +605,8 @@ def _rank_groups(frames, costs, keys, frame_group, b32, current, cont_cost, in_g
     of its group has a lower total, its key is above ``kth`` and it is cut in the merge either way).
     """
     cont_group = int(frame_group[current]) if in_group and cont_cost == cont_cost else -1  # NaN: not competing
+    cont_row = None if cont_group < 0 else (float(np.float32(cont_cost) + b32[cont_group]), 0, int(current),
+                                            float(np.float32(0.0) + b32[cont_group]))
     if top_k == 1 and keys.size:
         # the controller's tick search: usually one least key, and the playing frame's total differs from
         # it; then the ranking below keeps that frame and the playing frame and sorts the two, which is
@@ -613,12 +615,10 @@ def _rank_groups(frames, costs, keys, frame_group, b32, current, cont_cost, in_g
         least = keys[i]
         if least < np.inf and np.count_nonzero(keys == least) == 1:
             row = (float(least), 1, int(frames[i]), float(tc + b32[frame_group[frames[i]]]))
-            if cont_group < 0:
+            if cont_row is None:
                 return _rows_result([row])
-            cont_total = float(np.float32(cont_cost) + b32[cont_group])
-            if cont_total != row[0]:
-                return _rows_result([row if row[0] < cont_total else
-                                     (cont_total, 0, int(current), float(np.float32(0.0) + b32[cont_group]))])
+            if cont_row[0] != row[0]:
+                return _rows_result([min(row, cont_row)])
     if keys.size > top_k:
         kth = np.partition(keys, top_k - 1)[top_k - 1]
         few = (keys <= kth).nonzero()[0] if kth < np.inf else (keys < np.inf).nonzero()[0]
@@ -626,9 +626,6 @@ def _rank_groups(frames, costs, keys, frame_group, b32, current, cont_cost, in_g
         few = (keys < np.inf).nonzero()[0]
     f_few = frames[few]
     key_list, group_list = keys[few].tolist(), frame_group[f_few].tolist()
-    if cont_group >= 0:
-        cont_row = (float(np.float32(cont_cost) + b32[cont_group]), 0, int(current),
-                    float(np.float32(0.0) + b32[cont_group]))
     # usually no two of these keys are equal: then each group's ranking is its key order and the playing
     # frame sits at its key's place in it, so every cut at K that the groups make only drops rows that K
     # rows of the same group precede anyway: the merge is a plain sort by key

@@ -129,25 +129,26 @@ def collect_queries(db, features, n_queries: int, scenarios=None, tuning=None, l
             if lr is not None:
                 _step_learned(learners[name], log, start, chunk, dt, lr)
             if brute_runs is not None:
-                brute_runs += _time_brute_force(new, features)
+                brute_runs += _time_brute_force(new)
     return Runs(queries[:n_queries], np.asarray(step_us), np.asarray(search_us), lr,
                 None if brute_runs is None else brute_runs[:n_queries])
 
 
-def brute_force_args(controller, features) -> dict:
-    """The search arguments a benchmark query is searched with: the controller's tuning."""
-    tun = controller.tuning
-    return dict(transition_cost=tun.transition_cost, exclude_window=int(tun.exclude_current_window_frames),
-                top_k=int(tun.top_k), slices=features.slices)
+def brute_force_args(controller) -> dict:
+    """The search arguments a benchmark query is searched with: the controller's, from its tuning (the
+    playing frame is given per query)."""
+    args = controller.search_args(int(controller.tuning.top_k))
+    del args["current"]
+    return args
 
 
-def _time_brute_force(queries, features) -> list:
+def _time_brute_force(queries) -> list:
     """(result, seconds) of the brute-force search of each of ``queries`` (query, frame, hint, controller)."""
     from lmm.search import brute_force_search
 
     out = []
     for query, frame, _, c in queries:
-        X, mask, args = c.features.normalized, c.candidate_mask(), brute_force_args(c, features)
+        X, mask, args = c.features.normalized, c.candidate_mask(), brute_force_args(c)
         t0 = time.perf_counter()
         r = brute_force_search(X, query, mask, current=frame, **args)
         out.append((r, time.perf_counter() - t0))
@@ -180,14 +181,14 @@ def bench_search(db, features, n_queries: int = 2400, collected=None) -> dict:
     runs = collected or collect_queries(db, features, n_queries, brute=True)
     queries = runs.queries
     c0 = queries[0][3]
-    args = brute_force_args(c0, features)
+    args = brute_force_args(c0)
     mask = c0.candidate_mask()
     X = c0.features.normalized
     index = SearchIndex(X)
     # each search timed on its own pass over the queries (as at run time, not interleaved with the other):
     # the brute force chunk by chunk while they were collected (see collect_queries), else here
     if runs.brute is None:
-        runs.brute = _time_brute_force(queries, features)
+        runs.brute = _time_brute_force(queries)
     brute = [r for r, _ in runs.brute]
     t_brute = [t for _, t in runs.brute]
     fast, t_fast = [], []

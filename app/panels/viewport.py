@@ -413,9 +413,6 @@ class ViewportPanel(Panel):
         self._labels(view, roots, None if prepared is None else prepared.get(_HEADS))
         t0 = time.perf_counter()
         self.renderer.render_to(self.scene, self.camera)
-        if self._screen_fbo is None:     # dearpygui's own framebuffer: the same one every frame
-            self._screen_fbo = self.gl.detect_framebuffer(0)
-        self._screen_fbo.use()
         self.render_ms = (time.perf_counter() - t0) * 1e3
         self.readback_ms = 0.0
         self._unread = True
@@ -433,6 +430,8 @@ class ViewportPanel(Panel):
         # software GL, and the same numbers (x * float32(1/255) is what llvmpipe computes)
         self.renderer.read(dtype=np.uint8, out=self._read_bytes, flip=False)
         np.multiply(self._read_bytes, BYTE_TO_UNIT, out=self.tex_array)
+        if self._screen_fbo is None:     # dearpygui's own framebuffer: the same one every frame
+            self._screen_fbo = self.gl.detect_framebuffer(0)
         self._screen_fbo.use()
         self.readback_ms = (time.perf_counter() - t1) * 1e3
 
