@@ -326,6 +326,7 @@ class LearnedMotionMatchingController(CharacterController):
         self.state[:] = 0.0
         self._deriv = np.zeros_like(self.state)
         self._pose_vec = np.zeros(self.nets.decompressor.n_out, np.float32)
+        self._projected_state = np.zeros(self.nets.projector.n_out, np.float32)
         self._run_stepper = self.nets.stepper.bind_single(self._deriv, self._state1)
         self._run_decompressor = self.nets.decompressor.bind_single(self._pose_vec, self._state1)
         # per tick the decompressor computes the pose vector's tick columns only; the bones' velocities
@@ -354,7 +355,8 @@ class LearnedMotionMatchingController(CharacterController):
     def project(self, query_norm: np.ndarray) -> np.ndarray:
         """Projector on a query normalised with the controller's current feature weights -> state."""
         raw = self.features.denormalize(query_norm)
-        return self.nets.projector(self.nets.to_network_space(raw))
+        # into the controller's own buffer (the projector keeps a bound call for it), then a new array
+        return self.nets.projector(self.nets.to_network_space(raw), self._projected_state).copy()
 
     def decompress(self, state: np.ndarray) -> SourcePose:
         if state is self.state:

@@ -127,6 +127,7 @@ class MLP:
             raise ValueError(f"{name}: a skip connection needs n_out >= n_in ({self.n_in} -> {self.n_out})")
         self._buffers: dict[int, list[np.ndarray]] = {}
         self._plan = None   # batch-1 buffers, see _single_plan
+        self._bound = None  # (out, run): the last bind_single that __call__ made for one vector
 
     @classmethod
     def from_arrays(cls, arrays: dict, prefix: str, activation: str, skip: bool = False) -> "MLP":
@@ -247,11 +248,11 @@ class MLP:
         if self.skip and np.may_share_memory(out, x_own if x1 is None else x1):
             raise ValueError(f"{self.name}: with a skip connection out must not share the input's memory")
         own_input = x_view if x1 is None else x1[:-1]
-        if self.activation != "relu" or self.skip:
+        if self.activation != "relu":
             def run(x=None):
                 return self._call_single(own_input if x is None else x, out)
             return run
-        forward = self._bound_relu(x_own if x1 is None else x1, last, out)
+        forward = self._bound_relu(x_own if x1 is None else x1, last, out, own_input if self.skip else None)
         if x1 is not None:
             return forward
 
@@ -269,21 +270,33 @@ class MLP:
         if x1.dtype != np.float32 or x1.shape != (self.n_in + 1,) or x1[-1] != 1.0:
             raise ValueError(f"{self.name}: x1 must be float32 ({self.n_in + 1},) ending with 1.0")
 
-    def _bound_relu(self, first: np.ndarray, last: np.ndarray, out: np.ndarray):
+    def _bound_relu(self, first: np.ndarray, last: np.ndarray, out: np.ndarray, skip_input=None):
         """The core of the bound calls: a function running the plan's hidden ReLU layers from the buffer
-        ``first`` ([x, 1]) and then ``last`` into ``out``; its ``hidden`` attribute is the last layer's
-        input buffer ([h, 1])."""
+        ``first`` ([x, 1]) and then ``last`` into ``out``, then, with ``skip_input`` (the input vector,
+        float32), adding it to the first ``n_in`` outputs as :meth:`_call_single` does; its ``hidden``
+        attribute is the last layer's input buffer ([h, 1])."""
         _, _, hidden, _, _ = self._single_plan()
         inputs = [first] + [buf for _, buf, _, _, _ in hidden]
         layers = [(h, m, val, zero) for h, (m, _, val, zero, _) in zip(inputs, hidden)]
         h_last = inputs[-1]
-        dot, maximum = np.dot, np.maximum
+        dot, maximum, add = np.dot, np.maximum, np.add
 
-        def forward():
-            for h, m, val, zero in layers:
-                dot(h, m, val)
-                maximum(val, zero, out=val)
-            return dot(h_last, last, out)
+        if skip_input is None:
+            def forward():
+                for h, m, val, zero in layers:
+                    dot(h, m, val)
+                    maximum(val, zero, out=val)
+                return dot(h_last, last, out)
+        else:
+            head = out[:skip_input.shape[0]]
+
+            def forward():
+                for h, m, val, zero in layers:
+                    dot(h, m, val)
+                    maximum(val, zero, out=val)
+                dot(h_last, last, out)
+                add(head, skip_input, out=head)
+                return out
         forward.hidden = h_last
         return forward
 
@@ -314,8 +327,19 @@ class MLP:
         return run, run.hidden, rest
 
     def __call__(self, x: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-        """Evaluate on (D,) or (B, D); returns a new array (or writes into ``out``)."""
+        """Evaluate on (D,) or (B, D); returns a new array (or writes into ``out``).
+
+        One float32 vector through a ReLU network into a float32 ``out`` goes through a bound call
+        (:meth:`bind_single`, kept for the last ``out`` given): the same numpy calls on the same operands
+        as :meth:`_call_single`, so the same bits, without its per-call checks."""
         if x.ndim == 1:
+            if out is not None and x.dtype == np.float32 and self.activation == "relu":
+                bound = self._bound
+                if bound is None or bound[0] is not out:
+                    if out.dtype != np.float32 or out.shape != (self.n_out,):
+                        return self._call_single(x, out)
+                    bound = self._bound = (out, self.bind_single(out))
+                return bound[1](x)
             return self._call_single(x, out)
         x2 = x
         bufs = self._bufs(x2.shape[0])

@@ -267,6 +267,29 @@ def test_bound_single_calls_are_bit_identical(shipped, name):
             assert same_bits(_call_single_as_on_main(mlp, x, np.empty_like(out)), want)
 
 
+@pytest.mark.parametrize("name", ["decompressor", "stepper", "projector"])
+def test_call_with_out_uses_bound_call_with_the_same_bits(shipped, name):
+    """``mlp(x, out)`` on one float32 vector goes through a bound call kept for ``out``: the bits of
+    _call_single, whichever of two buffers is given (the binding follows ``out``), with ``x`` a view of
+    ``out`` itself, and with a float64 ``x`` or a float64 ``out`` (both left to _call_single)."""
+    mlp = shipped[name]
+    rng = np.random.default_rng(11)
+    outs = [np.empty(mlp.n_out, np.float32), np.empty(mlp.n_out, np.float32)]
+    for t in range(40):
+        x = (rng.standard_normal(mlp.n_in) * rng.uniform(0.1, 3.0)).astype(np.float32)
+        want = mlp._call_single(x, None).copy()
+        out = outs[t % 2]
+        assert mlp(x, out) is out and same_bits(out, want)
+        assert mlp._bound[0] is out
+        shared = np.zeros(max(mlp.n_in, mlp.n_out), np.float32)[:mlp.n_out]
+        shared[:mlp.n_in] = x
+        assert same_bits(mlp(shared[:mlp.n_in], shared), want)
+        x64 = x.astype(np.float64)
+        assert same_bits(mlp(x64, outs[0]), mlp._call_single(x64, None))
+        out64 = np.empty(mlp.n_out)
+        assert np.array_equal(mlp(x, out64), want.astype(np.float64))
+
+
 def test_bind_single_rejects_bad_buffers(shipped):
     mlp = shipped["stepper"]
     with pytest.raises(ValueError, match="float32"):
