@@ -30,6 +30,7 @@ class StudioOptions:
     write_layouts: str | None = None
     samples: int = -1
     render_scale: float = 1.0
+    readback_3d: bool = False    # read the 3D view back into a raw texture (see app.gl_texture)
     cache: str | None = None
     physics: bool = True
 

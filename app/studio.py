@@ -137,7 +137,8 @@ class Studio(SessionActions):
         ctx = self.panel_context()
         self.menu = MenuBar(ctx)
         self.viewport = ViewportPanel(ctx, samples=self.opts.samples,
-                                      render_scale=float(min(max(self.opts.render_scale, 0.25), 1.0)))
+                                      render_scale=float(min(max(self.opts.render_scale, 0.25), 1.0)),
+                                      readback=self.opts.readback_3d)
         self.panels = {"viewport": self.viewport}
         for cls in (FeaturesPanel, LatentPanel, SearchPanel, CandidatesPanel, TuningPanel, StatsPanel,
                     TimelinePanel, RecordingPanel, DatabasePanel, CoveragePanel,

@@ -4,11 +4,12 @@ Runs the real studio (``lmm-studio --frames N --input builtin:circle``) in a sub
 display (or on $DISPLAY with --display), with the default layout (all nine panels), both characters when
 LMM weights are available, and reads the per-frame timings from its state dump.
 
-    python bench/bench_studio.py [--frames 600] [--warmup 120] [--weights PATH] [--samples -1] [--json]
+    python bench/bench_studio.py [--frames 600] [--warmup 120] [--weights PATH] [--samples -1] [--readback-3d] [--json]
 
 Printed: fps (from the median frame time, and frames / wall time), and the median milliseconds per
 frame of each part: the controllers (MM, LMM), the studio's own Python (input, 3D scene update,
-panels: what this project's GUI code costs), the 3D render and its readback, and dearpygui's frame
+panels: what this project's GUI code costs), the 3D render and its copy into dearpygui's texture (or
+its readback, with --readback-3d), and dearpygui's frame
 (UI layout and rasterisation, swap). Software OpenGL (llvmpipe) is the floor: users have GPUs.
 """
 from __future__ import annotations
@@ -35,6 +36,8 @@ def main() -> int:
     ap.add_argument("--weights", help="LMM weights (default: the shipped ones; MM only when missing)")
     ap.add_argument("--samples", type=int, default=-1, help="3D multisampling (-1: auto)")
     ap.add_argument("--render-scale", type=float, default=1.0, help="3D view resolution scale (default 1)")
+    ap.add_argument("--readback-3d", action="store_true",
+                    help="the studio's --readback-3d: read the 3D view back and upload it (for comparison)")
     ap.add_argument("--display", help="use this X display instead of starting Xvfb")
     ap.add_argument("--lp-threads", help="set LP_NUM_THREADS for llvmpipe (default: leave as is)")
     ap.add_argument("--json", action="store_true", help="print one JSON object")
@@ -62,6 +65,8 @@ def main() -> int:
                "--dump-state", str(dump)]
         if args.weights:
             cmd += ["--weights", args.weights]
+        if args.readback_3d:
+            cmd += ["--readback-3d"]
         t0 = time.perf_counter()
         proc = subprocess.run(cmd, env=env, cwd=tmp, capture_output=True, text=True)
         wall = time.perf_counter() - t0
@@ -94,6 +99,8 @@ def main() -> int:
         "parts_ms_median": {k: float(np.nanmedian(v)) for k, v in ms.items()},
         "viewport_3d": d["final"]["viewport"].get("size"),
         "render_3d": d["final"]["viewport"].get("render_size"),
+        "view_path": d["final"]["viewport"].get("view_path"),
+        "readback_why": d["final"]["viewport"].get("readback_why"),
         "load_average": os.getloadavg(),
         "cpu_count": os.cpu_count(),
         "process_wall_s": wall,
@@ -110,11 +117,12 @@ def main() -> int:
     print(f"  Python-side per frame (studio: input + 3D scene update + panels): {out['python_ms_median']:.2f} ms median")
     print(f"  controllers per frame: {out['controllers_ms_median']:.2f} ms median")
     labels = {"input": "input", "mm": "MM step", "lmm": "LMM step", "viewport": "3D scene update (Python)",
-              "render": "3D render (GL)", "readback": "3D readback", "panels": "panels (Python)",
+              "render": "3D render (GL)", "readback": "3D copy (direct) / readback", "panels": "panels (Python)",
               "ui": "dearpygui frame (UI raster + swap)", "dump": "state dump (this benchmark's, not counted)"}
     for k, v in out["parts_ms_median"].items():
         print(f"    {labels.get(k, k):38s} {v:7.2f} ms")
-    print(f"  3D view {out['viewport_3d']} rendered at {out['render_3d']}, load average {out['load_average'][0]:.2f} on {out['cpu_count']} CPUs")
+    print(f"  3D view {out['viewport_3d']} rendered at {out['render_3d']}, {out['view_path']}"
+          + (f" ({out['readback_why']})" if out["readback_why"] else "") + f", load average {out['load_average'][0]:.2f} on {out['cpu_count']} CPUs")
     if out["lmm_problem"]:
         print(f"  note: {out['lmm_problem']}")
     return 0

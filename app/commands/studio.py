@@ -32,6 +32,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--render-scale", type=float, default=1.0, metavar="S",
                         help="render the 3D view at S times its size and stretch it (0.25-1; default 1): "
                              "cheaper on software OpenGL")
+    parser.add_argument("--readback-3d", action="store_true",
+                        help="read the 3D view back and upload it to dearpygui every frame instead of drawing it "
+                             "into dearpygui's texture (slower; for comparison, or a GL driver where that fails)")
     parser.add_argument("--no-gamepads", action="store_true", help="do not open gamepads (keyboard only)")
     parser.add_argument("--fixed-step", action="store_true",
                         help="one 60 Hz tick per rendered frame (default with --frames/--script: reproducible)")
@@ -70,5 +73,5 @@ def main(args: argparse.Namespace) -> int:
                          lmm=not args.no_lmm, physics=not args.no_physics, script=args.script, dump_state=args.dump_state,
                          fixed_step=args.fixed_step, gamepads=not args.no_gamepads,
                          save_layout=not args.no_save_layout, write_layouts=args.write_layouts,
-                         samples=args.samples, render_scale=args.render_scale)
+                         samples=args.samples, render_scale=args.render_scale, readback_3d=args.readback_3d)
     return Studio(opts).run()

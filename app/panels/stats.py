@@ -1,5 +1,6 @@
 """Stats: frames per second, the time each part of a frame takes (controllers with their search and
-network parts, the 3D render and readback, panel updates, dearpygui's own frame), and the memory
+network parts, the 3D render and its copy into dearpygui's texture, panel updates, dearpygui's own
+frame), and the memory
 motion matching and learned motion matching keep."""
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ from .common import COLORS, SHORT, fmt_bytes
 
 PARTS = ("input", "mm", "lmm", "viewport", "render", "readback", "panels", "ui")
 PART_LABELS = {"input": "input", "mm": "MM step", "lmm": "LMM step", "viewport": "3D scene",
-               "render": "3D render", "readback": "3D readback", "panels": "panels",
+               "render": "3D render", "readback": "3D to texture", "panels": "panels",
                "ui": "UI (dearpygui)"}
 
 

@@ -1,6 +1,8 @@
 """3D viewport: both characters, their simulation objects, predicted trajectories, ghosts of the
 matched frames, foot contacts and feature markers, drawn by :mod:`viewer` into its own framebuffer
-in dearpygui's GL context and shown as a raw texture.
+in dearpygui's GL context and copied on the GPU into the OpenGL texture of a dearpygui static texture
+(:mod:`app.gl_texture`); where that texture cannot be found (or with ``--readback-3d``) the pixels are
+read back into a raw texture instead, which dearpygui uploads again every frame.
 
 Mouse on the image: left-drag orbits, right/middle-drag pans, wheel zooms. The camera follows the
 characters unless "Follow" is off. The camera's azimuth has one owner, the input layer (sticks and
@@ -16,6 +18,7 @@ import time
 
 import numpy as np
 
+from ..gl_texture import SharedTexture, marker_image, texture_names
 from .base import Panel, PanelContext, View
 from .common import COLORS, RAGDOLL_COLOR, SHORT
 from .viewport_scene import (LEGEND, CharacterDrawing, CharacterParts, MarkerBatch, Markers, PreviewDrawings,
@@ -61,7 +64,10 @@ class ViewportPanel(Panel):
                ("contacts", "Contacts", True), ("features", "Features", True), ("trail", "Trail", True),
                ("sticks", "Sticks", False), ("shadow", "Shadow", True))
 
-    def __init__(self, ctx: PanelContext, samples: int = -1, render_scale: float = 1.0):
+    #: frames to wait for dearpygui to make a static texture before reading back instead
+    SHARED_TEXTURE_TRIES = 3
+
+    def __init__(self, ctx: PanelContext, samples: int = -1, render_scale: float = 1.0, readback: bool = False):
         super().__init__(ctx)
         self.gl = None
         self._screen_fbo = None
@@ -75,7 +81,10 @@ class ViewportPanel(Panel):
         self.reference_overlay = False     # followed reference drawn over the inspected character
         self.size = (0, 0)
         self.texture = None
-        self.tex_array = None
+        self.tex_array = None              # the raw texture's pixels (readback path only)
+        self._shared = None                # the static texture's SharedTexture (direct path)
+        # why the view is read back instead of drawn into dearpygui's texture (None: it is not)
+        self.readback_why = "--readback-3d" if readback else None
         self.side_by_side = True
         self.follow = True
         self.show = {k: v for k, _, v in self.TOGGLES}
@@ -146,8 +155,15 @@ class ViewportPanel(Panel):
         self.dpg.set_value("vp_follow", self.follow)
 
     def render_info(self) -> str:
-        return (f"3D {self.render_size[0]}x{self.render_size[1]} {max(self.samples, 0)}x MSAA "
-                f"({self.gl_renderer[:24]})")
+        return (f"3D {self.render_size[0]}x{self.render_size[1]} {max(self.samples, 0)}x MSAA, "
+                f"{self.view_path()} ({self.gl_renderer[:24]})")
+
+    def view_path(self) -> str:
+        """How the 3D view reaches the screen: "direct" (copied on the GPU into dearpygui's texture),
+        "readback" (read back and uploaded each frame) or "pending" (looking for the texture)."""
+        if self._shared is None:
+            return "readback"
+        return "direct" if self._shared.fbo is not None else "pending"
 
     # -- GL -----------------------------------------------------------------------------------
     def init_gl(self) -> None:
@@ -182,6 +198,10 @@ class ViewportPanel(Panel):
         # times the whole scene
         self.renderer = viewer.Renderer(self.gl, 64, 64, samples=None if self.samples < 0 else self.samples)
         self.samples = self.renderer.samples
+        if self.readback_why is None:
+            self._names, why = texture_names()
+            if self._names is None:
+                self.readback_why = why
 
     def add_controller(self, name: str) -> None:
         """A controller appeared (e.g. LMM weights loaded at run time)."""
@@ -257,14 +277,26 @@ class ViewportPanel(Panel):
         rw, rh = max(int(round(w * self.render_scale)), 16), max(int(round(h * self.render_scale)), 16)
         self.render_size = (rw, rh)
         self.renderer.resize(rw, rh)
-        old = self.texture
+        old, old_shared = self.texture, self._shared
         self._texture_counter += 1
-        self.tex_array = np.zeros((rh, rw, 4), dtype=np.float32)
-        self.tex_array[..., 3] = 1.0
-        self._read_bytes = np.zeros((rh, rw, 4), dtype=np.uint8)
         self.texture = f"vp_texture_{self._texture_counter}"
-        dpg.add_raw_texture(rw, rh, self.tex_array, format=dpg.mvFormat_Float_rgba, tag=self.texture,
-                            parent="texture_registry")
+        self._shared = None
+        if self.readback_why is None:
+            # a static texture dearpygui makes on the next frame and never writes again: the view is
+            # copied into it (see finish); until then it shows the background and a faint marker
+            marker = marker_image(rw, rh, self.scene.background, self._texture_counter)
+            dpg.add_static_texture(rw, rh, marker.ravel(), tag=self.texture, parent="texture_registry")
+            self.tex_array = self._read_bytes = None
+            try:
+                self._shared = SharedTexture(self.gl, self._names, rw, rh, marker)
+            except Exception as e:      # a GL library that does not answer: read back instead
+                self._give_up_shared(f"texture names not readable: {e}")
+        else:
+            self.tex_array = np.zeros((rh, rw, 4), dtype=np.float32)
+            self.tex_array[..., 3] = 1.0
+            self._read_bytes = np.zeros((rh, rw, 4), dtype=np.uint8)
+            dpg.add_raw_texture(rw, rh, self.tex_array, format=dpg.mvFormat_Float_rgba, tag=self.texture,
+                                parent="texture_registry")
         dpg.configure_item("vp_drawlist", width=w, height=h)
         if dpg.does_item_exist("vp_image"):
             dpg.configure_item("vp_image", texture_tag=self.texture, pmax=(w, h))
@@ -288,9 +320,19 @@ class ViewportPanel(Panel):
         for item in self._legend_items:
             pos = dpg.get_item_configuration(item)["pos"]
             dpg.configure_item(item, pos=(pos[0], h - 20))
+        if old_shared is not None:
+            old_shared.release()
         if old is not None:
             dpg.delete_item(old)
 
+    def _give_up_shared(self, why: str) -> None:
+        """Read the view back from now on (``why``: shown in the stats); the texture is remade as a raw
+        texture on the next update."""
+        self.readback_why = why
+        if self._shared is not None:
+            self._shared.release()
+        self._window_rect = None
+        self.size = (0, 0)
     # -- input ----------------------------------------------------------------------------------
     def on_wheel(self, delta: float) -> None:
         if self.dpg.is_item_hovered("vp_drawlist"):
@@ -418,18 +460,29 @@ class ViewportPanel(Panel):
         self._unread = True
 
     def finish(self) -> None:
-        """Read the 3D view rendered by :meth:`update` into the texture dearpygui shows. The studio
-        calls it after the other panels' updates: those run before the read's megabytes of pixels go
-        through the caches, and the GL driver (software GL rasterises on its own threads) has had that
-        time to draw. Does nothing when nothing new was rendered."""
+        """Put the 3D view rendered by :meth:`update` into the texture dearpygui shows: a copy on the
+        GPU into dearpygui's own texture, or (readback path) a read into the raw texture's array. The
+        studio calls it after the other panels' updates: those run while the GL driver (software GL
+        rasterises on its own threads) draws, and before a read's megabytes of pixels go through the
+        caches. Does nothing when nothing new was rendered."""
         if not self._unread:
             return
         self._unread = False
         t1 = time.perf_counter()
-        # read bytes and scale them here: several times cheaper than the driver's float read on
-        # software GL, and the same numbers (x * float32(1/255) is what llvmpipe computes)
-        self.renderer.read(dtype=np.uint8, out=self._read_bytes, flip=False)
-        np.multiply(self._read_bytes, BYTE_TO_UNIT, out=self.tex_array)
+        shared = self._shared
+        if shared is not None and shared.fbo is None:
+            try:
+                if not shared.find() and shared.tries >= self.SHARED_TEXTURE_TRIES:
+                    self._give_up_shared(f"dearpygui's texture not found in {shared.tries} frames")
+            except Exception as e:      # a GL error while looking: read back instead
+                self._give_up_shared(f"dearpygui's texture not usable: {e}")
+        if self._shared is not None and self._shared.fbo is not None:
+            self.gl.copy_framebuffer(self._shared.fbo, self.renderer.fbo)
+        elif self.tex_array is not None:
+            # read bytes and scale them here: several times cheaper than the driver's float read on
+            # software GL, and the same numbers (x * float32(1/255) is what llvmpipe computes)
+            self.renderer.read(dtype=np.uint8, out=self._read_bytes, flip=False)
+            np.multiply(self._read_bytes, BYTE_TO_UNIT, out=self.tex_array)
         if self._screen_fbo is None:     # dearpygui's own framebuffer: the same one every frame
             self._screen_fbo = self.gl.detect_framebuffer(0)
         self._screen_fbo.use()
@@ -569,6 +622,8 @@ class ViewportPanel(Panel):
         out = dict(self.drawn)
         out["size"] = list(self.size)
         out["render_size"] = list(self.render_size)
+        out["view_path"] = self.view_path()
+        out["readback_why"] = self.readback_why
         out["side_by_side"] = self.side_by_side
         if self.camera is not None:
             out["camera"] = {"target": [float(x) for x in self.camera.target], "yaw_deg": self.camera.yaw_deg,

@@ -1,0 +1,120 @@
+"""The 3D view drawn into dearpygui's own texture (app.gl_texture), under Xvfb.
+
+The texture finder runs in a subprocess of its own (dearpygui is one global context per process); the
+studio runs once each way, and its picture is compared with the readback path's."""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+
+from studio_testutil import ROOT
+
+pytestmark = pytest.mark.gui
+
+FINDER = textwrap.dedent("""
+    import json, numpy as np
+    import dearpygui.dearpygui as dpg
+    import moderngl
+    from app.gl_texture import SharedTexture, marker_image, texture_names
+
+    W, H = 120, 80
+    dpg.create_context()
+    dpg.add_texture_registry(tag="reg")
+    with dpg.window(width=400, height=300):
+        dpg.add_drawlist(W, H, tag="dl")
+    dpg.create_viewport(width=400, height=300, vsync=False)
+    dpg.setup_dearpygui()
+    dpg.show_viewport()
+    dpg.render_dearpygui_frame()
+    gl = moderngl.create_context()
+    names, why = texture_names()
+    out = {"why": why}
+    bg = (0.13, 0.14, 0.17)
+    # two textures of the same size, made on the same frame: the marker tells them apart
+    mine, other = marker_image(W, H, bg, 1), marker_image(W, H, bg, 2)
+    finders = {}
+    for tag, img in (("mine", mine), ("other", other)):
+        dpg.add_static_texture(W, H, img.ravel(), tag=tag, parent="reg")
+        finders[tag] = SharedTexture(gl, names, W, H, img)
+    # a finder whose marker is in no texture: never found
+    lost = SharedTexture(gl, names, W, H, marker_image(W, H, bg, 3))
+    out["before_frame"] = finders["mine"].find()
+    dpg.draw_image("mine", (0, 0), (W, H), parent="dl", uv_min=(0, 1), uv_max=(1, 0))
+    dpg.render_dearpygui_frame()
+    out["found"] = {t: f.find() for t, f in finders.items()}
+    out["names"] = {t: f.texture.glo for t, f in finders.items()}
+    out["lost"] = [lost.find() for _ in range(3)]
+    # draw into "mine" through its framebuffer: what dearpygui shows is what was drawn
+    f = finders["mine"]
+    f.fbo.use()
+    f.fbo.clear(0.2, 0.6, 0.3, 1.0)
+    gl.detect_framebuffer(0).use()
+    dpg.render_dearpygui_frame()
+    out["pixel"] = np.frombuffer(f.texture.read(), np.uint8)[:4].tolist()
+    glo = f.texture.glo
+    f.release()
+    out["alive_after_release"] = glo in names.alive(glo)
+    print(json.dumps(out))
+    dpg.destroy_context()
+""")
+
+
+def test_shared_texture_finds_dearpygui_texture_by_size_and_marker(xvfb_display, tmp_path):
+    env = dict(os.environ, DISPLAY=xvfb_display, PYTHONPATH=str(ROOT), LP_NUM_THREADS="0")
+    proc = subprocess.run([sys.executable, "-c", FINDER], cwd=tmp_path, env=env, capture_output=True, text=True,
+                          timeout=60)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    import json
+
+    out = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert out["why"] == ""
+    assert out["before_frame"] is False              # dearpygui makes the texture on the next frame
+    assert out["found"] == {"mine": True, "other": True}
+    assert out["names"]["mine"] != out["names"]["other"]
+    assert out["lost"] == [False, False, False]
+    assert out["pixel"] == [51, 153, 76, 255]         # 0.2, 0.6, 0.3 as 8-bit
+    assert out["alive_after_release"]                # the wrapper's release leaves dearpygui's texture
+
+
+def _view_pixels(run, shot):
+    from PIL import Image
+
+    win = run.dump["final"]["windows"]["viewport"]
+    (x, y), (w, h) = win["pos"], win["size"]
+    img = np.asarray(Image.open(shot).convert("RGB"), dtype=np.int16)
+    # the image area below the toolbar and the overlay line, inside the window's border
+    return img[y + 120:y + h - 10, x + 10:x + w - 10]
+
+
+def test_studio_draws_the_view_into_dearpygui_texture_one_frame_sooner(run_studio, tmp_path):
+    """The studio on Xvfb takes the direct path; its picture after N frames is the readback path's after
+    N + 1 (dearpygui's raw texture shows the array it was given one frame late), and not the
+    readback path's after N."""
+    common = ("--input", "builtin:zigzag", "--no-lmm", "--no-physics", "--layout", "default")
+    direct = run_studio("--frames", 40, *common, "--screenshot", tmp_path / "direct.png")
+    assert direct.rc == 0, direct.stderr[-3000:]
+    vp = direct.dump["final"]["viewport"]
+    assert vp["view_path"] == "direct" and vp["readback_why"] is None
+    views = {}
+    for frames in (40, 41):
+        r = run_studio("--frames", frames, *common, "--readback-3d", "--screenshot", tmp_path / f"rb{frames}.png")
+        assert r.rc == 0, r.stderr[-3000:]
+        assert r.dump["final"]["viewport"]["view_path"] == "readback"
+        assert r.dump["final"]["viewport"]["readback_why"] == "--readback-3d"
+        views[frames] = _view_pixels(r, tmp_path / f"rb{frames}.png")
+    mine = _view_pixels(direct, tmp_path / "direct.png")
+    assert mine.std() > 10.0                          # a scene, not the background alone
+
+    def changed(a, b):
+        return float(np.mean(np.abs(a - b).max(axis=2) > 8))
+
+    same_tick, next_tick = changed(mine, views[40]), changed(mine, views[41])
+    # the character and its labels move between frames; the same picture differs only where a label's
+    # text changes
+    assert next_tick < 0.02, (next_tick, same_tick)
+    assert same_tick > 4 * next_tick + 0.01, (next_tick, same_tick)
