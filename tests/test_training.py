@@ -1,6 +1,7 @@
 """Tiny training runs on a slice of the default database: every network's loss drops, seeds are fixed,
 the pipeline writes loadable weights, a CSV log and a summary."""
 import csv
+import dataclasses
 
 import numpy as np
 import pytest
@@ -63,11 +64,14 @@ def test_stepper_loss_drops(data):
 
 
 def test_projector_loss_drops(data):
-    Z = smooth_latents(data)
-    projector, log = T.train_projector(data, Z, tiny(200, 64), hidden=64, log_every=10, quiet=True)
+    # the database's first 12,000 frames (the training frames are the first 3000): the cell term's
+    # neighbour table of every frame costs the square of the frame count (57,500 frames: about 45 s)
+    small = dataclasses.replace(data, X=data.X[:12000])
+    Z = smooth_latents(small)
+    projector, log = T.train_projector(small, Z, tiny(200, 64), hidden=64, log_every=10, quiet=True)
     assert projector.spec.skip
     # the skip connection starts the projector near the identity, so its first loss is already lower
-    # (measured: 6.1 -> 4.5 over these 200 iterations)
+    # (measured: 6.4 -> 4.8 over these 200 iterations; 0.74-0.76 of the first loss for seeds 1234, 7, 99)
     assert log.last_loss < 0.85 * log.first_loss
     assert "cell" in log.rows[-1]
 
@@ -116,8 +120,10 @@ def test_pipeline_writes_loadable_files(dbf, tmp_path):
     from lmm.latents import load_compressor
 
     db, features = dbf
+    # no cell term: its neighbour table of every database frame (about 45 s on one thread) would be
+    # built three times here; test_projector_loss_drops trains with it
     r = T.Recipe(decompressor=tiny(8), stepper=tiny(6, 8), projector=tiny(6, 32), stepper_window=6, hidden=32,
-                 threads=1, log_every=2)
+                 threads=1, log_every=2, projector_neighbours=0)
     summary = T.train_pipeline(db, features, T.NETWORKS, r, tmp_path, frames=SLICE, quiet=True)
     assert set(summary["wall_s"]) >= {"decompressor", "stepper", "projector"}
     nets = LMMNetworks.load(tmp_path / "default.npz", db, features)
