@@ -66,6 +66,8 @@ class ViewportPanel(Panel):
 
     #: frames to wait for dearpygui to make a static texture before reading back instead
     SHARED_TEXTURE_TRIES = 3
+    #: an unchanged view is drawn again after this many frames all the same (see _scene_key)
+    REDRAW_EVERY = 60
 
     def __init__(self, ctx: PanelContext, samples: int = -1, render_scale: float = 1.0, readback: bool = False):
         super().__init__(ctx)
@@ -95,6 +97,11 @@ class ViewportPanel(Panel):
         self.render_ms = 0.0
         self.readback_ms = 0.0
         self._unread = False          # update() rendered a view that finish() has not read yet
+        self._drawn_key = None        # _scene_key of the last render
+        self._drawn_before = None     # drawn of the last render
+        self._unchanged = 0           # frames since then whose view was the same
+        self._preview_version = 0     # counts set_preview calls
+        self.renders = 0              # views rendered (the state dump's; tests)
         self.gl_error = None
         self._texture_counter = 0
         self._legend_items: list[str] = []
@@ -219,6 +226,7 @@ class ViewportPanel(Panel):
             self.previews[owner] = tuple(poses)
         else:
             self.previews.pop(owner, None)
+        self._preview_version += 1
 
     def preview_poses(self) -> list:
         return [p for owner in sorted(self.previews) for p in self.previews[owner]]
@@ -453,11 +461,33 @@ class ViewportPanel(Panel):
             centre = np.mean(roots, axis=0)
             self.camera.follow(centre, blend=0.12 if view.live else 1.0)
         self._labels(view, roots, None if prepared is None else prepared.get(_HEADS))
+        self.readback_ms = 0.0
+        key = self._scene_key(view)
+        if key == self._drawn_key and self.drawn == self._drawn_before and self._unchanged < self.REDRAW_EVERY:
+            # the same picture (paused, nothing moved): the texture still holds it
+            self._unchanged += 1
+            self.render_ms = 0.0
+            return
         t0 = time.perf_counter()
         self.renderer.render_to(self.scene, self.camera)
         self.render_ms = (time.perf_counter() - t0) * 1e3
-        self.readback_ms = 0.0
+        self._drawn_key, self._drawn_before, self._unchanged = key, self.drawn, 0
+        self.renders += 1
         self._unread = True
+
+    def _scene_key(self, view: View) -> tuple:
+        """What the 3D picture is made from, besides what was placed where (``drawn``, a new dict each
+        frame, compared apart: characters, reference, ragdoll, previews, labels): the displayed tick (its
+        snapshots, markers, ragdoll, trail), the camera, the toggles, the inspected character, the
+        previews and the image's size and texture. An equal key and ``drawn`` is an equal picture, so a
+        paused, untouched view is not drawn again (on software GL that is most of a frame); as a safety
+        net it is drawn again every :attr:`REDRAW_EVERY` frames."""
+        cam = self.camera
+        t = cam.target
+        return (id(view.tick), view.tick_number, view.inspected,
+                (float(t[0]), float(t[1]), float(t[2]), cam.distance, cam.yaw_deg, cam.pitch_deg, cam.fov_y_deg),
+                tuple(self.show.items()), self.side_by_side, self.reference_overlay, self._preview_version,
+                self.render_size, self.texture)
 
     def finish(self) -> None:
         """Put the 3D view rendered by :meth:`update` into the texture dearpygui shows: a copy on the
@@ -465,17 +495,20 @@ class ViewportPanel(Panel):
         studio calls it after the other panels' updates: those run while the GL driver (software GL
         rasterises on its own threads) draws, and before a read's megabytes of pixels go through the
         caches. Does nothing when nothing new was rendered."""
-        if not self._unread:
-            return
-        self._unread = False
-        t1 = time.perf_counter()
         shared = self._shared
+        found = False
         if shared is not None and shared.fbo is None:
+            # also on frames that drew nothing new: the last picture is still in the renderer's framebuffer
             try:
-                if not shared.find() and shared.tries >= self.SHARED_TEXTURE_TRIES:
+                found = shared.find()
+                if not found and shared.tries >= self.SHARED_TEXTURE_TRIES:
                     self._give_up_shared(f"dearpygui's texture not found in {shared.tries} frames")
             except Exception as e:      # a GL error while looking: read back instead
                 self._give_up_shared(f"dearpygui's texture not usable: {e}")
+        if not (self._unread or found):
+            return
+        self._unread = False
+        t1 = time.perf_counter()
         if self._shared is not None and self._shared.fbo is not None:
             self.gl.copy_framebuffer(self._shared.fbo, self.renderer.fbo)
         elif self.tex_array is not None:
@@ -623,6 +656,7 @@ class ViewportPanel(Panel):
         out["size"] = list(self.size)
         out["render_size"] = list(self.render_size)
         out["view_path"] = self.view_path()
+        out["renders"] = self.renders
         out["readback_why"] = self.readback_why
         out["side_by_side"] = self.side_by_side
         if self.camera is not None:

@@ -118,3 +118,26 @@ def test_studio_draws_the_view_into_dearpygui_texture_one_frame_sooner(run_studi
     # text changes
     assert next_tick < 0.02, (next_tick, same_tick)
     assert same_tick > 4 * next_tick + 0.01, (next_tick, same_tick)
+
+
+def test_a_paused_untouched_view_is_not_drawn_again(run_studio, tmp_path):
+    """Paused at frame 30, the 3D view is not rendered again (its texture keeps the picture) until the
+    inspected character changes (frame 60) or a tick is stepped (frame 70, shown at 71)."""
+    script = [{"frame": 30, "do": "pause"},
+              {"frame": 40, "do": "screenshot", "path": str(tmp_path / "p40.png")},
+              {"frame": 55, "do": "screenshot", "path": str(tmp_path / "p55.png")},
+              {"frame": 60, "do": "inspect", "controller": "lmm"},
+              {"frame": 70, "do": "step", "n": 1},
+              {"frame": 80, "do": "screenshot", "path": str(tmp_path / "p80.png")}]
+    r = run_studio("--frames", 90, "--input", "builtin:zigzag", "--no-physics", "--layout", "default", script=script)
+    assert r.rc == 0, r.stderr[-3000:]
+    if r.dump["controllers"] != ["mm", "lmm"]:
+        pytest.skip("needs the LMM character (shipped weights)")
+    rendered = [i for i, f in enumerate(r.dump["frames"]) if f["ms"]["render"] > 0]
+    assert [i for i in rendered if i >= 30] == [30, 60, 71]
+    assert r.dump["final"]["viewport"]["renders"] == len(rendered)
+    assert set(range(30)) <= set(rendered)
+    views = {n: _view_pixels(r, tmp_path / f"p{n}.png") for n in (40, 55, 80)}
+    assert views[40].std() > 10.0
+    assert np.array_equal(views[40], views[55])
+    assert np.mean(np.abs(views[55] - views[80]).max(axis=2) > 8) > 0.02
