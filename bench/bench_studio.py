@@ -4,13 +4,15 @@ Runs the real studio (``lmm-studio --frames N --input builtin:circle``) in a sub
 display (or on $DISPLAY with --display), with the default layout (all nine panels), both characters when
 LMM weights are available, and reads the per-frame timings from its state dump.
 
-    python bench/bench_studio.py [--frames 600] [--warmup 120] [--weights PATH] [--samples -1] [--readback-3d] [--json]
+    python bench/bench_studio.py [--frames 600] [--warmup 120] [--weights PATH] [--samples -1]
+                                 [--readback-3d] [--paused] [--json]
 
 Printed: fps (from the median frame time, and frames / wall time), and the median milliseconds per
 frame of each part: the controllers (MM, LMM), the studio's own Python (input, 3D scene update,
 panels: what this project's GUI code costs), the 3D render and its copy into dearpygui's texture (or
-its readback, with --readback-3d), and dearpygui's frame
-(UI layout and rasterisation, swap). Software OpenGL (llvmpipe) is the floor: users have GPUs.
+its readback, with --readback-3d), and dearpygui's frame (UI layout and rasterisation, swap).
+``--paused`` pauses at the end of the warm-up (a paused view is not drawn again). Software OpenGL
+(llvmpipe) is the floor: users have GPUs.
 """
 from __future__ import annotations
 
@@ -38,6 +40,8 @@ def main() -> int:
     ap.add_argument("--render-scale", type=float, default=1.0, help="3D view resolution scale (default 1)")
     ap.add_argument("--readback-3d", action="store_true",
                     help="the studio's --readback-3d: read the 3D view back and upload it (for comparison)")
+    ap.add_argument("--paused", action="store_true",
+                    help="pause at the end of the warm-up: the frame of a studio paused on one tick")
     ap.add_argument("--display", help="use this X display instead of starting Xvfb")
     ap.add_argument("--lp-threads", help="set LP_NUM_THREADS for llvmpipe (default: leave as is)")
     ap.add_argument("--json", action="store_true", help="print one JSON object")
@@ -67,6 +71,10 @@ def main() -> int:
             cmd += ["--weights", args.weights]
         if args.readback_3d:
             cmd += ["--readback-3d"]
+        if args.paused:
+            script = tmp / "pause.json"
+            script.write_text(json.dumps({"actions": [{"frame": max(args.warmup - 10, 0), "do": "pause"}]}))
+            cmd += ["--script", str(script)]
         t0 = time.perf_counter()
         proc = subprocess.run(cmd, env=env, cwd=tmp, capture_output=True, text=True)
         wall = time.perf_counter() - t0
@@ -85,7 +93,8 @@ def main() -> int:
     t = np.array([f["t"] for f in frames], float)
     cpu = np.array([f["cpu"] for f in frames], float)
     python_ms = ms["input"] + ms["viewport"] + ms["panels"]
-    controllers_ms = sum(ms[n] for n in d["controllers"])
+    # (a paused studio steps no controller)
+    controllers_ms = sum((ms[n] for n in d["controllers"] if n in ms), np.zeros(len(frames)))
     out = {
         "controllers": d["controllers"], "frames": len(frames), "window": "1600x900",
         "fps_median": 1000.0 / float(np.median(frame_ms)),
@@ -100,6 +109,8 @@ def main() -> int:
         "viewport_3d": d["final"]["viewport"].get("size"),
         "render_3d": d["final"]["viewport"].get("render_size"),
         "view_path": d["final"]["viewport"].get("view_path"),
+        "paused": bool(args.paused),
+        "renders_3d_measured": int(sum(1 for f in frames if f["ms"].get("render", 0) > 0)),
         "readback_why": d["final"]["viewport"].get("readback_why"),
         "load_average": os.getloadavg(),
         "cpu_count": os.cpu_count(),
@@ -110,7 +121,7 @@ def main() -> int:
         print(json.dumps(out, indent=2))
         return 0
     print(f"studio, default layout (all panels), 1600x900, {' + '.join(n.upper() for n in out['controllers'])}, "
-          f"{out['frames']} frames after {args.warmup} warm-up")
+          f"{out['frames']} frames after {args.warmup} warm-up" + (", paused" if args.paused else ""))
     print(f"  fps: {out['fps_median']:.1f} (median frame {out['frame_ms_median']:.1f} ms), "
           f"{out['fps_wall']:.1f} frames / wall second")
     print(f"  process CPU time per frame: {out['process_cpu_ms_per_frame']:.1f} ms (all threads, llvmpipe included)")
@@ -121,7 +132,8 @@ def main() -> int:
               "ui": "dearpygui frame (UI raster + swap)", "dump": "state dump (this benchmark's, not counted)"}
     for k, v in out["parts_ms_median"].items():
         print(f"    {labels.get(k, k):38s} {v:7.2f} ms")
-    print(f"  3D view {out['viewport_3d']} rendered at {out['render_3d']}, {out['view_path']}"
+    print(f"  3D view {out['viewport_3d']} rendered at {out['render_3d']} ({out['renders_3d_measured']} of the "
+          f"{out['frames']} frames drew it), {out['view_path']}"
           + (f" ({out['readback_why']})" if out["readback_why"] else "") + f", load average {out['load_average'][0]:.2f} on {out['cpu_count']} CPUs")
     if out["lmm_problem"]:
         print(f"  note: {out['lmm_problem']}")
