@@ -339,8 +339,10 @@ class ViewportPanel(Panel):
         self.readback_why = why
         if self._shared is not None:
             self._shared.release()
+            self._shared = None
         self._window_rect = None
         self.size = (0, 0)
+
     # -- input ----------------------------------------------------------------------------------
     def on_wheel(self, delta: float) -> None:
         if self.dpg.is_item_hovered("vp_drawlist"):
@@ -463,7 +465,7 @@ class ViewportPanel(Panel):
         self._labels(view, roots, None if prepared is None else prepared.get(_HEADS))
         self.readback_ms = 0.0
         key = self._scene_key(view)
-        if key == self._drawn_key and self.drawn == self._drawn_before and self._unchanged < self.REDRAW_EVERY:
+        if key == self._drawn_key and self._unchanged < self.REDRAW_EVERY and self._same_drawn():
             # the same picture (paused, nothing moved): the texture still holds it
             self._unchanged += 1
             self.render_ms = 0.0
@@ -474,6 +476,14 @@ class ViewportPanel(Panel):
         self._drawn_key, self._drawn_before, self._unchanged = key, self.drawn, 0
         self.renders += 1
         self._unread = True
+
+    def _same_drawn(self) -> bool:
+        """``drawn`` equals the last render's (plain numbers and lists; anything that cannot be compared
+        counts as changed)."""
+        try:
+            return bool(self.drawn == self._drawn_before)
+        except (TypeError, ValueError):
+            return False
 
     def _scene_key(self, view: View) -> tuple:
         """What the 3D picture is made from, besides what was placed where (``drawn``, a new dict each

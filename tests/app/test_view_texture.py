@@ -81,10 +81,11 @@ def test_shared_texture_finds_dearpygui_texture_by_size_and_marker(xvfb_display,
     assert out["alive_after_release"]                # the wrapper's release leaves dearpygui's texture
 
 
-def _view_pixels(run, shot):
+def _view_pixels(dump: dict, shot):
+    """The 3D view's pixels in a screenshot, from the window rectangle in the state dump."""
     from PIL import Image
 
-    win = run.dump["final"]["windows"]["viewport"]
+    win = dump["final"]["windows"]["viewport"]
     (x, y), (w, h) = win["pos"], win["size"]
     img = np.asarray(Image.open(shot).convert("RGB"), dtype=np.int16)
     # the image area below the toolbar and the overlay line, inside the window's border
@@ -106,8 +107,8 @@ def test_studio_draws_the_view_into_dearpygui_texture_one_frame_sooner(run_studi
         assert r.rc == 0, r.stderr[-3000:]
         assert r.dump["final"]["viewport"]["view_path"] == "readback"
         assert r.dump["final"]["viewport"]["readback_why"] == "--readback-3d"
-        views[frames] = _view_pixels(r, tmp_path / f"rb{frames}.png")
-    mine = _view_pixels(direct, tmp_path / "direct.png")
+        views[frames] = _view_pixels(r.dump, tmp_path / f"rb{frames}.png")
+    mine = _view_pixels(direct.dump, tmp_path / "direct.png")
     assert mine.std() > 10.0                          # a scene, not the background alone
 
     def changed(a, b):
@@ -137,7 +138,35 @@ def test_a_paused_untouched_view_is_not_drawn_again(run_studio, tmp_path):
     assert [i for i in rendered if i >= 30] == [30, 60, 71]
     assert r.dump["final"]["viewport"]["renders"] == len(rendered)
     assert set(range(30)) <= set(rendered)
-    views = {n: _view_pixels(r, tmp_path / f"p{n}.png") for n in (40, 55, 80)}
+    views = {n: _view_pixels(r.dump, tmp_path / f"p{n}.png") for n in (40, 55, 80)}
     assert views[40].std() > 10.0
     assert np.array_equal(views[40], views[55])
     assert np.mean(np.abs(views[55] - views[80]).max(axis=2) > 8) > 0.02
+
+
+def test_a_texture_that_is_never_found_falls_back_to_the_readback(xvfb_display, studio_cache, tmp_path):
+    """When dearpygui's texture is not found (here: a finder that never finds), the view is read back
+    after 3 frames, the dump says why, and the picture is there."""
+    import json
+
+    code = ("import sys, app.gl_texture as g\n"
+            "def never(self):\n"
+            "    self.tries += 1\n"
+            "    return False\n"
+            "g.SharedTexture.find = never\n"
+            "from app.cli import main\n"
+            "sys.exit(main(sys.argv[1:]))\n")
+    dump, shot = tmp_path / "dump.json", tmp_path / "shot.png"
+    env = dict(os.environ, DISPLAY=xvfb_display, LMM_STUDIO_CONFIG=str(tmp_path / "config"),
+               LMM_STUDIO_CACHE=str(studio_cache), PYTHONPATH=str(ROOT), LP_NUM_THREADS="0")
+    proc = subprocess.run([sys.executable, "-c", code, "--frames", "30", "--input", "builtin:zigzag", "--no-lmm",
+                           "--no-physics", "--layout", "default", "--no-gamepads", "--screenshot", str(shot),
+                           "--dump-state", str(dump)], cwd=tmp_path, env=env, capture_output=True, text=True,
+                          timeout=150)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    d = json.loads(dump.read_text())
+    vp = d["final"]["viewport"]
+    assert vp["view_path"] == "readback"
+    assert vp["readback_why"] == "dearpygui's texture not found in 3 frames"
+
+    assert _view_pixels(d, shot).std() > 10.0
