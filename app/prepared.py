@@ -8,6 +8,12 @@ the GUI thread, but only when nothing they depend on changed in between. These a
 problems) and each panel's own ``prepare_key`` (its settings). Any other frame (paused, scrubbed, a
 setting changed, the first frame) works them out on the GUI thread, with the same function.
 
+A frame that is not live (paused or scrubbed) keeps what it worked out, and the next such frame uses it
+again while the displayed tick (the same object), the history's newest tick, the view and the panel's
+``prepare_key`` are unchanged: a paused studio does not work the same numbers out every frame. Panels
+whose ``prepare`` reads the frame number (``prepare_uses_frame``, e.g. a colour range that keeps
+easing) work theirs out every frame.
+
 ``prepare`` must only read: the view, the history and the panel's settings. It makes no dearpygui or
 GL call and changes nothing that ``update`` reads. ``LMM_STUDIO_CHECK_PREPARED=1`` (the GUI tests)
 works every used result out again on the GUI thread and counts the ones that differ.
@@ -67,7 +73,9 @@ class Preparer:
         self.used: Counter = Counter()           # panel key -> frames it used a worker result
         self.inline: Counter = Counter()         # panel key -> frames it worked its own out
         self.mismatches: list = []               # (panel key, frame) whose worker result differed
+        self.kept: Counter = Counter()           # panel key -> frames (not live) that used a kept result
         self._frame: PreparedFrame | None = None
+        self._kept: dict = {}                    # panel key -> (tick, newest tick, view_key, prepare_key, result)
 
     def job(self, view, shown: set, next_frame: int):
         """The function the worker calls with the newest tick, or None when the next frame will not show
@@ -100,12 +108,29 @@ class Preparer:
                 hit = data
         if hit is None:
             self.inline[key] += 1
-            return None
+            if view.live or panel.prepare_uses_frame:
+                return None
+            return self._kept_result(key, panel, view)
         self.used[key] += 1
         if self.check and not same(hit, panel.prepare(view)):
             self.mismatches.append((key, int(view.frame)))
         return hit
 
+    def _kept_result(self, key: str, panel, view):
+        """A frame that is not live: the result kept from an earlier such frame of the same tick, view
+        and settings, else a new one (kept for the next)."""
+        ident = (view.history.newest_tick, view_key(view), panel.prepare_key(view))
+        kept = self._kept.get(key)
+        if kept is not None and kept[0] is view.tick and kept[1] == ident:
+            self.inline[key] -= 1
+            self.kept[key] += 1
+            if self.check and not same(kept[2], panel.prepare(view)):
+                self.mismatches.append((key, int(view.frame)))
+            return kept[2]
+        data = panel.prepare(view)
+        self._kept[key] = (view.tick, ident, data)
+        return data
+
     def state(self) -> dict:
-        return {"used": dict(self.used), "inline": dict(self.inline), "checked": self.check,
+        return {"used": dict(self.used), "inline": dict(self.inline), "kept": dict(self.kept), "checked": self.check,
                 "mismatches": [list(m) for m in self.mismatches]}

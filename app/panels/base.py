@@ -180,6 +180,9 @@ class Panel:
     # a panel whose update does numeric work (history windows, images, markers) can split it off:
     # ``prepare`` does it, ``update(view, prepared)`` shows a result (None: prepare it now). The studio
     # calls ``prepare`` on the tick worker for the next frame (see app.prepared).
+    #: ``prepare`` reads ``view.frame`` (a result is then never kept from one frame to the next)
+    prepare_uses_frame = False
+
     def prepare_key(self, view: View) -> tuple:
         """The panel's own settings that ``prepare`` reads (a result made with others is not used)."""
         return ()

@@ -128,6 +128,8 @@ class LatentPanel(Panel):
         L = float(self.n_latent)
         return (L + GAP, 2 * L + GAP) if key == "lmm" else (0.0, L)
 
+    prepare_uses_frame = True     # the colour ranges ease every sixth frame
+
     def prepare_key(self, view: View) -> tuple:
         return (self.seconds, self.dim, tuple(self._scale.items()))
 

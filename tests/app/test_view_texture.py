@@ -123,7 +123,8 @@ def test_studio_draws_the_view_into_dearpygui_texture_one_frame_sooner(run_studi
 
 def test_a_paused_untouched_view_is_not_drawn_again(run_studio, tmp_path):
     """Paused at frame 30, the 3D view is not rendered again (its texture keeps the picture) until the
-    inspected character changes (frame 60) or a tick is stepped (frame 70, shown at 71)."""
+    inspected character changes (frame 60) or a tick is stepped (frame 70, shown at 71), and the
+    panels' numbers are worked out once per tick and view, not every paused frame."""
     script = [{"frame": 30, "do": "pause"},
               {"frame": 40, "do": "screenshot", "path": str(tmp_path / "p40.png")},
               {"frame": 55, "do": "screenshot", "path": str(tmp_path / "p55.png")},
@@ -138,6 +139,13 @@ def test_a_paused_untouched_view_is_not_drawn_again(run_studio, tmp_path):
     assert [i for i in rendered if i >= 30] == [30, 60, 71]
     assert r.dump["final"]["viewport"]["renders"] == len(rendered)
     assert set(range(30)) <= set(rendered)
+    # the panels' numbers are kept from one paused frame to the next (checked against a new working-out
+    # on every such frame: run_studio asserts no mismatch), except the latent maps' easing colour range
+    prep = r.dump["prepared"]
+    assert prep["checked"] and prep["mismatches"] == []
+    for key in ("viewport", "features", "search", "timeline", "candidates"):
+        assert prep["kept"].get(key, 0) >= 50, prep      # 60 paused frames, less a new tick and inspect
+    assert "latent" not in prep["kept"], prep
     views = {n: _view_pixels(r.dump, tmp_path / f"p{n}.png") for n in (40, 55, 80)}
     assert views[40].std() > 10.0
     assert np.array_equal(views[40], views[55])
