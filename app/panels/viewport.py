@@ -18,7 +18,7 @@ import time
 
 import numpy as np
 
-from ..gl_texture import SharedTexture, marker_image, texture_names
+from ..gl_texture import MARKER_TEXELS, SharedTexture, marker_image, texture_names
 from .base import Panel, PanelContext, View
 from .common import COLORS, RAGDOLL_COLOR, SHORT
 from .viewport_scene import (LEGEND, CharacterDrawing, CharacterParts, MarkerBatch, Markers, PreviewDrawings,
@@ -290,10 +290,11 @@ class ViewportPanel(Panel):
         self.texture = f"vp_texture_{self._texture_counter}"
         self._shared = None
         if self.readback_why is None:
-            # a static texture dearpygui makes on the next frame and never writes again: the view is
-            # copied into it (see finish); until then it shows the background and a faint marker
+            # a static texture dearpygui makes during this frame and never writes again: finish fills
+            # it with this frame's picture first, the view is copied into it from the next frame on
             marker = marker_image(rw, rh, self.scene.background, self._texture_counter)
             dpg.add_static_texture(rw, rh, marker.ravel(), tag=self.texture, parent="texture_registry")
+            self._marker_row = marker[0, :MARKER_TEXELS].copy()
             self.tex_array = self._read_bytes = None
             try:
                 self._shared = SharedTexture(self.gl, self._names, rw, rh, marker)
@@ -332,6 +333,15 @@ class ViewportPanel(Panel):
             old_shared.release()
         if old is not None:
             dpg.delete_item(old)
+
+    def _fill_new_texture(self) -> None:
+        """The static texture added this frame is made by dearpygui later in the frame, from its value:
+        make that value this frame's picture (read back once, with the marker in its first texels), so
+        a new texture (a resize, a window being dragged) never shows an empty view."""
+        pixels = self.renderer.read(dtype=np.uint8, flip=False)
+        image = np.multiply(pixels, BYTE_TO_UNIT, dtype=np.float32)
+        image[0, :len(self._marker_row)] = self._marker_row
+        self.dpg.set_value(self.texture, image.ravel())
 
     def _give_up_shared(self, why: str) -> None:
         """Read the view back from now on (``why``: shown in the stats); the texture is remade as a raw
@@ -510,6 +520,8 @@ class ViewportPanel(Panel):
         if shared is not None and shared.fbo is None:
             # also on frames that drew nothing new: the last picture is still in the renderer's framebuffer
             try:
+                if shared.tries == 0 and self._unread:
+                    self._fill_new_texture()
                 found = shared.find()
                 if not found and shared.tries >= self.SHARED_TEXTURE_TRIES:
                     self._give_up_shared(f"dearpygui's texture not found in {shared.tries} frames")

@@ -178,3 +178,17 @@ def test_a_texture_that_is_never_found_falls_back_to_the_readback(xvfb_display, 
     assert vp["readback_why"] == "dearpygui's texture not found in 3 frames"
 
     assert _view_pixels(d, shot).std() > 10.0
+
+
+def test_a_resized_view_shows_its_picture_on_the_frame_of_the_resize(run_studio, tmp_path):
+    """A layout switch resizes the view: dearpygui makes the new texture during that frame from the
+    picture read back once, so no frame shows an empty view (before, the frame after the switch showed
+    the background)."""
+    script = [{"frame": 30, "do": "layout", "name": "compare"},
+              *({"frame": f, "do": "screenshot", "path": str(tmp_path / f"s{f}.png")} for f in (30, 31, 32))]
+    r = run_studio("--frames", 40, "--input", "builtin:zigzag", "--no-physics", script=script)
+    assert r.rc == 0, r.stderr[-3000:]
+    vp = r.dump["final"]["viewport"]
+    assert vp["view_path"] == "direct"
+    for f in (30, 31, 32):
+        assert _view_pixels(r.dump, tmp_path / f"s{f}.png").std() > 10.0, f
