@@ -99,7 +99,8 @@ class SharedTexture:
         self.names = names
         self.size = (int(width), int(height))
         n = min(MARKER_TEXELS, width)
-        self._expected = np.round(marker[0, :n, :3] * 255.0).astype(np.int16)
+        self.marker_row = marker[0, :n].copy()      # the marker texels (float32 RGBA), row 0
+        self._expected = np.round(self.marker_row[:, :3] * 255.0).astype(np.int16)
         probe = gl.texture((1, 1), 4)       # the newest name this context hands out now
         self._upto = int(probe.glo) + SCAN_MARGIN
         probe.release()

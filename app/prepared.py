@@ -75,7 +75,7 @@ class Preparer:
         self.mismatches: list = []               # (panel key, frame) whose worker result differed
         self.kept: Counter = Counter()           # panel key -> frames (not live) that used a kept result
         self._frame: PreparedFrame | None = None
-        self._kept: dict = {}                    # panel key -> (tick, newest tick, view_key, prepare_key, result)
+        self._kept: dict = {}                    # panel key -> (tick, (newest tick, view_key, prepare_key), result)
 
     def job(self, view, shown: set, next_frame: int):
         """The function the worker calls with the newest tick, or None when the next frame will not show
@@ -107,8 +107,8 @@ class Preparer:
             if pkey == panel.prepare_key(view):
                 hit = data
         if hit is None:
-            self.inline[key] += 1
             if view.live or panel.prepare_uses_frame:
+                self.inline[key] += 1
                 return None
             return self._kept_result(key, panel, view)
         self.used[key] += 1
@@ -122,11 +122,11 @@ class Preparer:
         ident = (view.history.newest_tick, view_key(view), panel.prepare_key(view))
         kept = self._kept.get(key)
         if kept is not None and kept[0] is view.tick and kept[1] == ident:
-            self.inline[key] -= 1
             self.kept[key] += 1
             if self.check and not same(kept[2], panel.prepare(view)):
                 self.mismatches.append((key, int(view.frame)))
             return kept[2]
+        self.inline[key] += 1
         data = panel.prepare(view)
         self._kept[key] = (view.tick, ident, data)
         return data

@@ -280,23 +280,16 @@ class MLP:
         layers = [(h, m, val, zero) for h, (m, _, val, zero, _) in zip(inputs, hidden)]
         h_last = inputs[-1]
         dot, maximum, add = np.dot, np.maximum, np.add
+        head = None if skip_input is None else out[:skip_input.shape[0]]
 
-        if skip_input is None:
-            def forward():
-                for h, m, val, zero in layers:
-                    dot(h, m, val)
-                    maximum(val, zero, out=val)
-                return dot(h_last, last, out)
-        else:
-            head = out[:skip_input.shape[0]]
-
-            def forward():
-                for h, m, val, zero in layers:
-                    dot(h, m, val)
-                    maximum(val, zero, out=val)
-                dot(h_last, last, out)
+        def forward():
+            for h, m, val, zero in layers:
+                dot(h, m, val)
+                maximum(val, zero, out=val)
+            dot(h_last, last, out)
+            if head is not None:
                 add(head, skip_input, out=head)
-                return out
+            return out
         forward.hidden = h_last
         return forward
 

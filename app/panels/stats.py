@@ -1,7 +1,6 @@
 """Stats: frames per second, the time each part of a frame takes (controllers with their search and
 network parts, the 3D render and its copy into dearpygui's texture, panel updates, dearpygui's own
-frame), and the memory
-motion matching and learned motion matching keep."""
+frame), and the memory motion matching and learned motion matching keep."""
 from __future__ import annotations
 
 import functools

@@ -18,7 +18,7 @@ import time
 
 import numpy as np
 
-from ..gl_texture import MARKER_TEXELS, SharedTexture, marker_image, texture_names
+from ..gl_texture import SharedTexture, marker_image, texture_names
 from .base import Panel, PanelContext, View
 from .common import COLORS, RAGDOLL_COLOR, SHORT
 from .viewport_scene import (LEGEND, CharacterDrawing, CharacterParts, MarkerBatch, Markers, PreviewDrawings,
@@ -294,7 +294,6 @@ class ViewportPanel(Panel):
             # it with this frame's picture first, the view is copied into it from the next frame on
             marker = marker_image(rw, rh, self.scene.background, self._texture_counter)
             dpg.add_static_texture(rw, rh, marker.ravel(), tag=self.texture, parent="texture_registry")
-            self._marker_row = marker[0, :MARKER_TEXELS].copy()
             self.tex_array = self._read_bytes = None
             try:
                 self._shared = SharedTexture(self.gl, self._names, rw, rh, marker)
@@ -334,13 +333,13 @@ class ViewportPanel(Panel):
         if old is not None:
             dpg.delete_item(old)
 
-    def _fill_new_texture(self) -> None:
+    def _fill_new_texture(self, marker_row: np.ndarray) -> None:
         """The static texture added this frame is made by dearpygui later in the frame, from its value:
         make that value this frame's picture (read back once, with the marker in its first texels), so
         a new texture (a resize, a window being dragged) never shows an empty view."""
         pixels = self.renderer.read(dtype=np.uint8, flip=False)
         image = np.multiply(pixels, BYTE_TO_UNIT, dtype=np.float32)
-        image[0, :len(self._marker_row)] = self._marker_row
+        image[0, :len(marker_row)] = marker_row
         self.dpg.set_value(self.texture, image.ravel())
 
     def _give_up_shared(self, why: str) -> None:
@@ -499,15 +498,15 @@ class ViewportPanel(Panel):
         """What the 3D picture is made from, besides what was placed where (``drawn``, a new dict each
         frame, compared apart: characters, reference, ragdoll, previews, labels): the displayed tick (its
         snapshots, markers, ragdoll, trail), the camera, the toggles, the inspected character, the
-        previews and the image's size and texture. An equal key and ``drawn`` is an equal picture, so a
-        paused, untouched view is not drawn again (on software GL that is most of a frame); as a safety
-        net it is drawn again every :attr:`REDRAW_EVERY` frames."""
+        previews and the texture (a new one with every size). An equal key and ``drawn`` is an equal
+        picture, so a paused, untouched view is not drawn again (on software GL that is most of a frame);
+        as a safety net it is drawn again every :attr:`REDRAW_EVERY` frames."""
         cam = self.camera
         t = cam.target
         return (id(view.tick), view.tick_number, view.inspected,
                 (float(t[0]), float(t[1]), float(t[2]), cam.distance, cam.yaw_deg, cam.pitch_deg, cam.fov_y_deg),
                 tuple(self.show.items()), self.side_by_side, self.reference_overlay, self._preview_version,
-                self.render_size, self.texture)
+                self.texture)    # a new texture tag with every new size
 
     def finish(self) -> None:
         """Put the 3D view rendered by :meth:`update` into the texture dearpygui shows: a copy on the
@@ -521,7 +520,7 @@ class ViewportPanel(Panel):
             # also on frames that drew nothing new: the last picture is still in the renderer's framebuffer
             try:
                 if shared.tries == 0 and self._unread:
-                    self._fill_new_texture()
+                    self._fill_new_texture(shared.marker_row)
                 found = shared.find()
                 if not found and shared.tries >= self.SHARED_TEXTURE_TRIES:
                     self._give_up_shared(f"dearpygui's texture not found in {shared.tries} frames")
