@@ -152,7 +152,7 @@ class Session:
         then carry ``matched_latent``). ``latent_table_status`` says why there is none (yet)."""
         import threading
 
-        from lmm.latents import database_latents, load_compressor
+        from lmm.latents import cached_database_latents
 
         mm = self.controllers.get("mm")
         if mm is None:
@@ -181,7 +181,7 @@ class Session:
             if lmm is not None and hasattr(lmm, "idle_states"):
                 lmm.idle_states()   # the LMM idle set's small table, so the first stop does not hitch (~80 ms)
             try:
-                table = database_latents(load_compressor(comp, self.db, self.features), self.db).astype(np.float32)
+                table = cached_database_latents(comp, self.db, self.features)
                 if job == self._latent_job:          # not superseded by a later call
                     mm.set_latent_table(table)
                     self.latent_table_status = ""

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -63,6 +64,52 @@ def test_derived_arrays_are_cached_bit_identical(tmp_path, monkeypatch):
     assert np.array_equal(computed, again) and np.array_equal(again, build_features(in_memory).raw)
     for a, b in zip(root_local_velocities(Database.load(info.path)), root_local_velocities(in_memory)):
         assert np.array_equal(a, b)
+
+
+def test_compressor_latents_are_cached_bit_identical(tmp_path, monkeypatch):
+    """The studio's table of every frame's compressor latent is worked out once per compressor file and
+    read afterwards; another compressor file is worked out again; a broken one is a WeightsError naming
+    the file, and nothing is stored for it."""
+    import shutil
+
+    import lmm.latents as latents
+    from lmm.data.weights import WeightsError, load as load_weights, save as save_weights
+    from lmm.features import build_features
+
+    _, info = load_or_build(None)                    # the shipped database, from the suite's cache
+    path = tmp_path / info.path.name
+    shutil.copyfile(info.path, path)                 # its derived arrays go beside this copy
+    db = Database.load(path)
+    features = build_features(db)
+    comp = DATA_DIR / "weights" / "compressor.npz"
+    derived = tmp_path / (path.name + ".derived")
+    computed = latents.cached_database_latents(comp, db, features)        # worked out, then stored
+    assert computed.dtype == np.float32 and computed.shape == (db.n_frames, 32)
+    assert len(list(derived.glob("compressor_latents-*.npy"))) == 1
+
+    calls = []
+
+    def spy(compressor, database, frames=None):
+        calls.append(compressor)
+        return np.full((database.n_frames, compressor.n_out), 7.0, np.float32)
+
+    monkeypatch.setattr(latents, "database_latents", spy)
+    again = latents.cached_database_latents(comp, Database.load(path), features)
+    assert not calls and np.array_equal(again, computed)                   # read, the same bits
+
+    wf = load_weights(comp)
+    arrays = dict(wf.arrays)
+    arrays["compressor.W0"] = arrays["compressor.W0"] * 2.0
+    other = save_weights(tmp_path / "other" / "compressor.npz", arrays, wf.metadata)
+    assert np.all(latents.cached_database_latents(other, db, features) == 7.0) and len(calls) == 1
+
+    broken = tmp_path / "broken" / "compressor.npz"
+    broken.parent.mkdir()
+    broken.write_bytes(comp.read_bytes()[:5000])     # cut short
+    for bad in (broken, tmp_path / "missing.npz"):
+        with pytest.raises(WeightsError, match=re.escape(str(bad))):
+            latents.cached_database_latents(bad, db, features)
+    assert len(calls) == 1 and len(list(derived.glob("compressor_latents-*.npy"))) == 1
 
 
 def test_small_caches_are_read_whole_and_large_ones_mapped(tmp_path, monkeypatch):

@@ -26,6 +26,7 @@ import numpy as np
 from lmm import DEFAULT_MANIFEST, quat
 from lmm.data import bvh
 from lmm.data.atomic import atomic_write
+from lmm.data.derived import file_digest as _file_digest
 from lmm.filters import catmull_rom, central_difference, median_filter, savgol_smooth
 from lmm.data.manifest import Manifest, ManifestError, load_manifest
 from lmm.data.npz_mmap import map_members, worth_mapping
@@ -395,14 +396,6 @@ def foot_contacts(toe_global_pos: np.ndarray, dt: float, threshold: float, windo
 # ---------------------------------------------------------------------------------------------
 # the build
 # ---------------------------------------------------------------------------------------------
-
-def _file_digest(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for chunk in iter(lambda: f.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
-
 
 def build_code_fingerprint() -> str:
     """Hash of the source of every module the build runs.

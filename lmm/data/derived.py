@@ -23,12 +23,22 @@ from lmm.data.atomic import atomic_write
 from lmm.data.npz_mmap import advise_random, drop_cached_pages, worth_mapping
 
 
-def _module_source_digest(fn) -> str:
+def module_source_digest(fn) -> str:
+    """SHA-256 of the source file of the module that defines ``fn`` ("unknown" when it has none)."""
     try:
         source = Path(inspect.getsourcefile(fn)).read_bytes()
     except (OSError, TypeError):
         return "unknown"
     return hashlib.sha256(source).hexdigest()
+
+
+def file_digest(path) -> str:
+    """SHA-256 of a file's bytes (hex), read in 1 MB pieces."""
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
 
 
 def derived_dir(db) -> Path | None:
@@ -43,7 +53,7 @@ def entry_path(db, name: str, params, compute: Callable) -> Path | None:
         return None
     h = hashlib.sha256()
     h.update(json.dumps([db.key, db.build_fingerprint, params], sort_keys=True, default=str).encode())
-    h.update(_module_source_digest(compute).encode())
+    h.update(module_source_digest(compute).encode())
     return folder / f"{name}-{h.hexdigest()[:20]}.npy"
 
 
