@@ -31,11 +31,12 @@ def batched(fn, x: np.ndarray, chunk: int = 4096) -> np.ndarray:
 
 
 def cached_database_latents(path, db, features=None) -> np.ndarray:
-    """:func:`database_latents` of every frame for the compressor in the weights file ``path`` (checked
-    as :func:`load_compressor` checks it), float32 (N, L), kept beside the database file like its other
-    derived arrays (:func:`lmm.data.derived.cached`): computed once per compressor file, database, feature
-    layout and code, then read, instead of on every studio start (5.6 s for the shipped 57,500 frames on
-    a 2-core machine, in a thread that slows the GUI meanwhile). The same bits as computing it."""
+    """:func:`database_latents` of every frame for the compressor in the weights file ``path``, float32
+    (N, L), kept beside the database file like its other derived arrays (:func:`lmm.data.derived.cached`):
+    computed once per compressor file, database, feature layout and code, then read, instead of on every
+    studio start (5.6 s for the shipped 57,500 frames on a 2-core machine, in a thread that slows the GUI
+    meanwhile). The same bits as computing it. The file is checked as :func:`load_compressor` checks it
+    when the table is computed; a stored table was made from the same file bytes, database and layout."""
     path = Path(path)
     try:
         digest = file_digest(path)
