@@ -337,10 +337,16 @@ class ViewportPanel(Panel):
         """The static texture added this frame is made by dearpygui later in the frame, from its value:
         make that value this frame's picture (read back once, with the marker in its first texels), so
         a new texture (a resize, a window being dragged) never shows an empty view."""
-        pixels = self.renderer.read(dtype=np.uint8, flip=False)
-        image = np.multiply(pixels, BYTE_TO_UNIT, dtype=np.float32)
+        image = self._read_view()
         image[0, :len(marker_row)] = marker_row
         self.dpg.set_value(self.texture, image.ravel())
+
+    def _read_view(self, byte_buf: np.ndarray | None = None, out: np.ndarray | None = None) -> np.ndarray:
+        """The rendered view as float32 RGBA in 0..1, OpenGL's row order (into ``out`` when given, via
+        ``byte_buf``). Bytes read and scaled here: several times cheaper than the driver's float read on
+        software GL, and the same numbers (x * float32(1/255) is what llvmpipe computes)."""
+        pixels = self.renderer.read(dtype=np.uint8, out=byte_buf, flip=False)
+        return np.multiply(pixels, BYTE_TO_UNIT, out=out, dtype=np.float32)
 
     def _give_up_shared(self, why: str) -> None:
         """Read the view back from now on (``why``: shown in the stats); the texture is remade as a raw
@@ -533,10 +539,7 @@ class ViewportPanel(Panel):
         if self._shared is not None and self._shared.fbo is not None:
             self.gl.copy_framebuffer(self._shared.fbo, self.renderer.fbo)
         elif self.tex_array is not None:
-            # read bytes and scale them here: several times cheaper than the driver's float read on
-            # software GL, and the same numbers (x * float32(1/255) is what llvmpipe computes)
-            self.renderer.read(dtype=np.uint8, out=self._read_bytes, flip=False)
-            np.multiply(self._read_bytes, BYTE_TO_UNIT, out=self.tex_array)
+            self._read_view(self._read_bytes, self.tex_array)
         if self._screen_fbo is None:     # dearpygui's own framebuffer: the same one every frame
             self._screen_fbo = self.gl.detect_framebuffer(0)
         self._screen_fbo.use()
