@@ -50,14 +50,18 @@ if [ ! -x "$VENV/bin/python" ]; then
   "$VENV/bin/python" -m pip install -q --upgrade pip >&2
 fi
 STAMP="$VENV/.lmm-installed-${EXTRA:-runtime}"
+# setuptools warns on every editable install that folders named like the packages in the working directory
+# may shadow them: here the working directory is this checkout, whose folders are the packages
+# (only for these two pip commands, not for what the scripts run afterwards)
+QUIET_EDITABLE="${PYTHONWARNINGS:+$PYTHONWARNINGS,}ignore:Editable installation:Warning"
 if [ ! -f "$STAMP" ] || [ "$ROOT/pyproject.toml" -nt "$STAMP" ]; then
   if [ -n "$EXTRA" ]; then
     install_torch
     echo "[setup] installing lmm-studio[$EXTRA] into $VENV" >&2
-    "$VENV/bin/python" -m pip install -q -e "$ROOT[$EXTRA]" >&2
+    PYTHONWARNINGS="$QUIET_EDITABLE" "$VENV/bin/python" -m pip install -q -e "$ROOT[$EXTRA]" >&2
   else
     echo "[setup] installing lmm-studio into $VENV" >&2
-    "$VENV/bin/python" -m pip install -q -e "$ROOT" >&2
+    PYTHONWARNINGS="$QUIET_EDITABLE" "$VENV/bin/python" -m pip install -q -e "$ROOT" >&2
   fi
   touch "$STAMP"
 fi
