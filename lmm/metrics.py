@@ -8,7 +8,9 @@
   horizontal speed exceeds 30 cm/s. It needs no contact flags, so recordings and mocap are measured alike;
 * trajectory following error: distance (m) between the character root and the simulation object;
 * transitions per second and searches per second;
-* search time per query (us) and controller step time (us).
+* search time per query (us) and controller step time (us);
+* tag shares: per tag of the database, the fraction of ticks whose playing frame's range has it (ticks
+  with a playing database frame only: the learned controller has one only with its debug comparison on).
 """
 from __future__ import annotations
 
@@ -267,6 +269,10 @@ class MotionMetrics:
         self._search_us = DurationStats()   # bounded: a long run must not grow (no per-tick lists)
         self._step_us = DurationStats()
         self.non_finite_ticks = 0
+        self._tag_names = list(getattr(db, "tag_names", []) or [])
+        self._frame_tags = db.frame_tags if self._tag_names else None   # (N, T) bool
+        self._tag_counts = np.zeros(len(self._tag_names), dtype=np.int64)
+        self._tagged_ticks = 0          # ticks with a playing database frame
 
     def update(self, snap) -> None:
         pose = snap.pose
@@ -296,6 +302,10 @@ class MotionMetrics:
                 self._search_us.add(snap.timings_us["search"])
         if "total" in snap.timings_us:
             self._step_us.add(snap.timings_us["total"])
+        frame = snap.matched_frame
+        if self._frame_tags is not None and 0 <= frame < len(self._frame_tags):
+            self._tag_counts += self._frame_tags[frame]
+            self._tagged_ticks += 1
 
     def result(self) -> dict:
         """Every metric as a plain JSON-able dict (NaN where nothing was measured)."""
@@ -323,6 +333,8 @@ class MotionMetrics:
             "step_us_median": self._step_us.median(),
             "step_us_mean": self._step_us.mean(),
             "non_finite_ticks": self.non_finite_ticks,
+            **{f"tag_share_{name}": float(n / self._tagged_ticks) if self._tagged_ticks else float("nan")
+               for name, n in zip(self._tag_names, self._tag_counts.tolist())},
         }
 
 

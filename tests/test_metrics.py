@@ -8,7 +8,8 @@ import pytest
 from lmm.metrics import MotionMetrics, format_metrics
 
 
-def _snap(t, toes, contacts, root=(0, 0, 0), sim=(0, 0, 0), transitioned=False, searched=False, search_us=None):
+def _snap(t, toes, contacts, root=(0, 0, 0), sim=(0, 0, 0), transitioned=False, searched=False, search_us=None,
+          frame=-1):
     gp = np.zeros((23, 3), np.float32)
     gp[0] = root
     gp[5], gp[9] = toes
@@ -17,7 +18,8 @@ def _snap(t, toes, contacts, root=(0, 0, 0), sim=(0, 0, 0), transitioned=False, 
         timings["search"] = search_us
     return SimpleNamespace(time_s=t, pose=SimpleNamespace(global_positions=gp, global_rotations=np.ones((23, 4))),
                            foot_contacts=np.array(contacts), simulation_position=np.array(sim, float),
-                           transitioned=transitioned, searched=searched, forced_search=False, timings_us=timings)
+                           transitioned=transitioned, searched=searched, forced_search=False, timings_us=timings,
+                           matched_frame=frame)
 
 
 def test_skating_counts_only_feet_in_contact(db):
@@ -157,3 +159,22 @@ def test_metrics_memory_does_not_grow_with_the_run(db):
     tracemalloc.stop()
     assert grown < 20_000, grown          # bytes, for 20,000 ticks: < 1 byte per tick
     assert m.result()["ticks"] == 25_000
+
+
+def test_tag_shares_count_the_playing_frames(db):
+    """Per tag, the share of ticks whose playing frame's range has it, over the ticks that play a database
+    frame (-1: none, e.g. the learned controller without its debug comparison)."""
+    walk = int(np.flatnonzero(db.tag_mask("walk"))[0])
+    other = int(np.flatnonzero(~db.tag_mask("walk"))[0])
+    m = MotionMetrics(db)
+    for i, frame in enumerate([walk, walk, -1, walk, other, db.n_frames]):
+        m.update(_snap(i / 60, [(0, 0, 0), (0, 0, 0)], [True, True], frame=frame))
+    r = m.result()
+    assert set(k for k in r if k.startswith("tag_share_")) == {f"tag_share_{t}" for t in db.tag_names}
+    assert r["tag_share_walk"] == pytest.approx(0.75)
+    for k, t in enumerate(db.tag_names):   # the same count, from the frames' own tags
+        expected = (3 * int(db.frame_tags[walk, k]) + int(db.frame_tags[other, k])) / 4
+        assert r[f"tag_share_{t}"] == pytest.approx(expected), t
+    none = MotionMetrics(db)
+    none.update(_snap(0.0, [(0, 0, 0), (0, 0, 0)], [True, True]))
+    assert all(math.isnan(none.result()[f"tag_share_{t}"]) for t in db.tag_names)
