@@ -33,6 +33,8 @@ class StudioOptions:
     readback_3d: bool = False    # read the 3D view back into a raw texture (see app.gl_texture)
     cache: str | None = None
     physics: bool = True
+    tuning: str | None = None            # a tuning preset file to start from
+    tuning_preset: dict | None = None    # its JSON object, already read (the command line checks it first)
 
 
 def load_session(opts: StudioOptions, report_error: Callable[[str, str], None]) -> tuple[Session, str | None]:
@@ -40,7 +42,6 @@ def load_session(opts: StudioOptions, report_error: Callable[[str, str], None]) 
     the default database; a problem with the LMM weights is reported and the studio runs MM only."""
     from lmm.data.database import load_or_build
     from lmm.features import build_features
-    from lmm.tuning import Tuning
 
     try:
         db, _ = load_or_build(opts.manifest, cache_dir=opts.cache)
@@ -51,7 +52,7 @@ def load_session(opts: StudioOptions, report_error: Callable[[str, str], None]) 
         opts.manifest = None
         db, _ = load_or_build(None, cache_dir=opts.cache)
     features = build_features(db)
-    tuning = Tuning()
+    tuning = _start_tuning(opts, features, report_error)
     controllers, problems = make_controllers(db, features, tuning, weights=opts.weights, with_lmm=opts.lmm)
     lmm_problem = None
     for p, serious in problems:
@@ -69,3 +70,18 @@ def load_session(opts: StudioOptions, report_error: Callable[[str, str], None]) 
     else:
         session.physics_status = "physics is off (--no-physics)"
     return session, lmm_problem
+
+
+def _start_tuning(opts: StudioOptions, features, report_error: Callable[[str, str], None]):
+    """The tuning the studio starts with: the defaults, or ``opts.tuning``'s preset. A preset that names a
+    feature channel this database lacks (known only now) is reported and the defaults are used."""
+    from lmm.tuning import Tuning, TuningError
+
+    if opts.tuning is None:
+        return Tuning()
+    try:
+        preset = opts.tuning_preset if opts.tuning_preset is not None else Tuning.read_preset(opts.tuning)
+        return Tuning.from_preset(preset, opts.tuning, channels=[ch.name for ch in features.layout])
+    except TuningError as e:
+        report_error("Tuning preset", f"{e} - started with the default tuning")
+        return Tuning()

@@ -17,6 +17,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--layout", metavar="NAME|PATH",
                         help="window layout: default, compare, tuning or an .ini file "
                              "(default: your last layout, else 'default')")
+    parser.add_argument("--tuning", metavar="PRESET.json",
+                        help="start from this tuning preset (partial presets keep the defaults; the Tuning "
+                             "panel's Reset buttons go back to the defaults)")
     parser.add_argument("--input", metavar="CSV|builtin:NAME",
                         help="replay an input log instead of live keyboard/gamepad input "
                              "(builtin: circle, zigzag, stop-and-go, strafe, turns, random:SEED)")
@@ -66,6 +69,17 @@ def main(args: argparse.Namespace) -> int:
         print("lmm-studio: error: no display (DISPLAY is not set). Run it on a desktop, or under Xvfb: "
               "xvfb-run -a lmm-studio ...", file=sys.stderr)
         return 2
+    preset = None
+    if args.tuning:
+        # checked before the window and the database: a bad file is one line and exit status 2
+        from lmm.tuning import Tuning, TuningError
+
+        try:
+            preset = Tuning.read_preset(args.tuning)
+            Tuning.from_preset(preset, args.tuning)
+        except TuningError as e:
+            print(f"lmm-studio: error: {e}", file=sys.stderr)
+            return 2
     from app.studio import Studio, StudioOptions
 
     opts = StudioOptions(manifest=args.manifest, weights=args.weights, layout=args.layout, input=args.input,
@@ -73,5 +87,6 @@ def main(args: argparse.Namespace) -> int:
                          lmm=not args.no_lmm, physics=not args.no_physics, script=args.script, dump_state=args.dump_state,
                          fixed_step=args.fixed_step, gamepads=not args.no_gamepads,
                          save_layout=not args.no_save_layout, write_layouts=args.write_layouts,
-                         samples=args.samples, render_scale=args.render_scale, readback_3d=args.readback_3d)
+                         samples=args.samples, render_scale=args.render_scale, readback_3d=args.readback_3d,
+                         tuning=args.tuning, tuning_preset=preset)
     return Studio(opts).run()
