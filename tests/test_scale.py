@@ -37,6 +37,29 @@ def test_shipped_full_manifest_names_its_root(monkeypatch):
         load_manifest(DATA_DIR / "manifests" / "lafan1_full.json")
 
 
+def test_full_manifest_tags_every_take_and_its_preset_names_only_those_tags(tmp_path, monkeypatch):
+    """Each take of the full LAFAN1 manifest carries its action family as a tag, and the shipped locomotion
+    preset is a valid tuning that biases only tags the manifest has (a misspelt one would bias nothing)."""
+    from lmm.tuning import Tuning
+
+    path = DATA_DIR / "manifests" / "lafan1_full.json"
+    files = [c["file"] for c in json.loads(path.read_text())["clips"]]
+    for name in files:                       # the manifest's files, empty: only the manifest is read
+        (tmp_path / name).touch()
+    monkeypatch.setenv("LAFAN1_DIR", str(tmp_path))
+    m = load_manifest(path)
+    for clip in m.clips:
+        family = re.match(r"[A-Za-z]+?(?=\d)", clip.source).group(0)
+        assert clip.tags, clip.source
+        assert {"pushAndFall": {"push", "fall"}, "fallAndGetUp": {"fall"}, "multipleActions": {"multiple-actions"}
+                }.get(family, {family}) == set(clip.tags), clip.source
+    preset = DATA_DIR / "manifests" / "lafan1_full_locomotion.tuning.json"
+    tuning = Tuning.load(preset)
+    biased = {t for t, b in Tuning.read_preset(preset)["tag_bias"].items() if b}
+    assert biased and biased <= set(m.tag_names()) and all(tuning.tag_bias[t] > 0 for t in biased)
+    assert not biased & {"walk", "multiple-actions"}          # the locomotion takes are not biased
+
+
 def test_mapped_database_equals_read_database(tmp_path, monkeypatch):
     monkeypatch.setenv("LMM_TEST_TAKES", str(DATA_DIR / "lafan1"))
     db, info = load_or_build(_manifest(tmp_path, "${LMM_TEST_TAKES}"), cache_dir=tmp_path / "cache")
