@@ -5,7 +5,7 @@ display (or on $DISPLAY with --display), with the default layout (all nine panel
 LMM weights are available, and reads the per-frame timings from its state dump.
 
     python bench/bench_studio.py [--frames 600] [--warmup 120] [--weights PATH] [--samples -1]
-                                 [--readback-3d] [--paused] [--json]
+                                 [--readback-3d] [--paused] [--ui-antialiasing auto|on|off] [--json]
 
 Printed: fps (from the median frame time, and frames / wall time), and the median milliseconds per
 frame of each part: the controllers (MM, LMM), the studio's own Python (input, 3D scene update,
@@ -42,6 +42,8 @@ def main() -> int:
     ap.add_argument("--render-scale", type=float, default=1.0, help="3D view resolution scale (default 1)")
     ap.add_argument("--readback-3d", action="store_true",
                     help="the studio's --readback-3d: read the 3D view back and upload it (for comparison)")
+    ap.add_argument("--ui-antialiasing", choices=("auto", "on", "off"), default="auto",
+                    help="the studio's --ui-antialiasing (default auto: off on software GL)")
     ap.add_argument("--paused", action="store_true",
                     help="pause at the end of the warm-up: the frame of a studio paused on one tick")
     ap.add_argument("--display", help="use this X display instead of starting Xvfb")
@@ -69,7 +71,7 @@ def main() -> int:
         cmd = [sys.executable, "-m", "app.cli", "--frames", str(args.frames), "--input", "builtin:circle",
                "--layout", "default", "--width", "1600", "--height", "900", "--no-gamepads",
                "--no-save-layout", "--samples", str(args.samples), "--render-scale", str(args.render_scale),
-               "--dump-state", str(dump)]
+               "--ui-antialiasing", args.ui_antialiasing, "--dump-state", str(dump)]
         if args.weights:
             cmd += ["--weights", args.weights]
         if args.readback_3d:
@@ -113,6 +115,7 @@ def main() -> int:
         "render_3d": d["final"]["viewport"].get("render_size"),
         "view_path": d["final"]["viewport"].get("view_path"),
         "paused": bool(args.paused),
+        "ui_antialiasing": d.get("ui_antialiasing", {}).get("anti_aliased_fill"),
         "renders_3d_measured": int(sum(1 for f in frames if f["ms"].get("render", 0) > 0)),
         "readback_why": d["final"]["viewport"].get("readback_why"),
         "load_average": os.getloadavg(),
@@ -139,6 +142,7 @@ def main() -> int:
     print(f"  3D view {out['viewport_3d']} rendered at {out['render_3d']} ({out['renders_3d_measured']} of the "
           f"{out['frames']} frames drew it), {out['view_path']}"
           + (f" ({out['readback_why']})" if out["readback_why"] else "") + f", load average {out['load_average'][0]:.2f} on {out['cpu_count']} CPUs")
+    print(f"  UI anti-aliasing (--ui-antialiasing {args.ui_antialiasing}): {'on' if out['ui_antialiasing'] else 'off'}")
     if out["lmm_problem"]:
         print(f"  note: {out['lmm_problem']}")
     print(f"  caches: {warm_note}")

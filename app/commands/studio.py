@@ -38,6 +38,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--readback-3d", action="store_true",
                         help="read the 3D view back and upload it to dearpygui every frame instead of drawing it "
                              "into dearpygui's texture (slower; for comparison, or a GL driver where that fails)")
+    parser.add_argument("--ui-antialiasing", choices=("auto", "on", "off"), default="auto",
+                        help="anti-aliased lines and shapes in the panels and plots (default auto: on, except on "
+                             "software OpenGL, where they cost about a tenth of the frame rate)")
     parser.add_argument("--no-gamepads", action="store_true", help="do not open gamepads (keyboard only)")
     parser.add_argument("--fixed-step", action="store_true",
                         help="one 60 Hz tick per rendered frame (default with --frames/--script: reproducible)")
@@ -88,5 +91,5 @@ def main(args: argparse.Namespace) -> int:
                          fixed_step=args.fixed_step, gamepads=not args.no_gamepads,
                          save_layout=not args.no_save_layout, write_layouts=args.write_layouts,
                          samples=args.samples, render_scale=args.render_scale, readback_3d=args.readback_3d,
-                         tuning=args.tuning, tuning_preset=preset)
+                         tuning=args.tuning, tuning_preset=preset, ui_antialiasing=args.ui_antialiasing)
     return Studio(opts).run()

@@ -161,6 +161,12 @@ class ViewportPanel(Panel):
         self.follow = not self.follow
         self.dpg.set_value("vp_follow", self.follow)
 
+    def software_gl(self) -> bool:
+        """The 3D view's GL renderer rasterises on the CPU (False when there is no GL context)."""
+        from viewer.renderer import is_software_renderer
+
+        return self.gl is not None and is_software_renderer(self.gl)
+
     def render_info(self) -> str:
         return (f"3D {self.render_size[0]}x{self.render_size[1]} {max(self.samples, 0)}x MSAA, "
                 f"{self.view_path()} ({self.gl_renderer[:24]})")
@@ -680,6 +686,7 @@ class ViewportPanel(Panel):
         out["size"] = list(self.size)
         out["render_size"] = list(self.render_size)
         out["view_path"] = self.view_path()
+        out["gl_renderer"] = self.gl_renderer
         out["renders"] = self.renders
         out["readback_why"] = self.readback_why
         out["side_by_side"] = self.side_by_side

@@ -163,6 +163,25 @@ def _expected(name):
     return {k: tuple(v) for k, v in layouts.BUILTIN[name].items() if v is not None}
 
 
+def test_ui_antialiasing_is_off_on_software_gl_unless_asked(circle_run, run_studio):
+    """--ui-antialiasing auto (the default) turns dearpygui's anti-aliased lines and fills off where the GL
+    renderer rasterises on the CPU (their fringes cost about a tenth of the frame rate there) and leaves
+    them on elsewhere; on and off are obeyed whatever the renderer."""
+    from viewer.renderer import SOFTWARE_RENDERERS
+
+    d = circle_run["dump"]
+    software = any(s in d["final"]["viewport"]["gl_renderer"].lower() for s in SOFTWARE_RENDERERS)
+    assert set(d["ui_antialiasing"]) == {"anti_aliased_lines", "anti_aliased_lines_use_tex", "anti_aliased_fill"}
+    assert all(v is (not software) for v in d["ui_antialiasing"].values()), (d["final"]["viewport"]["gl_renderer"],
+                                                                             d["ui_antialiasing"])
+    for choice, on in (("on", True), ("off", False)):
+        r = run_studio("--frames", 3, "--no-lmm", "--ui-antialiasing", choice)
+        assert r.rc == 0, r.stderr[-3000:]
+        assert all(v is on for v in r.dump["ui_antialiasing"].values()), (choice, r.dump["ui_antialiasing"])
+    r = run_studio("--frames", 3, "--ui-antialiasing", "sometimes")
+    assert r.rc == 2 and "--ui-antialiasing" in r.stderr and r.stderr.count("\n") == 1 and r.dump is None
+
+
 def test_layouts_switch_and_the_users_layout_is_restored(run_studio, tmp_path):
     config = tmp_path / "cfg"
     script = [{"frame": 3, "do": "capture", "label": "start"},
