@@ -27,12 +27,18 @@ def test_a_broken_preset_is_one_line_before_any_window(tmp_path, monkeypatch, ca
     assert "missing.json: no such tuning preset" in capsys.readouterr().err
 
 
-def test_the_session_starts_from_the_preset(tmp_path, db):
-    preset = tmp_path / "p.json"
-    preset.write_text(json.dumps({"stick_deadzone": 0.35, "tag_bias": {"walk": 2.5}}))
+def _session_from(preset, content: dict):
+    """A studio session (MM only, no ragdolls) started from ``preset`` holding ``content``, and the errors
+    it reported as (title, text) pairs."""
+    preset.write_text(json.dumps(content))
     errors = []
     session, _ = load_session(StudioOptions(tuning=str(preset), lmm=False, physics=False),
                               lambda title, text: errors.append((title, text)))
+    return session, errors
+
+
+def test_the_session_starts_from_the_preset(tmp_path, db):
+    session, errors = _session_from(tmp_path / "p.json", {"stick_deadzone": 0.35, "tag_bias": {"walk": 2.5}})
     assert not errors
     assert session.tuning.stick_deadzone == 0.35 and session.tuning.tag_bias["walk"] == 2.5
     assert all(c.tuning is session.tuning for c in session.controllers.values())
@@ -41,10 +47,7 @@ def test_the_session_starts_from_the_preset(tmp_path, db):
 
 def test_a_preset_naming_another_databases_channel_is_reported(tmp_path, db):
     preset = tmp_path / "p.json"
-    preset.write_text(json.dumps({"stick_deadzone": 0.35, "feature_weights": {"no_such_channel": 1.0}}))
-    errors = []
-    session, _ = load_session(StudioOptions(tuning=str(preset), lmm=False, physics=False),
-                              lambda title, text: errors.append((title, text)))
+    session, errors = _session_from(preset, {"stick_deadzone": 0.35, "feature_weights": {"no_such_channel": 1.0}})
     assert len(errors) == 1 and errors[0][0] == "Tuning preset"
     assert str(preset) in errors[0][1] and "no_such_channel" in errors[0][1] and "default tuning" in errors[0][1]
     assert session.tuning.stick_deadzone == 0.2                      # the defaults
