@@ -59,6 +59,7 @@ class Studio(SessionActions):
         self.layouts = LayoutManager(dpg, self.errors.show, (options.width, options.height))
         self.frame_times = FrameTimes()
         self.frame_index = 0
+        self.ui_antialiasing = True      # dearpygui's anti-aliased lines and fills (see _apply_ui_antialiasing)
         self.running = True
         self.exit_code = 0
         self.script = Script.load(options.script) if options.script else Script([])
@@ -253,7 +254,8 @@ class Studio(SessionActions):
                     inspected=self.inspected, frame=self.frame_index,
                     problems={"lmm": self.lmm_problem} if self.lmm_problem else {},
                     latent_status=s.latent_table_status, frame_times=self.frame_times,
-                    render_info=self.viewport.render_info(), camera_azimuth=float(live.camera_azimuth),
+                    render_info=self.viewport.render_info() + ("" if self.ui_antialiasing else "; UI lines aliased"),
+                    camera_azimuth=float(live.camera_azimuth),
                     recording=None if rec is None else RecordingStatus(
                         rec.frames * s.dt, tuple(Path(f).name for f in rec.paths.values())),
                     last_recording=self.last_recording, input_name=s.input_log.name if s.input_log else "",
@@ -440,9 +442,9 @@ class Studio(SessionActions):
 
     def _apply_ui_antialiasing(self) -> None:
         """dearpygui's anti-aliased lines and fills, as ``--ui-antialiasing`` says: with "auto", off where
-        the GL renderer rasterises on the CPU (their fringes made dearpygui's frame about 15 % slower
-        there, about 2 fps of 20 at 1600x900) and on otherwise (the cost on a GPU is nil). Known once
-        the 3D view has the GL context; without one, left on."""
+        the GL renderer rasterises on the CPU (their fringes made dearpygui's frame about 11 % longer
+        there, 1.5 fps of 21 at 1600x900) and on otherwise (on a GPU they cost next to nothing). Known
+        once the 3D view has the GL context; without one, left on. The Stats panel says when they are off."""
         choice = self.opts.ui_antialiasing
         on = choice == "on" or (choice == "auto" and not self.viewport.software_gl())
         self.dpg.configure_app(anti_aliased_lines=on, anti_aliased_lines_use_tex=on, anti_aliased_fill=on)
