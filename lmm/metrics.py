@@ -269,7 +269,7 @@ class MotionMetrics:
         self._search_us = DurationStats()   # bounded: a long run must not grow (no per-tick lists)
         self._step_us = DurationStats()
         self.non_finite_ticks = 0
-        self._tag_names = list(getattr(db, "tag_names", []) or [])
+        self._tag_names = list(db.tag_names)
         self._frame_tags = db.frame_tags if self._tag_names else None   # (N, T) bool
         self._tag_counts = np.zeros(len(self._tag_names), dtype=np.int64)
         self._tagged_ticks = 0          # ticks with a playing database frame
