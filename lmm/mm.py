@@ -56,8 +56,9 @@ class MotionMatchingController(CharacterController):
         self.tag_error: str | None = None  # a tag filter or bias that could not apply (the search used all frames)
         self._tag_groups: tuple | None = None  # (key, [(bias, mask)]) cached for the tuning it was made for
         super().__init__(db, features, tuning)
-        for tag in getattr(db, "tag_names", []):
+        for tag in db.tag_names:
             self.tuning.tag_bias.setdefault(tag, 0.0)
+            self.tuning.tag_excluded.setdefault(tag, False)
 
     def set_latent_table(self, table: np.ndarray | None) -> None:
         """Attach the compressor latent of every database frame, (N, L) (see
@@ -129,31 +130,46 @@ class MotionMatchingController(CharacterController):
         return bool(tun.idle_set_enabled) and self.stick_released_s >= tun.idle_delay_s - 1e-9
 
     def tag_groups(self) -> list[tuple[float, np.ndarray]]:
-        """The candidate mask split into (tag bias, mask) groups under the current tuning: restricted to the
-        idle set while it is active, one group per distinct sum of tag biases. A tag filter matching no frame
-        or a bias on a tag the database lacks sets ``tag_error`` (a TuningError's one line) and is ignored."""
+        """The candidate mask split into (tag bias, mask) groups under the current tuning: without the
+        frames of excluded tags, restricted to the idle set while it is active, one group per distinct sum
+        of tag biases. An exclusion or idle set leaving no frame, or a bias or exclusion on a tag the
+        database lacks, sets ``tag_error`` (a TuningError's one line) and is ignored."""
         tun = self.tuning
         mask = self.candidate_mask()
         idle = self.idle_set_active()
-        tags = list(getattr(self.db, "tag_names", []))
+        tags = list(self.db.tag_names)
         bias = tuple(float(tun.tag_bias.get(t, 0.0)) for t in tags)
-        # a bias the user set on a tag this database lacks is worth a note; a shipped default is not
-        unknown = tuple(sorted(t for t, b in tun.tag_bias.items()
-                               if b != DEFAULT_TAG_BIAS.get(t, 0.0) and t not in tags))
-        key = (id(mask), idle, bias, unknown)
+        excluded = tuple(t for t in tags if tun.tag_excluded.get(t, False))
+        # a bias or exclusion the user set on a tag this database lacks is worth a note; a shipped default is not
+        unknown = tuple(sorted([("tag_bias", t) for t, b in tun.tag_bias.items()
+                                if b != DEFAULT_TAG_BIAS.get(t, 0.0) and t not in tags]
+                               + [("tag_excluded", t) for t, on in tun.tag_excluded.items() if on and t not in tags]))
+        key = (id(mask), idle, bias, excluded, unknown)
         if self._tag_groups is not None and self._tag_groups[0] == key:
             return self._tag_groups[1]
         errors = []
+        excluding = False
+        if excluded:
+            kept = mask & ~self.db.tag_mask(excluded)
+            excluding = bool(kept.any())
+            if excluding:
+                mask = kept
+            else:
+                errors.append(TuningError(f"tuning field 'tag_excluded': excluding {', '.join(excluded)} leaves no "
+                                          f"candidate frame of database {self.db.name!r}; excluding nothing"))
         if idle:
             idle_mask = mask & self.db.tag_mask(IDLE_TAG)
             if idle_mask.any():
                 mask = idle_mask
             else:
                 errors.append(TuningError(f"tuning field 'idle_set_enabled': no candidate frame of database "
-                                          f"{self.db.name!r} is tagged {IDLE_TAG!r}; searching every frame"))
+                                          f"{self.db.name!r} is tagged {IDLE_TAG!r}"
+                                          f"{' outside the excluded tags' if excluding else ''}; searching every "
+                                          f"frame{' not excluded' if excluding else ''}"))
         if unknown:
-            errors.append(TuningError(f"tuning field 'tag_bias.{unknown[0]}': database {self.db.name!r} has no "
-                                      f"range tagged {unknown[0]!r} (tags: {', '.join(tags) or 'none'})"))
+            field_name, tag = unknown[0]
+            errors.append(TuningError(f"tuning field '{field_name}.{tag}': database {self.db.name!r} has no "
+                                      f"range tagged {tag!r} (tags: {', '.join(tags) or 'none'})"))
         self.tag_error = str(errors[0]) if errors else None
         if any(bias):
             frame_bias = (self.db.frame_tags.astype(np.float32) @ np.asarray(bias, dtype=np.float32))

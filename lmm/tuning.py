@@ -56,6 +56,10 @@ def _default_tag_bias() -> dict[str, float]:
     return {t: DEFAULT_TAG_BIAS.get(t, 0.0) for t in DEFAULT_TAGS}
 
 
+def _default_tag_excluded() -> dict[str, bool]:
+    return {t: False for t in DEFAULT_TAGS}
+
+
 @dataclass
 class Tuning:
     # -- simulation object: springs and stick --------------------------------------------------------
@@ -100,6 +104,12 @@ class Tuning:
         "group": "search", "min": -5.0, "max": 5.0, "unit": "cost",
         "doc": "Cost added to every candidate whose range has the tag (tag -> cost; negative prefers it, "
                "a frame with several tags gets the sum)."})
+    tag_excluded: dict = field(default_factory=_default_tag_excluded, metadata={
+        "group": "search", "min": False, "max": True, "unit": "", "item": "bool",
+        "doc": "Tags whose ranges are never candidates (tag -> true): a filter, where a bias is only a cost. "
+               "The frame being played leaves at the next search. Motion matching's search only (the "
+               "learned networks learned the unfiltered search). Excluding every candidate frame: an "
+               "error and no exclusion."})
     idle_set_enabled: bool = _f(
         True, "search", False, True, "", "When the stick has been released for idle_delay_s, search only frames "
         "tagged 'idle' (as UE's chooser and MxM's idle sets); no such frame: an error and every frame.")
@@ -175,28 +185,32 @@ class Tuning:
 
     def set(self, name: str, value, channel: str | None = None) -> None:
         """Set one field, checked and converted as a preset value is (an integer field takes ``12.0`` as
-        12); for ``feature_weights`` pass ``channel`` to set one channel's weight. Raises
-        :class:`TuningError` naming the field (``feature_weights.CHANNEL``) and its range, and leaves the
-        tuning unchanged, for an unknown field or channel, a wrong type or a value out of range."""
+        12); for a per-name field (``feature_weights``, ``tag_bias``, ``tag_excluded``) pass ``channel``
+        to set one entry. Raises :class:`TuningError` naming the field (``feature_weights.CHANNEL``) and
+        its range, and leaves the tuning unchanged, for an unknown field or entry, a wrong type or a value
+        out of range."""
         f = self.field_info(name)
         if channel is None:
             setattr(self, name, _check(f, value))
             return
-        if name != "feature_weights":
+        entries = getattr(self, name)
+        if not isinstance(entries, dict):
             raise TuningError(f"tuning field {name!r} has no channels (got channel {channel!r})")
-        if channel not in self.feature_weights:
-            raise TuningError(f"tuning field 'feature_weights': unknown channel {channel!r} "
-                              f"(channels: {', '.join(self.feature_weights)})")
-        self.feature_weights[channel] = _number(f"{name}.{channel}", value, f.metadata["min"], f.metadata["max"],
-                                                integer=False)
+        if channel not in entries:
+            what = "channel" if name == "feature_weights" else "tag"
+            raise TuningError(f"tuning field {name!r}: unknown {what} {str(channel)[:80]!r} "
+                              f"({what}s: {', '.join(entries) or 'none'})")
+        entries[channel] = _entry(f, channel, value)
 
     def reset_group(self, group: str) -> None:
         """Put every field of ``group`` back to its default."""
         fresh = Tuning()
         for f in self.fields_in(group):
             value = getattr(fresh, f.name)
-            if f.name in ("feature_weights", "tag_bias"):  # keep custom channels/tags, reset the known ones
-                merged = {k: 0.0 if f.name == "tag_bias" else w for k, w in getattr(self, f.name).items()}
+            if isinstance(value, dict):  # keep custom channels and tags, reset the known ones
+                # a custom channel keeps its weight; a custom tag goes back to no bias, not excluded
+                merged = {k: w if f.name == "feature_weights" else _NEUTRAL[f.metadata.get("item", "float")]
+                          for k, w in getattr(self, f.name).items()}
                 merged.update(value)
                 value = merged
             setattr(self, f.name, value)
@@ -214,7 +228,8 @@ class Tuning:
 
     @classmethod
     def from_dict(cls, d: dict, base: "Tuning | None" = None, channels=None) -> "Tuning":
-        """A tuning from a (possibly partial) dict; missing fields keep ``base``'s (or default) values.
+        """A tuning from a (possibly partial) dict; missing fields keep ``base``'s (or default) values, and
+        so do the entries a per-name field (feature weights, tag biases, excluded tags) does not name.
         ``channels``: when given, the feature channel names ``feature_weights`` may name (the database's
         feature schema); a name outside it is an error (a typo would otherwise be silently ignored)."""
         if not isinstance(d, dict):
@@ -224,7 +239,10 @@ class Tuning:
         for key, value in d.items():
             if key not in names:
                 raise TuningError(f"unknown tuning field {key[:80]!r}")
-            setattr(t, key, _check(names[key], value))
+            value = _check(names[key], value)
+            if isinstance(value, dict):    # a per-name field: the entries named change, the others stay
+                value = {**getattr(t, key), **value}
+            setattr(t, key, value)
         fw = d.get("feature_weights")
         if fw is not None and not fw:
             raise TuningError("tuning field 'feature_weights': empty; name channels to change (channel -> weight) "
@@ -275,7 +293,7 @@ class Tuning:
         return cls.from_preset(cls.read_preset(path), path, channels)
 
 
-#: Most entries in a name -> number field (feature_weights, tag_bias): a schema has ~10 channels, a
+#: Most entries in a per-name field (feature_weights, tag_bias, tag_excluded): a schema has ~10 channels, a
 #: database a handful of tags. Names are channel or tag names, short identifiers.
 MAX_DICT_ENTRIES = 1000
 MAX_NAME_CHARS = 100
@@ -291,7 +309,8 @@ def _check(f: dataclasses.Field, value):
         return value
     if kind == "dict":
         if not isinstance(value, dict):
-            raise TuningError(f"tuning field {f.name!r}: expected an object of name -> number, got {_short(value)}")
+            item = "true or false" if f.metadata.get("item") == "bool" else "number"
+            raise TuningError(f"tuning field {f.name!r}: expected an object of name -> {item}, got {_short(value)}")
         if len(value) > MAX_DICT_ENTRIES:
             raise TuningError(f"tuning field {f.name!r}: {len(value)} entries, more than {MAX_DICT_ENTRIES}")
         out = {}
@@ -299,9 +318,22 @@ def _check(f: dataclasses.Field, value):
             if not isinstance(k, str) or not 0 < len(k) <= MAX_NAME_CHARS:
                 raise TuningError(f"tuning field {f.name!r}: names must be strings of 1 to {MAX_NAME_CHARS} "
                                   f"characters, got {str(k)[:40]!r}")
-            out[k] = _number(f"{f.name}.{k}", w, lo, hi, integer=False)
+            out[k] = _entry(f, k, w)
         return out
     return _number(f.name, value, lo, hi, integer=(kind == "int"))
+
+
+#: The value of a per-name field's entry that changes nothing, by the field's item type.
+_NEUTRAL = {"float": 0.0, "bool": False}
+
+
+def _entry(f: dataclasses.Field, name: str, value):
+    """One entry of a per-name field (``field.name``), checked and converted, or TuningError naming it."""
+    if f.metadata.get("item") == "bool":
+        if not isinstance(value, bool):
+            raise TuningError(f"tuning field '{f.name}.{name}': expected true or false, got {_short(value)}")
+        return value
+    return _number(f"{f.name}.{name}", value, f.metadata["min"], f.metadata["max"], integer=False)
 
 
 def _short(value, limit: int = 40) -> str:

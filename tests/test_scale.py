@@ -39,7 +39,8 @@ def test_shipped_full_manifest_names_its_root(monkeypatch):
 
 def test_full_manifest_tags_every_take_and_its_preset_names_only_those_tags(tmp_path, monkeypatch):
     """Each take of the full LAFAN1 manifest carries its action family as a tag, and the shipped locomotion
-    preset is a valid tuning that biases only tags the manifest has (a misspelt one would bias nothing)."""
+    preset is a valid tuning that excludes and biases only tags the manifest has (a misspelt one would do
+    nothing)."""
     from lmm.tuning import Tuning
 
     path = DATA_DIR / "manifests" / "lafan1_full.json"
@@ -55,9 +56,12 @@ def test_full_manifest_tags_every_take_and_its_preset_names_only_those_tags(tmp_
                 }.get(family, {family}) == set(clip.tags), clip.source
     preset = DATA_DIR / "manifests" / "lafan1_full_locomotion.tuning.json"
     tuning = Tuning.load(preset)
-    biased = {t for t, b in Tuning.read_preset(preset)["tag_bias"].items() if b}
-    assert biased and biased <= set(m.tag_names()) and all(tuning.tag_bias[t] > 0 for t in biased)
-    assert not biased & {"walk", "multiple-actions"}          # the locomotion takes are not biased
+    named = Tuning.read_preset(preset)
+    excluded = {t for t, on in named["tag_excluded"].items() if on}
+    biased = {t for t, b in named.get("tag_bias", {}).items() if b}
+    assert excluded == {"dance", "fall", "ground", "push"} and all(tuning.tag_excluded[t] for t in excluded)
+    assert (excluded | biased) <= set(m.tag_names()) and all(tuning.tag_bias[t] > 0 for t in biased)
+    assert not (excluded | biased) & {"walk", "multiple-actions"}   # the locomotion takes stay in
 
 
 def test_mapped_database_equals_read_database(tmp_path, monkeypatch):

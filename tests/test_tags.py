@@ -271,3 +271,83 @@ def test_the_near_frames_of_a_top_1_search_make_the_next_hint(features, db):
         current = best + 10 if best + 10 < db.n_frames and mask[best + 10] else int(rng.integers(db.n_frames))
         hint = near + 10 if near.size else None
     assert carried >= 36, carried
+
+
+# -- excluded tags: a filter, where a bias is a cost ------------------------------------------------
+
+def test_an_excluded_tag_is_never_returned_and_the_playing_frame_leaves_it(mm, db):
+    """Every query looks for a run frame (its own features); with ``run`` excluded neither search returns a
+    frame tagged run, and a playing frame in a run range no longer competes as the continuing pose."""
+    run = db.tag_mask("run")
+    frames = np.flatnonzero(run & mm.candidate_mask())
+    rng = np.random.default_rng(5)
+    picks = rng.choice(frames, 20, replace=False)
+    assert all(mm.search(mm.features.normalized[f].copy()).best_frame == f
+               for f in picks[:3] if (mm.__setattr__("frame", _far_frame(db, f)) or True))
+    mm.tuning.tag_excluded["run"] = True
+    for f in picks:
+        query = mm.features.normalized[f].copy()
+        mm.frame = int(f)                              # playing the very frame the query describes
+        fast, slow = mm.search(query), mm.search(query, accelerated=False)
+        assert not run[fast.frames].any() and np.array_equal(fast.frames, slow.frames)
+        assert fast.best_frame != f
+    assert mm.tag_error is None
+    mm.tuning.tag_excluded["run"] = False              # unticked: run frames again
+    f = int(picks[0])
+    mm.frame = _far_frame(db, f)
+    assert mm.search(mm.features.normalized[f].copy()).best_frame == f
+
+
+def test_an_exclusion_that_leaves_nothing_or_names_a_missing_tag_is_one_line(mm, db):
+    for tag in db.tag_names:
+        mm.tuning.tag_excluded[tag] = True
+    res = mm.search(mm.features.normalized[500].copy())
+    assert res.best_frame >= 0                         # searched without the exclusion
+    assert "'tag_excluded'" in mm.tag_error and "leaves no candidate frame" in mm.tag_error
+    assert "\n" not in mm.tag_error
+    for tag in db.tag_names:
+        mm.tuning.tag_excluded[tag] = False
+    mm.tuning.tag_excluded["sprint"] = True
+    mm.search(mm.features.normalized[500].copy())
+    assert "'tag_excluded.sprint'" in mm.tag_error and "has no range tagged 'sprint'" in mm.tag_error
+
+
+def test_excluding_the_idle_tag_while_the_idle_set_is_active(mm, db):
+    """The idle set is taken from the frames left after the exclusion: excluding ``idle`` empties it, which
+    is reported, and the search keeps to the frames not excluded."""
+    mm.stick_released_s = 10.0
+    mm.tuning.tag_excluded["idle"] = True
+    idle = db.tag_mask("idle")
+    res = mm.search(mm.features.normalized[int(np.flatnonzero(idle)[5])].copy())
+    assert not idle[res.frames].any()
+    assert "'idle_set_enabled'" in mm.tag_error and "outside the excluded tags" in mm.tag_error
+    assert "searching every frame not excluded" in mm.tag_error
+
+
+def test_tag_exclusions_are_validated_and_reset():
+    with pytest.raises(TuningError, match=r"'tag_excluded.run': expected true or false, got 1"):
+        Tuning.from_dict({"tag_excluded": {"run": 1}})
+    with pytest.raises(TuningError, match=r"'tag_excluded': expected an object of name -> true or false"):
+        Tuning.from_dict({"tag_excluded": ["run"]})
+    t = Tuning.from_dict({"tag_excluded": {"run": True, "mine": True}})
+    assert t.tag_excluded["run"] and t.tag_excluded["mine"] and not t.tag_excluded["walk"]
+    t.reset_group("search")
+    assert not any(t.tag_excluded.values()) and "mine" in t.tag_excluded
+
+
+def test_set_changes_one_entry_of_any_per_name_field():
+    """What the studio's per-tag sliders and checkboxes call: one entry, checked; a bad one changes nothing."""
+    t = Tuning()
+    t.set("tag_bias", 2.5, channel="walk")
+    t.set("tag_excluded", True, channel="crouch")
+    t.set("feature_weights", 0.5, channel="hip_velocity")
+    assert (t.tag_bias["walk"], t.tag_excluded["crouch"], t.feature_weights["hip_velocity"]) == (2.5, True, 0.5)
+    before = t.to_dict()
+    for args, message in ((("tag_bias", 9.0, "walk"), r"'tag_bias.walk': 9.0 is outside \[-5.0, 5.0\]"),
+                          (("tag_excluded", 1.0, "walk"), r"'tag_excluded.walk': expected true or false"),
+                          (("tag_bias", 1.0, "sprint"), r"'tag_bias': unknown tag 'sprint' \(tags: idle, "),
+                          (("feature_weights", 1.0, "nope"), r"'feature_weights': unknown channel 'nope'"),
+                          (("stick_deadzone", 0.3, "walk"), r"'stick_deadzone' has no channels")):
+        with pytest.raises(TuningError, match=message):
+            t.set(args[0], args[1], channel=args[2])
+    assert t.to_dict() == before

@@ -22,6 +22,7 @@ GROUP_TITLES = {
 }
 
 OPEN_BY_DEFAULT = ("simulation", "speeds", "features", "search")
+CHECKS_PER_ROW = 3
 
 
 def field_kind(f: dataclasses.Field) -> str:
@@ -42,13 +43,22 @@ def pretty_label(name: str) -> str:
     return words.replace("_", " ")
 
 
-def widget_specs(tuning: Tuning | None = None) -> list[dict]:
+#: Per-name fields keyed by the database's tags, and the line shown above their widgets.
+TAG_FIELDS = {"tag_bias": "tag bias: cost added to the tag's frames (negative prefers them)",
+              "tag_excluded": "excluded tags: never candidates"}
+
+
+def widget_specs(tuning: Tuning | None = None, tags=None) -> list[dict]:
     """Every widget the panel builds (pure, for tests): group, field, optional channel, kind, range,
-    format and tooltip, in group order. Per-channel fields (feature weights, tag biases) get one slider
-    per key of ``tuning`` (default ``Tuning()``): the controllers add their database's channels and tags,
-    so a user's own feature schema and tags get sliders too."""
+    format and tooltip, in group order. Per-name fields (feature weights, tag biases, excluded tags) get
+    one slider (a checkbox for true/false entries) per key of ``tuning`` (default ``Tuning()``): the
+    controllers add their database's channels and tags, so a user's own feature schema and tags get
+    widgets too. With ``tags`` (the database's), the per-tag fields show those tags and any other entry
+    set away from its default (so a preset's bias on a tag the data lacks can still be seen and undone).
+    The first widget of a per-tag field carries its ``heading``."""
     specs = []
     defaults = tuning if tuning is not None else Tuning()
+    fresh = Tuning()
     for group in Tuning.groups():
         for f in Tuning.fields_in(group):
             kind = field_kind(f)
@@ -56,10 +66,19 @@ def widget_specs(tuning: Tuning | None = None) -> list[dict]:
             unit = md.get("unit", "")
             fmt_unit = f" {unit}" if unit and "|" not in unit and unit != "cost" else ""
             if kind == "dict":
-                for channel in getattr(defaults, f.name):
-                    specs.append({"group": group, "field": f.name, "channel": channel, "kind": "float",
-                                  "min": md["min"], "max": md["max"], "label": short_channel_name(channel),
-                                  "format": "%.2f", "doc": md.get("doc", "")})
+                flags = md.get("item") == "bool"
+                entries = getattr(defaults, f.name)
+                names = list(entries)
+                if tags is not None and f.name in TAG_FIELDS:
+                    neutral = getattr(fresh, f.name)
+                    off = [t for t in names if t not in tags and entries[t] != neutral.get(t, False if flags else 0.0)]
+                    names = [t for t in tags if t in entries] + off     # the database's order, then the others
+                for i, channel in enumerate(names):
+                    label = f"exclude {channel}" if flags else short_channel_name(channel)
+                    specs.append({"group": group, "field": f.name, "channel": channel,
+                                  "kind": "bool" if flags else "float", "min": md["min"], "max": md["max"],
+                                  "label": label, "format": "%.2f", "doc": md.get("doc", ""),
+                                  "heading": TAG_FIELDS.get(f.name) if i == 0 else None})
                 continue
             fmt = "%d" + fmt_unit.replace("%", "%%") if kind == "int" else "%.3f" + fmt_unit.replace("%", "%%")
             specs.append({"group": group, "field": f.name, "channel": None, "kind": kind, "min": md["min"],
@@ -78,7 +97,9 @@ class TuningPanel(Panel):
     def __init__(self, ctx):
         super().__init__(ctx)
         self.tuning: Tuning = ctx.tuning
-        self.specs = widget_specs(self.ctx.tuning)
+        engine = getattr(ctx, "engine", None)
+        db = getattr(engine, "db", None)
+        self.specs = widget_specs(self.ctx.tuning, None if db is None else list(db.tag_names))
         self.changes = 0
 
     def build(self, window_kwargs: dict) -> None:
@@ -91,7 +112,8 @@ class TuningPanel(Panel):
                 dpg.add_button(label="Reset all", callback=self.reset_all)
             dpg.add_text("acts on the next frame of both characters", color=(150, 150, 160))
             current_group = None
-            header = None
+            header = row = None
+            in_row = 0
             for spec in self.specs:
                 if spec["group"] != current_group:
                     current_group = spec["group"]
@@ -101,6 +123,16 @@ class TuningPanel(Panel):
                     dpg.add_button(label=f"Reset {current_group}", parent=header, small=True,
                                    callback=self._on_reset_group, user_data=current_group,
                                    tag=f"tun_reset_{current_group}")
+                if spec.get("heading"):
+                    dpg.add_text(spec["heading"], parent=header, color=(150, 150, 160))
+                if spec["kind"] == "bool" and spec["channel"] is not None:
+                    # a per-tag checkbox: CHECKS_PER_ROW to a row (a database may have a dozen tags)
+                    if row is None or in_row >= CHECKS_PER_ROW:
+                        row, in_row = dpg.add_group(horizontal=True, parent=header), 0
+                    self._add_widget(spec, row)
+                    in_row += 1
+                    continue
+                row = None
                 self._add_widget(spec, header)
 
     def _add_widget(self, spec: dict, parent) -> None:
@@ -124,7 +156,7 @@ class TuningPanel(Panel):
     def _value(self, spec: dict):
         v = getattr(self.tuning, spec["field"])
         if spec["channel"] is not None:
-            return v.get(spec["channel"], 0.0)
+            return v.get(spec["channel"], False if spec["kind"] == "bool" else 0.0)
         return v
 
     def _on_change(self, sender, value, user_data):

@@ -750,3 +750,22 @@ def test_total_error_is_the_sum_of_channel_errors(dbf):
     assert total_error(short, a, b) == float(np.sum(channel_errors(short, a, b)))
     assert np.isclose(total_error(short, a, b), float(np.sum((a[:6] - b[:6]) ** 2)))
     assert not np.isclose(total_error(short, a, b), float(np.sum((a - b) ** 2)))
+
+
+def test_tag_widgets_follow_the_database_tags():
+    """Given the database's tags, the per-tag sliders and checkboxes show those (in its order) and any other
+    tag set away from its default; the first of each field carries a heading line."""
+    t = Tuning()
+    for tag in ("dance", "fall"):
+        t.tag_bias.setdefault(tag, 0.0)
+        t.tag_excluded.setdefault(tag, False)
+    t.tag_excluded["fall"] = True
+    t.tag_bias["run"] = 2.0                   # a shipped tag this database lacks, biased: still shown
+    specs = widget_specs(t, tags=["dance", "fall", "walk"])
+    bias = [s["channel"] for s in specs if s["field"] == "tag_bias"]
+    excluded = [s for s in specs if s["field"] == "tag_excluded"]
+    assert bias == ["dance", "fall", "walk", "run"]
+    assert [s["channel"] for s in excluded] == ["dance", "fall", "walk"]
+    assert all(s["kind"] == "bool" and s["label"] == f"exclude {s['channel']}" for s in excluded)
+    assert excluded[0]["heading"] and not excluded[1]["heading"]
+    assert [s["channel"] for s in widget_specs(t) if s["field"] == "tag_excluded"] == list(t.tag_excluded)

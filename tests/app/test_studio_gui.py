@@ -32,12 +32,15 @@ def first_frame_with_tick(dump, tick):
 @pytest.fixture(scope="module")
 def circle_run(xvfb_display, studio_cache, lmm_weights, tmp_path_factory):
     """150 frames of builtin:circle with both characters (when weights exist); at frame 60 every run
-    speed goes to 1.0 m/s and a feature weight to 0 through the sliders; frames 20-120 are recorded."""
+    speed goes to 1.0 m/s, a feature weight to 0 and a tag bias to 0.5 through the sliders, and a tag's
+    exclusion checkbox is ticked; frames 20-120 are recorded."""
     tmp = tmp_path_factory.mktemp("circle")
     script = [
         {"frame": 20, "do": "record_start", "path": str(tmp / "take.bvh"), "which": ["mm", "lmm"]},
         *({"frame": 60, "do": "set_tuning", "field": f, "value": 1.0} for f in RUN_SPEEDS),
         {"frame": 60, "do": "set_tuning", "field": "feature_weights", "channel": "hip_velocity", "value": 0.0},
+        {"frame": 60, "do": "set_tuning", "field": "tag_bias", "channel": "walk", "value": 0.5},
+        {"frame": 60, "do": "set_tuning", "field": "tag_excluded", "channel": "crouch", "value": True},
         {"frame": 90, "do": "inspect", "controller": "lmm"},
         {"frame": 120, "do": "record_stop"},
         {"frame": 149, "do": "capture", "label": "end"},
@@ -96,6 +99,11 @@ def test_slider_change_reaches_the_runtime_on_the_next_frame(circle_run):
     assert before["tuning_seen"]["run_forward_speed_m_s"] == 3.5
     assert before["tuning_seen"]["feature_weights"]["hip_velocity"] == 1.0
     assert after["tuning_seen"]["feature_weights"]["hip_velocity"] == 0.0
+    # the per-tag widgets: a bias slider and an exclusion checkbox, with no error dialog
+    assert (before["tuning_seen"]["tag_bias"]["walk"], after["tuning_seen"]["tag_bias"]["walk"]) == (0.0, 0.5)
+    assert (before["tuning_seen"]["tag_excluded"]["crouch"], after["tuning_seen"]["tag_excluded"]["crouch"]) == \
+        (False, True)
+    assert not [e for e in d["errors"] if e["title"] == "Tuning"], d["errors"]
     # the effect, not just the value: the desired velocity is capped by the new speeds at once
     for name, speed in after["desired_speed"].items():
         assert speed <= 1.0 + 1e-6, name

@@ -131,6 +131,9 @@ FILES: dict[str, Spec] = {
     "preset/feature_weight_1e308.json": Spec("a feature weight of 1e308", "left_foot_position"),
     # nesting is refused by a scan before parsing, so the line names the depth, not the field
     "preset/nested_200.json": Spec("tag_bias nested 200 deep", "nested"),
+    "preset/tag_excluded_string.json": Spec("a tag exclusion given as \"yes\"", "tag_excluded.fall"),
+    "preset/tag_excluded_list.json": Spec("tag_excluded as a list of tags", "tag_excluded"),
+    "preset/tag_bias_string.json": Spec("a tag bias given as a string", "tag_bias.fall"),
     "preset/empty.json": Spec("an empty file"),
     "preset/big_64mib.json": Spec("64 MiB of whitespace around {} (size limit before reading)",
                                   solo=True, generated=True),

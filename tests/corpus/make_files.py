@@ -173,6 +173,9 @@ PRESET_CASES = {
     "unknown_field.json": '{"no_such_field": 1}\n',
     "feature_weight_1e308.json": '{"feature_weights": {"left_foot_position": 1e308}}\n',
     "nested_200.json": '{"tag_bias": ' + "[" * 200 + "]" * 200 + "}\n",
+    "tag_excluded_string.json": '{"tag_excluded": {"fall": "yes"}}\n',
+    "tag_excluded_list.json": '{"tag_excluded": ["fall", "dance"]}\n',
+    "tag_bias_string.json": '{"tag_bias": {"fall": "5"}}\n',
     "empty.json": "",
 }
 
