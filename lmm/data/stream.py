@@ -120,6 +120,11 @@ class StreamFile:
             if self.count_offset is not None:
                 field = self.format_count(n_records)
                 header = header[:self.count_offset] + field + header[self.count_offset + len(field):]
+            if self.page_lines:
+                # laid out as every later chunk is: where a line lands depends on the lines before it
+                # only, not on how they were split into chunks (the flushes follow the wall clock), so
+                # the same records give the same bytes
+                data = lines_within_pages(data, len(header))
             _write_all(fd, header + data)
             os.fsync(fd)
             if self.overwrite:
