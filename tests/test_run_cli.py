@@ -165,3 +165,21 @@ def test_full_disk_at_the_metrics_write_is_one_line(tmp_path, monkeypatch, capsy
                             "--metrics-json", str(metrics)]) == 1
     assert capsys.readouterr().err == f"lmm-studio run: error: {metrics}: No space left on device\n"
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_tag_exclusion_that_cannot_apply_is_noted_once(tmp_path):
+    """A preset excluding a tag the database lacks: the run goes on (exit 0) and says so once on stderr
+    and in the metrics JSON; a valid exclusion adds no note."""
+    bad, good = tmp_path / "sprint.json", tmp_path / "crouch.json"
+    bad.write_text(json.dumps({"tag_excluded": {"sprint": True}}))
+    good.write_text(json.dumps({"tag_excluded": {"crouch": True}}))
+    for preset, expect in ((bad, 1), (good, 0)):
+        out = tmp_path / f"{preset.stem}.json"
+        r = cli("run", "--input", "builtin:circle", "--seconds", "2", "--tuning", str(preset), "--quiet",
+                "--metrics-json", str(out))
+        assert r.returncode == 0, r.stderr
+        notes = [ln for ln in r.stderr.splitlines() if ln.startswith("note: tick ")]
+        assert len(notes) == expect, r.stderr
+        assert json.loads(out.read_text())["search_notes"] == [n.split(": ", 2)[2] for n in notes]
+        if expect:
+            assert "'tag_excluded.sprint'" in notes[0] and "has no range tagged 'sprint'" in notes[0]

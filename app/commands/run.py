@@ -12,6 +12,7 @@ command line are refused by argparse (exit 2). Every target is checked before th
 """
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 from app.cli import number_in
@@ -102,9 +103,16 @@ def main(args) -> int:
         except BaseException:
             _close(writer)
             raise
+    notes = []    # each distinct search note (a tag filter or bias that cannot apply), as it first appears
+
+    def note_once(pose, snap):
+        if snap.search_note and snap.search_note not in notes:
+            notes.append(snap.search_note)
+            print(f"note: tick {snap.tick}: {snap.search_note}", file=sys.stderr)
+
     try:
         metrics = run_headless(controller, source, seconds, dt=1.0 / args.fps, recorder=recorder,
-                               input_writer=writer, realtime=args.realtime)
+                               input_writer=writer, realtime=args.realtime, on_step=note_once)
     finally:
         # both streams are closed even when one fails (a full disk); the first error is the one reported
         close_errors = [e for e in (_close(recorder), _close(writer)) if e is not None]
@@ -115,7 +123,7 @@ def main(args) -> int:
     from lmm.metrics import source_ground_skating
     metrics["ground_skating_fraction_source"] = source_ground_skating(db)["fraction"]
     report = {"controller": args.controller, "input": args.input, "seconds": seconds, "fps": args.fps,
-              "frames": metrics["ticks"], "metrics": metrics}
+              "frames": metrics["ticks"], "metrics": metrics, "search_notes": notes}
     if args.record:
         report["recording"] = {"bvh": str(args.record), "frames": recorder.frames_written,
                                "input_csv": str(writer.path)}
