@@ -20,6 +20,10 @@ PALETTE = ((0.40, 0.80, 0.40), (0.90, 0.33, 0.40), (0.70, 0.55, 0.95), (0.95, 0.
            (0.95, 0.55, 0.80), (0.65, 0.65, 0.65), (0.60, 0.45, 0.30), (0.30, 0.69, 0.95), (0.96, 0.56, 0.16))
 
 
+#: the map colour of frames the search may not pick (their tags are excluded): dim, not a class colour
+EXCLUDED_COLOR = (0.32, 0.32, 0.36)
+
+
 def palette(i: int) -> tuple[int, int, int]:
     c = PALETTE[i % len(PALETTE)]
     return int(c[0] * 255), int(c[1] * 255), int(c[2] * 255)
@@ -58,20 +62,27 @@ def map_bounds(cov: Coverage, margin: float = 0.03) -> tuple[np.ndarray, np.ndar
     return lo - pad, hi + pad
 
 
-def map_image(cov: Coverage, cat: np.ndarray, width: int, height: int) -> np.ndarray:
+def map_image(cov: Coverage, cat: np.ndarray, width: int, height: int, excluded=None) -> np.ndarray:
     """(height, width, 4) float32 RGBA image of every frame on the map (within :func:`map_bounds`),
     highest PC2 first: each texel in the colour of the class most of its frames belong to, brighter
-    where more frames are, transparent (and black) where none is. The studio draws it as one textured
-    quad, far cheaper than tens of thousands of markers; the PNG pastes it."""
+    where more frames are, transparent (and black) where none is. ``excluded`` ((N,) bool): frames the
+    search may not pick (excluded tags), a class of their own drawn in :data:`EXCLUDED_COLOR`. The
+    studio draws it as one textured quad, far cheaper than tens of thousands of markers; the PNG pastes
+    it."""
     lo, hi = map_bounds(cov)
     size = np.array([width, height])
     ij = np.clip(np.floor((cov.map_xy - lo) / (hi - lo) * size).astype(np.int64), 0, size - 1)
     row = height - 1 - ij[:, 1]
     n_cat = int(cat.max()) + 1 if len(cat) else 1
+    colors = [PALETTE[i % len(PALETTE)] for i in range(n_cat)]
+    if excluded is not None and np.any(excluded):
+        cat = np.where(excluded, n_cat, cat)
+        n_cat += 1
+        colors.append(EXCLUDED_COLOR)
     counts = np.bincount((row * width + ij[:, 0]) * n_cat + cat, minlength=width * height * n_cat)
     counts = counts.reshape(width * height, n_cat)
     total = counts.sum(axis=1)
-    colors = np.array([PALETTE[i % len(PALETTE)] for i in range(n_cat)], np.float32)
+    colors = np.array(colors, np.float32)
     rgb = colors[np.argmax(counts, axis=1)]
     shade = np.where(total > 0, 0.7 + 0.3 * np.log1p(total) / np.log1p(max(int(total.max()), 1)), 0.0)
     img = np.concatenate([rgb * shade[:, None], (total > 0).astype(np.float32)[:, None]], axis=1)

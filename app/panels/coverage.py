@@ -7,7 +7,8 @@
 * the root speed x turning-rate heat map of the database (seconds per cell; dark red: none) with each
   character's asked-for speed and turning rate marked;
 * the histogram of one feature channel's dimensions with each character's query values on it;
-* the distance from each query to the nearest database frame, in search cost units.
+* the distance from each query to the nearest database frame, in search cost units (for motion
+  matching, the nearest frame it may pick: frames of excluded tags are drawn dim and left out).
 
 Everything follows the displayed tick (live or picked on the timeline). The coverage itself is computed
 once, the first time the window is shown.
@@ -86,6 +87,8 @@ class CoveragePanel(Panel):
         self._distance: dict[str, tuple[np.ndarray, DataDistance]] = {}
         self._shown_for = None
         self._mode_shown = None
+        self._excluded_shown = None   # the excluded tags the map was drawn for
+        self._searchable = None       # (N,) bool: the frames those leave to motion matching (None: every one)
         self.error = ""
 
     # -- build ---------------------------------------------------------------------------------
@@ -201,7 +204,15 @@ class CoveragePanel(Panel):
         have = self._distance.get(name)
         if have is None or have[0] is not features.normalized:   # the array itself: a weight change replaces it
             have = self._distance[name] = (features.normalized, DataDistance(features.normalized))
-        return have[1]
+        distance = have[1]
+        # motion matching's nearest frame among those it may pick; the learned controller's networks do
+        # not know the exclusions, so its nearest frame is any
+        searchable = self._searchable if name == "mm" else None
+        if searchable is not None and len(searchable) == distance.n_frames:
+            distance.mask = searchable
+        else:
+            distance.mask = np.ones(distance.n_frames, dtype=bool)
+        return distance
 
     # -- every frame ---------------------------------------------------------------------------
     def _layout_heights(self) -> None:
@@ -213,10 +224,23 @@ class CoveragePanel(Panel):
             dpg.configure_item("cov_map", height=top)
             dpg.configure_item("cov_heat", height=top)
 
+    def _excluded_tags(self) -> tuple[str, ...]:
+        """The database's tags the tuning excludes from the search now (motion matching's)."""
+        on = self.ctx.tuning.tag_excluded
+        return tuple(t for t in self.ctx.engine.db.tag_names if on.get(t, False))
+
     def _draw_map_data(self) -> None:
         dpg = self.dpg
         labels, cat = map_categories(self.cov, self.mode, MAX_CATEGORIES)
-        self.map_tex[...] = map_image(self.cov, cat, MAP_TEXELS, MAP_TEXELS)   # in place: the texture shows it
+        excluded_tags = self._excluded_tags()
+        excluded = self.ctx.engine.db.tag_mask(excluded_tags) if excluded_tags else None
+        if excluded is not None and excluded.all():   # the search ignores such an exclusion (one-line note)
+            excluded = None
+        self._searchable = None if excluded is None else ~excluded
+        # in place: the texture shows it
+        self.map_tex[...] = map_image(self.cov, cat, MAP_TEXELS, MAP_TEXELS, excluded)
+        if excluded is not None:                      # each class's marker at its frames still searched
+            cat = np.where(excluded, -1, cat)
         centres = category_centres(self.cov, cat, len(labels))
         for i in range(MAX_CATEGORIES):
             tag = f"cov_cat_{i}"
@@ -226,17 +250,22 @@ class CoveragePanel(Panel):
             else:
                 dpg.configure_item(tag, show=False)
         self._mode_shown = self.mode
+        self._excluded_shown = excluded_tags
         self.last["categories"] = labels
         self.last["frames_drawn"] = int(len(cat))
+        self.last["excluded_tags"] = list(excluded_tags) if excluded is not None else []
+        self.last["excluded_frames"] = int(excluded.sum()) if excluded is not None else 0
 
     def update(self, view: View) -> None:
         if not self._ensure_coverage():
             return
         dpg = self.dpg
         self._layout_heights()
-        if self._mode_shown != self.mode:
+        excluded_tags = self._excluded_tags()
+        if self._mode_shown != self.mode or self._excluded_shown != excluded_tags:
             self._draw_map_data()
-        key = (view.tick_number, self.mode, self.channel, self.trail, tuple(view.tick.snapshots) if view.tick else ())
+        key = (view.tick_number, self.mode, self.channel, self.trail, tuple(view.tick.snapshots) if view.tick else (),
+               excluded_tags)
         if key == self._shown_for:
             return
         self._shown_for = key
@@ -277,6 +306,9 @@ class CoveragePanel(Panel):
             lines.append(f"{SHORT[name]}: nearest frame {r.nearest_frame}" + (f" [{', '.join(tags)}]" if tags else "")
                          + f", cost {fmt_num(r.cost)} | {fmt_num(r.speed, 2)} m/s, {fmt_num(r.turn, 0)} deg/s: "
                          + f"{fmt_num(r.cell_seconds, 1)} s of data there")
+        if self.last.get("excluded_tags"):
+            lines.append(f"dark grey on the map: {self.last['excluded_frames']} frames of excluded tags "
+                         f"({', '.join(self.last['excluded_tags'])}), which motion matching does not pick")
         self.text.set("cov_status", "\n".join(lines) if lines else "no query yet")
         # the chosen channel's histogram with the query values
         hist = cov.histograms[self.channel]

@@ -29,6 +29,7 @@ Viewport=1600,900
 Hidden=features,latent,search,candidates,tuning,stats,recording
 """
 COVERAGE_RECT = (700, 22, 900, 878)
+EXCLUDED = ("crouch", "jog", "run", "stop", "strafe", "turn", "walk")   # every shipped tag but idle
 
 
 @pytest.fixture(scope="module")
@@ -61,6 +62,28 @@ def test_map_image_draws_every_frame_in_its_class_colour(cov):
     fast = speed_labels.index("3-4 m/s")
     sel = (cov.speed_m_s >= 3) & (cov.speed_m_s < 4)
     assert np.allclose(centres[fast], np.median(cov.map_xy[sel], axis=0))
+
+
+def test_excluded_frames_are_drawn_in_their_own_dim_colour(cov):
+    """Frames of excluded tags: a class of their own, in EXCLUDED_COLOR; the other texels keep their class
+    colour, and nothing is drawn or dropped beyond that."""
+    from lmm.coverage_png import EXCLUDED_COLOR
+
+    labels, cat = map_categories(cov, "tag", MAX_CATEGORIES)
+    excluded = cat == 0                                   # every frame of the first class
+    plain, dimmed = map_image(cov, cat, 64, 64), map_image(cov, cat, 64, 64, excluded)
+    assert np.array_equal(plain[..., 3], dimmed[..., 3])   # the same texels occupied
+    lo, hi = map_bounds(cov)
+    ij = np.clip(np.floor((cov.map_xy - lo) / (hi - lo) * 64).astype(int), 0, 63)
+    texel = (63 - ij[:, 1]) * 64 + ij[:, 0]
+    only_excluded = np.setdiff1d(texel[excluded], texel[~excluded])
+    none_excluded = np.setdiff1d(texel[~excluded], texel[excluded])
+    assert len(only_excluded) > 10 and len(none_excluded) > 10
+    rgb = dimmed[..., :3].reshape(-1, 3)
+    grey = np.array(EXCLUDED_COLOR) / max(EXCLUDED_COLOR)
+    assert np.allclose(rgb[only_excluded] / rgb[only_excluded].max(axis=1, keepdims=True), grey, atol=1e-5)
+    assert np.array_equal(rgb[none_excluded], plain[..., :3].reshape(-1, 3)[none_excluded])
+    assert np.array_equal(map_image(cov, cat, 64, 64, np.zeros(cov.n_frames, bool)), plain)
 
 
 def test_more_tags_than_colours_share_the_last_class(cov):
@@ -98,7 +121,7 @@ def test_percentile_of_a_query_value_in_a_histogram():
 # -----------------------------------------------------------------------------------------------
 
 @pytest.mark.gui
-def test_coverage_panel_shows_the_live_and_the_picked_tick(run_studio, tmp_path, lmm_weights, features):
+def test_coverage_panel_shows_the_live_and_the_picked_tick(run_studio, tmp_path, lmm_weights, features, db):
     from PIL import Image
 
     layout = tmp_path / "coverage.ini"
@@ -112,6 +135,8 @@ def test_coverage_panel_shows_the_live_and_the_picked_tick(run_studio, tmp_path,
               {"frame": 129, "do": "screenshot", "path": str(tmp_path / "coverage.png")},
               {"frame": 130, "do": "live"},
               {"frame": 131, "do": "set_tuning", "field": "feature_weights", "channel": "hip_velocity", "value": 2.0},
+              *({"frame": 131, "do": "set_tuning", "field": "tag_excluded", "channel": tag, "value": True}
+                for tag in EXCLUDED),
               {"frame": 140, "do": "capture", "label": "reweighted"}]
     args = ["--frames", 145, "--input", "builtin:circle", "--layout", layout]
     args += ["--weights", lmm_weights] if lmm_weights else ["--no-lmm"]
@@ -155,7 +180,16 @@ def test_coverage_panel_shows_the_live_and_the_picked_tick(run_studio, tmp_path,
     shown = rew["panels"]["coverage"]["queries"]["mm"]
     assert np.allclose(shown["xy"], pca.project(rescale_query(q, now.inv_scale, features.inv_scale)), atol=1e-4)
     costs = ((now.normalized.astype(np.float64) - q) ** 2).sum(axis=1)
-    assert shown["cost"] == pytest.approx(costs.min(), rel=1e-4, abs=1e-6)
+    # every tag but idle excluded by then: motion matching's nearest frame is the nearest idle frame, not
+    # the nearest of all (the character is running)
+    out = db.tag_mask(EXCLUDED)
+    assert shown["cost"] == pytest.approx(costs[~out].min(), rel=1e-4, abs=1e-6)
+    assert not out[shown["nearest_frame"]] and costs[out].min() < costs[~out].min()
+    # a tag excluded: its frames are counted and named (and drawn dim on the map)
+    cov_now = rew["panels"]["coverage"]
+    assert cov_now["excluded_tags"] == sorted(EXCLUDED)
+    assert cov_now["excluded_frames"] == int(out.sum()) > 0
+    assert d["labels"]["live"]["panels"]["coverage"]["excluded_frames"] == 0
     # the window is drawn: the map, the heat map and the histograms make a busy picture
     img = np.asarray(Image.open(tmp_path / "coverage.png").convert("RGB"), np.float32)
     x, y, w, h = COVERAGE_RECT
