@@ -65,17 +65,21 @@ class PCA:
 
 
 def fit_pca(points, n_components: int = MAP_COMPONENTS) -> PCA:
-    """PCA of ``points`` (N, D) by SVD of the centred matrix. Each axis' sign is fixed (its largest
-    component positive), so the same data always gives the same map."""
+    """PCA of ``points`` (N, D): the eigenvectors of their D x D covariance, largest variance first
+    (for 0.5 M frames a tenth of the time of an SVD of the centred N x D matrix, and the leading axes
+    agree to rounding). Each axis' sign is fixed (its largest component positive), so the same data
+    always gives the same map."""
     x = np.asarray(points, np.float64)
     if x.ndim != 2 or x.shape[0] < 2:
         raise CoverageError(f"coverage needs at least 2 feature vectors, got {x.shape[0] if x.ndim else 0}")
     k = int(min(n_components, x.shape[1]))
     mean = x.mean(axis=0)
-    _, s, vt = np.linalg.svd(x - mean, full_matrices=False)
-    var = s ** 2 / x.shape[0]
+    centred = x - mean
+    values, vectors = np.linalg.eigh(centred.T @ centred)
+    order = np.argsort(values)[::-1]
+    var = np.maximum(values[order], 0.0) / x.shape[0]   # rounding can leave a null variance at -1e-17
     total = float(var.sum())
-    axes = vt[:k].copy()
+    axes = np.ascontiguousarray(vectors[:, order[:k]].T)
     signs = np.sign(axes[np.arange(k), np.argmax(np.abs(axes), axis=1)])
     axes *= np.where(signs == 0, 1.0, signs)[:, None]
     ratio = var[:k] / total if total > 0 else np.zeros(k)
