@@ -206,14 +206,24 @@ class Tuning:
         """Put every field of ``group`` back to its default."""
         fresh = Tuning()
         for f in self.fields_in(group):
-            value = getattr(fresh, f.name)
-            if isinstance(value, dict):  # keep custom channels and tags, reset the known ones
-                # a custom channel keeps its weight; a custom tag goes back to no bias, not excluded
-                merged = {k: w if f.name == "feature_weights" else _NEUTRAL[f.metadata.get("item", "float")]
-                          for k, w in getattr(self, f.name).items()}
-                merged.update(value)
-                value = merged
-            setattr(self, f.name, value)
+            setattr(self, f.name, self._kept_entries(f, getattr(fresh, f.name)))
+
+    def assign(self, other: "Tuning") -> None:
+        """Take every value of ``other`` (a loaded preset) in place, so the controllers sharing this object
+        see it at their next step. A per-name entry ``other`` lacks (a database's own feature channel or
+        tag, added by the controllers) is kept, reset as :meth:`reset_group` resets it."""
+        for f in dataclasses.fields(self):
+            setattr(self, f.name, self._kept_entries(f, getattr(other, f.name)))
+
+    def _kept_entries(self, f: dataclasses.Field, value):
+        """``value`` for field ``f``; for a per-name field, with this tuning's other entries kept: a custom
+        channel keeps its weight, a custom tag goes back to no bias and not excluded."""
+        if not isinstance(value, dict):
+            return value
+        merged = {k: w if f.name == "feature_weights" else _NEUTRAL[f.metadata.get("item", "float")]
+                  for k, w in getattr(self, f.name).items()}
+        merged.update(value)
+        return merged
 
     def copy(self) -> "Tuning":
         return Tuning.from_dict(self.to_dict())

@@ -351,3 +351,24 @@ def test_set_changes_one_entry_of_any_per_name_field():
         with pytest.raises(TuningError, match=message):
             t.set(args[0], args[1], channel=args[2])
     assert t.to_dict() == before
+
+
+def test_a_preset_loaded_later_keeps_the_database_tags(tmp_path):
+    """The studio loads a preset into the tuning the controllers share, after they added their database's
+    own tags: those entries stay (reset), so their slider and checkbox still set them, and the preset's
+    values arrive."""
+    t = Tuning()
+    t.tag_bias.setdefault("dance", 0.0)            # what a controller on a database tagged "dance" adds
+    t.tag_excluded.setdefault("dance", False)
+    t.tag_excluded["dance"] = True
+    t.feature_weights["head_velocity"] = 0.5        # a custom schema's channel
+    preset = tmp_path / "p.json"
+    preset.write_text('{"tag_excluded": {"walk": true}, "tag_bias": {"run": 1.5}}')
+    shared = t
+    t.assign(Tuning.load(preset))
+    assert shared is t and t.tag_excluded["walk"] and t.tag_bias["run"] == 1.5
+    assert t.tag_excluded["dance"] is False and t.tag_bias["dance"] == 0.0    # kept, reset
+    assert t.feature_weights["head_velocity"] == 0.5 and t.tag_bias["crouch"] == 1.0
+    t.set("tag_excluded", True, channel="dance")   # the checkbox still works
+    t.set("tag_bias", -2.0, channel="dance")
+    assert t.tag_excluded["dance"] and t.tag_bias["dance"] == -2.0

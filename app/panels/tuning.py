@@ -192,8 +192,7 @@ class TuningPanel(Panel):
     def load_preset(self, path) -> None:
         # TuningError with the file and field; a feature channel the running controllers lack is one
         t = Tuning.load(path, channels=list(self.tuning.feature_weights))
-        for f in dataclasses.fields(Tuning):
-            setattr(self.tuning, f.name, getattr(t, f.name))
+        self.tuning.assign(t)   # the database's own tags and channels keep their widgets' entries
         self.sync()
 
     def state(self) -> dict:
