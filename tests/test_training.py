@@ -98,6 +98,19 @@ def test_frame_neighbours_are_the_nearest_other_frames(data):
     assert torch.allclose(picked, ref.values, rtol=1e-4, atol=1e-5)
 
 
+def test_frame_neighbours_bound_their_block_without_changing_the_answer(data, monkeypatch):
+    """On a CPU the distance block is cut to CPU_DISTANCE_BLOCK_BYTES (a full LAFAN1 download's 2048-row
+    block is 4 GB): rows rank alone, so any block size gives the same neighbours."""
+    X = data.X[:1500]
+    whole = T.frame_neighbours(X, 5)                       # one block of every row
+    monkeypatch.setattr(T, "CPU_DISTANCE_BLOCK_BYTES", 7 * 1500 * 4)
+    seen = []
+    real_topk = torch.Tensor.topk
+    monkeypatch.setattr(torch.Tensor, "topk", lambda t, *a, **kw: (seen.append(t.shape[0]), real_topk(t, *a, **kw))[1])
+    assert torch.equal(T.frame_neighbours(X, 5), whole)
+    assert max(seen) == 7 and sum(seen) == 1500
+
+
 def test_nearest_neighbours_are_exact(data):
     X = data.X[:2000]
     q = X[:50] + 0.3 * torch.randn(50, X.shape[1])
