@@ -11,7 +11,7 @@
   matching, the nearest frame it may pick: frames of excluded tags are drawn dim and left out).
 
 Everything follows the displayed tick (live or picked on the timeline). The coverage itself is computed
-once, the first time the window is shown.
+once, on a thread, the first time the window is shown (the panel says so meanwhile).
 """
 from __future__ import annotations
 
@@ -89,6 +89,7 @@ class CoveragePanel(Panel):
         self._mode_shown = None
         self._excluded_shown = None   # the excluded tags the map was drawn for
         self._searchable = None       # (N,) bool: the frames those leave to motion matching (None: every one)
+        self._job = None              # the coverage being worked out on a thread (see _start_coverage)
         self.error = ""
 
     # -- build ---------------------------------------------------------------------------------
@@ -165,18 +166,47 @@ class CoveragePanel(Panel):
         self._shown_for = None
 
     # -- the coverage (computed once) ----------------------------------------------------------
+    def _start_coverage(self) -> None:
+        """Work out the coverage and the nearest-frame indexes on a thread (about 1.5 s for 0.5 M frames
+        here, 0.2 s for the default data), so the studio keeps drawing meanwhile; :meth:`_ensure_coverage`
+        takes the result (the map image is then drawn on the GUI thread: 0.12 s for 0.5 M frames)."""
+        import threading
+
+        engine = self.ctx.engine
+        job = {"done": threading.Event()}
+
+        def work():
+            try:
+                job["cov"] = build_coverage(engine.db, engine.features)
+                job["horizon"] = first_trajectory_dims(engine.features.layout)[2]
+                # the running controllers' nearest-frame indexes too (0.17 s each for 0.5 M frames)
+                names = [n for n in CONTROLLERS if n in engine.controller_names()]
+                job["distance"] = {n: (feats.normalized, DataDistance(feats.normalized))
+                                   for n in names for feats in (engine.features_of(n),)}
+            except Exception as e:  # noqa: BLE001 - a layout without trajectory channels: said, studio runs on
+                job["error"] = f"no coverage: {e}"
+            finally:
+                job["done"].set()
+
+        self._job = job
+        self.text.set("cov_status", f"working out the coverage of {engine.db.n_frames:,} frames ...")
+        threading.Thread(target=work, name="coverage", daemon=True).start()
+
     def _ensure_coverage(self) -> bool:
         if self.cov is not None or self.error:
             return self.cov is not None
-        dpg = self.dpg
-        engine = self.ctx.engine
-        try:
-            self.cov = build_coverage(engine.db, engine.features)
-            self.horizon = first_trajectory_dims(engine.features.layout)[2]
-        except Exception as e:  # noqa: BLE001 - a layout without trajectory channels: say so, keep running
-            self.error = f"no coverage: {e}"
+        if self._job is None:
+            self._start_coverage()
+        if not self._job["done"].is_set():
+            return False
+        job, self._job = self._job, None
+        if "error" in job:
+            self.error = job["error"]
             self.text.set("cov_status", self.error)
             return False
+        self.cov, self.horizon = job["cov"], job["horizon"]
+        self._distance.update(job["distance"])
+        dpg = self.dpg
         cov = self.cov
         tex = heat_texture(cov)
         rows, cols = tex.shape[:2]

@@ -214,3 +214,40 @@ def test_history_keeps_each_controllers_query_for_the_trail():
     w = h.window("mm", "query", 14, 4)
     assert w.shape == (4, 3) and np.allclose(w[:, 0], [11, 12, 13, 14])
     assert np.isnan(h.window("mm", "query", 14, 12)[0]).all()       # older than the buffer holds
+
+
+def test_the_coverage_is_worked_out_on_a_thread_and_a_failure_is_one_line(db, features):
+    """The first show starts the work and returns at once (the status says so); the next updates take the
+    result. A feature layout without trajectory channels cannot be mapped: one line, and no map."""
+    import copy
+    import time
+    from types import SimpleNamespace
+
+    from app.panels.coverage import CoveragePanel
+
+    class Dpg:                              # only what the panel calls before the map exists
+        def __init__(self):
+            self.values = {}
+
+        def set_value(self, item, value):
+            self.values[item] = value
+
+    def panel_for(feats):
+        dpg = Dpg()
+        engine = SimpleNamespace(db=db, features=feats)
+        return CoveragePanel(SimpleNamespace(dpg=dpg, engine=engine, tuning=None)), dpg
+
+    bones_only = copy.copy(features)
+    bones_only.layout = [ch for ch in features.layout if ch.kind.startswith("bone")]
+    panel, dpg = panel_for(bones_only)
+    assert panel._ensure_coverage() is False
+    assert dpg.values["cov_status"].startswith(f"working out the coverage of {db.n_frames:,} frames")
+    deadline = time.monotonic() + 60
+    while panel._job is not None and time.monotonic() < deadline:
+        panel._job["done"].wait(0.1)
+        if panel._job["done"].is_set():
+            assert panel._ensure_coverage() is False
+    assert panel.cov is None and panel.error.startswith("no coverage: ") and "\n" not in panel.error
+    assert "trajectory" in panel.error, panel.error
+    assert dpg.values["cov_status"] == panel.error
+    assert panel._ensure_coverage() is False and panel._job is None      # not tried again
