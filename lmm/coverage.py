@@ -287,7 +287,8 @@ class DataDistance:
         points = np.ascontiguousarray(normalized, np.float32)
         self.n_frames = len(points)
         self.index = SearchIndex(points) if self.n_frames else None
-        self.mask = np.ones(self.n_frames, dtype=bool)
+        self.every = np.ones(self.n_frames, dtype=bool)   # every frame a candidate
+        self.mask = self.every        # the candidates (a caller may set a narrower mask of its own)
         self._hint: np.ndarray | None = None
 
     def nearest(self, query) -> tuple[int, float]:

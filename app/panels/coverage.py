@@ -75,6 +75,12 @@ class QueryReport:
                 "cell_seconds": f(self.cell_seconds)}
 
 
+def _distance_for(features) -> tuple:
+    """(the normalised features it was built on, :class:`DataDistance` over them): a panel's nearest-frame
+    search, made again when a weight change replaces the array."""
+    return features.normalized, DataDistance(features.normalized)
+
+
 class CoveragePanel(Panel):
     key = "coverage"
 
@@ -180,9 +186,8 @@ class CoveragePanel(Panel):
                 job["cov"] = build_coverage(engine.db, engine.features)
                 job["horizon"] = first_trajectory_dims(engine.features.layout)[2]
                 # the running controllers' nearest-frame indexes too (0.17 s each for 0.5 M frames)
-                names = [n for n in CONTROLLERS if n in engine.controller_names()]
-                job["distance"] = {n: (feats.normalized, DataDistance(feats.normalized))
-                                   for n in names for feats in (engine.features_of(n),)}
+                job["distance"] = {n: _distance_for(engine.features_of(n))
+                                   for n in CONTROLLERS if n in engine.controller_names()}
             except Exception as e:  # noqa: BLE001 - a layout without trajectory channels: said, studio runs on
                 job["error"] = f"no coverage: {e}"
             finally:
@@ -233,15 +238,12 @@ class CoveragePanel(Panel):
         features = self.ctx.engine.features_of(name)
         have = self._distance.get(name)
         if have is None or have[0] is not features.normalized:   # the array itself: a weight change replaces it
-            have = self._distance[name] = (features.normalized, DataDistance(features.normalized))
+            have = self._distance[name] = _distance_for(features)
         distance = have[1]
         # motion matching's nearest frame among those it may pick; the learned controller's networks do
         # not know the exclusions, so its nearest frame is any
         searchable = self._searchable if name == "mm" else None
-        if searchable is not None and len(searchable) == distance.n_frames:
-            distance.mask = searchable
-        else:
-            distance.mask = np.ones(distance.n_frames, dtype=bool)
+        distance.mask = distance.every if searchable is None else searchable
         return distance
 
     # -- every frame ---------------------------------------------------------------------------
