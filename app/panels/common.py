@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import functools
 
+import math
+
 import numpy as np
 
 # key -> (fixed item id, title). The ids key the windows in layout (.ini) files: never renumber.
@@ -64,7 +66,8 @@ def darker(c, t: float = 0.35):
 
 def cost_color(t: float) -> tuple[int, int, int, int]:
     """Green (t=0, cheapest) -> yellow -> red (t=1, dearest), as RGBA 0..255 for table cells."""
-    t = float(np.clip(t, 0.0, 1.0)) if np.isfinite(t) else 0.5
+    t = float(t)
+    t = min(max(t, 0.0), 1.0) if math.isfinite(t) else 0.5     # plain floats: called per table cell
     if t < 0.5:
         r, g = 2.0 * t, 1.0
     else:

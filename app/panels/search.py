@@ -306,6 +306,7 @@ class CandidatesPanel(Panel):
         self.sort_key = "total"
         self.descending = False
         self._shown_for = None
+        self._highlighted: dict = {}     # (row, column) -> the colour dearpygui has for the cell (None: none)
         self.rows: list[dict] = []
         self.columns: list[str] = []
 
@@ -398,7 +399,7 @@ class CandidatesPanel(Panel):
         self.rows = rows
         for r in range(MAX_ROWS):
             show = r < len(rows)
-            dpg.configure_item(f"cand_row_{r}", show=show)
+            self.text.configure(f"cand_row_{r}", show=show)
             if not show:
                 continue
             row = rows[r]
@@ -423,11 +424,20 @@ class CandidatesPanel(Panel):
                     continue
                 self.text.set(f"cand_{r}_{k}", txt)
                 if k in fractions:
-                    dpg.highlight_table_cell("cand_table", r, c, cost_color(fractions[k][r]))
-            if row["frame"] == snap.matched_frame:
-                dpg.highlight_table_cell("cand_table", r, 1, (60, 110, 200, 170))
-            else:
-                dpg.unhighlight_table_cell("cand_table", r, 1)
+                    self._highlight(r, c, cost_color(fractions[k][r]))
+            self._highlight(r, 1, (60, 110, 200, 170) if row["frame"] == snap.matched_frame else None)
+
+    def _highlight(self, row: int, column: int, color) -> None:
+        """Colour one cell of the table (None: none), telling dearpygui only of a change (a call costs
+        microseconds; a new search rewrote some fifty cells' colours, most of them the same)."""
+        lit = self._highlighted
+        if lit.get((row, column)) == color:
+            return
+        lit[(row, column)] = color
+        if color is None:
+            self.dpg.unhighlight_table_cell("cand_table", row, column)
+        else:
+            self.dpg.highlight_table_cell("cand_table", row, column, color)
 
     def state(self) -> dict:
         return {"sort": self.sort_key, "descending": self.descending,

@@ -74,6 +74,8 @@ class ViewportPanel(Panel):
         self.gl = None
         self._screen_fbo = None
         self._window_rect = None
+        self._resized = True          # the window's size changed (its resize handler) since the last check
+        self._size_checks = 0
         self.renderer = None
         self.scene = None
         self.camera = None
@@ -96,7 +98,8 @@ class ViewportPanel(Panel):
         self.drawn: dict = {}
         self.render_ms = 0.0
         self.readback_ms = 0.0
-        self._unread = False          # update() rendered a view that finish() has not read yet
+        self._render_due = False      # update() placed a new scene that render() has not drawn yet
+        self._unread = False          # render() drew a view that finish() has not read yet
         self._drawn_key = None        # _scene_key of the last render
         self._drawn_before = None     # drawn of the last render
         self._unchanged = 0           # frames since then whose view was the same
@@ -135,6 +138,14 @@ class ViewportPanel(Panel):
                     dpg.add_checkbox(label=label, tag=f"vp_show_{key}", default_value=default,
                                      callback=self._on_toggle, user_data=key)
             dpg.add_drawlist(width=64, height=64, tag="vp_drawlist")
+        # the window's size is asked for only when dearpygui says it changed (a query costs tens of
+        # microseconds a frame in a studio of thousands of items), and every CHECK_SIZE_EVERY frames
+        with dpg.item_handler_registry(tag="vp_handlers"):
+            dpg.add_item_resize_handler(callback=self._on_resize)
+        dpg.bind_item_handler_registry(self.tag, "vp_handlers")
+
+    def _on_resize(self, *_):
+        self._resized = True
 
     def _on_inspect(self, sender, value):
         for name in COLORS:
@@ -273,8 +284,14 @@ class ViewportPanel(Panel):
         t = tick.time_s if tick is not None else 0.0
         return self.reference.at(t), np.array([-SIDE_OFFSET_M, 0.0, 0.0]), -1
 
+    CHECK_SIZE_EVERY = 60     # frames between two looks at the window's size without a resize event
+
     def _ensure_size(self) -> None:
         dpg = self.dpg
+        self._size_checks += 1
+        if not self._resized and self.texture is not None and self._size_checks % self.CHECK_SIZE_EVERY:
+            return
+        self._resized = False
         avail = dpg.get_item_rect_size(self.tag)
         # the drawing's place in the window moves only when the window's size does (its toolbar wraps)
         if avail == self._window_rect and self.texture is not None:
@@ -362,6 +379,7 @@ class ViewportPanel(Panel):
             self._shared.release()
             self._shared = None
         self._window_rect = None
+        self._resized = True
         self.size = (0, 0)
 
     # -- input ----------------------------------------------------------------------------------
@@ -374,16 +392,16 @@ class ViewportPanel(Panel):
         if self.camera is None:
             return
         mouse = dpg.get_mouse_pos(local=False)
-        hovered = dpg.is_item_hovered("vp_drawlist")
         buttons = {"left": dpg.mvMouseButton_Left, "right": dpg.mvMouseButton_Right,
                    "middle": dpg.mvMouseButton_Middle}
-        if self.drag is None and hovered:
-            for name, b in buttons.items():
-                if dpg.is_mouse_button_down(b):
-                    self.drag = name
-                    self.last_mouse = mouse
-                    break
-        elif self.drag is not None:
+        if self.drag is None:
+            # a drag starts with a button down over the view (hovering is asked only then: a query of
+            # an item costs tens of microseconds)
+            down = next((name for name, b in buttons.items() if dpg.is_mouse_button_down(b)), None)
+            if down is not None and dpg.is_item_hovered("vp_drawlist"):
+                self.drag = down
+                self.last_mouse = mouse
+        else:
             if not dpg.is_mouse_button_down(buttons[self.drag]):
                 self.drag = None
             else:
@@ -485,16 +503,27 @@ class ViewportPanel(Panel):
             self.camera.follow(centre, blend=0.12 if view.live else 1.0)
         self._labels(view, roots, None if prepared is None else prepared.get(_HEADS))
         self.readback_ms = 0.0
+        self.render_ms = 0.0
         key = self._scene_key(view)
         if key == self._drawn_key and self._unchanged < self.REDRAW_EVERY and self._same_drawn():
             # the same picture (paused, nothing moved): the texture still holds it
             self._unchanged += 1
-            self.render_ms = 0.0
             return
+        self._drawn_key, self._drawn_before, self._unchanged = key, self.drawn, 0
+        self._render_due = True
+
+    def render(self) -> None:
+        """Draw the scene :meth:`update` placed, when it differs from the last one drawn. The studio calls
+        it after the other panels' updates, then :meth:`finish`: on software GL the driver rasterises on
+        its own threads from here until the copy, and Python run meanwhile shares the cores with it
+        (panels measured 1.23 ms a frame that way against 0.86 ms before the render, and the frame was
+        shorter too: ``bench/bench_studio.py``, README)."""
+        if not self._render_due:
+            return
+        self._render_due = False
         t0 = time.perf_counter()
         self.renderer.render_to(self.scene, self.camera)
         self.render_ms = (time.perf_counter() - t0) * 1e3
-        self._drawn_key, self._drawn_before, self._unchanged = key, self.drawn, 0
         self.renders += 1
         self._unread = True
 
@@ -521,11 +550,9 @@ class ViewportPanel(Panel):
                 self.texture)    # a new texture tag with every new size
 
     def finish(self) -> None:
-        """Put the 3D view rendered by :meth:`update` into the texture dearpygui shows: a copy on the
-        GPU into dearpygui's own texture, or (readback path) a read into the raw texture's array. The
-        studio calls it after the other panels' updates: those run while the GL driver (software GL
-        rasterises on its own threads) draws, and before a read's megabytes of pixels go through the
-        caches. Does nothing when nothing new was rendered."""
+        """Put the 3D view drawn by :meth:`render` into the texture dearpygui shows: a copy on the GPU
+        into dearpygui's own texture, or (readback path) a read into the raw texture's array. Does
+        nothing when nothing new was rendered."""
         shared = self._shared
         found = False
         if shared is not None and shared.fbo is None:
