@@ -31,7 +31,7 @@ class Script:
     feature channel's name); ``help`` (Help > Keys and mouse); ``dismiss`` (OK on the message shown); ``quit``;
     ``quit_when_exists`` (path: quit on the first frame that file exists); ``write_rects`` (path, items:
     write the screen rectangles of those items as JSON, for tests that click them with xdotool);
-    ``show`` (window[, show]); ``click_candidate`` (row: preview a Search Candidates row); ``database`` (op: ``select`` (range),
+    ``show`` (window[, show]); ``window_size`` (window, width, height: resize a window); ``click_candidate`` (row: preview a Search Candidates row); ``database`` (op: ``select`` (range),
     ``frame`` (db_frame), ``play``, ``pause``, ``scrub`` (source_frame), ``selection`` (start, stop),
     ``mark`` (end: in/out), ``copy``) drives the Database panel;
     ``motion_search`` (source: timeline or file, seconds, file, frames, in, top: runs that search);
@@ -113,6 +113,10 @@ class Script:
                 s.set_ragdoll(a["key"], a["value"])
         elif do == "quit_when_exists":  # external tests (real key presses) end the run by creating a file
             self.quit_files.append(Path(a["path"]))
+        elif do == "window_size":       # as a user dragging the window's edge would
+            from .panels.common import window_tag
+
+            s.dpg.configure_item(window_tag(a["window"]), width=int(a["width"]), height=int(a["height"]))
         elif do == "write_rects":
             dpg = s.dpg
             rects = {item: list(dpg.get_item_rect_min(item)) + list(dpg.get_item_rect_max(item))

@@ -4,6 +4,7 @@ The texture finder runs in a subprocess of its own (dearpygui is one global cont
 studio runs once each way, and its picture is compared with the readback path's."""
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
@@ -192,3 +193,21 @@ def test_a_resized_view_shows_its_picture_on_the_frame_of_the_resize(run_studio,
     assert vp["view_path"] == "direct"
     for f in (30, 31, 32):
         assert _view_pixels(r.dump, tmp_path / f"s{f}.png").std() > 10.0, f
+
+
+def test_the_view_follows_a_window_resize_on_the_next_frames(run_studio, tmp_path):
+    """The viewport asks for its window's size only when dearpygui reports a resize (or every 60 frames):
+    a window resized at frame 30 of a 40-frame run must still give a view of the new size, and a
+    picture in it."""
+    rects = tmp_path / "rects.json"
+    script = [{"frame": 30, "do": "window_size", "window": "viewport", "width": 640, "height": 420},
+              {"frame": 38, "do": "write_rects", "path": str(rects), "items": ["vp_drawlist"]},
+              {"frame": 38, "do": "screenshot", "path": str(tmp_path / "s.png")}]
+    r = run_studio("--frames", 40, "--input", "builtin:zigzag", "--no-physics", script=script)
+    assert r.rc == 0, r.stderr[-3000:]
+    vp = r.dump["final"]["viewport"]
+    x0, y0, x1, y1 = json.loads(rects.read_text())["vp_drawlist"]
+    assert vp["size"][0] == 640 - 16
+    assert [x1 - x0, y1 - y0] == vp["size"]        # the drawing was given the new size
+    assert vp["render_size"] == vp["size"]
+    assert _view_pixels(r.dump, tmp_path / "s.png").std() > 10.0
