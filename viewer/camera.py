@@ -110,6 +110,7 @@ class OrbitCamera:
     def __post_init__(self):
         self.target = np.asarray(self.target, dtype=np.float64).copy()
         self._view_key, self._view = None, None
+        self._vp_key, self._vp = None, None
 
     # ---- geometry ---------------------------------------------------------------------------
     @property
@@ -144,7 +145,14 @@ class OrbitCamera:
         return perspective(self.fov_y_deg, aspect, self.near, self.far)
 
     def view_projection(self, aspect: float) -> np.ndarray:
-        return self.projection_matrix(aspect) @ self.view_matrix()
+        # once per camera placement and aspect, as view_matrix (the labels and the render both ask)
+        t = self.target
+        key = (float(t[0]), float(t[1]), float(t[2]), self.distance, self.yaw_deg, self.pitch_deg,
+               self.fov_y_deg, self.near_ratio, self.far_ratio, float(aspect))
+        if self._vp_key != key:
+            self._vp = self.projection_matrix(aspect) @ self.view_matrix()
+            self._vp_key = key
+        return self._vp.copy()
 
     def basis(self):
         """(right, up, forward) unit vectors of the camera in world space."""
@@ -177,10 +185,13 @@ class OrbitCamera:
     def follow(self, position, blend: float = 1.0, keep_height: bool = True) -> None:
         """Track a character root: move the target towards ``position`` (horizontally by default,
         so the root's bobbing does not shake the view). ``blend`` in (0, 1] smooths the motion."""
-        goal = np.asarray(position, dtype=np.float64).copy()
+        # plain floats (the studio follows every frame): the same operations per component as numpy's
+        b = float(blend)
+        t0, t1, t2 = (float(v) for v in self.target)
+        g0, g1, g2 = (float(v) for v in position)
         if keep_height:
-            goal[1] = self.target[1]
-        self.target = self.target + float(blend) * (goal - self.target)
+            g1 = t1
+        self.target = np.array([t0 + b * (g0 - t0), t1 + b * (g1 - t1), t2 + b * (g2 - t2)])
 
     def fit(self, points, aspect: float = 16 / 9, margin: float = 1.15) -> None:
         """Aim at the bounding box centre of ``points`` and set the distance so their bounding

@@ -24,6 +24,8 @@ class TimelinePanel(Panel):
     key = "timeline"
     _line_value = 0.0
     _slider_range = None
+    _slider_value = None      # the tick this panel last put in the slider
+    _slider_held = False      # the user holds the slider (its activated / deactivated events)
 
     def build(self, window_kwargs: dict) -> None:
         dpg = self.dpg
@@ -38,6 +40,12 @@ class TimelinePanel(Panel):
                 dpg.add_button(label="Live", tag="tl_live", callback=lambda: act.go_live())
                 dpg.add_slider_int(tag="tl_slider", width=-185, min_value=0, max_value=1, default_value=1,
                                    callback=self._on_slider, format="tick %d")
+                # whether the user holds the slider, from dearpygui's events (asking each frame costs
+                # tens of microseconds in a studio of thousands of items)
+                with dpg.item_handler_registry(tag="tl_slider_handlers"):
+                    dpg.add_item_activated_handler(callback=lambda: setattr(self, "_slider_held", True))
+                    dpg.add_item_deactivated_handler(callback=lambda: setattr(self, "_slider_held", False))
+                dpg.bind_item_handler_registry("tl_slider", "tl_slider_handlers")
                 dpg.add_text("", tag="tl_status")
             with dpg.plot(tag="tl_plot", height=-1, width=-1, no_menus=True, no_mouse_pos=True, no_title=True,
                           no_box_select=True):
@@ -83,7 +91,8 @@ class TimelinePanel(Panel):
         if self._slider_range != (oldest, newest):
             self._slider_range = (oldest, newest)
             dpg.configure_item("tl_slider", min_value=int(oldest), max_value=int(newest))
-        if dpg.get_value("tl_slider") != view.tick_number and not dpg.is_item_active("tl_slider"):
+        if self._slider_value != view.tick_number and not self._slider_held:
+            self._slider_value = view.tick_number     # a drag's value becomes the scrubbed tick: set again
             dpg.set_value("tl_slider", view.tick_number)
         # the drag line: a user drag moves the scrub position
         line = float(dpg.get_value("tl_drag"))

@@ -389,3 +389,37 @@ def test_broken_database_bvh_opens_the_default_database_with_an_error(run_studio
     msgs = [e["message"] for e in r.dump["errors"]]
     assert len(msgs) == 1 and "truncated_frame.bvh" in msgs[0] and "default database" in msgs[0]
     assert r.dump["tick_count"] == 10
+
+
+def test_a_real_drag_of_the_timeline_slider_scrubs_back_xdotool(xvfb_display, studio_cache, tmp_path):
+    """Press the timeline slider near its left end and drag further left with the mouse (xdotool), the
+    studio running live: the view pauses on an old tick and stays there after the release (the panel
+    no longer asks dearpygui each frame whether the slider is held, nor what it holds)."""
+    if shutil.which("xdotool") is None:
+        pytest.skip("xdotool is not installed")
+    rects = tmp_path / "rects.json"
+    actions = [{"frame": 150, "do": "write_rects", "path": str(rects), "items": ["tl_slider"]}]
+    with RealKeyStudio(tmp_path, xvfb_display, studio_cache, actions,
+                       ["--layout", "default", "--input", "builtin:circle"]) as s:
+        for _ in range(120):
+            if rects.exists():
+                break
+            time.sleep(0.5)
+        time.sleep(0.5)
+        x0, y0, x1, y1 = json.loads(rects.read_text())["tl_slider"]
+        y = str(int((y0 + y1) / 2))
+        s.xdo("windowfocus", "--sync", s.win)
+        s.xdo("mousemove", "--window", s.win, str(int(x0 + 0.2 * (x1 - x0))), y)
+        s.xdo("mousedown", "1")
+        for f in (0.15, 0.1, 0.05):
+            time.sleep(0.4)
+            s.xdo("mousemove", "--window", s.win, str(int(x0 + f * (x1 - x0))), y)
+        time.sleep(0.6)
+        s.xdo("mouseup", "1")
+        time.sleep(1.5)
+    assert s.returncode == 0, s.stderr[-3000:]
+    tl = s.dump()["final"]["timeline"]
+    span = tl["newest"] - tl["oldest"]
+    assert tl["paused"] and not tl["live"], tl
+    assert span > 100, tl
+    assert tl["tick"] <= tl["oldest"] + 0.15 * span, tl     # the slider's left end, not the newest tick

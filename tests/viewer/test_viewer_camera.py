@@ -131,3 +131,44 @@ def test_projecting_a_few_points_in_floats_equals_the_numpy_form():
     got = project_points_floats(pts, vp, w, h)
     assert [g[2] for g in got] == front.tolist() and not got[0][2]
     assert np.allclose(np.array([g[:2] for g in got]), px, rtol=1e-12, atol=1e-9)
+
+
+def test_view_projection_is_remade_whenever_the_camera_or_the_aspect_changes():
+    """The product is kept per camera placement and aspect (the labels and the render ask each frame):
+    every change must give the matrix made from scratch, and a caller's copy is its own."""
+    cam = OrbitCamera(target=np.array([0.5, 0.9, -1.0]), distance=3.0, yaw_deg=20.0, pitch_deg=10.0)
+
+    def fresh(aspect):
+        return cam.projection_matrix(aspect) @ look_at(cam.eye, cam.target)
+
+    first = cam.view_projection(1.5)
+    assert np.array_equal(first, fresh(1.5))
+    first[:] = 0.0                                    # the caller's copy
+    assert np.array_equal(cam.view_projection(1.5), fresh(1.5))
+    changes = [lambda: setattr(cam, "yaw_deg", 21.0), lambda: setattr(cam, "pitch_deg", 12.0),
+               lambda: setattr(cam, "distance", 2.5), lambda: setattr(cam, "fov_y_deg", 50.0),
+               lambda: cam.follow([1.0, 0.0, 2.0], blend=0.5), lambda: cam.pan(10.0, 5.0, 600.0),
+               lambda: setattr(cam, "near_ratio", 0.02)]
+    for change in changes:
+        before = cam.view_projection(1.5)
+        change()
+        after = cam.view_projection(1.5)
+        assert np.array_equal(after, fresh(1.5))
+        assert not np.array_equal(after, before)
+    assert np.array_equal(cam.view_projection(0.75), fresh(0.75))
+
+
+def test_follow_in_plain_floats_gives_numpys_bits():
+    rng = np.random.default_rng(3)
+    for _ in range(200):
+        start = rng.normal(size=3) * 10
+        goal = rng.normal(size=3) * 10
+        blend = float(rng.uniform(0.01, 1.0))
+        for keep in (True, False):
+            cam = OrbitCamera(target=start.copy())
+            cam.follow(goal, blend=blend, keep_height=keep)
+            g = goal.copy()
+            if keep:
+                g[1] = start[1]
+            assert np.array_equal(cam.target, start + blend * (g - start))
+            assert cam.target.dtype == np.float64 and cam.target.shape == (3,)
