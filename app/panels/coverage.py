@@ -92,8 +92,10 @@ class CoveragePanel(Panel):
         self.cov: Coverage | None = None
         self._distance: dict[str, tuple[np.ndarray, DataDistance]] = {}
         self._shown_for = None
-        self._mode_shown = None
-        self._excluded_shown = None   # the excluded tags the map was drawn for
+        self._map_wanted = None       # (mode, excluded tags) the map is asked for
+        self._map_shown = None        # (mode, excluded tags) the map shows
+        self._map_job = None          # the map being drawn on a thread (see _want_map)
+        self.map_error = ""
         self._searchable = None       # (N,) bool: the frames those leave to motion matching (None: every one)
         self._job = None              # the coverage being worked out on a thread (see _start_coverage)
         self.error = ""
@@ -175,7 +177,7 @@ class CoveragePanel(Panel):
     def _start_coverage(self) -> None:
         """Work out the coverage and the nearest-frame indexes on a thread (about 1.5 s for 0.5 M frames
         here, 0.2 s for the default data), so the studio keeps drawing meanwhile; :meth:`_ensure_coverage`
-        takes the result (the map image is then drawn on the GUI thread: 0.12 s for 0.5 M frames)."""
+        takes the result (the map's picture is drawn on a thread too, see :meth:`_want_map`)."""
         import threading
 
         engine = self.ctx.engine
@@ -261,19 +263,55 @@ class CoveragePanel(Panel):
         on = self.ctx.tuning.tag_excluded
         return tuple(t for t in self.ctx.engine.db.tag_names if on.get(t, False))
 
-    def _draw_map_data(self) -> None:
-        dpg = self.dpg
-        labels, cat = map_categories(self.cov, self.mode, MAX_CATEGORIES)
-        excluded_tags = self._excluded_tags()
+    def _want_map(self, mode: str, excluded_tags: tuple[str, ...]) -> None:
+        """The map is asked for in ``mode`` with ``excluded_tags`` dimmed: the frames motion matching may
+        pick (its nearest-frame distance) change at once; the picture is worked out on a thread (0.2 s for
+        0.5 M frames) while the old one stays, and :meth:`_take_map` shows it when it is done, unless
+        another change came meanwhile."""
+        import threading
+
         excluded = self.ctx.engine.db.tag_mask(excluded_tags) if excluded_tags else None
         if excluded is not None and excluded.all():   # the search ignores such an exclusion (one-line note)
             excluded = None
         self._searchable = None if excluded is None else ~excluded
-        # in place: the texture shows it
-        self.map_tex[...] = map_image(self.cov, cat, MAP_TEXELS, MAP_TEXELS, excluded)
-        if excluded is not None:                      # each class's marker at its frames still searched
-            cat = np.where(excluded, -1, cat)
-        centres = category_centres(self.cov, cat, len(labels))
+        self.last["excluded_tags"] = list(excluded_tags) if excluded is not None else []
+        self.last["excluded_frames"] = int(excluded.sum()) if excluded is not None else 0
+        key = (mode, excluded_tags)
+        self._map_wanted = key
+        job = {"key": key, "done": threading.Event()}
+        cov = self.cov
+
+        def work():
+            try:
+                labels, cat = map_categories(cov, mode, MAX_CATEGORIES)
+                job["image"] = map_image(cov, cat, MAP_TEXELS, MAP_TEXELS, excluded)
+                if excluded is not None:              # each class's marker at its frames still searched
+                    cat = np.where(excluded, -1, cat)
+                job["labels"], job["frames"] = labels, int(len(cat))
+                job["centres"] = category_centres(cov, cat, len(labels))
+            except Exception as e:  # noqa: BLE001 - said on the status line, the old map stays
+                job["error"] = f"the map could not be drawn: {type(e).__name__}: {e}"
+            finally:
+                job["done"].set()
+
+        self._map_job = job
+        threading.Thread(target=work, name="coverage-map", daemon=True).start()
+
+    def _take_map(self) -> None:
+        """Show the map a thread finished, if it is the one last asked for."""
+        job = self._map_job
+        if job is None or not job["done"].is_set():
+            return
+        self._map_job = None
+        if job["key"] != self._map_wanted:
+            return
+        if "error" in job:
+            self.map_error = job["error"]
+            return
+        self.map_error = ""
+        dpg = self.dpg
+        labels, centres = job["labels"], job["centres"]
+        self.map_tex[...] = job["image"]              # in place: the texture shows it
         for i in range(MAX_CATEGORIES):
             tag = f"cov_cat_{i}"
             if i < len(labels) and np.isfinite(centres[i]).all():
@@ -281,12 +319,10 @@ class CoveragePanel(Panel):
                 dpg.configure_item(tag, label=labels[i], show=True)
             else:
                 dpg.configure_item(tag, show=False)
-        self._mode_shown = self.mode
-        self._excluded_shown = excluded_tags
+        self._map_shown = job["key"]
         self.last["categories"] = labels
-        self.last["frames_drawn"] = int(len(cat))
-        self.last["excluded_tags"] = list(excluded_tags) if excluded is not None else []
-        self.last["excluded_frames"] = int(excluded.sum()) if excluded is not None else 0
+        self.last["frames_drawn"] = job["frames"]
+        self.last["map"] = {"mode": job["key"][0], "excluded_tags": list(job["key"][1])}
 
     def update(self, view: View) -> None:
         if not self._ensure_coverage():
@@ -294,10 +330,13 @@ class CoveragePanel(Panel):
         dpg = self.dpg
         self._layout_heights()
         excluded_tags = self._excluded_tags()
-        if self._mode_shown != self.mode or self._excluded_shown != excluded_tags:
-            self._draw_map_data()
+        if self._map_wanted != (self.mode, excluded_tags):
+            self._want_map(self.mode, excluded_tags)
+        shown_before = self._map_shown
+        self._take_map()
+        pending = self._map_shown != self._map_wanted
         key = (view.tick_number, self.mode, self.channel, self.trail, tuple(view.tick.snapshots) if view.tick else (),
-               excluded_tags)
+               excluded_tags, self._map_shown != shown_before, pending, self.map_error)
         if key == self._shown_for:
             return
         self._shown_for = key
@@ -341,6 +380,10 @@ class CoveragePanel(Panel):
         if self.last.get("excluded_tags"):
             lines.append(f"dark grey on the map: {self.last['excluded_frames']} frames of excluded tags "
                          f"({', '.join(self.last['excluded_tags'])}), which motion matching does not pick")
+        if self.map_error:
+            lines.append(self.map_error)
+        elif pending:
+            lines.append(f"drawing the map of {cov.n_frames:,} frames ...")
         self.text.set("cov_status", "\n".join(lines) if lines else "no query yet")
         # the chosen channel's histogram with the query values
         hist = cov.histograms[self.channel]
@@ -372,7 +415,8 @@ class CoveragePanel(Panel):
         self.last.update({"tick": view.tick_number, "mode": self.mode, "channel": hist.name,
                           "variance_ratio": cov.pca.variance_ratio.tolist(),
                           "queries": {n: r.to_dict() for n, r in reports.items()},
-                          "percentiles": percentiles, "error": self.error})
+                          "percentiles": percentiles, "error": self.error, "map_pending": pending,
+                          "map_error": self.map_error})
 
     def state(self) -> dict:
         return dict(self.last)

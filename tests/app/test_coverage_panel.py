@@ -167,6 +167,9 @@ def test_coverage_panel_shows_the_live_and_the_picked_tick(run_studio, tmp_path,
     assert speed["mode"] == "speed" and speed["channel"] == "trajectory_position"
     assert speed["categories"][0].endswith("m/s") and speed["tick"] == old["displayed_tick"]
     assert len(speed["percentiles"]["mm"]) == 6
+    # the map is drawn on a thread: three frames after the switch it shows the speed classes
+    assert speed["map"] == {"mode": "speed", "excluded_tags": []} and not speed["map_pending"]
+    assert live["panels"]["coverage"]["map"] == {"mode": "tag", "excluded_tags": []}
     # a weight slider moved: the map stays, the query is re-expressed in its units, the distance is
     # measured as the search now measures it
     import copy
@@ -189,6 +192,8 @@ def test_coverage_panel_shows_the_live_and_the_picked_tick(run_studio, tmp_path,
     cov_now = rew["panels"]["coverage"]
     assert cov_now["excluded_tags"] == sorted(EXCLUDED)
     assert cov_now["excluded_frames"] == int(out.sum()) > 0
+    assert sorted(cov_now["map"]["excluded_tags"]) == sorted(EXCLUDED) and not cov_now["map_pending"]
+    assert cov_now["map_error"] == ""
     assert d["labels"]["live"]["panels"]["coverage"]["excluded_frames"] == 0
     # the window is drawn: the map, the heat map and the histograms make a busy picture
     img = np.asarray(Image.open(tmp_path / "coverage.png").convert("RGB"), np.float32)
