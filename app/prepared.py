@@ -91,8 +91,11 @@ class Preparer:
 
         return work
 
-    def receive(self, prepared: PreparedFrame | None) -> None:
-        self._frame = prepared
+    def receive(self, prepared: PreparedFrame | None):
+        """Take the next frame's prepared results; returns the ones they replace (the caller may have
+        them freed elsewhere: see ``TickWorker.submit``)."""
+        old, self._frame = self._frame, prepared
+        return old
 
     def result(self, key: str, view):
         """Panel ``key``'s prepared result for ``view``, or None when it has to work it out itself."""

@@ -286,7 +286,7 @@ class Studio(SessionActions):
         if self.session.recording_error:     # a write failed (full disk): the recording stopped itself
             self.stop_recording()
             self.errors.show("Recording", self.last_recording)
-        self.preparer.receive(self.worker.take_prepared())
+        replaced = self.preparer.receive(self.worker.take_prepared())   # freed on the worker (submit)
         step_ms = per_tick_ms(finished, self.session.names)
         dump_s = 0.0      # the state dump's own work (a test and benchmark instrument): not the studio's
         if self.dump is not None:
@@ -339,7 +339,8 @@ class Studio(SessionActions):
         self.script.captures.clear()
         # the next ticks are stepped on the worker while dearpygui draws (it releases the GIL);
         # from here to the next wait() nothing may touch the session
-        self.worker.submit(inputs, prep.job(view, shown, self.frame_index + 1))
+        self.worker.submit(inputs, prep.job(view, shown, self.frame_index + 1), release=replaced)
+        replaced = None
         dpg.render_dearpygui_frame()
         t4 = time.perf_counter()
         vp = self.viewport
