@@ -3,7 +3,6 @@ formats and small dearpygui helpers. What a panel is and may touch: :mod:`app.pa
 from __future__ import annotations
 
 import functools
-
 import math
 
 import numpy as np
