@@ -60,6 +60,21 @@ class RealKeyStudio:
         self.returncode = self.proc.returncode
         return False
 
+    def rect(self, path, item: str, wait_s: float = 60.0, settle_s: float = 0.5) -> list[float]:
+        """The screen rectangle [x0, y0, x1, y1] of ``item`` from the JSON file a ``write_rects`` action
+        writes at ``path``, waiting up to ``wait_s`` for it (then ``settle_s`` more, for the frames
+        after it to be drawn)."""
+        import json
+        import time
+
+        path = Path(path)
+        for _ in range(int(wait_s / 0.5)):
+            if path.exists():
+                break
+            time.sleep(0.5)
+        time.sleep(settle_s)
+        return json.loads(path.read_text())[item]
+
     def dump(self) -> dict:
         import json
 

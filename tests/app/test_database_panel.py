@@ -289,12 +289,7 @@ def test_a_real_click_on_a_candidate_row_previews_its_frame_xdotool(xvfb_display
                {"frame": 40, "do": "write_rects", "path": str(rects), "items": ["cand_1_rank"]}]
     with RealKeyStudio(tmp_path, xvfb_display, studio_cache, actions,
                        ["--layout", "default", "--input", "builtin:circle"]) as s:
-        for _ in range(120):
-            if rects.exists():
-                break
-            time.sleep(0.5)
-        time.sleep(1.0)
-        x0, y0, x1, y1 = json.loads(rects.read_text())["cand_1_rank"]
+        x0, y0, x1, y1 = s.rect(rects, "cand_1_rank", settle_s=1.0)
         s.xdo("windowfocus", "--sync", s.win)
         s.xdo("mousemove", "--window", s.win, str(int(x0 + 6)), str(int((y0 + y1) / 2)))
         s.xdo("click", "1")

@@ -401,12 +401,7 @@ def test_a_real_drag_of_the_timeline_slider_scrubs_back_xdotool(xvfb_display, st
     actions = [{"frame": 150, "do": "write_rects", "path": str(rects), "items": ["tl_slider"]}]
     with RealKeyStudio(tmp_path, xvfb_display, studio_cache, actions,
                        ["--layout", "default", "--input", "builtin:circle"]) as s:
-        for _ in range(120):
-            if rects.exists():
-                break
-            time.sleep(0.5)
-        time.sleep(0.5)
-        x0, y0, x1, y1 = json.loads(rects.read_text())["tl_slider"]
+        x0, y0, x1, y1 = s.rect(rects, "tl_slider")
         y = str(int((y0 + y1) / 2))
         s.xdo("windowfocus", "--sync", s.win)
         s.xdo("mousemove", "--window", s.win, str(int(x0 + 0.2 * (x1 - x0))), y)
