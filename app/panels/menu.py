@@ -31,6 +31,7 @@ class MenuBar:
         self.ctx = ctx
         self.dpg = ctx.dpg
         self.text = TextCache(ctx.dpg)
+        self._fps = None        # (frame, fps) last worked out
 
     def build(self) -> None:
         dpg = self.dpg
@@ -84,7 +85,10 @@ class MenuBar:
 
     def update(self, view: View) -> None:
         names = " + ".join(n.upper() for n in self.ctx.engine.controller_names())
-        fps = view.frame_times.fps() if view.frame_times is not None else float("nan")
+        # the frame rate (a median of the last frames) 4 times a second, as the Stats panel's numbers
+        if self._fps is None or not 0 <= view.frame - self._fps[0] < 15:
+            self._fps = (view.frame, view.frame_times.fps() if view.frame_times is not None else float("nan"))
+        fps = self._fps[1]
         parts = [names, view.mode, f"tick {view.tick_number}", f"input: {view.input_name or 'keyboard/gamepad'}",
                  f"layout: {view.layout}", f"{fps:.0f} fps"]
         if view.recording is not None:
