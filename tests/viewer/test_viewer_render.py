@@ -380,3 +380,21 @@ def test_a_prepared_pose_gives_the_records_of_a_direct_update(gl_ctx):
     # sticks style makes no capsule records ahead
     skel.style = "sticks"
     assert skel.prepare(pose).records is None
+
+
+def test_line_instances_pair_the_points_of_strips_and_segments(gl_ctx):
+    """Each instance holds a segment's two ends and their colours: consecutive points for a strip, (0, 1),
+    (2, 3), ... for segments, read back from the GPU buffer."""
+    pts = np.arange(18, dtype=np.float32).reshape(6, 3)
+    cols = np.linspace(0.0, 1.0, 24, dtype=np.float32).reshape(6, 4)
+    line = Lines(gl_ctx)
+    for mode, pairs in (("strip", [(0, 1), (1, 2), (2, 3), (3, 4), (4, 5)]), ("segments", [(0, 1), (2, 3), (4, 5)])):
+        line.update(pts, mode=mode, colors=cols)
+        got = np.frombuffer(line._buf.buffer.read(), np.float32).reshape(-1, 14)[:line._buf.count]
+        want = np.array([np.concatenate([pts[a], pts[b], cols[a], cols[b]]) for a, b in pairs], np.float32)
+        assert np.array_equal(got, want), mode
+    for n in (0, 1):                                   # no segment at all
+        line.update(pts[:n], mode="strip")
+        assert line._buf.count == 0
+    line.update(pts[:0], mode="segments")
+    assert line._buf.count == 0

@@ -31,17 +31,16 @@ class Lines(Renderable):
 
     def update(self, points, mode: str = "strip", colors=None) -> None:
         p = np.asarray(points, dtype=np.float32).reshape(-1, 3)
+        # each segment's first and second point, as slices (views: no index arrays, no gathers)
         if mode == "strip":
-            i0 = np.arange(max(len(p) - 1, 0))
-            i1 = i0 + 1
+            i0, i1 = slice(0, max(len(p) - 1, 0)), slice(1, None)
         elif mode == "segments":
             if len(p) % 2:
                 raise ValueError("mode='segments' needs an even number of points")
-            i0 = np.arange(0, len(p), 2)
-            i1 = i0 + 1
+            i0, i1 = slice(0, None, 2), slice(1, None, 2)
         else:
             raise ValueError(f"unknown mode {mode!r}: use 'strip' or 'segments'")
-        data = self._buf.staging(len(i0))
+        data = self._buf.staging(len(p[i0]))
         data[:, 0:3] = p[i0]
         data[:, 3:6] = p[i1]
         # unchanged colours (the same frozen array, the same default) for the same segments are still
