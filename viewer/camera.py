@@ -17,6 +17,11 @@ import numpy as np
 
 def look_at(eye, target, up=(0.0, 1.0, 0.0)) -> np.ndarray:
     """World -> view matrix of a camera at ``eye`` looking at ``target`` (view looks down -Z)."""
+    return np.array([*_look_at_rows(eye, target, up), (0.0, 0.0, 0.0, 1.0)], dtype=np.float32)
+
+
+def _look_at_rows(eye, target, up=(0.0, 1.0, 0.0)) -> tuple:
+    """The first three rows of :func:`look_at`, as float64 tuples (the last row is 0, 0, 0, 1)."""
     # plain float arithmetic: numpy's per-call overhead on 3-vectors is most of the cost otherwise
     ex, ey, ez = (float(v) for v in eye)
     tx, ty, tz = (float(v) for v in target)
@@ -31,19 +36,23 @@ def look_at(eye, target, up=(0.0, 1.0, 0.0)) -> np.ndarray:
         n = math.sqrt(rx * rx + ry * ry)
     rx, ry, rz = rx / n, ry / n, rz / n
     vx, vy, vz = ry * fz - rz * fy, rz * fx - rx * fz, rx * fy - ry * fx
-    return np.array([[rx, ry, rz, -(rx * ex + ry * ey + rz * ez)],
-                     [vx, vy, vz, -(vx * ex + vy * ey + vz * ez)],
-                     [-fx, -fy, -fz, fx * ex + fy * ey + fz * ez],
-                     [0.0, 0.0, 0.0, 1.0]], dtype=np.float32)
+    return ((rx, ry, rz, -(rx * ex + ry * ey + rz * ez)),
+            (vx, vy, vz, -(vx * ex + vy * ey + vz * ez)),
+            (-fx, -fy, -fz, fx * ex + fy * ey + fz * ez))
 
 
 def perspective(fov_y_deg: float, aspect: float, near: float, far: float) -> np.ndarray:
     """OpenGL perspective projection (NDC depth in [-1, 1])."""
-    # plain floats, then one array: the same IEEE doubles as numpy's scalar maths, a tenth of the calls
+    a, f, c, d = _perspective_terms(fov_y_deg, aspect, near, far)
+    return np.array([[a, 0.0, 0.0, 0.0], [0.0, f, 0.0, 0.0], [0.0, 0.0, c, d], [0.0, 0.0, -1.0, 0.0]],
+                    dtype=np.float32)
+
+
+def _perspective_terms(fov_y_deg: float, aspect: float, near: float, far: float) -> tuple:
+    """The four non-constant entries of :func:`perspective` (x scale, y scale, depth scale and offset),
+    float64: plain floats, the same IEEE doubles as numpy's scalar maths, a tenth of the calls."""
     f = 1.0 / math.tan(math.radians(fov_y_deg) / 2.0)
-    return np.array([[f / aspect, 0.0, 0.0, 0.0], [0.0, f, 0.0, 0.0],
-                     [0.0, 0.0, (far + near) / (near - far), 2.0 * far * near / (near - far)],
-                     [0.0, 0.0, -1.0, 0.0]], dtype=np.float32)
+    return f / aspect, f, (far + near) / (near - far), 2.0 * far * near / (near - far)
 
 
 def project_points(points, view_proj: np.ndarray, width: int, height: int):
@@ -72,7 +81,8 @@ def project_points_floats(points, view_proj: np.ndarray, width: int, height: int
     """:func:`project_points` for a few points in plain floats (labels: three or four a frame, where
     numpy's per-call cost is most of the work): ``[(x, y, in_front), ...]`` with the same pixel
     convention, equal to its pixels to float64 rounding."""
-    (a0, a1, a2, a3), (b0, b1, b2, b3), _, (d0, d1, d2, d3) = np.asarray(view_proj, np.float64).tolist()
+    rows = view_proj if isinstance(view_proj, tuple) else np.asarray(view_proj, np.float64).tolist()
+    (a0, a1, a2, a3), (b0, b1, b2, b3), _, (d0, d1, d2, d3) = rows
     half_w, half_h = 0.5 * width, 0.5 * height
     out = []
     for p in points:
@@ -145,14 +155,24 @@ class OrbitCamera:
         return perspective(self.fov_y_deg, aspect, self.near, self.far)
 
     def view_projection(self, aspect: float) -> np.ndarray:
-        # once per camera placement and aspect, as view_matrix (the labels and the render both ask)
+        """projection @ view (float32), as :meth:`view_projection_rows` works it out in float64."""
+        return np.array(self.view_projection_rows(aspect), dtype=np.float32)
+
+    def view_projection_rows(self, aspect: float) -> tuple:
+        """projection @ view as four float64 row tuples, kept per camera placement and aspect: the studio's
+        labels project through it every frame (plain floats: the numpy form cost 20-100 us a frame).
+        The product of the two float64 matrices before their rounding to float32, so within a float32
+        rounding of ``projection_matrix(aspect) @ view_matrix()``."""
         t = self.target
         key = (float(t[0]), float(t[1]), float(t[2]), self.distance, self.yaw_deg, self.pitch_deg,
                self.fov_y_deg, self.near_ratio, self.far_ratio, float(aspect))
         if self._vp_key != key:
-            self._vp = self.projection_matrix(aspect) @ self.view_matrix()
+            r0, r1, r2 = _look_at_rows(self._eye(), key[:3])
+            a, f, c, d = _perspective_terms(self.fov_y_deg, aspect, self.near, self.far)
+            self._vp = (tuple(a * v for v in r0), tuple(f * v for v in r1),
+                        (c * r2[0], c * r2[1], c * r2[2], c * r2[3] + d), tuple(-v for v in r2))
             self._vp_key = key
-        return self._vp.copy()
+        return self._vp
 
     def basis(self):
         """(right, up, forward) unit vectors of the camera in world space."""

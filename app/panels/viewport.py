@@ -658,7 +658,7 @@ class ViewportPanel(Panel):
         dpg = self.dpg
         cache = self.text
         w, h = self.size
-        vp = self.camera.view_projection(w / max(h, 1))
+        vp = self.camera.view_projection_rows(w / max(h, 1))
         from viewer.camera import project_points_floats
 
         # every label's anchor above a head, projected in one call
@@ -675,9 +675,11 @@ class ViewportPanel(Panel):
         rag = self.drawn.get("ragdoll")
         if rag is not None:
             _, positions, off = self.ragdoll_pose(view)
+            hx, hy, hz = positions[int(np.argmax(positions[:, 1]))].tolist()   # the highest joint, floats
+            ox, oy, oz = off.tolist()
             wanted.append(("ragdoll", "vp_label_ragdoll",
                            f"ragdoll ({SHORT.get(rag['controller'], rag['controller'])})",
-                           positions[int(np.argmax(positions[:, 1]))] + off + [0, 0.25, 0]))
+                           (hx + ox, hy + oy + 0.25, hz + oz)))
         else:
             cache.configure("vp_label_ragdoll", show=False)
         previews = self.drawn.get("previews", [])

@@ -2,7 +2,8 @@
 import numpy as np
 import pytest
 
-from viewer.camera import OrbitCamera, apply_drag, apply_scroll, look_at, perspective, project_points
+from viewer.camera import (OrbitCamera, _look_at_rows, _perspective_terms, apply_drag, apply_scroll, look_at,
+                           perspective, project_points, project_points_floats)
 
 
 def test_look_at_maps_eye_to_origin_and_target_to_minus_z():
@@ -139,23 +140,40 @@ def test_view_projection_is_remade_whenever_the_camera_or_the_aspect_changes():
     cam = OrbitCamera(target=np.array([0.5, 0.9, -1.0]), distance=3.0, yaw_deg=20.0, pitch_deg=10.0)
 
     def fresh(aspect):
-        return cam.projection_matrix(aspect) @ look_at(cam.eye, cam.target)
+        """The float64 product of the two matrices before their float32 rounding."""
+        a, f, c, d = _perspective_terms(cam.fov_y_deg, aspect, cam.near, cam.far)
+        proj = np.array([[a, 0, 0, 0], [0, f, 0, 0], [0, 0, c, d], [0, 0, -1, 0]], np.float64)
+        view = np.array([*_look_at_rows(cam.eye, cam.target), (0, 0, 0, 1)], np.float64)
+        out = proj @ view
+        # and within float32 rounding of the float32 matrices' product
+        assert np.allclose(out, cam.projection_matrix(aspect).astype(np.float64)
+                           @ cam.view_matrix().astype(np.float64), rtol=1e-6, atol=1e-6)
+        return out
+
+    def rows(aspect):
+        return np.array(cam.view_projection_rows(aspect))
 
     first = cam.view_projection(1.5)
-    assert np.array_equal(first, fresh(1.5))
-    first[:] = 0.0                                    # the caller's copy
-    assert np.array_equal(cam.view_projection(1.5), fresh(1.5))
+    assert first.dtype == np.float32 and np.array_equal(first, fresh(1.5).astype(np.float32))
+    first[:] = 0.0                                    # the caller's own array
+    assert np.allclose(rows(1.5), fresh(1.5), rtol=1e-13, atol=1e-13)
     changes = [lambda: setattr(cam, "yaw_deg", 21.0), lambda: setattr(cam, "pitch_deg", 12.0),
                lambda: setattr(cam, "distance", 2.5), lambda: setattr(cam, "fov_y_deg", 50.0),
                lambda: cam.follow([1.0, 0.0, 2.0], blend=0.5), lambda: cam.pan(10.0, 5.0, 600.0),
                lambda: setattr(cam, "near_ratio", 0.02)]
     for change in changes:
-        before = cam.view_projection(1.5)
+        before = rows(1.5)
         change()
-        after = cam.view_projection(1.5)
-        assert np.array_equal(after, fresh(1.5))
+        after = rows(1.5)
+        assert np.allclose(after, fresh(1.5), rtol=1e-13, atol=1e-13)
         assert not np.array_equal(after, before)
-    assert np.array_equal(cam.view_projection(0.75), fresh(0.75))
+    assert np.allclose(rows(0.75), fresh(0.75), rtol=1e-13, atol=1e-13)
+    # the labels' plain-float projection through the rows is project_points' through the matrix
+    pts = np.array([[0.3, 1.6, -0.4], [2.0, 0.1, 1.0], [-1.0, 1.0, -3.0]])
+    px, _, front = project_points(pts, rows(0.75), 640, 480)
+    floats = project_points_floats(pts, cam.view_projection_rows(0.75), 640, 480)
+    assert np.allclose([(x, y) for x, y, _ in floats], px, rtol=1e-12, atol=1e-9)
+    assert [ok for _, _, ok in floats] == front.tolist()
 
 
 def test_follow_in_plain_floats_gives_numpys_bits():
