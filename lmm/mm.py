@@ -139,7 +139,7 @@ class MotionMatchingController(CharacterController):
         idle = self.idle_set_active()
         tags = list(self.db.tag_names)
         bias = tuple(float(tun.tag_bias.get(t, 0.0)) for t in tags)
-        excluded = tuple(t for t in tags if tun.tag_excluded.get(t, False))
+        excluded = tun.excluded_tags(tags)
         # a bias or exclusion the user set on a tag this database lacks is worth a note; a shipped default is not
         unknown = tuple(sorted([("tag_bias", t) for t, b in tun.tag_bias.items()
                                 if b != DEFAULT_TAG_BIAS.get(t, 0.0) and t not in tags]

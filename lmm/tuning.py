@@ -220,10 +220,21 @@ class Tuning:
         channel keeps its weight, a custom tag goes back to no bias and not excluded."""
         if not isinstance(value, dict):
             return value
-        merged = {k: w if f.name == "feature_weights" else _NEUTRAL[f.metadata.get("item", "float")]
+        merged = {k: w if f.name == "feature_weights" else self.neutral_entry(f.name)
                   for k, w in getattr(self, f.name).items()}
         merged.update(value)
         return merged
+
+    @classmethod
+    def neutral_entry(cls, name: str):
+        """The entry of per-name field ``name`` that changes nothing (0.0, or False for true/false
+        entries): what a tag or channel the field does not name counts as."""
+        return _NEUTRAL[cls.field_info(name).metadata.get("item", "float")]
+
+    def excluded_tags(self, tags) -> tuple[str, ...]:
+        """Those of ``tags`` (a database's, in its order) that ``tag_excluded`` excludes."""
+        on = self.tag_excluded
+        return tuple(t for t in tags if on.get(t, False))
 
     def copy(self) -> "Tuning":
         return Tuning.from_dict(self.to_dict())

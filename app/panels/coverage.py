@@ -260,8 +260,7 @@ class CoveragePanel(Panel):
 
     def _excluded_tags(self) -> tuple[str, ...]:
         """The database's tags the tuning excludes from the search now (motion matching's)."""
-        on = self.ctx.tuning.tag_excluded
-        return tuple(t for t in self.ctx.engine.db.tag_names if on.get(t, False))
+        return self.ctx.tuning.excluded_tags(self.ctx.engine.db.tag_names)
 
     def _want_map(self, mode: str, excluded_tags: tuple[str, ...]) -> None:
         """The map is asked for in ``mode`` with ``excluded_tags`` dimmed: the frames motion matching may

@@ -71,7 +71,8 @@ def widget_specs(tuning: Tuning | None = None, tags=None) -> list[dict]:
                 names = list(entries)
                 if tags is not None and f.name in TAG_FIELDS:
                     neutral = getattr(fresh, f.name)
-                    off = [t for t in names if t not in tags and entries[t] != neutral.get(t, False if flags else 0.0)]
+                    off = [t for t in names
+                           if t not in tags and entries[t] != neutral.get(t, Tuning.neutral_entry(f.name))]
                     names = [t for t in tags if t in entries] + off     # the database's order, then the others
                 for i, channel in enumerate(names):
                     label = f"exclude {channel}" if flags else short_channel_name(channel)
@@ -156,7 +157,7 @@ class TuningPanel(Panel):
     def _value(self, spec: dict):
         v = getattr(self.tuning, spec["field"])
         if spec["channel"] is not None:
-            return v.get(spec["channel"], False if spec["kind"] == "bool" else 0.0)
+            return v.get(spec["channel"], Tuning.neutral_entry(spec["field"]))
         return v
 
     def _on_change(self, sender, value, user_data):
