@@ -280,26 +280,9 @@ def _leg_update(global_rot: list, global_pos: list, local_rot: list, local_pos, 
 
 def bone_heights(db, bones) -> np.ndarray:
     """World heights (F, len(bones)) of the given bones in every database frame: forward kinematics along
-    each bone's chain only (a handful of bones, not the whole skeleton)."""
-    parents = [int(p) for p in db.parents]
-    out = np.zeros((len(db.positions), len(bones)))
-    for k, b in enumerate(bones):
-        chain = []
-        j = int(b)
-        while j >= 0:
-            chain.append(j)
-            j = parents[j]
-        rot = pos = None
-        for j in reversed(chain):
-            lr = db.rotations[:, j].astype(np.float64)
-            lp = db.positions[:, j].astype(np.float64)
-            if rot is None:
-                rot, pos = lr, lp
-            else:
-                pos = pos + quat.mul_vec(rot, lp)
-                rot = quat.mul(rot, lr)
-        out[:, k] = pos[:, 1]
-    return out
+    each bone's chain only (a handful of bones, not the whole skeleton; see
+    :meth:`lmm.data.database.Database.global_transforms_of`)."""
+    return db.global_transforms_of([int(b) for b in bones])[1][:, :, 1]
 
 
 def range_contact_heights(db, toe_bones, min_frames: int = 10) -> np.ndarray:

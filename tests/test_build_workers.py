@@ -104,3 +104,44 @@ def test_features_do_not_depend_on_the_chunk_size(db, monkeypatch):
     first = features.layout_slices(features.DEFAULT_LAYOUT)[0]
     assert features.DEFAULT_LAYOUT[0].kind == "bone_position" and db.bone(features.DEFAULT_LAYOUT[0].bone) == foot
     assert np.array_equal(chunked[:, first], expected)
+
+
+def _build_db(tmp_path, manifest, cache, *extra):
+    import os
+
+    env = dict(os.environ, LMM_STUDIO_CACHE=str(cache))
+    return subprocess.run([sys.executable, "-m", "app.cli", "build-db", "--manifest", str(manifest), "--quiet", *extra],
+                          capture_output=True, text=True, timeout=300, env=env)
+
+
+def test_build_db_in_processes_writes_the_same_files_and_warnings(tmp_path):
+    """With two jobs the derived arrays are computed in a second process while the database file is
+    written, and the data checks in a third: the same files, bit for bit, and the same warnings as one
+    process doing it all in turn."""
+    _manifest(tmp_path, CLIPS)
+    outputs = {}
+    for jobs in ("1", "2"):
+        cache = tmp_path / f"cache{jobs}"
+        r = _build_db(tmp_path, tmp_path / "m.json", cache, "--jobs", jobs)
+        assert r.returncode == 0, r.stderr
+        (db_file,) = cache.glob("*.npz")
+        derived = {p.name: p.read_bytes() for p in (cache / (db_file.name + ".derived")).glob("*.npy")}
+        warnings = [line for line in r.stderr.splitlines() if line.strip()]
+        outputs[jobs] = (db_file.name, db_file.read_bytes(), derived, warnings)
+    assert {n.split("-")[0] for n in outputs["2"][2]} == {"features", "root_local_velocities",
+                                                         "range_contact_heights", "default_start_frame",
+                                                         "source_ground_skating"}
+    assert outputs["1"] == outputs["2"]
+    assert outputs["2"][3] and all(line.startswith("warning: ") for line in outputs["2"][3])
+
+
+def test_build_db_that_cannot_write_its_file_leaves_nothing_beside_it(tmp_path):
+    """The database file cannot be written (a file where its folder should be): one line, no warnings
+    of the checks that ran meanwhile, no derived-array folder."""
+    blocker = tmp_path / "file.txt"
+    blocker.write_text("a file, not a folder")
+    _manifest(tmp_path, CLIPS[:2])
+    r = _build_db(tmp_path, tmp_path / "m.json", tmp_path / "cache", "--jobs", "2", "--out", str(blocker / "db.npz"))
+    lines = [line for line in r.stderr.splitlines() if line.strip()]
+    assert r.returncode == 1 and len(lines) == 1 and "db.npz" in lines[0] and "Traceback" not in r.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["file.txt", "m.json"]

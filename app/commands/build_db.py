@@ -38,20 +38,36 @@ def main(args) -> int:
     jobs = args.jobs if args.jobs is not None else min(MAX_BUILD_WORKERS, os.cpu_count() or 1)
 
     progress = ProgressCallback("build-db", quiet=args.quiet)
+    derived = _DerivedBeside(jobs)
+    checks = None
+
+    def before_save(db, path):
+        # while the database file is written: its derived arrays and the data checks in other processes
+        nonlocal checks
+        derived.start(db, path)
+        if not args.no_checks:
+            checks = _start_checks(args.manifest, jobs)
+
     try:
         # one process needs no workers; more build takes side by side (same database bit for bit)
         db, info = load_or_build(args.manifest, progress=progress, rebuild=args.rebuild, out_path=args.out,
-                                 workers=jobs if jobs > 1 else 0)
+                                 workers=jobs if jobs > 1 else 0, before_save=before_save)
     except InputError as e:  # a bad manifest, take or field: the line names the file and field
         _error(str(e))
         return 1
     except OSError as e:  # --out not writable (read-only folder, full disk): nothing was written there
+        derived.discard()
+        if checks is not None:
+            checks.cancel()
         _error(_os_error_line(e, args.out))
         return 1
     finally:
         progress.close()
-    checks = None if args.no_checks else _start_checks(args.manifest, jobs)
-    if info.path is not None:
+    if checks is None and not args.no_checks:
+        checks = _start_checks(args.manifest, jobs)
+    if info.path is None:
+        derived.discard()
+    elif not derived.finish():
         _precompute_derived(db)
     source = "cache" if info.cached else "built"
     print(f"database  {db.name} ({source} in {info.seconds:.2f} s)")
@@ -64,6 +80,48 @@ def main(args) -> int:
     if checks is not None:
         _print_warnings(checks)
     return 0
+
+
+class _DerivedBeside:
+    """The derived arrays of a database just built, computed in a second process while this one writes
+    the database file (``start`` is :func:`lmm.data.database.load_or_build`'s ``before_save``): writing
+    600 MB and filling the cache were one after the other before (about 2 s and 5 s for the 0.5 M-frame
+    set). Only with cores to spare and ``fork`` (the child reads the database this process holds)."""
+
+    def __init__(self, jobs: int):
+        self.jobs, self.process, self.folder = jobs, None, None
+
+    def start(self, db, path) -> None:
+        import multiprocessing
+
+        if self.jobs < 2 or "fork" not in multiprocessing.get_all_start_methods():
+            return
+        from lmm.data.derived import derived_dir_of
+
+        def run():
+            db.source_path = path
+            _precompute_derived(db)
+
+        self.folder = derived_dir_of(path)
+        self.process = multiprocessing.get_context("fork").Process(target=run, name="build-db-derived")
+        self.process.start()
+
+    def finish(self) -> bool:
+        """Wait for the second process: True when it filled the cache."""
+        if self.process is None:
+            return False
+        self.process.join()
+        return self.process.exitcode == 0
+
+    def discard(self) -> None:
+        """The database file was not written: stop and remove what the second process wrote beside it."""
+        if self.process is None:
+            return
+        import shutil
+
+        self.process.terminate()
+        self.process.join()
+        shutil.rmtree(self.folder, ignore_errors=True)
 
 
 def _precompute_derived(db) -> None:
@@ -96,21 +154,38 @@ def _warning_lines(manifest_path) -> list[str]:
 
 def _start_checks(manifest_path, jobs: int):
     """The data checks' warning lines, as a call that returns them: with cores to spare the checks run
-    in a second process meanwhile (while this one fills the derived-array cache), else at the call."""
+    in another process meanwhile (while this one writes the database file), else at the call. The call
+    has ``cancel()``, which stops that process (a build that failed prints no warnings)."""
     import multiprocessing
 
     if jobs < 2 or "fork" not in multiprocessing.get_all_start_methods():
-        return lambda: _warning_lines(manifest_path)
-    from concurrent.futures import ProcessPoolExecutor
+        def now() -> list[str]:
+            return _warning_lines(manifest_path)
+        now.cancel = lambda: None
+        return now
+    # a plain process and a pipe: no helper thread in this process, which may fork again
+    ctx = multiprocessing.get_context("fork")
+    receive, send = ctx.Pipe(duplex=False)
 
-    pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("fork"))
-    future = pool.submit(_warning_lines, manifest_path)
+    def run():
+        try:
+            lines = _warning_lines(manifest_path)
+        except Exception as e:  # noqa: BLE001 - a failed check is reported, never fatal to the build
+            lines = [f"warning: data checks failed: {type(e).__name__}: {e}"]
+        send.send(lines)
+
+    process = ctx.Process(target=run, name="build-db-checks", daemon=True)
+    process.start()
+    send.close()
 
     def result() -> list[str]:
         try:
-            return future.result()
+            return receive.recv()
+        except EOFError:
+            return [f"warning: data checks stopped (exit code {process.exitcode})"]
         finally:
-            pool.shutdown()
+            process.join()
+    result.cancel = process.terminate
     return result
 
 

@@ -14,9 +14,11 @@ past :data:`MAX_DATABASE_FRAMES` frames.
 """
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import os
+import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -296,12 +298,27 @@ def local_to_global(local_rot, local_pos, parents):
 
 
 def global_to_local(global_rot, global_pos, parents):
+    global_rot, global_pos = np.asarray(global_rot), np.asarray(global_pos)
     local_rot = np.array(global_rot, copy=True)
     local_pos = np.array(global_pos, copy=True)
-    for j, p in enumerate(parents):
-        if p >= 0:
-            local_rot[..., j, :] = quat.inv_mul(global_rot[..., p, :], global_rot[..., j, :])
-            local_pos[..., j, :] = quat.inv_mul_vec(global_rot[..., p, :], global_pos[..., j, :] - global_pos[..., p, :])
+    blocks = quat._per_frame_blocks((global_rot, global_pos))
+    if blocks is None:
+        for j, p in enumerate(parents):
+            if p >= 0:
+                local_rot[..., j, :] = quat.inv_mul(global_rot[..., p, :], global_rot[..., j, :])
+                local_pos[..., j, :] = quat.inv_mul_vec(global_rot[..., p, :], global_pos[..., j, :] - global_pos[..., p, :])
+        return local_rot, local_pos
+    for s in blocks:  # long takes: a block of frames at a time, joint-major (the same operations and bits)
+        gr, gp = quat.joint_major(global_rot[s], local_rot.dtype), quat.joint_major(global_pos[s], local_pos.dtype)
+        lr, lp = gr.copy(), gp.copy()
+        for j, p in enumerate(parents):
+            if p >= 0:
+                w, x, y, z = gr[p]
+                inverse = (w, -x, -y, -z)        # conj: a negation is exact
+                quat._mul_rows(inverse, gr[j], lr[j])
+                quat._mul_vec_rows(inverse, gp[j] - gp[p], lp[j])
+        local_rot[s] = lr.transpose(2, 0, 1)
+        local_pos[s] = lp.transpose(2, 0, 1)
     return local_rot, local_pos
 
 
@@ -380,7 +397,10 @@ def quat_central_difference(q: np.ndarray, dt: float) -> np.ndarray:
     out = np.zeros(q.shape[:-1] + (3,), dtype=np.float64)
     if n < 2:
         return out
-    out[1:-1] = quat.to_scaled_angle_axis(quat.abs_(quat.mul_inv(q[2:], q[:-2]))) / (2 * dt)
+    # frame i's difference reads frames i - 1 and i + 1 only: a block of frames at a time, the same bits
+    for s in quat.frame_blocks(n - 2) if n > quat.FRAME_BLOCK else (slice(0, n - 2),):
+        out[1 + s.start:1 + s.stop] = quat.to_scaled_angle_axis(
+            quat.abs_(quat.mul_inv(q[2 + s.start:2 + s.stop], q[s]))) / (2 * dt)
     out[0] = quat.to_scaled_angle_axis(quat.abs_(quat.mul_inv(q[1], q[0]))) / dt
     out[-1] = quat.to_scaled_angle_axis(quat.abs_(quat.mul_inv(q[-1], q[-2]))) / dt
     return out
@@ -563,14 +583,39 @@ def _build_take(manifest: Manifest, ci: int, skeleton=None, frames_before: int =
     return _Take(names, parents, total_frames - frames_before, pieces)
 
 
+#: the arrays of a :class:`_Piece` (the rest are its name and mirror flag)
+_PIECE_ARRAYS = ("positions", "rotations", "velocities", "angular_velocities", "contacts", "toe_speeds")
+
+
 def _build_take_or_none(job) -> _Take | None:
     """A worker's job: the take, or None when it fails (the build then redoes it in order to raise the
-    very error a one-process build raises)."""
-    manifest, ci = job
+    very error a one-process build raises). With a spill folder the pieces' arrays are written there as
+    ``.npy`` files and the take comes back holding their paths (see :func:`_unspill`): a long take's
+    arrays are tens of MB, and pickling them through the pool's pipe cost the parent process about 4 s
+    of CPU for the 0.5 M-frame set, against a read of files the page cache still holds."""
+    manifest, ci, spill = job
     try:
-        return _build_take(manifest, ci)
+        take = _build_take(manifest, ci)
+        if spill is not None:
+            for k, piece in enumerate(take.pieces):
+                for name in _PIECE_ARRAYS:
+                    path = os.path.join(spill, f"{ci}-{k}-{name}.npy")
+                    np.save(path, getattr(piece, name), allow_pickle=False)
+                    setattr(piece, name, path)
+        return take
     except Exception:
         return None
+
+
+def _unspill(take: _Take | None) -> _Take | None:
+    """A worker's take with its spilled arrays read back (memory maps of the files)."""
+    if take is not None:
+        for piece in take.pieces:
+            for name in _PIECE_ARRAYS:
+                value = getattr(piece, name)
+                if isinstance(value, str):
+                    setattr(piece, name, np.load(value, mmap_mode="r", allow_pickle=False))
+    return take
 
 
 def build_workers(manifest: Manifest) -> int:
@@ -580,10 +625,11 @@ def build_workers(manifest: Manifest) -> int:
     return n if n > 1 else 0
 
 
-def _takes(manifest: Manifest, workers: int):
+def _takes(manifest: Manifest, workers: int, spill: str | None = None):
     """The takes in manifest order, each checked exactly as a one-process build checks it. With
-    ``workers`` > 0 they are built in that many processes, ahead of the order; a take that failed there
-    or breaks a cross-take rule is built again here, which raises."""
+    ``workers`` > 0 they are built in that many processes, ahead of the order (their arrays passed
+    through files in the folder ``spill`` when given, see :func:`_build_take_or_none`); a take that
+    failed there or breaks a cross-take rule is built again here, which raises."""
     skeleton, total = None, 0
     workers = min(workers, len(manifest.clips))
     if workers <= 1:
@@ -597,7 +643,8 @@ def _takes(manifest: Manifest, workers: int):
     # fork where there is one: no re-import of the caller's main module (spawn's) is needed
     method = "fork" if "fork" in multiprocessing.get_all_start_methods() else "spawn"
     with multiprocessing.get_context(method).Pool(workers) as pool:
-        for ci, take in enumerate(pool.imap(_build_take_or_none, [(manifest, ci) for ci in range(len(manifest.clips))])):
+        jobs = [(manifest, ci, spill) for ci in range(len(manifest.clips))]
+        for ci, take in enumerate(map(_unspill, pool.imap(_build_take_or_none, jobs))):
             if (take is None or total + take.n_frames > MAX_DATABASE_FRAMES
                     or (skeleton is not None and (take.names != skeleton[0]
                                                   or not np.array_equal(take.parents, skeleton[1])))):
@@ -612,33 +659,39 @@ def build(manifest: Manifest, progress=None, workers: int = 0) -> Database:
     for single-threaded callers such as ``lmm-studio build-db`` (forking a process that runs threads, a GUI,
     is not safe); the database is the same bit for bit either way."""
     total_ranges = sum(len(c.ranges) if c.ranges else 1 for c in manifest.clips) * (2 if manifest.mirror else 1)
-    names = parents = None
-    pieces: list[_Piece] = []
-    for take in _takes(manifest, workers):
-        names, parents = names or take.names, take.parents if parents is None else parents
-        for piece in take.pieces:
-            pieces.append(piece)
-            if progress:
-                progress(len(pieces), total_ranges, piece.name)
+    workers = min(workers, len(manifest.clips))
+    # the workers' arrays come back through files here (removed once joined into the database's arrays)
+    spill = (tempfile.TemporaryDirectory(prefix="lmm-build-", ignore_cleanup_errors=True) if workers > 1
+             else contextlib.nullcontext(None))
+    with spill as spill_dir:
+        names = parents = None
+        pieces: list[_Piece] = []
+        for take in _takes(manifest, workers, spill_dir):
+            names, parents = names or take.names, take.parents if parents is None else parents
+            for piece in take.pieces:
+                pieces.append(piece)
+                if progress:
+                    progress(len(pieces), total_ranges, piece.name)
 
-    all_names = [SIMULATION_BONE] + names
-    all_parents = np.concatenate([[-1], np.where(parents < 0, 0, parents + 1)]).astype(np.int64)
-    lengths = np.array([p.positions.shape[0] for p in pieces], dtype=np.int64)
-    stops = np.cumsum(lengths)
-    mirror_full = np.concatenate([[0], mirror_map(names, manifest.mirror_name_pairs) + 1]).astype(np.int64)
+        all_names = [SIMULATION_BONE] + names
+        all_parents = np.concatenate([[-1], np.where(parents < 0, 0, parents + 1)]).astype(np.int64)
+        lengths = np.array([p.positions.shape[0] for p in pieces], dtype=np.int64)
+        stops = np.cumsum(lengths)
+        mirror_full = np.concatenate([[0], mirror_map(names, manifest.mirror_name_pairs) + 1]).astype(np.int64)
 
-    def joined(field_name):
-        return np.concatenate([getattr(p, field_name) for p in pieces])
+        def joined(field_name):
+            return np.concatenate([getattr(p, field_name) for p in pieces])
 
-    db = Database(
-        names=all_names, parents=all_parents,
-        positions=joined("positions"), rotations=joined("rotations"), velocities=joined("velocities"),
-        angular_velocities=joined("angular_velocities"), contacts=joined("contacts").astype(bool),
-        toe_speeds=joined("toe_speeds"),
-        range_starts=stops - lengths, range_stops=stops,
-        range_names=[p.name for p in pieces], range_mirrored=np.array([p.mirrored for p in pieces], dtype=bool),
-        fps=float(manifest.target_fps), bone_roles=dict(manifest.bones), mirror_map=mirror_full,
-        key=manifest_key(manifest), name=manifest.name, build_fingerprint=build_code_fingerprint())
+        db = Database(
+            names=all_names, parents=all_parents,
+            positions=joined("positions"), rotations=joined("rotations"), velocities=joined("velocities"),
+            angular_velocities=joined("angular_velocities"), contacts=joined("contacts").astype(bool),
+            toe_speeds=joined("toe_speeds"),
+            range_starts=stops - lengths, range_stops=stops,
+            range_names=[p.name for p in pieces], range_mirrored=np.array([p.mirrored for p in pieces], dtype=bool),
+            fps=float(manifest.target_fps), bone_roles=dict(manifest.bones), mirror_map=mirror_full,
+            key=manifest_key(manifest), name=manifest.name, build_fingerprint=build_code_fingerprint())
+        pieces.clear()  # the files' maps closed before the folder goes
     db.set_tags(database_range_tags(manifest))
     set_feature_schema(db, manifest)
     return db
@@ -666,12 +719,14 @@ class LoadInfo:
 
 
 def load_or_build(manifest_path=None, cache_dir=None, progress=None, rebuild: bool = False,
-                  out_path=None, workers: int = 0) -> tuple[Database, LoadInfo]:
+                  out_path=None, workers: int = 0, before_save=None) -> tuple[Database, LoadInfo]:
     """The database for a manifest, from the cache when its key matches, else built (``workers``: see
     :func:`build`) and cached.
 
     With ``out_path`` the database is written there and a failure to write it is an ``OSError`` (the
-    caller asked for that file); a cache that cannot be written is only reported in ``LoadInfo``."""
+    caller asked for that file); a cache that cannot be written is only reported in ``LoadInfo``.
+    ``before_save(db, path)``, when given, is called after a build, before the file is written (the
+    caller may start work that needs the database and the path, e.g. its derived arrays, meanwhile)."""
     t0 = time.perf_counter()
     manifest = load_manifest(manifest_path or DEFAULT_MANIFEST)
     key = manifest_key(manifest)
@@ -695,6 +750,8 @@ def load_or_build(manifest_path=None, cache_dir=None, progress=None, rebuild: bo
         except DatabaseError:
             pass  # stale or damaged cache: rebuild below
     db = build(manifest, progress=progress, workers=workers)
+    if before_save is not None:
+        before_save(db, path)
     if out_path:
         db.save(path)  # atomic: an OSError leaves no file behind, and the caller reports it
         db.source_path = path

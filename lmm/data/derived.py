@@ -44,7 +44,12 @@ def file_digest(path) -> str:
 def derived_dir(db) -> Path | None:
     """The folder of ``db``'s derived arrays, or None for a database not loaded from a file."""
     source = getattr(db, "source_path", None)
-    return None if source is None else Path(str(source) + ".derived")
+    return None if source is None else derived_dir_of(source)
+
+
+def derived_dir_of(database_file) -> Path:
+    """The folder of the derived arrays of the database file ``database_file``."""
+    return Path(str(database_file) + ".derived")
 
 
 def entry_path(db, name: str, params, compute: Callable) -> Path | None:
