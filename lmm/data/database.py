@@ -342,12 +342,13 @@ def mirror_frame_rotation(offsets, parents, mirror_idx) -> np.ndarray:
     return _OFFSET_REFLECTIONS[int(np.argmin(errors))][1]
 
 
-def mirror_local(local_rot, local_pos, parents, mirror_idx):
+def mirror_local(local_rot, local_pos, parents, mirror_idx, global_transforms=None):
     """Reflect a motion across the world YZ plane (negate X) and swap left/right joints.
 
     Bone offsets stay those of the original skeleton (see :func:`mirror_frame_rotation`).
+    ``global_transforms``: ``local_to_global(local_rot, local_pos, parents)`` when the caller has it.
     """
-    g_rot, g_pos = local_to_global(local_rot, local_pos, parents)
+    g_rot, g_pos = global_transforms or local_to_global(local_rot, local_pos, parents)
     g_pos = g_pos * np.array([-1.0, 1.0, 1.0])
     g_rot = g_rot * np.array([1.0, 1.0, -1.0, -1.0])  # M R M with M = diag(-1, 1, 1)
     g_rot = quat.mul(g_rot, mirror_frame_rotation(np.asarray(local_pos)[0], parents, mirror_idx))
@@ -397,12 +398,39 @@ def quat_central_difference(q: np.ndarray, dt: float) -> np.ndarray:
     out = np.zeros(q.shape[:-1] + (3,), dtype=np.float64)
     if n < 2:
         return out
-    # frame i's difference reads frames i - 1 and i + 1 only: a block of frames at a time, the same bits
-    for s in quat.frame_blocks(n - 2) if n > quat.FRAME_BLOCK else (slice(0, n - 2),):
-        out[1 + s.start:1 + s.stop] = quat.to_scaled_angle_axis(
-            quat.abs_(quat.mul_inv(q[2 + s.start:2 + s.stop], q[s]))) / (2 * dt)
+    # frame i's difference reads frames i - 1 and i + 1 only: on long takes a block of frames at a time,
+    # joint-major (the same operations, the same bits)
+    if q.ndim == 3 and n > quat.FRAME_BLOCK:
+        for s in quat.frame_blocks(n - 2):
+            rows = quat.joint_major(q[2 + s.start:2 + s.stop], out.dtype)
+            before = quat.joint_major(q[s], out.dtype)
+            out[1 + s.start:1 + s.stop] = _angular_velocity_rows(rows, before, 2 * dt).transpose(2, 0, 1)
+    elif n > 2:
+        out[1:-1] = quat.to_scaled_angle_axis(quat.abs_(quat.mul_inv(q[2:], q[:-2]))) / (2 * dt)
     out[0] = quat.to_scaled_angle_axis(quat.abs_(quat.mul_inv(q[1], q[0]))) / dt
     out[-1] = quat.to_scaled_angle_axis(quat.abs_(quat.mul_inv(q[-1], q[-2]))) / dt
+    return out
+
+
+def _angular_velocity_rows(a: np.ndarray, b: np.ndarray, dt: float, eps: float = 1e-8) -> np.ndarray:
+    """``quat.to_scaled_angle_axis(quat.abs_(quat.mul_inv(a, b))) / dt`` on joint-major component rows
+    (J, 4, B): the operations of those functions in their order (conj, product, abs_ twice, the norm's
+    sum of squares, arctan2 of the clipped w, the small-angle choice), so the same bits. Returns (J, 3, B)."""
+    bw, bx, by, bz = b.transpose(1, 0, 2)
+    q = np.empty_like(a)
+    quat._mul_rows(a.transpose(1, 0, 2), (bw, -bx, -by, -bz), q.transpose(1, 0, 2))
+    w = q[:, 0]
+    flip = w < 0.0                                    # abs_ (the second abs_ in log changes nothing)
+    np.negative(q, out=q, where=flip[:, None, :])
+    xyz = q[:, 1:]
+    x, y, z = xyz.transpose(1, 0, 2)
+    length = np.sqrt(x * x + y * y + z * z)
+    small = length < eps
+    safe = np.where(small, 1.0, length)
+    halfangle = np.arctan2(length, np.clip(w, -1.0, 1.0))
+    out = np.where(small[:, None, :], xyz, (halfangle / safe)[:, None, :] * xyz)
+    out *= 2.0
+    out /= dt
     return out
 
 
@@ -499,12 +527,14 @@ class _Take:
     pieces: list[_Piece]
 
 
-def _finish_piece(name: str, is_mirror: bool, rot, pos, parents, manifest: Manifest, names) -> _Piece:
-    """A resampled range -> the stored range: simulation bone, velocities, contacts (float32)."""
+def _finish_piece(name: str, is_mirror: bool, rot, pos, parents, manifest: Manifest, names,
+                  global_transforms=None) -> _Piece:
+    """A resampled range -> the stored range: simulation bone, velocities, contacts (float32).
+    ``global_transforms``: ``local_to_global(rot, pos, parents)`` when the caller has it."""
     hips, spine = names.index(manifest.bones["hips"]), names.index(manifest.bones["spine"])
     toes = [names.index(manifest.bones["left_toe"]), names.index(manifest.bones["right_toe"])]
     dt = 1.0 / manifest.target_fps
-    g_rot, g_pos = local_to_global(rot, pos, parents)
+    g_rot, g_pos = global_transforms or local_to_global(rot, pos, parents)
     sim_rot, sim_pos = simulation_bone(g_rot, g_pos, spine, hips, manifest.hips_forward_axis, manifest)
     # re-parent every root of the file under the simulation bone
     rot = rot.copy()
@@ -576,9 +606,11 @@ def _build_take(manifest: Manifest, ci: int, skeleton=None, frames_before: int =
         rot, pos = resample(quat.unroll(local_rot[start:stop]), local_pos[start:stop], source_fps,
                             manifest.target_fps, manifest.speed_scale)
         base = f"{clip.file.name.split('.')[0]}[{start}:{stop}]"
-        pieces.append(_finish_piece(base, False, rot, pos, parents, manifest, names))
+        # the range's forward kinematics, once for the piece and its mirrored copy
+        global_transforms = local_to_global(rot, pos, parents)
+        pieces.append(_finish_piece(base, False, rot, pos, parents, manifest, names, global_transforms))
         if manifest.mirror:
-            mrot, mpos = mirror_local(rot, pos, parents, mirror_idx)
+            mrot, mpos = mirror_local(rot, pos, parents, mirror_idx, global_transforms)
             pieces.append(_finish_piece(base + " mirrored", True, quat.unroll(mrot), mpos, parents, manifest, names))
     return _Take(names, parents, total_frames - frames_before, pieces)
 
