@@ -268,7 +268,7 @@ def frame_blocks(n: int, block: int = FRAME_BLOCK) -> list[slice]:
     return [slice(i, min(i + block, n)) for i in range(0, n, block)]
 
 
-def _per_frame_blocks(arrays) -> list[slice] | None:
+def per_frame_blocks(arrays) -> list[slice] | None:
     """:func:`frame_blocks` for arrays that share a leading frame axis ahead of a joint axis and are
     longer than a block; None otherwise (broadcast or short inputs run in one go)."""
     n = arrays[0].shape[0] if arrays[0].ndim >= 3 else 0
@@ -287,7 +287,7 @@ def forward_kinematics(local_rot: np.ndarray, local_pos: np.ndarray, parents) ->
     local_rot, local_pos = np.asarray(local_rot), np.asarray(local_pos)
     g_rot = np.empty(np.broadcast_shapes(local_rot.shape[:-1]) + (4,), dtype=np.result_type(local_rot, local_pos))
     g_pos = np.empty(local_pos.shape, dtype=g_rot.dtype)
-    blocks = _per_frame_blocks((local_rot, local_pos))
+    blocks = per_frame_blocks((local_rot, local_pos))
     if blocks is None:
         _forward_kinematics_into(local_rot, local_pos, parents, g_rot, g_pos)
     else:
@@ -296,7 +296,7 @@ def forward_kinematics(local_rot: np.ndarray, local_pos: np.ndarray, parents) ->
     return g_rot, g_pos
 
 
-def _mul_rows(a, b, out) -> None:
+def mul_rows(a, b, out) -> None:
     """:func:`mul` on quaternions given as four component rows each (``a``, ``b``: sequences of four
     arrays), into the rows of ``out``: the same operations in the same order, so the same bits."""
     aw, ax, ay, az = a
@@ -307,7 +307,7 @@ def _mul_rows(a, b, out) -> None:
     out[3] = aw * bz + ax * by - ay * bx + az * bw
 
 
-def _mul_vec_rows(q, v, out, plus=None) -> None:
+def mul_vec_rows(q, v, out, plus=None) -> None:
     """:func:`mul_vec` on component rows (``q`` four, ``v`` three), into the rows of ``out``, plus the
     rows of ``plus`` when given (added last, as ``mul_vec(q, v) + plus``): the same operations."""
     w, x, y, z = q
@@ -327,7 +327,7 @@ def _mul_vec_rows(q, v, out, plus=None) -> None:
 
 def joint_major(a: np.ndarray, dtype) -> np.ndarray:
     """A block of frames (B, J, C) as a contiguous (J, C, B) array of ``dtype`` (an exact cast): every
-    component of every joint a contiguous row, for :func:`_mul_rows` and :func:`_mul_vec_rows`."""
+    component of every joint a contiguous row, for :func:`mul_rows` and :func:`mul_vec_rows`."""
     return np.ascontiguousarray(np.asarray(a).transpose(1, 2, 0), dtype=dtype)
 
 
@@ -342,8 +342,8 @@ def _forward_kinematics_block(local_rot, local_pos, parents, g_rot, g_pos) -> No
         if p < 0:
             gr[j], gp[j] = lr[j], lp[j]
         else:
-            _mul_rows(gr[p], lr[j], gr[j])
-            _mul_vec_rows(gr[p], lp[j], gp[j], plus=gp[p])
+            mul_rows(gr[p], lr[j], gr[j])
+            mul_vec_rows(gr[p], lp[j], gp[j], plus=gp[p])
     g_rot[...] = gr.transpose(2, 0, 1)
     g_pos[...] = gp.transpose(2, 0, 1)
 

@@ -301,7 +301,7 @@ def global_to_local(global_rot, global_pos, parents):
     global_rot, global_pos = np.asarray(global_rot), np.asarray(global_pos)
     local_rot = np.array(global_rot, copy=True)
     local_pos = np.array(global_pos, copy=True)
-    blocks = quat._per_frame_blocks((global_rot, global_pos))
+    blocks = quat.per_frame_blocks((global_rot, global_pos))
     if blocks is None:
         for j, p in enumerate(parents):
             if p >= 0:
@@ -315,8 +315,8 @@ def global_to_local(global_rot, global_pos, parents):
             if p >= 0:
                 w, x, y, z = gr[p]
                 inverse = (w, -x, -y, -z)        # conj: a negation is exact
-                quat._mul_rows(inverse, gr[j], lr[j])
-                quat._mul_vec_rows(inverse, gp[j] - gp[p], lp[j])
+                quat.mul_rows(inverse, gr[j], lr[j])
+                quat.mul_vec_rows(inverse, gp[j] - gp[p], lp[j])
         local_rot[s] = lr.transpose(2, 0, 1)
         local_pos[s] = lp.transpose(2, 0, 1)
     return local_rot, local_pos
@@ -402,8 +402,8 @@ def quat_central_difference(q: np.ndarray, dt: float) -> np.ndarray:
     # joint-major (the same operations, the same bits)
     if q.ndim == 3 and n > quat.FRAME_BLOCK:
         for s in quat.frame_blocks(n - 2):
-            rows = quat.joint_major(q[2 + s.start:2 + s.stop], out.dtype)
-            before = quat.joint_major(q[s], out.dtype)
+            rows = quat.joint_major(q[2 + s.start:2 + s.stop], q.dtype)   # in q's own type, as in one go
+            before = quat.joint_major(q[s], q.dtype)
             out[1 + s.start:1 + s.stop] = _angular_velocity_rows(rows, before, 2 * dt).transpose(2, 0, 1)
     elif n > 2:
         out[1:-1] = quat.to_scaled_angle_axis(quat.abs_(quat.mul_inv(q[2:], q[:-2]))) / (2 * dt)
@@ -418,7 +418,7 @@ def _angular_velocity_rows(a: np.ndarray, b: np.ndarray, dt: float, eps: float =
     sum of squares, arctan2 of the clipped w, the small-angle choice), so the same bits. Returns (J, 3, B)."""
     bw, bx, by, bz = b.transpose(1, 0, 2)
     q = np.empty_like(a)
-    quat._mul_rows(a.transpose(1, 0, 2), (bw, -bx, -by, -bz), q.transpose(1, 0, 2))
+    quat.mul_rows(a.transpose(1, 0, 2), (bw, -bx, -by, -bz), q.transpose(1, 0, 2))
     w = q[:, 0]
     flip = w < 0.0                                    # abs_ (the second abs_ in log changes nothing)
     np.negative(q, out=q, where=flip[:, None, :])
