@@ -167,7 +167,7 @@ def _fk_links_into(g: list, p: list, local_rot, local_pos, links) -> None:
     """Forward kinematics along ``links`` ((joint, parent) pairs, each parent's entry of ``g``/``p`` already
     set), in place: the one loop every forward kinematics of a single pose here runs. Plain Python
     floats: for one pose of ~20 bones this is several times faster than numpy calls on tiny arrays (see
-    :func:`lmm.quat.forward_kinematics` for frames in bulk)."""
+    :func:`lmm.kinematics.forward_kinematics` for frames in bulk)."""
     for j, pj in links:
         w, x, y, z = local_rot[j]
         px, py, pz = local_pos[j]

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from lmm import quat
+from lmm import kinematics, quat
 
 
 def pose_vector_slices(n_bones: int) -> dict[str, slice]:
@@ -95,7 +95,7 @@ def pose_vectors(db, frames=slice(None)) -> np.ndarray:
 def character_space(db, frames=slice(None)) -> np.ndarray:
     """Character-space (simulation bone removed) positions, 2-axis rotations, velocities and angular
     velocities of bones 1.., (n, 15 (J-1)) float32."""
-    g_rot, g_pos, g_vel, g_ang = quat.forward_kinematics_velocity(
+    g_rot, g_pos, g_vel, g_ang = kinematics.forward_kinematics_velocity(
         db.rotations[frames, 1:].astype(np.float64), db.positions[frames, 1:].astype(np.float64),
         db.velocities[frames, 1:].astype(np.float64), db.angular_velocities[frames, 1:].astype(np.float64),
         character_parents(db.parents))

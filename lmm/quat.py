@@ -277,25 +277,6 @@ def per_frame_blocks(arrays) -> list[slice] | None:
     return frame_blocks(n)
 
 
-def forward_kinematics(local_rot: np.ndarray, local_pos: np.ndarray, parents) -> tuple[np.ndarray, np.ndarray]:
-    """Global rotations and positions from local ones.
-
-    local_rot (..., J, 4), local_pos (..., J, 3); ``parents[j] < j`` (topological order), -1 for roots.
-    The loop is over joints (tens), vectorised over everything else (frames), a block of frames at a
-    time for long takes (:func:`frame_blocks`).
-    """
-    local_rot, local_pos = np.asarray(local_rot), np.asarray(local_pos)
-    g_rot = np.empty(np.broadcast_shapes(local_rot.shape[:-1]) + (4,), dtype=np.result_type(local_rot, local_pos))
-    g_pos = np.empty(local_pos.shape, dtype=g_rot.dtype)
-    blocks = per_frame_blocks((local_rot, local_pos))
-    if blocks is None:
-        _forward_kinematics_into(local_rot, local_pos, parents, g_rot, g_pos)
-    else:
-        for s in blocks:
-            _forward_kinematics_block(local_rot[s], local_pos[s], parents, g_rot[s], g_pos[s])
-    return g_rot, g_pos
-
-
 def mul_rows(a, b, out) -> None:
     """:func:`mul` on quaternions given as four component rows each (``a``, ``b``: sequences of four
     arrays), into the rows of ``out``: the same operations in the same order, so the same bits."""
@@ -329,58 +310,3 @@ def joint_major(a: np.ndarray, dtype) -> np.ndarray:
     """A block of frames (B, J, C) as a contiguous (J, C, B) array of ``dtype`` (an exact cast): every
     component of every joint a contiguous row, for :func:`mul_rows` and :func:`mul_vec_rows`."""
     return np.ascontiguousarray(np.asarray(a).transpose(1, 2, 0), dtype=dtype)
-
-
-def _forward_kinematics_block(local_rot, local_pos, parents, g_rot, g_pos) -> None:
-    """:func:`_forward_kinematics_into` on a block of frames (B, J, 4) and (B, J, 3), worked in a
-    joint-major, component-major copy (:func:`joint_major`): every operand of every operation is then
-    a contiguous row instead of a column strided by a whole frame (about twice as fast on long takes).
-    The operations of :func:`mul` and :func:`mul_vec` in their order on the same values, so the same bits."""
-    lr, lp = joint_major(local_rot, g_rot.dtype), joint_major(local_pos, g_rot.dtype)
-    gr, gp = np.empty_like(lr), np.empty_like(lp)
-    for j, p in enumerate(parents):
-        if p < 0:
-            gr[j], gp[j] = lr[j], lp[j]
-        else:
-            mul_rows(gr[p], lr[j], gr[j])
-            mul_vec_rows(gr[p], lp[j], gp[j], plus=gp[p])
-    g_rot[...] = gr.transpose(2, 0, 1)
-    g_pos[...] = gp.transpose(2, 0, 1)
-
-
-def _forward_kinematics_into(local_rot, local_pos, parents, g_rot, g_pos) -> None:
-    for j, p in enumerate(parents):
-        if p < 0:
-            g_rot[..., j, :] = local_rot[..., j, :]
-            g_pos[..., j, :] = local_pos[..., j, :]
-        else:
-            g_rot[..., j, :] = mul(g_rot[..., p, :], local_rot[..., j, :])
-            g_pos[..., j, :] = mul_vec(g_rot[..., p, :], local_pos[..., j, :]) + g_pos[..., p, :]
-
-
-def forward_kinematics_velocity(local_rot, local_pos, local_vel, local_angvel, parents):
-    """Global rotations, positions, velocities and angular velocities.
-
-    local_vel / local_angvel are expressed in the parent's frame (as stored in the
-    database); global velocities include the contribution of the parent's spin.
-    """
-    shape = local_pos.shape
-    g_rot = np.empty(shape[:-1] + (4,), dtype=local_pos.dtype)
-    g_pos = np.empty(shape, dtype=local_pos.dtype)
-    g_vel = np.empty(shape, dtype=local_pos.dtype)
-    g_ang = np.empty(shape, dtype=local_pos.dtype)
-    for j, p in enumerate(parents):
-        if p < 0:
-            g_rot[..., j, :] = local_rot[..., j, :]
-            g_pos[..., j, :] = local_pos[..., j, :]
-            g_vel[..., j, :] = local_vel[..., j, :]
-            g_ang[..., j, :] = local_angvel[..., j, :]
-        else:
-            pr = g_rot[..., p, :]
-            offset = mul_vec(pr, local_pos[..., j, :])
-            g_rot[..., j, :] = mul(pr, local_rot[..., j, :])
-            g_pos[..., j, :] = offset + g_pos[..., p, :]
-            g_vel[..., j, :] = (g_vel[..., p, :] + mul_vec(pr, local_vel[..., j, :])
-                                + np.cross(g_ang[..., p, :], offset))
-            g_ang[..., j, :] = mul_vec(pr, local_angvel[..., j, :]) + g_ang[..., p, :]
-    return g_rot, g_pos, g_vel, g_ang

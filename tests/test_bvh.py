@@ -16,7 +16,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from lmm import quat
+from lmm import kinematics, quat
 from lmm.data import bvh
 
 HERE = Path(__file__).resolve().parent
@@ -620,7 +620,7 @@ def test_from_local_reproduces_rotations_and_positions(order):
     lr = anim.local_rotations()
     np.testing.assert_allclose(np.abs(np.sum(lr * rot, axis=-1)), 1.0, atol=1e-12)
     np.testing.assert_allclose(anim.local_positions(), pos, atol=1e-12)
-    g_rot, g_pos = quat.forward_kinematics(rot, pos, np.array(parents))
+    g_rot, g_pos = kinematics.forward_kinematics(rot, pos, np.array(parents))
     np.testing.assert_allclose(anim.global_positions(), g_pos, atol=1e-9)
     back = bvh.loads(bvh.dumps(anim))
     np.testing.assert_allclose(back.global_positions(), g_pos, atol=1e-4)
@@ -635,7 +635,7 @@ def test_from_local_per_joint_orders_multiple_roots_and_no_channels():
     assert anim.channels[2] == ("Xposition", "Yposition", "Zposition", "Yrotation", "Xrotation", "Zrotation")
     rot_used = rot.copy()
     rot_used[:, [1, 5]] = [1, 0, 0, 0]
-    _, g_pos = quat.forward_kinematics(rot_used, pos, np.array(parents))
+    _, g_pos = kinematics.forward_kinematics(rot_used, pos, np.array(parents))
     np.testing.assert_allclose(anim.global_positions(), g_pos, atol=1e-9)
     back = bvh.loads(bvh.dumps(anim))
     assert_same_animation(anim, back, atol=1e-4)

@@ -13,8 +13,8 @@ import pytest
 
 from lmm import DEFAULT_MANIFEST, quat
 from lmm.data import bvh
-from lmm.data.database import (Database, DatabaseError, build, global_to_local, load_or_build, local_to_global,
-                          manifest_key, mirror_local, mirror_map)
+from lmm.data.database import (Database, DatabaseError, build, load_or_build, manifest_key,
+                                mirror_local, mirror_map)
 from lmm.filters import median_filter
 from lmm.data.manifest import ManifestError, load_manifest
 
@@ -91,17 +91,6 @@ def test_mirroring_twice_gives_back_the_original():
     assert np.abs(twice_pos - pos).max() < 1e-5
     dot = np.abs(np.sum(twice_rot * rot, axis=-1))
     assert np.all(dot > 1.0 - 1e-10)  # same rotation up to sign: angle error < ~1e-5 rad
-
-
-def test_global_local_round_trip():
-    rng = np.random.default_rng(3)
-    parents = np.array([-1, 0, 1, 1, 3])
-    rot = quat.normalize(rng.normal(size=(7, 5, 4)))
-    pos = rng.normal(size=(7, 5, 3))
-    g_rot, g_pos = local_to_global(rot, pos, parents)
-    l_rot, l_pos = global_to_local(g_rot, g_pos, parents)
-    assert np.allclose(l_pos, pos, atol=1e-9)
-    assert np.allclose(np.abs(np.sum(l_rot * rot, -1)), 1.0, atol=1e-9)
 
 
 def test_contacts_are_exactly_the_filtered_toe_speed_under_threshold(default_db, default_manifest):

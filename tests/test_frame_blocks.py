@@ -10,7 +10,7 @@ import pytest
 
 import lmm.data.database as database
 import lmm.filters as filters
-from lmm import DATA_DIR, quat
+from lmm import DATA_DIR, kinematics, quat
 from lmm.data.manifest import load_manifest
 
 PARENTS = [-1, 0, 1, 2, 3, 0, 5, 6, 7, 0, 9, 10, 11, 12, 11, 14, 15, 11, 17, 18]
@@ -32,7 +32,7 @@ def test_forward_kinematics_in_blocks_is_the_per_joint_formula(monkeypatch, dtyp
     monkeypatch.setattr(quat, "FRAME_BLOCK", 64)
     rot, _ = _motion(333, dtypes[0])
     _, pos = _motion(333, dtypes[1], seed=1)
-    g_rot, g_pos = quat.forward_kinematics(rot, pos, PARENTS)
+    g_rot, g_pos = kinematics.forward_kinematics(rot, pos, PARENTS)
     # the definition, joint by joint over every frame at once
     want_rot = np.empty(g_rot.shape, g_rot.dtype)
     want_pos = np.empty(g_pos.shape, g_pos.dtype)
@@ -49,12 +49,12 @@ def test_forward_kinematics_in_blocks_is_the_per_joint_formula(monkeypatch, dtyp
 def test_global_to_local_in_blocks_is_the_per_joint_formula(monkeypatch):
     rot, pos = _motion(300)
     monkeypatch.setattr(quat, "FRAME_BLOCK", 10**9)   # one go: the per-joint formula over every frame
-    whole = database.global_to_local(rot, pos, PARENTS)
+    whole = kinematics.global_to_local(rot, pos, PARENTS)
     monkeypatch.setattr(quat, "FRAME_BLOCK", 50)
-    blocks = database.global_to_local(rot, pos, PARENTS)
+    blocks = kinematics.global_to_local(rot, pos, PARENTS)
     assert all(_same(a, b) for a, b in zip(whole, blocks))
     # and it inverts forward kinematics (to rounding)
-    local_rot, local_pos = database.global_to_local(*quat.forward_kinematics(rot, pos, PARENTS), PARENTS)
+    local_rot, local_pos = kinematics.global_to_local(*kinematics.forward_kinematics(rot, pos, PARENTS), PARENTS)
     assert np.allclose(np.abs(np.sum(local_rot * rot, axis=-1)), 1.0) and np.allclose(local_pos[:, 1:], pos[:, 1:])
 
 

@@ -53,7 +53,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lmm import quat
+from lmm import kinematics, quat
 from lmm.data.atomic import write_bytes_atomic
 from lmm.errors import InputError
 
@@ -279,7 +279,7 @@ class Animation:
 
     def global_transforms(self) -> tuple[np.ndarray, np.ndarray]:
         """World rotations (F, J, 4) and positions (F, J, 3), in file units."""
-        return quat.forward_kinematics(self.local_rotations(), self.local_positions(), self.parents)
+        return kinematics.forward_kinematics(self.local_rotations(), self.local_positions(), self.parents)
 
     def global_positions(self) -> np.ndarray:
         """(F, J, 3) world positions of the joints, in file units."""

@@ -32,6 +32,7 @@ from lmm.data.derived import file_digest as _file_digest
 from lmm.filters import catmull_rom, central_difference, median_filter, savgol_smooth
 from lmm.data.manifest import Manifest, ManifestError, load_manifest
 from lmm.data.npz_mmap import map_members, worth_mapping
+from lmm.kinematics import forward_kinematics, forward_kinematics_velocity, global_to_local
 from lmm.errors import InputError
 
 DB_FORMAT_VERSION = 5  # 5: mirrored clips keep the original bone offsets
@@ -151,8 +152,8 @@ class Database:
     # -- kinematics ------------------------------------------------------------------------
     def global_transforms(self, frames=slice(None)):
         """Global rotations (n, J, 4) and positions (n, J, 3) of the given frames (float64)."""
-        return quat.forward_kinematics(self.rotations[frames].astype(np.float64),
-                                       self.positions[frames].astype(np.float64), self.parents)
+        return forward_kinematics(self.rotations[frames].astype(np.float64),
+                                  self.positions[frames].astype(np.float64), self.parents)
 
     FK_CHUNK_FRAMES = 8192
 
@@ -179,14 +180,14 @@ class Database:
             part = index[start:start + self.FK_CHUNK_FRAMES]
             rot = np.asarray(self.rotations[part])[:, chain].astype(np.float64)
             pos = np.asarray(self.positions[part])[:, chain].astype(np.float64)
-            g_rot, g_pos = quat.forward_kinematics(rot, pos, sub_parents)
+            g_rot, g_pos = forward_kinematics(rot, pos, sub_parents)
             out_rot[start:start + len(part)] = g_rot[:, cols]
             out_pos[start:start + len(part)] = g_pos[:, cols]
         return out_rot, out_pos
 
     def global_kinematics(self, frames=slice(None)):
         """Global rotations, positions, velocities and angular velocities (float64)."""
-        return quat.forward_kinematics_velocity(
+        return forward_kinematics_velocity(
             self.rotations[frames].astype(np.float64), self.positions[frames].astype(np.float64),
             self.velocities[frames].astype(np.float64), self.angular_velocities[frames].astype(np.float64),
             self.parents)
@@ -293,35 +294,6 @@ def mirror_map(names: list[str], pairs) -> np.ndarray:
     return out
 
 
-def local_to_global(local_rot, local_pos, parents):
-    return quat.forward_kinematics(local_rot, local_pos, parents)
-
-
-def global_to_local(global_rot, global_pos, parents):
-    global_rot, global_pos = np.asarray(global_rot), np.asarray(global_pos)
-    local_rot = np.array(global_rot, copy=True)
-    local_pos = np.array(global_pos, copy=True)
-    blocks = quat.per_frame_blocks((global_rot, global_pos))
-    if blocks is None:
-        for j, p in enumerate(parents):
-            if p >= 0:
-                local_rot[..., j, :] = quat.inv_mul(global_rot[..., p, :], global_rot[..., j, :])
-                local_pos[..., j, :] = quat.inv_mul_vec(global_rot[..., p, :], global_pos[..., j, :] - global_pos[..., p, :])
-        return local_rot, local_pos
-    for s in blocks:  # long takes: a block of frames at a time, joint-major (the same operations and bits)
-        gr, gp = quat.joint_major(global_rot[s], local_rot.dtype), quat.joint_major(global_pos[s], local_pos.dtype)
-        lr, lp = gr.copy(), gp.copy()
-        for j, p in enumerate(parents):
-            if p >= 0:
-                w, x, y, z = gr[p]
-                inverse = (w, -x, -y, -z)        # conj: a negation is exact
-                quat.mul_rows(inverse, gr[j], lr[j])
-                quat.mul_vec_rows(inverse, gp[j] - gp[p], lp[j])
-        local_rot[s] = lr.transpose(2, 0, 1)
-        local_pos[s] = lp.transpose(2, 0, 1)
-    return local_rot, local_pos
-
-
 # local-space reflections S a skeleton's left/right offsets may follow (o[mirror] = S o), each with
 # the quaternion of the proper rotation M S (M = diag(-1, 1, 1), the world mirror)
 _OFFSET_REFLECTIONS = ((np.array([-1.0, 1.0, 1.0]), np.array([1.0, 0.0, 0.0, 0.0])),
@@ -346,9 +318,9 @@ def mirror_local(local_rot, local_pos, parents, mirror_idx, global_transforms=No
     """Reflect a motion across the world YZ plane (negate X) and swap left/right joints.
 
     Bone offsets stay those of the original skeleton (see :func:`mirror_frame_rotation`).
-    ``global_transforms``: ``local_to_global(local_rot, local_pos, parents)`` when the caller has it.
+    ``global_transforms``: ``forward_kinematics(local_rot, local_pos, parents)`` when the caller has it.
     """
-    g_rot, g_pos = global_transforms or local_to_global(local_rot, local_pos, parents)
+    g_rot, g_pos = global_transforms or forward_kinematics(local_rot, local_pos, parents)
     g_pos = g_pos * np.array([-1.0, 1.0, 1.0])
     g_rot = g_rot * np.array([1.0, 1.0, -1.0, -1.0])  # M R M with M = diag(-1, 1, 1)
     g_rot = quat.mul(g_rot, mirror_frame_rotation(np.asarray(local_pos)[0], parents, mirror_idx))
@@ -455,7 +427,7 @@ def build_code_fingerprint() -> str:
     h = hashlib.sha256()
     data = Path(__file__).resolve().parent
     engine = data.parent
-    for path in (data / "database.py", engine / "filters.py", engine / "quat.py", data / "bvh.py", data / "manifest.py"):
+    for path in (data / "database.py", engine / "filters.py", engine / "quat.py", engine / "kinematics.py", data / "bvh.py", data / "manifest.py"):
         h.update(path.read_bytes())
     return h.hexdigest()
 
@@ -530,11 +502,11 @@ class _Take:
 def _finish_piece(name: str, is_mirror: bool, rot, pos, parents, manifest: Manifest, names,
                   global_transforms=None) -> _Piece:
     """A resampled range -> the stored range: simulation bone, velocities, contacts (float32).
-    ``global_transforms``: ``local_to_global(rot, pos, parents)`` when the caller has it."""
+    ``global_transforms``: ``forward_kinematics(rot, pos, parents)`` when the caller has it."""
     hips, spine = names.index(manifest.bones["hips"]), names.index(manifest.bones["spine"])
     toes = [names.index(manifest.bones["left_toe"]), names.index(manifest.bones["right_toe"])]
     dt = 1.0 / manifest.target_fps
-    g_rot, g_pos = global_transforms or local_to_global(rot, pos, parents)
+    g_rot, g_pos = global_transforms or forward_kinematics(rot, pos, parents)
     sim_rot, sim_pos = simulation_bone(g_rot, g_pos, spine, hips, manifest.hips_forward_axis, manifest)
     # re-parent every root of the file under the simulation bone
     rot = rot.copy()
@@ -607,7 +579,7 @@ def _build_take(manifest: Manifest, ci: int, skeleton=None, frames_before: int =
                             manifest.target_fps, manifest.speed_scale)
         base = f"{clip.file.name.split('.')[0]}[{start}:{stop}]"
         # the range's forward kinematics, once for the piece and its mirrored copy
-        global_transforms = local_to_global(rot, pos, parents)
+        global_transforms = forward_kinematics(rot, pos, parents)
         pieces.append(_finish_piece(base, False, rot, pos, parents, manifest, names, global_transforms))
         if manifest.mirror:
             mrot, mpos = mirror_local(rot, pos, parents, mirror_idx, global_transforms)

@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lmm import quat
+from lmm import kinematics, quat
 from lmm.latents import batched, database_latents, load_compressor  # noqa: F401 (app/commands/eval.py imports it from here)
 from lmm.nn import MLP, character_parents, character_space, decode_pose_vector
 
@@ -38,7 +38,7 @@ from lmm.nn import MLP, character_parents, character_space, decode_pose_vector
 def character_positions(y: np.ndarray, n_bones: int, parents) -> np.ndarray:
     """Character-space joint positions (n, J-1, 3) from pose vectors."""
     p = decode_pose_vector(y.astype(np.float64), n_bones)
-    _, g_pos = quat.forward_kinematics(p["rotations"], p["positions"], character_parents(parents))
+    _, g_pos = kinematics.forward_kinematics(p["rotations"], p["positions"], character_parents(parents))
     return g_pos
 
 
