@@ -11,7 +11,7 @@ from pathlib import Path
 
 from lmm.factory import make_controller
 
-from .session import load_reference_clip
+from .reference_clip import load_reference_clip
 
 
 class SessionActions:
@@ -79,6 +79,7 @@ class SessionActions:
             self.errors.show("Reference BVH", f"{path}: cannot load: {type(e).__name__}: {e}")
             return False
         following = self.session.following is not None
+        self.session.reference = clip
         self.viewport.set_reference(clip)
         self.reference_path = str(path)
         if following:                 # follow the new reference instead of the old one

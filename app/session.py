@@ -1,6 +1,8 @@
 """The studio's simulation side, with no GUI: controllers, the shared tuning, input sources, the
-rewind history and recording. The dearpygui studio (:mod:`app.studio`) drives one :class:`Session`
-per run; tests and the benchmark can drive it headless.
+rewind history, recording (:mod:`app.recording`), the open reference clip (:mod:`app.reference_clip`)
+and background jobs (:mod:`app.jobs`). The dearpygui studio (:mod:`app.studio`) drives one
+:class:`Session` per run, stepped by :class:`app.tick_worker.TickWorker`; tests and the benchmark can
+drive it headless.
 
 Tuning: one :class:`lmm.tuning.Tuning` object is shared by both controllers. A side-by-side
 comparison is only meaningful when both characters get the same springs, speeds, thresholds and
@@ -10,97 +12,18 @@ weights.)
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
 from pathlib import Path
-
-import numpy as np
 
 from lmm.controller import Controller, InputState
 from lmm.runner import step_controllers
 from lmm.tuning import Tuning
 
 from .history import History, Tick
+from .jobs import Jobs
+from .recording import Recording, RecordingResult, free_recording_paths
+from .reference_clip import ReferenceClip
 
 TICK_RATE_HZ = 60.0
-
-
-# ------------------------------------------------------------------------------------------------
-# recording
-# ------------------------------------------------------------------------------------------------
-
-def recording_paths(base, which: tuple[str, ...]) -> dict[str, Path]:
-    """Files written by one recording: a BVH per controller and the input CSV.
-
-    ``base`` is what the user picked (``take.bvh`` or ``take``): one controller writes ``take.bvh``,
-    several write ``take_mm.bvh`` / ``take_lmm.bvh``; the input goes to ``take_input.csv``.
-    """
-    base = Path(base)
-    stem = base.name[:-4] if base.name.lower().endswith(".bvh") else base.name
-    folder = base.parent
-    out = {}
-    for name in which:
-        out[name] = folder / (f"{stem}.bvh" if len(which) == 1 else f"{stem}_{name}.bvh")
-    out["input"] = folder / f"{stem}_input.csv"
-    return out
-
-
-def free_recording_paths(base, which: tuple[str, ...]) -> dict[str, Path]:
-    """:func:`recording_paths` of ``base``, or, when any of those files exists, of the first numbered
-    base none of whose files exists (``take.bvh`` -> ``take_001.bvh``, ``take_002.bvh``, ...; one
-    number for all files of the recording). A recording never overwrites a file."""
-    paths = recording_paths(base, which)
-    if not any(p.exists() for p in paths.values()):
-        return paths
-    base = Path(base)
-    stem = base.name[:-4] if base.name.lower().endswith(".bvh") else base.name
-    number = 1
-    while True:
-        paths = recording_paths(base.parent / f"{stem}_{number:03d}.bvh", which)
-        if not any(p.exists() for p in paths.values()):
-            return paths
-        number += 1
-
-
-@dataclass
-class RecordingResult:
-    """What :meth:`Session.stop_recording` left on disk."""
-    paths: dict[str, Path]   # controller name (and "input") -> file written; empty when nothing was written
-    frames: int
-    seconds: float
-    message: str             # one line for the studio's status bar
-
-
-@dataclass
-class Recording:
-    """A recording in progress: one streaming BVH per controller and the input CSV, checked from the
-    start (so a folder that cannot be written fails at once). Each file appears with its first flushed
-    frames (:mod:`lmm.data.stream`), so a recording that gets no frame leaves no file."""
-    paths: dict[str, Path]
-    recorders: dict          # controller name -> lmm.data.recording.BVHRecorder
-    input_writer: object     # lmm.data.inputs.InputCsvWriter
-    start_tick: int
-    frames: int = 0
-
-    def writers(self) -> dict:
-        """Controller name (and "input") -> its writer."""
-        out = dict(self.recorders)
-        if self.input_writer is not None:
-            out["input"] = self.input_writer
-        return out
-
-    def close(self) -> list[str]:
-        """Close every file, even when one fails (e.g. a full disk); returns one line per failure."""
-        errors = []
-        for w in self.writers().values():
-            try:
-                w.close()
-            except OSError as e:
-                errors.append(str(e))
-        return errors
-
-    def written(self) -> dict[str, Path]:
-        """The files that exist (a file appears with its first flushed frames)."""
-        return {name: self.paths[name] for name, w in self.writers().items() if w.exists}
 
 
 # ------------------------------------------------------------------------------------------------
@@ -125,8 +48,10 @@ class Session:
         self.recording_error = ""           # one line: why the recording stopped by itself ("" = it did not)
         self._failed_recording: Recording | None = None
         self.step_ms: dict[str, float] = {}
-        self.latent_table_status = ""  # "" once MM's latent table is attached, else why not (one line)
-        self._latent_job = 0
+        self._latent_status = ""       # see latent_table_status
+        self._latent_job = None        # the latent table being computed (a Job), or None
+        self.jobs = Jobs()             # the session's background work, delivered at a tick boundary
+        self.reference: ReferenceClip | None = None   # the reference BVH drawn beside the characters
         self.ragdolls = None           # an lmm.physics.ragdoll.RagdollTracker (see start_ragdolls), or None
         self.physics_status = "physics off"   # one line: why there is no ragdoll ("" when there is)
 
@@ -147,20 +72,19 @@ class Session:
 
     # -- the compressor latent of every database frame (for "the latent of the frames MM plays") ----
     def start_latent_table(self, weights_path=None) -> None:
-        """Compute the compressor's latent of every database frame in a background thread, when a
+        """Compute the compressor's latent of every database frame as a background job, when a
         compressor file lies next to the LMM weights, and attach it to the MM controller (whose snapshots
         then carry ``matched_latent``). ``latent_table_status`` says why there is none (yet)."""
-        import threading
-
         from lmm.latents import cached_database_latents
 
         mm = self.controllers.get("mm")
         if mm is None:
-            self.latent_table_status = "MM is not running: no MM latents"
+            self._latent_status = "MM is not running: no MM latents"
             return
         mm.set_latent_table(None)      # a table from other networks' compressor is not comparable
-        self._latent_job += 1
-        job = self._latent_job
+        if self._latent_job is not None:
+            self._latent_job.cancel()  # superseded: its table is dropped
+            self._latent_job = None
         path = None
         nets = getattr(self.controllers.get("lmm"), "nets", None)
         if weights_path is not None:
@@ -168,28 +92,35 @@ class Session:
         elif nets is not None and getattr(nets, "path", None) is not None:
             path = Path(nets.path)
         if path is None:
-            self.latent_table_status = "no LMM networks: no compressor latents"
+            self._latent_status = "no LMM networks: no compressor latents"
             return
         comp = path.with_name("compressor.npz")
         if not comp.is_file():
-            self.latent_table_status = f"no compressor next to the weights ({comp.name}): MM latents unavailable"
+            self._latent_status = f"no compressor next to the weights ({comp.name}): MM latents unavailable"
             return
-        self.latent_table_status = "computing the compressor latent of every frame..."
+        self._latent_status = "computing the compressor latent of every frame..."
 
-        def work():
+        def work(job):
             lmm = self.controllers.get("lmm")
             if lmm is not None and hasattr(lmm, "idle_states"):
                 lmm.idle_states()   # the LMM idle set's small table, so the first stop does not hitch (~80 ms)
-            try:
-                table = cached_database_latents(comp, self.db, self.features)
-                if job == self._latent_job:          # not superseded by a later call
-                    mm.set_latent_table(table)
-                    self.latent_table_status = ""
-            except Exception as e:  # shown in the latent panel; nothing else depends on it
-                if job == self._latent_job:
-                    self.latent_table_status = f"compressor latents unavailable: {e}"
+            return cached_database_latents(comp, self.db, self.features)
 
-        threading.Thread(target=work, name="latent-table", daemon=True).start()
+        def attach(table):
+            mm.set_latent_table(table)
+            self._latent_status = ""
+
+        def fail(line):               # shown in the latent panel; nothing else depends on it
+            self._latent_status = f"compressor latents unavailable: {line}"
+
+        self._latent_job = self.jobs.submit("latent-table", work, on_done=attach, on_error=fail)
+
+    @property
+    def latent_table_status(self) -> str:
+        """"" once MM's latent table is attached, else why not (one line). Asking takes a finished table:
+        ask on the thread that owns the session (the GUI thread between ticks, or the stepping one)."""
+        self.jobs.poll()
+        return self._latent_status
 
     @property
     def memory(self) -> dict[str, dict[str, int]]:
@@ -269,7 +200,9 @@ class Session:
 
     # -- ticking -------------------------------------------------------------------------------
     def step(self, inp: InputState, extra: dict | None = None) -> Tick:
-        """One tick of every controller (:func:`lmm.runner.step_controllers`), recorded and kept in the history."""
+        """One tick of every controller (:func:`lmm.runner.step_controllers`), recorded and kept in the history
+        (background results, such as MM's latent table, are taken first: between two ticks)."""
+        self.jobs.poll()
         _, snaps, self.step_ms = step_controllers(self.controllers, inp, self.dt)
         tick = Tick(self.tick + 1, (self.tick + 1) * self.dt, snaps, dict(extra or {}))
         tick.extra.setdefault("input", inp)
@@ -289,7 +222,7 @@ class Session:
     # -- recording -----------------------------------------------------------------------------
     def start_recording(self, base, which=("mm", "lmm")) -> dict[str, Path]:
         """Start recording the chosen controllers to BVH (and the input to CSV); returns the paths it
-        will write: those of ``base`` (see :func:`recording_paths`), or the next free numbered ones when
+        will write: those of ``base`` (see :func:`app.recording.recording_paths`), or the next free numbered ones when
         any of them exists (:func:`free_recording_paths`). Raises ``ValueError`` when none of ``which`` is
         running and ``OSError`` when a file cannot be created (nothing is left behind then)."""
         from lmm.data.inputs import InputCsvWriter
@@ -355,128 +288,3 @@ class Session:
             return RecordingResult(written, frames, seconds, f"recording stopped by a write error: {error}; "
                                                              f"kept {seconds:.2f} s ({frames} frames) in {names}")
         return RecordingResult(written, frames, seconds, f"recorded {seconds:.2f} s ({frames} frames) to {names}")
-
-
-#: a snapshot's fields made on their first read that the default layout's panels read every frame
-_DRAWN_LAZY_FIELDS = ("matched_pose_positions", "trajectory_positions", "trajectory_rotations", "query",
-                      "simulation_position", "simulation_rotation")
-
-
-class TickWorker:
-    """Steps the session on a worker thread while the GUI draws.
-
-    dearpygui releases the GIL while it renders a frame, so the controllers of the next tick run in
-    parallel with the drawing of this one. The studio hands over a list of inputs (``submit``) just
-    before it draws, and collects the finished ticks (``wait``) at the start of the next frame; in
-    between it must not touch the session, and everything that changes the session (sliders,
-    recording, replay, reset) runs after ``wait`` and before ``submit``.
-    """
-
-    def __init__(self, session: Session):
-        import queue
-        import threading
-
-        self.session = session
-        self._jobs: queue.Queue = queue.Queue()
-        self._idle = threading.Event()
-        self._idle.set()
-        self._results: list = []
-        self._error: BaseException | None = None
-        self.prepared = None
-        self._thread = threading.Thread(target=self._loop, name="studio-ticks", daemon=True)
-        self._thread.start()
-
-    def submit(self, inputs: list[InputState], prepare=None, release=None) -> None:
-        """Step ``inputs``; then, when given, call ``prepare(newest tick)`` on the worker too (the panels'
-        numeric work for the next frame, see ``Studio``): its result is ``prepared`` after ``wait``.
-        ``release``: an object the GUI thread is done with, dropped on the worker (freeing a frame's
-        prepared numbers, thousands of small objects, took 0.1 ms of the GUI thread's frame)."""
-        if not inputs:
-            return
-        self._idle.clear()
-        self._jobs.put((list(inputs), prepare, release))
-
-    def wait(self) -> list[tuple[Tick, dict]]:
-        """The ticks finished since the last call, with each one's per-controller milliseconds
-        (``prepared`` then holds what the last job's ``prepare`` returned, or None)."""
-        self._idle.wait()
-        if self._error is not None:
-            err, self._error = self._error, None
-            raise err
-        out, self._results = self._results, []
-        return out
-
-    def take_prepared(self):
-        """What the last job's ``prepare`` returned (once; None when there was none or it failed)."""
-        out, self.prepared = self.prepared, None
-        return out
-
-    def _loop(self) -> None:
-        while True:
-            job = self._jobs.get()
-            if job is None:
-                return
-            inputs, prepare, release = job
-            job = release = None       # freed here, while the GUI thread draws
-            self.prepared = None
-            try:
-                for inp in inputs:
-                    tick = self.session.step(inp)
-                    self._results.append((tick, dict(self.session.step_ms)))
-                # the newest tick is the one a live studio draws next: what its panels read that is worked
-                # out on the first read (the ghost poses' forward kinematics, the trajectory and query of a
-                # tick that did not search) is worked out here, while the GUI thread draws, not on it
-                for snap in tick.snapshots.values():
-                    for name in _DRAWN_LAZY_FIELDS:
-                        getattr(snap, name, None)
-            except BaseException as e:  # handed to the GUI thread by wait()
-                self._error = e
-            else:
-                if prepare is not None:
-                    try:
-                        self.prepared = prepare(tick)
-                    except Exception:    # the GUI thread works it out itself, and reports what fails
-                        self.prepared = None
-            finally:
-                self._idle.set()
-
-    def close(self) -> None:
-        self._idle.wait()
-        self._jobs.put(None)
-        self._thread.join(timeout=5.0)
-
-
-# ------------------------------------------------------------------------------------------------
-# a reference BVH drawn beside the characters
-# ------------------------------------------------------------------------------------------------
-
-@dataclass
-class ReferenceClip:
-    name: str
-    parents: np.ndarray
-    positions: np.ndarray     # (F, J, 3) metres, first root at the origin (x, z)
-    frame_time: float
-    names: tuple[str, ...] = ()   # joint names (they size the drawn body parts)
-
-    def at(self, t: float) -> np.ndarray:
-        f = int(t / self.frame_time) % len(self.positions)
-        return self.positions[f]
-
-
-def load_reference_clip(path) -> ReferenceClip:
-    """A BVH file as global joint positions in metres (centimetre files are detected by size).
-    Raises ``lmm.data.bvh.BVHError`` / ``OSError`` / ``ValueError`` with a readable message."""
-    from lmm.data import bvh
-
-    anim = bvh.load(path)
-    pos = anim.global_positions()
-    if pos.ndim != 3 or len(pos) == 0 or pos.shape[1] == 0:
-        raise ValueError(f"{path}: no frames to show")
-    if not np.isfinite(pos).all():
-        raise ValueError(f"{path}: the joint positions are not finite")
-    height = float(np.ptp(pos[0, :, 1])) if pos.shape[1] > 1 else 0.0
-    if height > 10.0:        # centimetres (or larger): bring to metres
-        pos = pos * (0.01 if height < 1000 else 0.001)
-    pos = pos - np.array([pos[0, 0, 0], 0.0, pos[0, 0, 2]])
-    return ReferenceClip(Path(path).name, anim.parents, pos.astype(np.float32), float(anim.frame_time),
-                         tuple(anim.names))

@@ -38,7 +38,7 @@ from .playback import Playback
 from .scripting import Screenshots, Script, StateDump
 from .engine import StudioOptions, load_session
 from .prepared import Preparer
-from .session import TickWorker
+from .tick_worker import TickWorker
 from .theme import OPAQUE, WINDOW_BG, Theme
 
 START_AZIMUTH = float(np.radians(35.0) + np.pi)     # the camera's start azimuth (input convention)
@@ -249,7 +249,7 @@ class Studio(SessionActions):
         if s.input_log is not None:
             done = " (finished: last row holds)" if s.replay_finished() else ""
             replay = f"replaying {s.input_log.name}: {s.replay_time():.1f} / {s.input_log.duration:.1f} s{done}"
-        ref = self.viewport.reference
+        ref = s.reference
         return View(tick=p.displayed_tick(), history=s.history, live=p.live, paused=p.paused,
                     inspected=self.inspected, frame=self.frame_index,
                     problems={"lmm": self.lmm_problem} if self.lmm_problem else {},

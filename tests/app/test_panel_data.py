@@ -21,7 +21,9 @@ from app.panels.timeline import scrub_target
 from app.panels.tuning import pretty_label, widget_specs
 from app.panels.viewport import separate_labels
 from app.panels.viewport_scene import feature_markers
-from app.session import RecordingResult, Session, load_reference_clip, recording_paths
+from app.recording import RecordingResult, recording_paths
+from app.reference_clip import load_reference_clip
+from app.session import Session
 from lmm.controller import Candidates, InputState
 from lmm.factory import make_controllers
 from lmm.tuning import Tuning, TuningError
@@ -389,7 +391,7 @@ def test_recording_paths():
 # -- the session, headless ------------------------------------------------------------------------
 
 def test_tick_worker_works_out_the_newest_ghost_pose_trajectory_and_query(dbf):
-    from app.session import TickWorker
+    from app.tick_worker import TickWorker
 
     db, features = dbf
     tuning = Tuning()

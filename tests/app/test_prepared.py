@@ -93,7 +93,7 @@ def test_the_replaced_results_are_freed_on_the_tick_worker():
     draws."""
     import threading
 
-    from app.session import TickWorker
+    from app.tick_worker import TickWorker
     from lmm.controller import InputState
 
     prep = Preparer({"stats": Counting()})
