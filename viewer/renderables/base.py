@@ -11,128 +11,8 @@ from dataclasses import dataclass
 import moderngl
 import numpy as np
 
-from .capsule_mesh import (CAPSULE_EXACT_FS, CAPSULE_FS, CAPSULE_INFLATE, CAPSULE_VS, SHADOW_DEPTH_PULL, SHADOW_FS, SHADOW_RESOLVE_FS,
-                           SHADOW_RESOLVE_VS, capsule_mesh)
-
-# ---------------------------------------------------------------------------------------------
-# shaders
-
-# Instanced "oriented mesh": each instance is a segment a->b with a radius and a colour. Mesh
-# vertices give radial offsets (x, z) and an axial offset (y) in radius units plus a parameter t
-# along the segment, so one vertex format draws spheres (a == b), cylinders and cones.
-MESH_VS = """
-#version 330
-uniform mat4 u_view_proj;
-uniform float u_cone;  // 1 for meshes stretched along the axis (cone sides): fixes normals
-in vec3 in_pos;
-in float in_t;
-in vec3 in_normal;
-in vec3 i_a;
-in vec3 i_b;
-in float i_radius;
-in vec4 i_color;
-out vec3 v_normal;
-out vec3 v_world;
-out vec4 v_color;
-void main() {
-    vec3 d = i_b - i_a;
-    float len = length(d);
-    vec3 axis = len > 1e-9 ? d / len : vec3(0.0, 1.0, 0.0);
-    vec3 helper = abs(axis.y) < 0.99 ? vec3(0.0, 1.0, 0.0) : vec3(1.0, 0.0, 0.0);
-    vec3 u = normalize(cross(axis, helper));
-    vec3 v = cross(u, axis);
-    vec3 world = i_a + axis * (in_t * len + in_pos.y * i_radius)
-               + i_radius * (in_pos.x * u + in_pos.z * v);
-    vec3 n = in_normal;
-    if (u_cone > 0.5) {
-        // the cone is scaled by (r, len, r); normals take the inverse scale
-        n = vec3(n.x * len, n.y * i_radius, n.z * len);
-    }
-    v_normal = n.x * u + n.y * axis + n.z * v;
-    v_world = world;
-    v_color = i_color;
-    gl_Position = u_view_proj * vec4(world, 1.0);
-}
-"""
-
-MESH_FS = """
-#version 330
-uniform vec3 u_light_dir;   // towards the light, world space
-uniform vec3 u_eye;
-uniform float u_ambient;
-uniform float u_diffuse;
-uniform float u_specular;
-in vec3 v_normal;
-in vec3 v_world;
-in vec4 v_color;
-out vec4 f_color;
-void main() {
-    vec3 n = normalize(v_normal);
-    vec3 l = normalize(u_light_dir);
-    vec3 to_eye = normalize(u_eye - v_world);
-    float sky = 0.75 + 0.25 * n.y;                        // hemisphere ambient
-    float diffuse = max(dot(n, l), 0.0);
-    float fill = 0.2 * max(dot(n, to_eye), 0.0);          // keeps the shadow side readable
-    float spec = pow(max(dot(n, normalize(l + to_eye)), 0.0), 32.0) * u_specular;
-    vec3 rgb = v_color.rgb * (u_ambient * sky + u_diffuse * diffuse + fill) + vec3(spec);
-    f_color = vec4(rgb, v_color.a);
-}
-"""
-
-# Screen-space thick lines: each instance is a segment, expanded to a quad of u_width_px pixels
-# (with square caps so polyline corners have no gaps). Segments crossing the near plane are clipped
-# in clip space. Vertices are pulled slightly towards the camera so lines lying on the ground win
-# the depth test without visibly moving.
-LINE_VS = """
-#version 330
-uniform mat4 u_view;
-uniform mat4 u_proj;
-uniform vec2 u_viewport;
-uniform float u_width_px;
-uniform float u_depth_pull;
-in vec2 in_corner;   // x: 0 start / 1 end, y: -1 / +1 side
-in vec3 i_p0;
-in vec3 i_p1;
-in vec4 i_c0;
-in vec4 i_c1;
-out vec4 v_color;
-vec4 to_clip(vec3 p) {
-    vec4 v = u_view * vec4(p, 1.0);
-    v.xyz *= 1.0 - u_depth_pull;
-    return u_proj * v;
-}
-void main() {
-    vec4 c0 = to_clip(i_p0);
-    vec4 c1 = to_clip(i_p1);
-    float d0 = c0.z + c0.w;   // >= 0 in front of the near plane
-    float d1 = c1.z + c1.w;
-    if (d0 < 0.0 && d1 < 0.0) {
-        gl_Position = vec4(2.0, 2.0, 2.0, 1.0);   // fully behind: outside the clip volume
-        v_color = vec4(0.0);
-        return;
-    }
-    if (d0 < 0.0) c0 = mix(c0, c1, d0 / (d0 - d1));
-    if (d1 < 0.0) c1 = mix(c1, c0, d1 / (d1 - d0));
-    vec2 s0 = c0.xy / c0.w * 0.5 * u_viewport;
-    vec2 s1 = c1.xy / c1.w * 0.5 * u_viewport;
-    vec2 dir = s1 - s0;
-    float n = length(dir);
-    dir = n > 1e-6 ? dir / n : vec2(1.0, 0.0);
-    vec2 side = vec2(-dir.y, dir.x);
-    vec4 c = in_corner.x < 0.5 ? c0 : c1;
-    vec2 offset = 0.5 * u_width_px * (side * in_corner.y + dir * (in_corner.x * 2.0 - 1.0));
-    c.xy += offset / (0.5 * u_viewport) * c.w;
-    gl_Position = c;
-    v_color = in_corner.x < 0.5 ? i_c0 : i_c1;
-}
-"""
-
-LINE_FS = """
-#version 330
-in vec4 v_color;
-out vec4 f_color;
-void main() { f_color = v_color; }
-"""
+from ..shaders import FRAME_BINDING, FRAME_FLOATS, frame_block, load_program
+from .capsule_mesh import CAPSULE_INFLATE, SHADOW_DEPTH_PULL, capsule_mesh
 
 
 # ---------------------------------------------------------------------------------------------
@@ -167,11 +47,6 @@ class FrameState:
     @property
     def view_proj(self) -> np.ndarray:
         return self.proj @ self.view
-
-
-def mat_bytes(m: np.ndarray) -> bytes:
-    """A row-major numpy matrix as the column-major bytes GLSL expects."""
-    return np.ascontiguousarray(np.asarray(m, dtype=np.float32).T).tobytes()
 
 
 # ---------------------------------------------------------------------------------------------
@@ -283,25 +158,29 @@ class Resources:
     def __init__(self, ctx: moderngl.Context):
         self.ctx = ctx
         self.exact_capsules = not is_software_renderer(ctx)
-        self.mesh_program = ctx.program(vertex_shader=MESH_VS, fragment_shader=MESH_FS)
-        self.line_program = ctx.program(vertex_shader=LINE_VS, fragment_shader=LINE_FS)
+        self.frame_uniforms = ctx.buffer(reserve=4 * FRAME_FLOATS, dynamic=True)
+        self.mesh_program = load_program(ctx, "mesh.vert", "mesh.frag")
+        self.line_program = load_program(ctx, "line.vert", "line.frag")
         self.meshes = {}
         for name, (verts, tris) in {"sphere": sphere_mesh(), "cylinder": cylinder_mesh(),
                                     "cone": cone_mesh()}.items():
             self.meshes[name] = (ctx.buffer(verts.tobytes()), ctx.buffer(tris.tobytes()))
         corners = np.array([[0, -1], [0, 1], [1, -1], [1, 1]], dtype=np.float32)
         self.line_corners = ctx.buffer(corners.tobytes())
-        self.capsule_program = ctx.program(vertex_shader=CAPSULE_VS, fragment_shader=CAPSULE_FS)
-        self.capsule_exact_program = ctx.program(vertex_shader=CAPSULE_VS, fragment_shader=CAPSULE_EXACT_FS)
-        self.shadow_program = ctx.program(vertex_shader=CAPSULE_VS, fragment_shader=SHADOW_FS)
+        self.capsule_program = load_program(ctx, "capsule.vert", "capsule.frag")
+        self.capsule_exact_program = load_program(ctx, "capsule.vert", "capsule_exact.frag")
+        self.shadow_program = load_program(ctx, "capsule.vert", "shadow.frag")
+        for prog in (self.capsule_program, self.capsule_exact_program, self.shadow_program):
+            prog["u_shadow"].value = 1.0 if prog is self.shadow_program else 0.0
+            prog["u_inflate"].value = CAPSULE_INFLATE if prog is self.capsule_exact_program else 1.0
         verts, tris = capsule_mesh()
         self.capsule_mesh = (ctx.buffer(verts.tobytes()), ctx.buffer(tris.tobytes()))
         # shadows only need the outline: a coarse mesh keeps them cheap on software GL, where
         # their cost is mostly per triangle
         verts, tris = capsule_mesh(segments=12, cap_rings=3)
         self.shadow_mesh = (ctx.buffer(verts.tobytes()), ctx.buffer(tris.tobytes()))
-        self.shadow_resolve_program = ctx.program(vertex_shader=SHADOW_RESOLVE_VS,
-                                                  fragment_shader=SHADOW_RESOLVE_FS)
+        self.shadow_resolve_program = load_program(ctx, "shadow_resolve.vert", "shadow_resolve.frag")
+        self.shadow_resolve_program["u_depth_pull"].value = SHADOW_DEPTH_PULL
         self._resolve_corners = ctx.buffer(np.array([[0, 0], [1, 0], [0, 1], [1, 1]], np.float32).tobytes())
         self.shadow_resolve_vao = ctx.vertex_array(self.shadow_resolve_program,
                                                    [(self._resolve_corners, "2f", "in_corner")])
@@ -344,34 +223,12 @@ class Resources:
              (instances, "3f 3f 4f 4f/i", "i_p0", "i_p1", "i_c0", "i_c1")])
 
     def begin_frame(self, frame: FrameState, light: Light) -> None:
-        """Write the per-frame uniforms shared by all renderables."""
-        mp = self.mesh_program
-        mp["u_view_proj"].write(mat_bytes(frame.view_proj))
+        """Write the per-frame uniforms shared by all programs (frame.glsl's block) and bind them."""
         direction = np.asarray(light.direction, dtype=np.float64)
-        mp["u_light_dir"].value = tuple(direction / np.linalg.norm(direction))
-        mp["u_eye"].value = tuple(float(x) for x in frame.eye)
-        mp["u_ambient"].value = light.ambient
-        mp["u_diffuse"].value = light.diffuse
-        mp["u_specular"].value = light.specular
-        rp = self.shadow_resolve_program
-        rp["u_view"].write(mat_bytes(frame.view))
-        rp["u_proj"].write(mat_bytes(frame.proj))
-        rp["u_depth_pull"].value = SHADOW_DEPTH_PULL
-        for prog in (self.capsule_program, self.capsule_exact_program, self.shadow_program):
-            prog["u_view"].write(mat_bytes(frame.view))
-            prog["u_proj"].write(mat_bytes(frame.proj))
-            prog["u_shadow"].value = 1.0 if prog is self.shadow_program else 0.0
-            prog["u_inflate"].value = CAPSULE_INFLATE if prog is self.capsule_exact_program else 1.0
-        for cp in (self.capsule_program, self.capsule_exact_program):
-            cp["u_light_dir"].value = mp["u_light_dir"].value
-            cp["u_eye"].value = mp["u_eye"].value
-            cp["u_ambient"].value = light.ambient
-            cp["u_diffuse"].value = light.diffuse
-            cp["u_specular"].value = light.specular
-        lp = self.line_program
-        lp["u_view"].write(mat_bytes(frame.view))
-        lp["u_proj"].write(mat_bytes(frame.proj))
-        lp["u_viewport"].value = (float(frame.width), float(frame.height))
+        self.frame_uniforms.write(frame_block(
+            frame.view, frame.proj, frame.view_proj, frame.eye, direction / np.linalg.norm(direction),
+            light.ambient, light.diffuse, light.specular, (frame.width, frame.height)))
+        self.frame_uniforms.bind_to_uniform_block(FRAME_BINDING)
 
 
 _fallback_store: dict = {}

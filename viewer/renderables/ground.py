@@ -4,50 +4,9 @@ from __future__ import annotations
 import moderngl
 import numpy as np
 
-from .base import FrameState, Renderable, mat_bytes
+from ..shaders import load_program
+from .base import FrameState, Renderable
 from .lines import Lines
-
-GROUND_VS = """
-#version 330
-uniform mat4 u_view_proj;
-uniform vec2 u_center;
-uniform float u_size;
-uniform float u_height;
-in vec2 in_xz;
-out vec3 v_world;
-void main() {
-    v_world = vec3(u_center.x + in_xz.x * u_size, u_height, u_center.y + in_xz.y * u_size);
-    gl_Position = u_view_proj * vec4(v_world, 1.0);
-}
-"""
-
-GROUND_FS = """
-#version 330
-uniform float u_tile;
-uniform vec3 u_color_a;
-uniform vec3 u_color_b;
-uniform vec3 u_line_color;
-uniform vec3 u_background;
-uniform vec2 u_center;
-uniform float u_size;
-in vec3 v_world;
-out vec4 f_color;
-void main() {
-    vec2 p = v_world.xz / u_tile;
-    vec2 fw = max(fwidth(p), vec2(1e-6));
-    // far away a tile covers few pixels: blend the checker to its mean instead of aliasing
-    float blur = smoothstep(0.15, 0.5, max(fw.x, fw.y));
-    vec2 cell = floor(p);
-    float checker = mix(mod(cell.x + cell.y, 2.0), 0.5, blur);
-    vec3 col = mix(u_color_a, u_color_b, checker);
-    vec2 dist_px = abs(fract(p - 0.5) - 0.5) / fw;   // distance to the nearest grid line, pixels
-    float line = (1.0 - clamp(min(dist_px.x, dist_px.y) - 0.25, 0.0, 1.0)) * (1.0 - blur);
-    col = mix(col, u_line_color, line);
-    float r = length(v_world.xz - u_center) / (0.5 * u_size);
-    col = mix(col, u_background, smoothstep(0.55, 1.0, r));
-    f_color = vec4(col, 1.0);
-}
-"""
 
 
 class Ground(Renderable):
@@ -68,7 +27,7 @@ class Ground(Renderable):
         self.color_a, self.color_b, self.line_color = color_a, color_b, line_color
         self.visible = True
         self.center = np.zeros(2)
-        self.program = ctx.program(vertex_shader=GROUND_VS, fragment_shader=GROUND_FS)
+        self.program = load_program(ctx, "ground.vert", "ground.frag")
         quad = np.array([[-0.5, -0.5], [0.5, -0.5], [-0.5, 0.5], [0.5, 0.5]], dtype=np.float32)
         self._vbo = ctx.buffer(quad.tobytes())
         self._vao = ctx.vertex_array(self.program, [(self._vbo, "2f", "in_xz")])
@@ -93,7 +52,6 @@ class Ground(Renderable):
             # snap to whole tiles so the fade ring moves but the pattern never swims
             self.center = np.round(np.asarray(frame.target)[[0, 2]] / self.tile_m) * self.tile_m
         prog = self.program
-        prog["u_view_proj"].write(mat_bytes(frame.view_proj))
         prog["u_center"].value = tuple(float(x) for x in self.center)
         prog["u_size"].value = self.size_m
         prog["u_height"].value = self.height
