@@ -33,9 +33,10 @@ CLIPS = [
 def test_workers_build_the_same_database(tmp_path):
     m = _manifest(tmp_path, CLIPS)
     labels = []
-    one = build(m, workers=0).to_arrays()
-    two = build(m, workers=2, progress=lambda done, total, label: labels.append((done, total, label))).to_arrays()
-    assert set(one) == set(two)
+    one, one_meta = build(m, workers=0).to_archive()
+    two, two_meta = build(m, workers=2,
+                          progress=lambda done, total, label: labels.append((done, total, label))).to_archive()
+    assert one_meta == two_meta and set(one) == set(two)
     for name in one:
         assert one[name].dtype == two[name].dtype, name
         assert np.array_equal(one[name], two[name]), name

@@ -104,11 +104,11 @@ def test_a_database_built_in_small_blocks_is_the_same(tmp_path, monkeypatch):
     m = load_manifest(path)
     monkeypatch.setattr(quat, "FRAME_BLOCK", 10**9)
     monkeypatch.setattr(filters, "CATMULL_ROM_BLOCK", 10**9)
-    whole = database.build(m).to_arrays()
+    whole, whole_meta = database.build(m).to_archive()
     monkeypatch.setattr(quat, "FRAME_BLOCK", 97)
     monkeypatch.setattr(filters, "CATMULL_ROM_BLOCK", 101)
-    blocks = database.build(m).to_arrays()
-    assert set(whole) == set(blocks)
+    blocks, blocks_meta = database.build(m).to_archive()
+    assert whole_meta == blocks_meta and set(whole) == set(blocks)
     for name in whole:
         assert _same(np.asarray(whole[name]), np.asarray(blocks[name])), name
 

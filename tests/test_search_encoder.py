@@ -102,7 +102,7 @@ def test_loader_refuses_bad_files(tmp_path):
     nan = arrays["fc0.bias"].copy()
     nan[3] = np.nan
     variant("nan.npz", **{"fc0.bias": nan})
-    cases["nan.npz"] = (None, "fc0.bias holds NaN/inf")
+    cases["nan.npz"] = (None, "fc0.bias holds 1 NaN/inf")
     variant("huge.npz", **{"fc0.bias": np.full_like(nan, 1e6)})
     cases["huge.npz"] = (None, "fc0.bias holds values up to 1e\\+06")
     variant("std.npz", in_std=np.zeros(W.FRAME_DIM, np.float32))

@@ -6,7 +6,7 @@ BVH -> local rotations/positions (unit scaled) -> trim to ranges -> cubic resamp
 -> foot contacts. Bone 0 is always the simulation bone; its position/velocity are in world space and
 every other bone is local to its parent (velocities and angular velocities in the parent's frame).
 
-The result is cached as a pickle-free, uncompressed ``.npz`` (its per-frame arrays memory-mapped on
+The result is cached as an archive (:mod:`lmm.data.archive`; its per-frame arrays memory-mapped on
 load, see :mod:`lmm.data.npz_mmap`) keyed by a hash of the file contents and settings; the
 cache file's name is made of that hash only (never of text from the manifest), and it is written
 atomically. A build stops with a ManifestError before resampling a range that would take the database
@@ -27,11 +27,11 @@ import numpy as np
 
 from lmm import DEFAULT_MANIFEST, quat
 from lmm.data import bvh
-from lmm.data.atomic import atomic_write
+from lmm.data import archive
 from lmm.data.derived import file_digest as _file_digest
 from lmm.filters import catmull_rom, central_difference, median_filter, savgol_smooth
 from lmm.data.manifest import Manifest, ManifestError, load_manifest
-from lmm.data.npz_mmap import map_members, worth_mapping
+from lmm.data.npz_mmap import worth_mapping
 from lmm.kinematics import forward_kinematics, forward_kinematics_velocity, global_to_local
 from lmm.errors import InputError
 
@@ -193,29 +193,29 @@ class Database:
             self.parents)
 
     # -- persistence -----------------------------------------------------------------------
-    def to_arrays(self) -> dict[str, np.ndarray]:
-        return {
-            "format_version": np.array(DB_FORMAT_VERSION),
-            "names": np.array(self.names), "parents": self.parents,
-            "positions": self.positions, "rotations": self.rotations, "velocities": self.velocities,
-            "angular_velocities": self.angular_velocities, "contacts": self.contacts,
-            "toe_speeds": self.toe_speeds, "range_starts": self.range_starts, "range_stops": self.range_stops,
-            "range_names": np.array(self.range_names), "range_mirrored": self.range_mirrored,
-            "fps": np.array(self.fps),
-            "bone_roles": np.array(json.dumps(self.bone_roles)),
+    def to_archive(self) -> tuple[dict[str, np.ndarray], dict]:
+        """The arrays and the metadata of the database's file (:mod:`lmm.data.archive`). The bone roles
+        are pairs, so their order (the manifest's) survives the archive's sorted keys."""
+        arrays = {
+            "parents": self.parents, "positions": self.positions, "rotations": self.rotations,
+            "velocities": self.velocities, "angular_velocities": self.angular_velocities,
+            "contacts": self.contacts, "toe_speeds": self.toe_speeds, "range_starts": self.range_starts,
+            "range_stops": self.range_stops, "range_mirrored": self.range_mirrored,
             "mirror_map": self.mirror_map if self.mirror_map is not None else np.arange(self.n_bones),
-            "key": np.array(self.key), "name": np.array(self.name),
-            "build_fingerprint": np.array(self.build_fingerprint),
-            "range_tags": np.array(json.dumps([list(t) for t in self.range_tags])),
-            "tag_names": np.array(self.tag_names, dtype=str).reshape(-1),
             "frame_tags": (self.frame_tags if self.frame_tags is not None
                            else np.zeros((self.n_frames, 0), dtype=bool)),
-            "feature_schema": np.array(json.dumps(self.feature_schema)),
         }
+        metadata = {
+            "format_version": DB_FORMAT_VERSION, "names": list(self.names), "range_names": list(self.range_names),
+            "fps": float(self.fps), "bone_roles": [[role, bone] for role, bone in self.bone_roles.items()],
+            "key": self.key, "name": self.name, "build_fingerprint": self.build_fingerprint,
+            "range_tags": [list(t) for t in self.range_tags], "tag_names": list(self.tag_names),
+            "feature_schema": self.feature_schema,
+        }
+        return arrays, metadata
 
     def save(self, path) -> None:
-        with atomic_write(path) as f:  # a killed build never leaves a half-written cache
-            np.savez(f, **self.to_arrays())
+        archive.write(path, *self.to_archive())  # atomic: a killed build never leaves a half-written cache
 
     @classmethod
     def load(cls, path, mmap: bool | None = None) -> "Database":
@@ -226,51 +226,35 @@ class Database:
         path = Path(path)
         if mmap is None:
             mmap = worth_mapping(path)
-        try:
-            with np.load(path, allow_pickle=False) as z:
-                if int(z["format_version"]) != DB_FORMAT_VERSION:
-                    raise DatabaseError(f"{path}: database format {int(z['format_version'])}, expected {DB_FORMAT_VERSION}")
-                mapped = {k: np.asarray(v) for k, v in map_members(path, MAPPED_ARRAYS).items()} if mmap else {}
-                z = _Members(z, mapped)
-                db = cls(
-                    names=[str(s) for s in z["names"]], parents=z["parents"].astype(np.int64),
-                    positions=z["positions"], rotations=z["rotations"], velocities=z["velocities"],
-                    angular_velocities=z["angular_velocities"], contacts=z["contacts"], toe_speeds=z["toe_speeds"],
-                    range_starts=z["range_starts"].astype(np.int64), range_stops=z["range_stops"].astype(np.int64),
-                    range_names=[str(s) for s in z["range_names"]], range_mirrored=z["range_mirrored"],
-                    fps=float(z["fps"]), bone_roles=json.loads(str(z["bone_roles"])),
-                    mirror_map=z["mirror_map"].astype(np.int64), key=str(z["key"]), name=str(z["name"]),
-                    build_fingerprint=str(z["build_fingerprint"]) if "build_fingerprint" in z.files else "")
-                if "range_tags" in z.files:  # older caches have no tags (and a different build fingerprint)
-                    db.range_tags = [tuple(t) for t in json.loads(str(z["range_tags"]))]
-                    db.tag_names = [str(t) for t in z["tag_names"]]
-                    db.frame_tags = np.asarray(z["frame_tags"], dtype=bool)
-                else:
-                    db.set_tags([()] * db.n_ranges)
-                if "feature_schema" in z.files:
-                    db.feature_schema = list(json.loads(str(z["feature_schema"])))
-                db.source_path = path
-                return db
-        except DatabaseError:
-            raise
-        except Exception as e:  # zipfile.BadZipFile, OSError, KeyError, ValueError...: all mean "not a cache"
-            raise DatabaseError(f"{path}: not a valid lmm-studio database cache ({e})") from None
+        with archive.read(path, DatabaseError, "lmm-studio database cache",
+                          map_arrays=MAPPED_ARRAYS if mmap else ()) as z:
+            z.refuse_unknown(_ARCHIVE_ARRAYS)
+            meta = z.metadata(MAX_METADATA_BYTES)
+            if not isinstance(meta, dict) or meta.get("format_version") != DB_FORMAT_VERSION:
+                version = meta.get("format_version") if isinstance(meta, dict) else None
+                z.fail(f"database format {version}, expected {DB_FORMAT_VERSION}")
+            db = cls(
+                names=[str(s) for s in meta["names"]], parents=z["parents"].astype(np.int64),
+                positions=z["positions"], rotations=z["rotations"], velocities=z["velocities"],
+                angular_velocities=z["angular_velocities"], contacts=z["contacts"], toe_speeds=z["toe_speeds"],
+                range_starts=z["range_starts"].astype(np.int64), range_stops=z["range_stops"].astype(np.int64),
+                range_names=[str(s) for s in meta["range_names"]], range_mirrored=z["range_mirrored"],
+                fps=float(meta["fps"]), bone_roles={str(r): str(b) for r, b in meta["bone_roles"]},
+                mirror_map=z["mirror_map"].astype(np.int64), key=str(meta["key"]), name=str(meta["name"]),
+                build_fingerprint=str(meta["build_fingerprint"]),
+                range_tags=[tuple(t) for t in meta["range_tags"]], tag_names=[str(t) for t in meta["tag_names"]],
+                frame_tags=np.asarray(z["frame_tags"], dtype=bool), feature_schema=list(meta["feature_schema"]))
+        db.source_path = path
+        return db
 
 
 #: The per-frame arrays :meth:`Database.load` memory-maps (everything else is small and read).
 MAPPED_ARRAYS = ("positions", "rotations", "velocities", "angular_velocities", "contacts", "toe_speeds",
                  "frame_tags")
-
-
-class _Members:
-    """An open ``.npz`` whose mapped members come from ``mapped`` (the rest are read as usual)."""
-
-    def __init__(self, z, mapped: dict):
-        self._z, self._mapped = z, mapped
-        self.files = z.files
-
-    def __getitem__(self, name):
-        return self._mapped[name] if name in self._mapped else self._z[name]
+#: Every array of a database file (names, tags, settings and keys are in its metadata).
+_ARCHIVE_ARRAYS = MAPPED_ARRAYS + ("parents", "range_starts", "range_stops", "range_mirrored", "mirror_map")
+#: Largest metadata record of a database file: range names and tags, about 100 bytes a range.
+MAX_METADATA_BYTES = 64 * 1024 * 1024
 
 
 # ---------------------------------------------------------------------------------------------

@@ -1,4 +1,4 @@
-"""Network weight files: a pickle-free ``.npz`` with a JSON metadata record.
+"""Network weight files: an archive of arrays + JSON metadata (:mod:`lmm.data.archive`).
 
 Layout of a file:
 
@@ -18,14 +18,12 @@ nothing), and the metadata record has a size and nesting limit.
 """
 from __future__ import annotations
 
-import json
-import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from lmm.data.atomic import atomic_write
+from lmm.data import archive
 from lmm.errors import InputError
 
 WEIGHTS_FORMAT_VERSION = 1
@@ -50,7 +48,6 @@ MAX_WEIGHT_MAGNITUDE = 1e4
 MAX_FEATURE_MAGNITUDE = 1e6
 #: Largest metadata record (bytes): the shipped one is ~5 KB (layout, bone names, recipe).
 MAX_METADATA_BYTES = 1024 * 1024
-_NPY_HEADER_SLACK = 4096  # a .npy member is its header (<= a few hundred bytes) plus the raw data
 
 
 class WeightsError(InputError):
@@ -190,30 +187,15 @@ def expected_shapes(name: str, spec: dict) -> dict[str, tuple[int, ...]]:
 
 
 def save(path, arrays: dict[str, np.ndarray], metadata: dict) -> Path:
-    """Write arrays + metadata atomically (a killed run never leaves a half-written file at ``path``)."""
+    """Write arrays + metadata as an archive (:mod:`lmm.data.archive`, atomic)."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     meta = dict(metadata)
     meta["format_version"] = WEIGHTS_FORMAT_VERSION
     for name, spec in meta.get("networks", {}).items():
         for key, shape in expected_shapes(name, spec).items():
             if key not in arrays or tuple(arrays[key].shape) != shape:
                 raise WeightsError(f"{path}: refusing to save: {key} is missing or not {shape}")
-    out = {k: np.ascontiguousarray(v, dtype=np.float32) for k, v in arrays.items()}
-    out["metadata"] = np.frombuffer(json.dumps(meta, sort_keys=True).encode("utf-8"), dtype=np.uint8)
-    with atomic_write(path) as f:
-        np.savez(f, **out)
-    return path
-
-
-def _check_member_size(path, z, key: str, limit: int, shape=None) -> None:
-    """Refuse an npz member whose declared uncompressed size is over ``limit`` bytes, before reading it
-    (zipfile reads no more than the declared size)."""
-    info = z.zip.getinfo(f"{key}.npy")
-    if info.file_size > limit:
-        expected = f" for shape {shape}" if shape is not None else ""
-        raise WeightsError(f"{path}: member {key} declares {info.file_size} bytes, more than the {limit}"
-                           f"{expected}")
+    return archive.write(path, {k: np.ascontiguousarray(v, dtype=np.float32) for k, v in arrays.items()}, meta)
 
 
 def load(path, require=None, db_key: str | None = None, layout_dicts: list[dict] | None = None) -> WeightsFile:
@@ -226,65 +208,19 @@ def load(path, require=None, db_key: str | None = None, layout_dicts: list[dict]
     path = Path(path)
     if not path.is_file():
         raise WeightsError(f"{path}: weights file not found")
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            if not hasattr(z, "files"):
-                raise WeightsError(f"{path}: not an lmm-studio weights file (a single array, not an .npz)")
-            if "metadata" not in z.files:
-                raise WeightsError(f"{path}: not an lmm-studio weights file (no metadata record)")
-            _check_member_size(path, z, "metadata", MAX_METADATA_BYTES)
-            raw_meta = z["metadata"]
-            if raw_meta.dtype != np.uint8 or raw_meta.ndim != 1:
-                raise WeightsError(f"{path}: metadata record is not UTF-8 JSON bytes ({raw_meta.dtype})")
-            from lmm.data.jsonio import JsonError, parse_json
-
-            try:
-                metadata = parse_json(raw_meta.tobytes().decode("utf-8"), path)
-            except UnicodeDecodeError as e:
-                raise WeightsError(f"{path}: metadata record is not valid JSON (not UTF-8 at byte {e.start})") from None
-            except JsonError as e:
-                rest = str(e)[len(str(path)) + 2:]  # after "PATH: "
-                raise WeightsError(f"{path}: metadata record {'is ' if rest.startswith('not') else ''}{rest}") from None
-            check_metadata(path, metadata)
-            nets = metadata["networks"]
-            require = list(nets) if require is None else list(require)
-            for name in require:
-                if name not in nets:
-                    raise WeightsError(f"{path}: no {name} network in this file (it holds: {', '.join(nets)})")
-            known = {"metadata"}.union(*(expected_shapes(name, nets[name]) for name in nets))
-            extra = sorted(f for f in z.files if f not in known)
-            if extra:  # never read: it might be huge or a pickled object; a file we did not write
-                raise WeightsError(f"{path}: unexpected member {extra[0]!r} ({len(extra)} in all; a weights file "
-                                   f"holds only 'metadata' and the arrays of its networks: {', '.join(nets)})")
-            arrays = {}
-            for name in nets:
-                for key, shape in expected_shapes(name, nets[name]).items():
-                    if key not in z.files:
-                        raise WeightsError(f"{path}: missing array {key}")
-                    # read no member bigger than its expected shape in float64: an extra or oversized
-                    # member costs nothing
-                    _check_member_size(path, z, key, int(np.prod(shape)) * 8 + _NPY_HEADER_SLACK, shape)
-                    arrays[key] = z[key]
-    except WeightsError:
-        raise
-    except Exception as e:  # zipfile.BadZipFile, EOFError, OSError, ValueError, zlib.error from a damaged member
-        raise WeightsError(f"{path}: truncated or corrupt weights file ({type(e).__name__}: "
-                           f"{' '.join(str(e).split())[:200]})") from None
+    with archive.read(path, WeightsError, "weights file") as r:
+        metadata = r.metadata(MAX_METADATA_BYTES)
+        check_metadata(path, metadata)
+        nets = metadata["networks"]
+        require = list(nets) if require is None else list(require)
+        for name in require:
+            if name not in nets:
+                raise WeightsError(f"{path}: no {name} network in this file (it holds: {', '.join(nets)})")
+        shapes = {k: v for name in nets for k, v in expected_shapes(name, nets[name]).items()}
+        r.refuse_unknown(shapes, f"a weights file holds only 'metadata' and the arrays of its networks: "
+                                 f"{', '.join(nets)}")
+        arrays = r.float_arrays(shapes, MAX_WEIGHT_MAGNITUDE)
     for name in nets:
-        for key, shape in expected_shapes(name, nets[name]).items():
-            a = arrays[key]
-            if tuple(a.shape) != shape:
-                raise WeightsError(f"{path}: {key} has shape {tuple(a.shape)}, expected {shape} "
-                                   f"(from the {name} sizes in the metadata)")
-            if a.dtype.kind != "f":
-                raise WeightsError(f"{path}: {key} has dtype {a.dtype}, expected float32")
-            if not np.all(np.isfinite(a)):
-                bad = int(np.size(a) - np.count_nonzero(np.isfinite(a)))
-                raise WeightsError(f"{path}: {key} holds {bad} NaN/inf values")
-            if a.size and float(np.max(np.abs(a))) > MAX_WEIGHT_MAGNITUDE:
-                raise WeightsError(f"{path}: {key} holds values up to {float(np.max(np.abs(a))):.3g}, beyond "
-                                   f"+-{MAX_WEIGHT_MAGNITUDE:g} (MAX_WEIGHT_MAGNITUDE; trained weights stay "
-                                   f"under 15)")
         for part in ("in_std", "out_std"):
             if np.any(arrays[f"{name}.{part}"] <= 0):
                 raise WeightsError(f"{path}: {name}.{part} has non-positive entries (a normalisation "

@@ -19,12 +19,12 @@ layouts); ``metadata``: UTF-8 JSON as uint8 with ``format_version``, ``kind``, `
 from __future__ import annotations
 
 import hashlib
-import json
 from pathlib import Path
 
 import numpy as np
 
-from lmm.data.atomic import atomic_write
+from lmm.data import archive
+from lmm.data.archive import METADATA
 from lmm.errors import InputError
 from lmm.motion_search.windows import FRAME_DIM, WINDOW_FRAMES
 
@@ -37,7 +37,6 @@ MAX_LAYERS = 8              # convolutions, and fully connected layers
 MAX_KERNEL = 15
 MAX_MAGNITUDE = 1e4         # any weight, bias or normalisation entry (trained ones stay under ~10)
 MAX_METADATA_BYTES = 256 * 1024
-_NPY_HEADER_SLACK = 4096
 
 
 class SearchWeightsError(InputError):
@@ -173,65 +172,30 @@ def load(path) -> ConvNet:
     path = Path(path)
     if not path.is_file():
         _fail(path, "search network file not found")
-    try:
-        raw = path.read_bytes()
-        digest = hashlib.sha256(raw).hexdigest()
-        with np.load(path, allow_pickle=False) as z:
-            if not hasattr(z, "files") or "metadata" not in z.files:
-                _fail(path, "not a search network file (no metadata record)")
-            if z.zip.getinfo("metadata.npy").file_size > MAX_METADATA_BYTES:
-                _fail(path, f"metadata record is larger than {MAX_METADATA_BYTES} bytes")
-            m = z["metadata"]
-            if m.dtype != np.uint8 or m.ndim != 1:
-                _fail(path, f"metadata record is not UTF-8 JSON bytes ({m.dtype})")
-            try:
-                meta = json.loads(m.tobytes().decode("utf-8"))
-            except (UnicodeDecodeError, json.JSONDecodeError) as e:
-                _fail(path, f"metadata record is not valid JSON ({type(e).__name__})")
-            check_metadata(path, meta)
-            shapes = expected_shapes(meta)
-            extra = sorted(f for f in z.files if f != "metadata" and f not in shapes)
-            if extra:  # never read: a member we did not write (it could be huge or a pickled object)
-                _fail(path, f"unexpected member {extra[0]!r} ({len(extra)} in all)")
-            arrays = {}
-            for key, shape in shapes.items():
-                if key not in z.files:
-                    _fail(path, f"missing array {key}")
-                if z.zip.getinfo(f"{key}.npy").file_size > int(np.prod(shape)) * 8 + _NPY_HEADER_SLACK:
-                    _fail(path, f"member {key} is larger than its shape {shape} allows")
-                arrays[key] = z[key]
-    except SearchWeightsError:
-        raise
-    except Exception as e:  # zipfile.BadZipFile, EOFError, OSError, ValueError from a damaged member
-        _fail(path, f"truncated or corrupt search network file ({type(e).__name__}: {' '.join(str(e).split())[:160]})")
-    for key, shape in shapes.items():
-        a = arrays[key]
-        if tuple(a.shape) != shape:
-            _fail(path, f"{key} has shape {tuple(a.shape)}, expected {shape} (from the metadata's layer sizes)")
-        if a.dtype.kind != "f":
-            _fail(path, f"{key} has dtype {a.dtype}, expected float32")
-        if not np.all(np.isfinite(a)):
-            _fail(path, f"{key} holds NaN/inf values")
-        if a.size and float(np.max(np.abs(a))) > MAX_MAGNITUDE:
-            _fail(path, f"{key} holds values up to {float(np.max(np.abs(a))):.3g}, beyond +-{MAX_MAGNITUDE:g}")
+    with archive.read(path, SearchWeightsError, "search network file") as r:
+        if METADATA not in r:
+            _fail(path, "not a search network file (no metadata record)")
+        meta = r.metadata(MAX_METADATA_BYTES)
+        check_metadata(path, meta)
+        shapes = expected_shapes(meta)
+        r.refuse_unknown(shapes)
+        arrays = r.float_arrays(shapes, MAX_MAGNITUDE)
+        digest = hashlib.sha256(path.read_bytes()).hexdigest()   # names the embedder in index caches
     if np.any(arrays["in_std"] <= 0):
         _fail(path, "in_std has non-positive entries (a normalisation scale must be positive)")
     return ConvNet(arrays, meta, digest)
 
 
 def save(path, arrays: dict[str, np.ndarray], metadata: dict) -> Path:
-    """Write a network file atomically; refuses arrays that do not match the metadata."""
+    """Write a network file (an archive, :mod:`lmm.data.archive`); refuses arrays that do not match the
+    metadata."""
     meta = dict(metadata, format_version=FORMAT_VERSION, window_frames=WINDOW_FRAMES, frame_dim=FRAME_DIM)
     check_metadata(path, meta)
     shapes = expected_shapes(meta)
     for key, shape in shapes.items():
         if key not in arrays or tuple(np.shape(arrays[key])) != shape:
             _fail(path, f"refusing to save: {key} is missing or not {shape}")
-    out = {k: np.ascontiguousarray(arrays[k], dtype=np.float32) for k in shapes}
-    out["metadata"] = np.frombuffer(json.dumps(meta, sort_keys=True).encode("utf-8"), dtype=np.uint8)
-    with atomic_write(path) as f:
-        np.savez(f, **out)
-    return Path(path)
+    return archive.write(path, {k: np.ascontiguousarray(arrays[k], dtype=np.float32) for k in shapes}, meta)
 
 
 def load_default() -> ConvNet | None:

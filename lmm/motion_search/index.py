@@ -356,26 +356,26 @@ class MotionIndex:
                    window_take, window_start, embeddings, scale, embedder)
 
     def _save(self, path: Path, identity: str) -> None:
-        from lmm.data.atomic import atomic_write
+        from lmm.data import archive
 
         meta = {"version": INDEX_VERSION, "embedder": identity, "labels": [s.label for s in self.sources]}
         try:
-            with atomic_write(path) as f:
-                np.savez(f, meta=np.array(json.dumps(meta)), file_fps=self.file_fps,
-                         n_file_frames=self.n_file_frames, take_offsets=self.take_offsets, frames=self.frames,
-                         window_take=self.window_take, window_start=self.window_start,
-                         embeddings=self.embeddings, scale=self.scale)
+            archive.write(path, {k: getattr(self, k) for k in _CACHED_ARRAYS}, meta)
         except OSError:
             pass  # a read-only cache only costs the next build its time
 
     @classmethod
     def _load(cls, path: Path, sources, embedder, fitted_features) -> "MotionIndex | None":
+        from lmm.data import archive
+
         try:
-            with np.load(path, allow_pickle=False) as z:
-                meta = json.loads(str(z["meta"]))
-                arrays = {k: z[k] for k in ("file_fps", "n_file_frames", "take_offsets", "frames",
-                                            "window_take", "window_start", "embeddings", "scale")}
-        except Exception:  # noqa: BLE001 - a damaged cache file is rebuilt, never an error
+            with archive.read(path, what="search index cache") as r:
+                r.refuse_unknown(_CACHED_ARRAYS)
+                meta = r.metadata()
+                arrays = {k: r.array(k) for k in _CACHED_ARRAYS}
+        except archive.ArchiveError:  # a damaged or older cache file is rebuilt, never an error
+            return None
+        if not isinstance(meta, dict):
             return None
         if meta.get("labels") != [s.label for s in sources] or meta.get("version") != INDEX_VERSION:
             return None
@@ -513,6 +513,11 @@ class MotionIndex:
         b = min(max(self.file_frame(t, start + length), a + 1), int(self.n_file_frames[t]))
         return Match(self.sources[t].label, a, b, float(distance), t, int(start), int(length),
                      float(embedding_distance))
+
+
+#: the arrays of a :class:`MotionIndex` its cache file holds
+_CACHED_ARRAYS = ("file_fps", "n_file_frames", "take_offsets", "frames", "window_take", "window_start", "embeddings",
+                  "scale")
 
 
 def _suppress(takes, starts, dists, k: int, radius: int, exclude, lengths) -> list[tuple[int, int, float]]:

@@ -115,20 +115,21 @@ def load_takes(folder=None, cache: bool = True, log=None) -> list[Take]:
 
 
 def _write_cache(path: Path, takes: list[Take]) -> None:
-    from lmm.data.atomic import atomic_write
+    from lmm.data import archive
 
     meta = [{"file": t.file, "label": t.label, "file_fps": t.file_fps, "n_file_frames": t.n_file_frames,
              "n": len(t.frames)} for t in takes]
     frames = np.concatenate([t.frames for t in takes]) if takes else np.zeros((0, W.FRAME_DIM), np.float32)
-    with atomic_write(path) as f:
-        np.savez(f, frames=frames.astype(np.float32),
-                 meta=np.frombuffer(json.dumps(meta).encode(), np.uint8))
+    archive.write(path, {"frames": frames.astype(np.float32)}, meta)
 
 
 def _read_cache(path: Path) -> list[Take]:
-    with np.load(path, allow_pickle=False) as z:
-        meta = json.loads(z["meta"].tobytes().decode())
-        frames = z["frames"]
+    from lmm.data import archive
+
+    with archive.read(path, what="search frames cache") as r:
+        r.refuse_unknown({"frames"})
+        meta = r.metadata()
+        frames = r.array("frames")
     out, start = [], 0
     for m in meta:
         out.append(Take(m["file"], m["label"], float(m["file_fps"]), int(m["n_file_frames"]),
