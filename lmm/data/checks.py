@@ -28,6 +28,7 @@ from lmm.data import bvh
 from lmm.data.manifest import Manifest
 from lmm.data.database import MIN_RANGE_FRAMES
 from lmm.errors import InputError
+from lmm.skeleton import bones_with_defaults, joint_of_role
 
 # -- thresholds (metres, seconds) ---------------------------------------------------------------------
 GROUND_PERCENTILE = 2.0          # a take's ground level: this percentile of the lower toe's height
@@ -51,10 +52,6 @@ HUMAN_HEIGHT_M = (1.0, 2.5)      # head height range of a standing adult
 
 KINDS = ("calibration_pose", "airborne", "contact_sliding", "speed_outlier", "turn_outlier",
          "frame_rate", "unit_scale")
-
-# joints the checks need beyond the manifest's bone roles: role -> default LAFAN1 name
-EXTRA_ROLES = {"left_hand": "LeftHand", "right_hand": "RightHand", "left_shoulder": "LeftArm",
-               "right_shoulder": "RightArm", "head": "Head"}
 
 # coverage histogram bins
 SPEED_BINS_M_S = (0.0, 0.25, 0.75, 1.25, 1.75, 2.5, 3.25, 4.0, np.inf)
@@ -159,11 +156,6 @@ def source_fps(frame_time: float) -> float:
     return float(round(fps)) if abs(fps - round(fps)) < 0.01 else fps
 
 
-def _joint(names: list[str], bones: dict[str, str], role: str) -> int | None:
-    name = bones.get(role, EXTRA_ROLES.get(role))
-    return names.index(name) if name in names else None
-
-
 # ---------------------------------------------------------------------------------------------------
 # signals and rules
 # ---------------------------------------------------------------------------------------------------
@@ -176,11 +168,11 @@ def take_signals(global_positions: np.ndarray, global_rotations: np.ndarray | No
     ``ground_m``: the floor height; None takes the take's own ground level (a low percentile of the
     lower toe's height), which is right for source takes; recordings stand on y = 0.
     """
-    bones = {**{"hips": "Hips", "left_toe": "LeftToe", "right_toe": "RightToe"}, **(bones or {})}
+    bones = bones_with_defaults(bones)   # the roles the manifest does not name: their LAFAN1 names
     g = np.asarray(global_positions, dtype=np.float64)
     F = g.shape[0]
-    toes = [_joint(names, bones, "left_toe"), _joint(names, bones, "right_toe")]
-    hips = _joint(names, bones, "hips")
+    toes = [joint_of_role(names, bones, "left_toe"), joint_of_role(names, bones, "right_toe")]
+    hips = joint_of_role(names, bones, "hips")
     if None in toes or hips is None:
         raise CheckError(f"the checks need the hips and toe joints ({bones.get('hips')}, {bones.get('left_toe')}, "
                          f"{bones.get('right_toe')})")
@@ -193,7 +185,7 @@ def take_signals(global_positions: np.ndarray, global_rotations: np.ndarray | No
         turn = moving_average(facing_turn_rate(global_rotations[:, hips], fps, forward_axis), window)
     else:
         turn = np.zeros(F)
-    hand = [_joint(names, bones, r) for r in ("left_hand", "right_hand", "left_shoulder", "right_shoulder")]
+    hand = [joint_of_role(names, bones, r) for r in ("left_hand", "right_hand", "left_shoulder", "right_shoulder")]
     if None in hand:
         tpose = np.zeros(F, dtype=bool)
     else:
@@ -429,8 +421,7 @@ def motion_report(global_positions: np.ndarray, names: list[str], fps: float, bo
     F = s.toe_height_m.shape[0]
     air = s.toe_height_m.min(axis=1) > AIRBORNE_HEIGHT_M
     air_runs = runs(air)
-    bones = {**{"left_toe": "LeftToe", "right_toe": "RightToe"}, **(bones or {})}
-    toes = [_joint(names, bones, "left_toe"), _joint(names, bones, "right_toe")]
+    toes = [joint_of_role(names, bones, "left_toe"), joint_of_role(names, bones, "right_toe")]
     skating = ground_skating(np.asarray(global_positions, np.float64)[:, toes], fps) if F > 1 else None
     return {
         "frames": int(F), "fps": float(fps), "seconds": F / fps if fps else 0.0,

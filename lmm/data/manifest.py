@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from lmm.errors import InputError
+from lmm.skeleton import MANIFEST_ROLES, default_bones
 from lmm.features import DEFAULT_LAYOUT, SchemaError, layout_from_schema, schema_of
 
 try:  # Python 3.11+
@@ -110,9 +111,7 @@ class Manifest:
     speed_scale: float = 1.0
     mirror: bool = True
     mirror_name_pairs: list[tuple[str, str]] = field(default_factory=lambda: [("Left", "Right")])
-    bones: dict[str, str] = field(default_factory=lambda: {
-        "hips": "Hips", "spine": "Spine2", "left_foot": "LeftFoot", "right_foot": "RightFoot",
-        "left_toe": "LeftToe", "right_toe": "RightToe"})
+    bones: dict[str, str] = field(default_factory=default_bones)   # role -> joint name (LAFAN1's by default)
     hips_forward_axis: tuple[float, float, float] = (0.0, 1.0, 0.0)
     simulation_position_window: int = 31
     simulation_direction_window: int = 61
@@ -143,7 +142,7 @@ class Manifest:
         return [[list(c.tags_of(k)) for k in range(len(c.ranges or [None]))] for c in self.clips]
 
 
-REQUIRED_BONES = ("hips", "spine", "left_foot", "right_foot", "left_toe", "right_toe")
+REQUIRED_BONES = MANIFEST_ROLES
 
 
 def _short(value, limit: int = 40) -> str:

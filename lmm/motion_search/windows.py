@@ -18,14 +18,14 @@ frame numbers. :func:`mirror_frames` swaps left and right (the augmentation and 
 from __future__ import annotations
 
 import math
-import re
 from dataclasses import dataclass
 
 import numpy as np
 
 from lmm.errors import InputError
+from lmm.skeleton import KEY_ROLES, SkeletonMatchError, match_roles  # noqa: F401  (SkeletonMatchError re-exported)
 
-KEY_JOINTS = ("hips", "head", "left_hand", "right_hand", "left_foot", "right_foot")
+KEY_JOINTS = KEY_ROLES
 LIMB_JOINTS = KEY_JOINTS[1:]            # relative to the hips, in this order
 WINDOW_FPS = 30.0
 WINDOW_FRAMES = 32                      # 1.07 s: a step cycle of a walk, two of a run
@@ -35,43 +35,12 @@ MIRROR_PERMUTATION = (0, 2, 1, 4, 3)    # head, hands and feet with left and rig
 # drop a frame from every 60-frame query and shift every later frame by a fraction of one
 SAME_RATE_TOLERANCE = 1e-4
 
-# normalized names (lower case, letters and digits only, a namespace prefix like "mixamorig:" dropped)
-_SYNONYMS = {
-    "hips": ("hips", "hip", "pelvis", "root", "bip01pelvis"),
-    "head": ("head", "bip01head"),
-    "left_hand": ("lefthand", "lhand", "handl", "leftwrist", "lwrist", "wristl", "bip01lhand"),
-    "right_hand": ("righthand", "rhand", "handr", "rightwrist", "rwrist", "wristr", "bip01rhand"),
-    "left_foot": ("leftfoot", "lfoot", "footl", "leftankle", "lankle", "anklel", "bip01lfoot"),
-    "right_foot": ("rightfoot", "rfoot", "footr", "rightankle", "rankle", "ankler", "bip01rfoot"),
-}
-
-
-class SkeletonMatchError(InputError):
-    """The key joints of a skeleton cannot be found by name; the message lists the missing ones."""
-
-
-def _normalize(name: str) -> str:
-    name = name.rsplit(":", 1)[-1]
-    return re.sub(r"[^a-z0-9]", "", name.lower())
-
 
 def match_key_joints(names, path="") -> dict[str, int]:
-    """Joint index of each key joint, matched by name (exact normalized synonyms, e.g. ``LeftHand``,
-    ``mixamorig:LeftHand``, ``l_wrist``). Raises :class:`SkeletonMatchError` naming ``path`` and every
-    key joint it could not find."""
-    normalized = [_normalize(n) for n in names]
-    out, missing = {}, []
-    for key in KEY_JOINTS:
-        hit = next((i for syn in _SYNONYMS[key] for i, n in enumerate(normalized) if n == syn), None)
-        if hit is None:
-            missing.append(key)
-        else:
-            out[key] = hit
-    if missing:
-        accepted = "; ".join(f"{k}: {', '.join(_SYNONYMS[k][:3])}" for k in missing)
-        raise SkeletonMatchError(f"{path}: cannot match the key joints {', '.join(missing)} by name "
-                                 f"(accepted names, e.g. {accepted})")
-    return out
+    """Joint index of each key joint, matched by name (:func:`lmm.skeleton.match_roles`: exact normalized
+    synonyms, e.g. ``LeftHand``, ``mixamorig:LeftHand``, ``l_wrist``). Raises :class:`SkeletonMatchError`
+    naming ``path`` and every key joint it could not find."""
+    return match_roles(names, KEY_JOINTS, path)
 
 
 def reference_height(hips_y: np.ndarray) -> float:

@@ -15,7 +15,8 @@ compiled ``mujoco.MjModel`` wrapped in a :class:`Body`:
 * **Masses.** The total mass (default 70 kg) split by segment fractions of body mass (Winter,
   *Biomechanics and Motor Control of Human Movement*, table 4.1: :data:`SEGMENT_MASS_FRACTIONS`), each
   segment's mass spread over its geoms by volume; MuJoCo derives the inertia from the geoms.
-* **Segments.** From the key joints matched by name (:func:`lmm.motion_search.windows.match_key_joints`):
+* **Segments.** From the key joints (:data:`lmm.skeleton.KEY_ROLES`: the skeleton's roles, found by name
+  when no bones table names them):
   the two joints above a foot are thigh and shank, the two above a hand upper arm and forearm, the joints
   between the arms' branch and the head (and the head's subtree) the head and neck, a foot with its
   subtree the foot, a hand with its subtree the hand; everything else (pelvis, spine, clavicles) the trunk.
@@ -40,8 +41,9 @@ import numpy as np
 
 from lmm import quat
 from lmm.errors import InputError
-from lmm.motion_search.windows import SkeletonMatchError, match_key_joints
 from lmm.physics import require_mujoco
+from lmm.skeleton import (KEY_ROLES, SIDES, Skeleton, SkeletonMatchError, ancestors, children, find_toe,
+                          guess_unit_scale, leg_length, subtree)
 
 GRAVITY_M_S2 = 9.81
 DEFAULT_TOTAL_MASS_KG = 70.0
@@ -67,7 +69,6 @@ SEGMENT_RADIUS_M = {
 FOOT_HALF_WIDTH_M = 0.045        # half the width of a sole box for a 1.75 m body
 HEEL_FRACTION = 0.35             # heel behind the ankle, as a fraction of the ankle-to-toe-joint length
 TOE_FRACTION = 0.35              # toe box length, same fraction
-SIDES = ("left", "right")
 
 
 class BodyError(InputError):
@@ -159,69 +160,38 @@ class Body:
 # the skeleton's segments
 # ---------------------------------------------------------------------------------------------------
 
-def _ancestors(parents, j) -> list[int]:
-    """Joints from ``j``'s parent up to the root, nearest first."""
-    out = []
-    p = int(parents[j])
-    while p >= 0:
-        out.append(p)
-        p = int(parents[p])
-    return out
-
-
-def _subtree(parents, j) -> list[int]:
-    inside = {j}
-    for k in range(j + 1, len(parents)):
-        if int(parents[k]) in inside:
-            inside.add(k)
-    return sorted(inside)
-
-
-def _children(parents, j) -> list[int]:
-    return [k for k in range(len(parents)) if int(parents[k]) == j]
-
-
-def find_toe(names, parents, foot: int) -> int | None:
-    """The foot's toe joint: a child named like a toe, else its only child; None when it has none."""
-    kids = _children(parents, foot)
-    for k in kids:
-        if "toe" in names[k].lower():
-            return k
-    return kids[0] if len(kids) == 1 else None
-
-
 def skeleton_segments(names, parents, key: dict[str, int], path="") -> tuple[list[str], list[str]]:
     """(segment, side) of every joint (see the module doc); joints outside the hips' subtree get ""."""
     J = len(names)
     hips = key["hips"]
-    inside = set(_subtree(parents, hips))
+    inside = set(subtree(parents, hips))
     segment = ["trunk" if j in inside else "" for j in range(J)]
     side = ["" for _ in range(J)]
     for k in ("head", "left_hand", "right_hand", "left_foot", "right_foot"):
         if key[k] not in inside:
             raise BodyError(f"{path}: the {k.replace('_', ' ')} ({names[key[k]]}) is not below the hips "
                             f"({names[hips]}): cannot build a body with the hips as root")
-    head_chain = _ancestors(parents, key["head"])
+    head_chain = ancestors(parents, key["head"])
     for s in SIDES:
         foot, hand = key[f"{s}_foot"], key[f"{s}_hand"]
-        leg = _ancestors(parents, foot)
+        leg = ancestors(parents, foot)
         leg = leg[:leg.index(hips)]                          # shank joint, thigh joint, (hip joints)
-        arm_all = _ancestors(parents, hand)
+        arm_all = ancestors(parents, hand)
         arm = [a for a in arm_all if a not in head_chain]   # below the branch point
         for seg, chain in (("shank", leg[:1]), ("thigh", leg[1:2]), ("forearm", arm[:1]), ("upper_arm", arm[1:2])):
             for j in chain:
                 segment[j], side[j] = seg, s
-        for j in _subtree(parents, foot):
+        for j in subtree(parents, foot):
             segment[j], side[j] = "foot", s
-        for j in _subtree(parents, hand):
+        for j in subtree(parents, hand):
             segment[j], side[j] = "hand", s
     # neck: the joints between the arms' branch point and the head
-    arm_chain = set(_ancestors(parents, key["left_hand"])) | set(_ancestors(parents, key["right_hand"]))
+    arm_chain = set(ancestors(parents, key["left_hand"])) | set(ancestors(parents, key["right_hand"]))
     for j in head_chain:
         if j in arm_chain or j == hips:
             break
         segment[j] = "neck"
-    for j in _subtree(parents, key["head"]):
+    for j in subtree(parents, key["head"]):
         segment[j] = "head"
     return segment, side
 
@@ -331,20 +301,16 @@ def _box_bottom_corners(g: _Geom) -> np.ndarray:
                      for sx in (-1, 1) for sy in (-1, 1)])
 
 
-def build_body(names, parents, offsets_m, total_mass: float = DEFAULT_TOTAL_MASS_KG, *, stance=None,
+def build_body(skeleton: Skeleton, total_mass: float = DEFAULT_TOTAL_MASS_KG, *, stance=None,
                end_sites_m=None, joint_limit_deg: float = JOINT_LIMIT_DEG, path: str = "") -> Body:
-    """A :class:`Body` for a skeleton: ``names`` (J), ``parents`` (J, -1 for the root, parents first),
-    ``offsets_m`` (J, 3) in metres. ``stance``: optional ``(global_pos (F, J, 3) m, global_rot (F, J, 4))``
-    of a motion of this skeleton, to lay the soles flat (see the module doc). ``end_sites_m``: optional
-    ``{joint: offset}`` (m), sizing a foot without a toe joint. ``path`` names the skeleton in errors.
-    Raises :class:`BodyError` (one line) for a skeleton it cannot build, and
-    :class:`lmm.physics.PhysicsUnavailable` when mujoco is not installed."""
-    names = [str(n) for n in names]
-    parents = np.asarray(parents, dtype=np.int64).reshape(-1)
-    offsets = np.asarray(offsets_m, dtype=np.float64).reshape(-1, 3)
+    """A :class:`Body` for a :class:`lmm.skeleton.Skeleton` (its offsets taken in metres through its
+    ``unit_scale``; its key joints :data:`lmm.skeleton.KEY_ROLES` from its roles). ``stance``: optional
+    ``(global_pos (F, J, 3) m, global_rot (F, J, 4))`` of a motion of this skeleton, to lay the soles flat
+    (see the module doc). ``end_sites_m``: optional ``{joint: offset}`` (m), sizing a foot without a toe
+    joint. ``path`` names the skeleton in errors. Raises :class:`BodyError` (one line) for a skeleton it
+    cannot build, and :class:`lmm.physics.PhysicsUnavailable` when mujoco is not installed."""
+    names, parents, offsets = skeleton.names, skeleton.parents, skeleton.offsets_m
     J = len(names)
-    if parents.shape != (J,) or offsets.shape != (J, 3):
-        raise BodyError(f"{path}: names, parents and offsets disagree on the joint count")
     if not (np.isfinite(total_mass) and total_mass > 0):
         raise BodyError(f"{path}: total mass {total_mass} kg: expected a positive number")
     end_sites = {int(k): np.asarray(v, dtype=np.float64).reshape(3) for k, v in (end_sites_m or {}).items()}
@@ -352,26 +318,25 @@ def build_body(names, parents, offsets_m, total_mass: float = DEFAULT_TOTAL_MASS
         stance = (np.asarray(stance[0], dtype=np.float64).reshape(-1, J, 3),
                   quat.normalize(np.asarray(stance[1], dtype=np.float64).reshape(-1, J, 4)))
     try:
-        key = match_key_joints(names, path)
+        key = skeleton.require(KEY_ROLES, path)
     except SkeletonMatchError as e:
         raise BodyError(str(e)) from None
     segment, side = skeleton_segments(names, parents, key, path)
     hips = key["hips"]
-    joints = np.array(_subtree(parents, hips), dtype=np.int64)
+    joints = np.array(subtree(parents, hips), dtype=np.int64)
 
     # limb bones must have a length: a capsule from each limb joint to the next joint of its chain
     for j in joints:
         if segment[j] in ("thigh", "shank", "upper_arm", "forearm"):
-            nxt = [k for k in _children(parents, j) if segment[k] != "" and
-                   any(key[f"{side[j]}_{e}"] in _subtree(parents, k) for e in ("foot", "hand"))]
+            nxt = [k for k in children(parents, j) if segment[k] != "" and
+                   any(key[f"{side[j]}_{e}"] in subtree(parents, k) for e in ("foot", "hand"))]
             for k in nxt:
                 if np.linalg.norm(offsets[k]) < MIN_BONE_M:
                     raise BodyError(f"{path}: the bone {names[j]} -> {names[k]} has zero length "
                                     f"({1000 * np.linalg.norm(offsets[k]):.2g} mm): cannot size the "
                                     f"{side[j]} {segment[j].replace('_', ' ')}")
     # hip-to-ankle length: thigh bone (the shank joint's offset) + shank bone (the foot's offset), mean of sides
-    leg_len = 0.5 * sum(float(np.linalg.norm(offsets[key[f"{s}_foot"]]) + np.linalg.norm(offsets[parents[key[f"{s}_foot"]]]))
-                        for s in SIDES)
+    leg_len = leg_length(parents, offsets, key)
     if leg_len < 10 * MIN_BONE_M:
         raise BodyError(f"{path}: the legs ({names[key['left_foot']]}, {names[key['right_foot']]}) have no length")
     height = leg_len / HIP_TO_ANKLE_FRACTION
@@ -394,7 +359,7 @@ def build_body(names, parents, offsets_m, total_mass: float = DEFAULT_TOTAL_MASS
                 geoms.append(_Geom(j, "sphere", seg, side[j], pos=np.zeros(3), size=np.array([0.5 * radius])))
             continue
         made = False
-        for k in _children(parents, j):
+        for k in children(parents, j):
             length = float(np.linalg.norm(offsets[k]))
             if length < MIN_BONE_M:
                 continue
@@ -514,7 +479,7 @@ def _mjcf(names, parents, offsets, joints, hips, geoms, joint_limit_deg) -> tupl
             else:
                 attrs += f' pos="{_v(g.pos)}" size="{_v(g.size)}" xyaxes="{_v(g.xaxis)} {_v(g.yaxis)}"'
             lines.append(f"{pad}  <geom {attrs}/>")
-        for k in _children(parents, j):
+        for k in children(parents, j):
             if k in inside:
                 emit(k, depth + 1)
         lines.append(f"{pad}</body>")
@@ -528,43 +493,27 @@ def _mjcf(names, parents, offsets, joints, hips, geoms, joint_limit_deg) -> tupl
 # bodies of the things we hold: a BVH animation, a motion database
 # ---------------------------------------------------------------------------------------------------
 
-UNIT_SCALES = (1.0, 0.1, 0.0254, 0.01, 0.001)   # metres per file unit: m, dm, inch, cm, mm
-HUMAN_LEG_M = 0.86                                # hip-to-ankle length of a 1.75 m body
-
-
-def guess_unit_scale(names, parents, offsets, path="") -> float:
-    """Metres per file unit of a skeleton: the one of :data:`UNIT_SCALES` that makes its hip-to-ankle
-    length (thigh + shank bones) closest to a human's."""
-    try:
-        key = match_key_joints(names, path)
-    except SkeletonMatchError as e:
-        raise BodyError(str(e)) from None
-    offsets = np.asarray(offsets, dtype=np.float64)
-    parents = np.asarray(parents)
-    leg = 0.5 * sum(float(np.linalg.norm(offsets[key[f"{s}_foot"]]) +
-                          np.linalg.norm(offsets[parents[key[f"{s}_foot"]]])) for s in SIDES)
-    if leg <= 0:
-        raise BodyError(f"{path}: the legs have no length: cannot guess the file's unit")
-    return min(UNIT_SCALES, key=lambda s: abs(np.log(leg * s / HUMAN_LEG_M)))
-
-
 def body_for_animation(anim, unit_scale: float | None = None, total_mass: float = DEFAULT_TOTAL_MASS_KG):
     """``(body, global_pos_m, global_rot, unit_scale)`` of a :class:`lmm.data.bvh.Animation`: its soles laid
     from its own standing frames; ``unit_scale`` (metres per file unit) guessed when None."""
     path = anim.path or "<animation>"
     if unit_scale is None:
-        unit_scale = guess_unit_scale(anim.names, anim.parents, anim.offsets, path)
+        unit_scale = guess_unit_scale(anim.names, anim.parents, anim.offsets)
+        if unit_scale is None:
+            raise BodyError(f"{path}: the legs have no length: cannot guess the file's unit")
     rot, pos = anim.global_transforms()
     pos = pos * unit_scale
-    body = build_body(anim.names, anim.parents, anim.offsets * unit_scale, total_mass, stance=(pos, rot),
+    skeleton = Skeleton.by_synonyms(anim.names, anim.parents, anim.offsets, unit_scale)
+    body = build_body(skeleton, total_mass, stance=(pos, rot),
                       end_sites_m={k: v * unit_scale for k, v in anim.end_sites.items()}, path=path)
     return body, pos, rot, float(unit_scale)
 
 
 def body_for_database(db, total_mass: float = DEFAULT_TOTAL_MASS_KG, stance_frames: int = 4000) -> Body:
-    """The body of a :class:`lmm.data.database.Database`'s skeleton (metres; its simulation bone left out),
-    soles laid from up to ``stance_frames`` of its frames spread over the database."""
+    """The body of a :class:`lmm.data.database.Database`'s skeleton (metres; its simulation bone left out;
+    its roles from the database's ``bone_roles``, the others by name), soles laid from up to
+    ``stance_frames`` of its frames spread over the database."""
     frames = np.unique(np.linspace(0, db.n_frames - 1, min(stance_frames, db.n_frames)).astype(np.int64))
     rot, pos = db.global_transforms(frames)
-    return build_body(db.names, db.parents, db.positions[0].astype(np.float64), total_mass, stance=(pos, rot),
-                      path=f"database {db.name}")
+    skeleton = Skeleton.from_bones(db.names, db.parents, db.positions[0], db.bone_roles)
+    return build_body(skeleton, total_mass, stance=(pos, rot), path=f"database {db.name}")
