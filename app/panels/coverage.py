@@ -11,7 +11,8 @@
   matching, the nearest frame it may pick: frames of excluded tags are drawn dim and left out).
 
 Everything follows the displayed tick (live or picked on the timeline). The coverage itself is computed
-once, on a thread, the first time the window is shown (the panel says so meanwhile).
+once, as a background job (:mod:`app.jobs`), the first time the window is shown (the panel says so
+meanwhile); the map's picture is drawn by a job too.
 """
 from __future__ import annotations
 
@@ -20,6 +21,7 @@ import numpy as np
 from lmm.coverage import Coverage, DataDistance, build_coverage, first_trajectory_dims, query_speed_turn
 from lmm.coverage_png import PALETTE, category_centres, heat_colors, map_bounds, map_categories, map_image
 
+from ..jobs import Jobs
 from .base import Panel, View
 from .common import COLORS, SHORT, fmt_num, short_channel_name
 
@@ -84,8 +86,9 @@ def _distance_for(features) -> tuple:
 class CoveragePanel(Panel):
     key = "coverage"
 
-    def __init__(self, ctx):
+    def __init__(self, ctx, jobs: Jobs | None = None):
         super().__init__(ctx)
+        self.jobs = jobs if jobs is not None else Jobs()   # the coverage and the map's picture, off the GUI thread
         self.mode = "tag"
         self.channel = 0
         self.trail = True
@@ -94,10 +97,10 @@ class CoveragePanel(Panel):
         self._shown_for = None
         self._map_wanted = None       # (mode, excluded tags) the map is asked for
         self._map_shown = None        # (mode, excluded tags) the map shows
-        self._map_job = None          # the map being drawn on a thread (see _want_map)
+        self._map_job = None          # the map being drawn (a Job, see _want_map)
         self.map_error = ""
         self._searchable = None       # (N,) bool: the frames those leave to motion matching (None: every one)
-        self._job = None              # the coverage being worked out on a thread (see _start_coverage)
+        self._job = None              # the coverage being worked out (a Job, see _start_coverage)
         self.error = ""
 
     # -- build ---------------------------------------------------------------------------------
@@ -175,44 +178,44 @@ class CoveragePanel(Panel):
 
     # -- the coverage (computed once) ----------------------------------------------------------
     def _start_coverage(self) -> None:
-        """Work out the coverage and the nearest-frame indexes on a thread (about 1.5 s for 0.5 M frames
-        here, 0.2 s for the default data), so the studio keeps drawing meanwhile; :meth:`_ensure_coverage`
-        takes the result (the map's picture is drawn on a thread too, see :meth:`_want_map`)."""
-        import threading
-
+        """Work out the coverage and the nearest-frame indexes as a job (about 1.5 s for 0.5 M frames here,
+        0.2 s for the default data), so the studio keeps drawing meanwhile; :meth:`_ensure_coverage` shows
+        the result (the map's picture is drawn by a job too, see :meth:`_want_map`)."""
         engine = self.ctx.engine
-        job = {"done": threading.Event()}
 
-        def work():
+        def work(job):
             try:
-                job["cov"] = build_coverage(engine.db, engine.features)
-                job["horizon"] = first_trajectory_dims(engine.features.layout)[2]
+                cov = build_coverage(engine.db, engine.features)
+                horizon = first_trajectory_dims(engine.features.layout)[2]
                 # the running controllers' nearest-frame indexes too (0.17 s each for 0.5 M frames)
-                job["distance"] = {n: _distance_for(engine.features_of(n))
-                                   for n in CONTROLLERS if n in engine.controller_names()}
+                distance = {n: _distance_for(engine.features_of(n))
+                            for n in CONTROLLERS if n in engine.controller_names()}
             except Exception as e:  # noqa: BLE001 - a layout without trajectory channels: said, studio runs on
-                job["error"] = f"no coverage: {e}"
-            finally:
-                job["done"].set()
+                raise RuntimeError(f"no coverage: {e}") from e
+            return cov, horizon, distance
 
-        self._job = job
+        def failed(line):
+            self._job = None
+            self.error = line
+            self.text.set("cov_status", self.error)
+
+        self._job = self.jobs.submit("coverage", work, on_done=self._took_coverage, on_error=failed)
         self.text.set("cov_status", f"working out the coverage of {engine.db.n_frames:,} frames ...")
-        threading.Thread(target=work, name="coverage", daemon=True).start()
 
     def _ensure_coverage(self) -> bool:
-        if self.cov is not None or self.error:
-            return self.cov is not None
-        if self._job is None:
+        """The coverage is shown (True); else its job is started (the first call), or its outcome taken
+        once it finished (a later one)."""
+        if self.cov is None and not self.error and self._job is None:
             self._start_coverage()
-        if not self._job["done"].is_set():
             return False
-        job, self._job = self._job, None
-        if "error" in job:
-            self.error = job["error"]
-            self.text.set("cov_status", self.error)
-            return False
-        self.cov, self.horizon = job["cov"], job["horizon"]
-        self._distance.update(job["distance"])
+        self.jobs.poll()
+        return self.cov is not None
+
+    def _took_coverage(self, result) -> None:
+        """The coverage job's result: the heat map and the map's textures and axes (GUI thread)."""
+        self._job = None
+        self.cov, self.horizon, distance = result
+        self._distance.update(distance)
         dpg = self.dpg
         cov = self.cov
         tex = heat_texture(cov)
@@ -232,7 +235,6 @@ class CoveragePanel(Panel):
         ratio = cov.pca.variance_ratio
         dpg.configure_item("cov_map_x", label=f"PC1 ({100 * ratio[0]:.0f}%)")
         dpg.configure_item("cov_map_y", label=f"PC2 ({100 * ratio[1]:.0f}%)")
-        return True
 
     def _data_distance(self, name: str) -> DataDistance:
         """The nearest-frame search over the controller's features as they are normalised now (weights
@@ -264,11 +266,9 @@ class CoveragePanel(Panel):
 
     def _want_map(self, mode: str, excluded_tags: tuple[str, ...]) -> None:
         """The map is asked for in ``mode`` with ``excluded_tags`` dimmed: the frames motion matching may
-        pick (its nearest-frame distance) change at once; the picture is worked out on a thread (0.2 s for
-        0.5 M frames) while the old one stays, and :meth:`_take_map` shows it when it is done, unless
-        another change came meanwhile."""
-        import threading
-
+        pick (its nearest-frame distance) change at once; the picture is drawn by a job (0.2 s for 0.5 M
+        frames) while the old one stays, and shown when it is done (:meth:`_show_map`); a job asked for
+        before it is cancelled."""
         excluded = self.ctx.engine.db.tag_mask(excluded_tags) if excluded_tags else None
         if excluded is not None and excluded.all():   # the search ignores such an exclusion (one-line note)
             excluded = None
@@ -277,40 +277,30 @@ class CoveragePanel(Panel):
         self.last["excluded_frames"] = int(excluded.sum()) if excluded is not None else 0
         key = (mode, excluded_tags)
         self._map_wanted = key
-        job = {"key": key, "done": threading.Event()}
         cov = self.cov
 
-        def work():
-            try:
-                labels, cat = map_categories(cov, mode, MAX_CATEGORIES)
-                job["image"] = map_image(cov, cat, MAP_TEXELS, MAP_TEXELS, excluded)
-                if excluded is not None:              # each class's marker at its frames still searched
-                    cat = np.where(excluded, -1, cat)
-                job["labels"], job["frames"] = labels, int(len(cat))
-                job["centres"] = category_centres(cov, cat, len(labels))
-            except Exception as e:  # noqa: BLE001 - said on the status line, the old map stays
-                job["error"] = f"the map could not be drawn: {type(e).__name__}: {e}"
-            finally:
-                job["done"].set()
+        def work(job):
+            labels, cat = map_categories(cov, mode, MAX_CATEGORIES)
+            image = map_image(cov, cat, MAP_TEXELS, MAP_TEXELS, excluded)
+            if excluded is not None:              # each class's marker at its frames still searched
+                cat = np.where(excluded, -1, cat)
+            return key, image, labels, int(len(cat)), category_centres(cov, cat, len(labels))
 
-        self._map_job = job
-        threading.Thread(target=work, name="coverage-map", daemon=True).start()
+        def failed(line):                         # said on the status line, the old map stays
+            self.map_error = f"the map could not be drawn: {line}"
+            self._map_job = None
 
-    def _take_map(self) -> None:
-        """Show the map a thread finished, if it is the one last asked for."""
-        job = self._map_job
-        if job is None or not job["done"].is_set():
-            return
+        if self._map_job is not None:
+            self._map_job.cancel()
+        self._map_job = self.jobs.submit("coverage-map", work, on_done=self._show_map, on_error=failed)
+
+    def _show_map(self, result) -> None:
+        """Show the map a job drew (the one last asked for: earlier ones are cancelled)."""
         self._map_job = None
-        if job["key"] != self._map_wanted:
-            return
-        if "error" in job:
-            self.map_error = job["error"]
-            return
+        key, image, labels, frames, centres = result
         self.map_error = ""
         dpg = self.dpg
-        labels, centres = job["labels"], job["centres"]
-        self.map_tex[...] = job["image"]              # in place: the texture shows it
+        self.map_tex[...] = image              # in place: the texture shows it
         for i in range(MAX_CATEGORIES):
             tag = f"cov_cat_{i}"
             if i < len(labels) and np.isfinite(centres[i]).all():
@@ -318,10 +308,10 @@ class CoveragePanel(Panel):
                 dpg.configure_item(tag, label=labels[i], show=True)
             else:
                 dpg.configure_item(tag, show=False)
-        self._map_shown = job["key"]
+        self._map_shown = key
         self.last["categories"] = labels
-        self.last["frames_drawn"] = job["frames"]
-        self.last["map"] = {"mode": job["key"][0], "excluded_tags": list(job["key"][1])}
+        self.last["frames_drawn"] = frames
+        self.last["map"] = {"mode": key[0], "excluded_tags": list(key[1])}
 
     def update(self, view: View) -> None:
         if not self._ensure_coverage():
@@ -332,7 +322,7 @@ class CoveragePanel(Panel):
         if self._map_wanted != (self.mode, excluded_tags):
             self._want_map(self.mode, excluded_tags)
         shown_before = self._map_shown
-        self._take_map()
+        self.jobs.poll()
         pending = self._map_shown != self._map_wanted
         key = (view.tick_number, self.mode, self.channel, self.trail, tuple(view.tick.snapshots) if view.tick else (),
                excluded_tags, self._map_shown != shown_before, pending, self.map_error)

@@ -4,13 +4,15 @@ The example is either the last seconds of the inspected character ending at the 
 follows the tick picked on the timeline while paused), or a frame range of any BVH file. Search runs the
 engine's :mod:`lmm.motion_search.index` (cached index, exact k-NN, DTW re-ranking) and lists the results
 (file, frames in the file's own numbering, distance); selecting a row plays that match as a preview ghost
-in the 3D view, looping. Bad input (joints that cannot be matched, an empty range, a range past the end,
+in the 3D view, looping. The index is built (or read from its cache) and searched as a background job
+(:mod:`app.jobs`): the studio keeps drawing and the panel's status line says what is being done. Bad input (joints that cannot be matched, an empty range, a range past the end,
 an empty folder) is one line in the error dialog and in the panel; the studio runs on.
 """
 from __future__ import annotations
 
 import numpy as np
 
+from ..jobs import Jobs
 from .base import Panel, View
 
 SOURCES = ("Timeline window", "BVH file range")
@@ -42,8 +44,10 @@ def parse_frames(text: str, where: str) -> tuple[int, int]:
 class MotionSearchPanel(Panel):
     key = "motion_search"
 
-    def __init__(self, ctx):
+    def __init__(self, ctx, jobs: Jobs | None = None):
         super().__init__(ctx)
+        self.jobs = jobs if jobs is not None else Jobs()   # the index build and search, off the GUI thread
+        self._search_job = None    # the search running (a Job), or None
         self.results = []          # lmm.motion_search.index.Match, best first
         self.selected = -1
         self._ghost = None         # (F, J, 3) positions of the selected match, and its parents
@@ -54,7 +58,6 @@ class MotionSearchPanel(Panel):
         self._view: View | None = None
         self._anims = {}           # path -> loaded Animation (previewed results)
         self._index = None
-        self._index_key = None
 
     # --- building --------------------------------------------------------------------------------
     def build(self, window_kwargs: dict) -> None:
@@ -86,7 +89,9 @@ class MotionSearchPanel(Panel):
 
     # --- searching -------------------------------------------------------------------------------
     def _query(self):
-        """The example's key-joint frames (InputError on bad input, naming the file or the window)."""
+        """What to search for: ``(make the query, where, end tick)``, where ``make()`` returns the
+        example's key-joint frames (a file's are read by the search job). InputError on bad input, naming
+        the file or the window."""
         from lmm.errors import InputError
         from lmm.motion_search.index import query_from_bvh, query_from_skeleton
         from lmm.motion_search.windows import match_key_joints, reference_height
@@ -96,7 +101,8 @@ class MotionSearchPanel(Panel):
             path = dpg.get_value("ms_file").strip()
             if not path:
                 raise InputError("Motion search: give the query's .bvh file")
-            return query_from_bvh(path, parse_frames(dpg.get_value("ms_frames"), path)), path, None
+            frames = parse_frames(dpg.get_value("ms_frames"), path)
+            return (lambda: query_from_bvh(path, frames)), path, None
         view = self._view
         if view is None or view.tick is None:
             raise InputError("Motion search: no tick to take the example from yet")
@@ -108,38 +114,77 @@ class MotionSearchPanel(Panel):
         everything = history_positions(view.history, name, view.tick_number, len(view.history))
         hips = match_key_joints(db.names, where)["hips"]
         ref = reference_height(everything[:, hips, 1]) if len(everything) else None
-        return query_from_skeleton(db.names, g, 1.0 / self.ctx.engine.dt, ref, where), where, view.tick_number
+        query = query_from_skeleton(db.names, g, 1.0 / self.ctx.engine.dt, ref, where)
+        return (lambda: query), where, view.tick_number
 
-    def search(self) -> bool:
-        """Run the search for what the panel's fields say; False (and one error line) on bad input."""
-        import time
-
+    def search(self, wait: bool = False) -> bool:
+        """Start the search for what the panel's fields say, as a job whose results fill the table when
+        the panel next updates after it finished (``wait``: block until then, so a script's next step sees
+        them); False (and one error line) on bad input found before the job starts."""
         from lmm.errors import InputError
-        from lmm.motion_search.index import MotionIndex, sources_from
 
         dpg = self.dpg
         try:
-            query, where, end_tick = self._query()
-            target = dpg.get_value("ms_in").strip()
-            index = MotionIndex.build(sources_from(target))
-            t0 = time.perf_counter()
-            self.results = index.search(query, top=int(dpg.get_value("ms_top")))
-            ms = (time.perf_counter() - t0) * 1000.0
-        except (InputError, OSError) as e:
-            message = str(e) if isinstance(e, InputError) else f"{e.filename}: {e.strerror}"
-            dpg.set_value("ms_status", message)
-            self.ctx.actions.show_error("Motion search", message)
-            self.last = {"error": message, "results": []}
+            make_query, where, end_tick = self._query()
+        except InputError as e:
+            self._failed(str(e))
             return False
-        self._index = index
+        target = dpg.get_value("ms_in").strip()
+        top = int(dpg.get_value("ms_top"))
+        if self._search_job is not None:
+            self._search_job.cancel()        # a newer search replaces it
+
+        def work(job):
+            import time
+
+            from lmm.motion_search.index import MotionIndex, sources_from
+
+            try:
+                query = make_query()
+                job.report(None, f"building the index of {target} ...")
+                index = MotionIndex.build(sources_from(target),
+                                          progress=lambda i, n, label: job.report(i / max(n, 1), f"indexing {label}"))
+                t0 = time.perf_counter()
+                results = index.search(query, top=top)
+            except OSError as e:
+                raise InputError(f"{e.filename}: {e.strerror}") from e
+            return query, index, results, (time.perf_counter() - t0) * 1000.0
+
+        def done(result):
+            self._search_job = None
+            self._show_results(*result, where, end_tick)
+
+        def failed(line):
+            self._search_job = None
+            self._failed(line)
+
+        def progress(fraction, message):
+            dpg.set_value("ms_status", message + ("" if fraction is None else f" ({100 * fraction:.0f}%)"))
+
+        dpg.set_value("ms_status", f"searching {target} for {where} ...")
+        self._search_job = job = self.jobs.submit("motion-search", work, on_done=done, on_error=failed,
+                                                  on_progress=progress)
+        if wait:
+            job.wait()
+            self.jobs.poll()
+            return not job.error
+        return True
+
+    def _failed(self, message: str) -> None:
+        self.dpg.set_value("ms_status", message)
+        self.ctx.actions.show_error("Motion search", message)
+        self.last = {"error": message, "results": []}
+
+    def _show_results(self, query, index, results, ms: float, where: str, end_tick) -> None:
+        """A finished search: its results in the table, the best one previewed (GUI thread)."""
+        self._index, self.results = index, results
         status = (f"{len(query)} frames of {where}: {len(self.results)} results from {index.n_windows} windows "
                   f"of {len(index.sources)} files ({index.embedder.name}) in {ms:.0f} ms")
-        dpg.set_value("ms_status", status)
+        self.dpg.set_value("ms_status", status)
         self._fill_table()
         self.last = {"status": status, "query_frames": len(query), "query_end_tick": end_tick,
                      "results": [m.to_dict() for m in self.results]}
         self.select(0 if self.results else -1)
-        return True
 
     def _fill_table(self) -> None:
         dpg = self.dpg
@@ -157,7 +202,8 @@ class MotionSearchPanel(Panel):
     def run_script(self, action: dict) -> None:
         """A scripted search (tests, demos): the fields ``source`` ("timeline" or "file"), ``seconds``,
         ``file``, ``frames``, ``in``, ``top`` set the panel's inputs; the window is shown and :meth:`search`
-        runs on its next update (with the tick the studio shows then, as a click would)."""
+        runs on its next update (with the tick the studio shows then, as a click would) and waits for its
+        job, so that the script's next step sees the results."""
         dpg = self.dpg
         self.ctx.actions.show_window(self.key, True)
         dpg.set_value("ms_source", SOURCES[1] if action.get("source") == "file" else SOURCES[0])
@@ -216,9 +262,10 @@ class MotionSearchPanel(Panel):
 
     def update(self, view: View) -> None:
         self._view = view
+        self.jobs.poll()
         if self._pending_search:
             self._pending_search = False
-            self.search()
+            self.search(wait=True)
         if self._ghost is None or not len(self._ghost):
             return
         try:

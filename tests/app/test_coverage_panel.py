@@ -221,11 +221,11 @@ def test_history_keeps_each_controllers_query_for_the_trail():
     assert np.isnan(h.window("mm", "query", 14, 12)[0]).all()       # older than the buffer holds
 
 
-def test_the_coverage_is_worked_out_on_a_thread_and_a_failure_is_one_line(db, features):
-    """The first show starts the work and returns at once (the status says so); the next updates take the
-    result. A feature layout without trajectory channels cannot be mapped: one line, and no map."""
+def test_the_coverage_is_worked_out_by_a_job_and_a_failure_is_one_line(db, features):
+    """The first show starts the job and returns at once (the status says so); once the job has finished,
+    the next update takes its outcome. A feature layout without trajectory channels cannot be mapped: one
+    line, and no map."""
     import copy
-    import time
     from types import SimpleNamespace
 
     from app.panels.coverage import CoveragePanel
@@ -239,20 +239,53 @@ def test_the_coverage_is_worked_out_on_a_thread_and_a_failure_is_one_line(db, fe
 
     def panel_for(feats):
         dpg = Dpg()
-        engine = SimpleNamespace(db=db, features=feats)
+        engine = SimpleNamespace(db=db, features=feats, controller_names=lambda: [])
         return CoveragePanel(SimpleNamespace(dpg=dpg, engine=engine, tuning=None)), dpg
 
     bones_only = copy.copy(features)
     bones_only.layout = [ch for ch in features.layout if ch.kind.startswith("bone")]
     panel, dpg = panel_for(bones_only)
     assert panel._ensure_coverage() is False
-    assert dpg.values["cov_status"].startswith(f"working out the coverage of {db.n_frames:,} frames")
-    deadline = time.monotonic() + 60
-    while panel._job is not None and time.monotonic() < deadline:
-        panel._job["done"].wait(0.1)
-        if panel._job["done"].is_set():
-            assert panel._ensure_coverage() is False
+    job = panel._job
+    assert job is not None and job.name == "coverage"
+    assert panel.error == "" and dpg.values["cov_status"].startswith(
+        f"working out the coverage of {db.n_frames:,} frames")
+    assert job.wait(60), "the coverage job did not finish in 60 s"
+    assert panel.error == ""                # finished, not yet taken: the GUI thread takes it on its update
+    assert panel._ensure_coverage() is False
     assert panel.cov is None and panel.error.startswith("no coverage: ") and "\n" not in panel.error
     assert "trajectory" in panel.error, panel.error
     assert dpg.values["cov_status"] == panel.error
-    assert panel._ensure_coverage() is False and panel._job is None      # not tried again
+    assert panel._ensure_coverage() is False and panel._job is None and not panel.jobs.running()  # not tried again
+
+
+def test_jobs_deliver_results_errors_and_progress_on_poll_and_drop_cancelled_ones():
+    import threading
+
+    from app.jobs import Jobs
+
+    jobs = Jobs()
+    got, gate = [], threading.Event()
+
+    def slow(job):
+        job.report(0.5, "half way")
+        gate.wait(10)
+        return 42
+
+    a = jobs.submit("a", slow, on_done=lambda r: got.append(("done", r)),
+                    on_progress=lambda f, m: got.append(("progress", f, m)))
+    b = jobs.submit("b", lambda job: 1 / 0, on_error=lambda line: got.append(("error", line)))
+    c = jobs.submit("c", lambda job: "dropped", on_done=lambda r: got.append(("done", r)))
+    c.cancel()
+    assert b.wait(10) and c.wait(10)
+    for _ in range(100):                   # the progress report of ``a`` arrives before its gate opens
+        if a.progress is not None:
+            break
+        a.wait(0.05)
+    assert got == []                       # nothing is delivered on the jobs' threads
+    finished = jobs.poll()
+    assert {j.name for j in finished} == {"b", "c"} and c.cancelled
+    assert got == [("progress", 0.5, "half way"), ("error", "division by zero")]
+    gate.set()
+    assert jobs.wait(10) and jobs.poll() == [a]
+    assert got[-1] == ("done", 42) and jobs.running() == []
