@@ -54,6 +54,9 @@ def load_session(opts: StudioOptions, report_error: Callable[[str, str], None]) 
         db, _ = load_or_build(None, cache_dir=opts.cache)
     features = build_features(db)
     tuning = _start_tuning(opts, features, report_error)
+    # the database's own channels and tags get entries (their sliders set them); the controllers only read
+    tuning.name_database_entries({ch.name: float(w) for ch, w in zip(features.layout, features.weights)},
+                                 db.tag_names)
     controllers, problems = make_controllers(db, features, tuning, weights=opts.weights, with_lmm=opts.lmm)
     lmm_problem = None
     for p, serious in problems:

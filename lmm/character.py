@@ -49,7 +49,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from lmm import quat
-from lmm import quat_scalar as qs
 from lmm.data.derived import cached
 from lmm.controller import Candidates, Controller, DebugSnapshot, InputState, LazyField, Pose
 from lmm.features import build_query_from_columns, normalize_with, trajectory_query_columns
@@ -168,18 +167,11 @@ def _fk_links_into(g: list, p: list, local_rot, local_pos, links) -> None:
     set), in place: the one loop every forward kinematics of a single pose here runs. Plain Python
     floats: for one pose of ~20 bones this is several times faster than numpy calls on tiny arrays (see
     :func:`lmm.kinematics.forward_kinematics` for frames in bulk)."""
+    mul, mul_vec = quat.mul_scalar, quat.mul_vec_scalar
     for j, pj in links:
-        w, x, y, z = local_rot[j]
-        px, py, pz = local_pos[j]
-        aw, ax, ay, az = g[pj]
-        g[j] = (aw * w - ax * x - ay * y - az * z, aw * x + ax * w + ay * z - az * y,
-                aw * y - ax * z + ay * w + az * x, aw * z + ax * y - ay * x + az * w)
-        tx = 2.0 * (ay * pz - az * py)
-        ty = 2.0 * (az * px - ax * pz)
-        tz = 2.0 * (ax * py - ay * px)
-        qx, qy, qz = p[pj]
-        p[j] = (qx + px + aw * tx + (ay * tz - az * ty), qy + py + aw * ty + (az * tx - ax * tz),
-                qz + pz + aw * tz + (ax * ty - ay * tx))
+        parent = g[pj]
+        g[j] = mul(parent, local_rot[j])
+        p[j] = mul_vec(parent, local_pos[j], p[pj])
 
 
 def skeleton_links(parents) -> tuple[list[int], list[tuple[int, int]]]:
@@ -254,27 +246,16 @@ def _leg_update(global_rot: list, global_pos: list, local_rot: list, local_pos, 
     parent's global as solved), then forward kinematics of the chain from the hip's parent (unchanged). The
     hip's global position depends only on bones that did not change: it is kept. The float operations of
     the local-from-global loop and :func:`forward_kinematics_update_lists`, so the same bits."""
-    sw, sx, sy, sz = global_rot[parent]  # the parent's global rotation as solved (and kept)
-    gw, gx, gy, gz = sw, sx, sy, sz      # the parent's global rotation after the update
-    pj = -1                              # the parent of j once past the hip
-    for j, (bw, bx, by, bz) in zip(chain, solved):
-        aw, ax, ay, az = sw, -sx, -sy, -sz
-        w, x, y, z = local_rot[j] = (aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
-                                     aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw)
-        sw, sx, sy, sz = bw, bx, by, bz
-        aw, ax, ay, az = gw, gx, gy, gz
-        gw, gx, gy, gz = global_rot[j] = (aw * w - ax * x - ay * y - az * z, aw * x + ax * w + ay * z - az * y,
-                                          aw * y - ax * z + ay * w + az * x, aw * z + ax * y - ay * x + az * w)
-        if pj < 0:  # the hip: its position (parent's position plus its rotated offset) did not change
-            pj = j
-            continue
-        px, py, pz = local_pos[j]
-        tx = 2.0 * (ay * pz - az * py)
-        ty = 2.0 * (az * px - ax * pz)
-        tz = 2.0 * (ax * py - ay * px)
-        qx, qy, qz = global_pos[pj]
-        global_pos[j] = (qx + px + aw * tx + (ay * tz - az * ty), qy + py + aw * ty + (az * tx - ax * tz),
-                         qz + pz + aw * tz + (ax * ty - ay * tx))
+    solved_parent = global_rot[parent]   # the parent's global rotation as solved (and kept)
+    updated_parent = solved_parent        # the parent's global rotation after the update
+    pj = -1                               # the parent of j once past the hip
+    for j, q in zip(chain, solved):
+        local_rot[j] = local = quat.inv_mul_scalar(solved_parent, q)
+        solved_parent = q
+        rotation = updated_parent
+        updated_parent = global_rot[j] = quat.mul_scalar(rotation, local)
+        if pj >= 0:  # (the hip's position, its parent's plus its rotated offset, did not change)
+            global_pos[j] = quat.mul_vec_scalar(rotation, local_pos[j], global_pos[pj])
         pj = j
 
 
@@ -447,65 +428,14 @@ def _damper_factor(halflife: float, dt: float) -> float:
     return f
 
 
-# The root's integration and synchronization in written-out float arithmetic: each helper performs exactly
-# the float operations of its namesake in lmm.quat_scalar (same products, same order of sums; tested in
-# tests/test_mm.py against those functions) without the generic loops and tuple building.
-_atan2 = np.arctan2
-
-
-def _mul_f(aw, ax, ay, az, bw, bx, by, bz) -> tuple:
-    """``qs.mul`` of two quaternions given as 4 + 4 floats."""
-    return (aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
-            aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw)
-
-
-def _normalize_f(w, x, y, z) -> tuple:
-    """``qs.normalize``."""
-    n = math.sqrt(w * w + x * x + y * y + z * z)
-    if not n > 1e-10:
-        n = 1e-10
-    return (w / n, x / n, y / n, z / n)
-
-
-def _exp_half_f(vx, vy, vz) -> tuple:
-    """``qs.from_scaled_angle_axis((vx, vy, vz))``: ``qs.exp`` of the halved vector."""
-    vx, vy, vz = vx * 0.5, vy * 0.5, vz * 0.5
-    half = math.sqrt(vx * vx + vy * vy + vz * vz)
-    w = math.cos(half)
-    if half < 1e-8:
-        return _normalize_f(w, vx, vy, vz)
-    s = math.sin(half) / half
-    return _normalize_f(w, s * vx, s * vy, s * vz)
-
-
-def _log_mul_inv_f(aw, ax, ay, az, bw, bx, by, bz) -> tuple:
-    """``qs.to_scaled_angle_axis(qs.abs_(qs.mul_inv(a, b)))``."""
-    w, x, y, z = _mul_f(aw, ax, ay, az, bw, -bx, -by, -bz)
-    if w < 0.0:
-        w, x, y, z = -w, -x, -y, -z
-    length = math.sqrt(x * x + y * y + z * z)
-    if length < 1e-8:
-        return (2.0 * x, 2.0 * y, 2.0 * z)
-    w = -1.0 if w < -1.0 else 1.0 if w > 1.0 else w
-    s = float(_atan2(length, w)) / length
-    return (2.0 * (s * x), 2.0 * (s * y), 2.0 * (s * z))
-
-
-def _integrate_root_f(root_pos, root_rot, vel, ang, dt) -> tuple:
+def _integrate_root(root_pos, root_rot, vel, ang, dt) -> tuple:
     """The character root moved by its local velocity ``vel`` and angular velocity ``ang`` (3 floats each)
-    for ``dt``: (world velocity, world angular velocity, position, rotation), the operations of
-    ``qs.mul_vec``, ``p + v dt`` and ``qs.normalize(qs.mul(qs.from_scaled_angle_axis(a dt), rot))``."""
-    w, x, y, z = root_rot
-    out = []
-    for v0, v1, v2 in (vel, ang):
-        t0 = 2.0 * (y * v2 - z * v1)
-        t1 = 2.0 * (z * v0 - x * v2)
-        t2 = 2.0 * (x * v1 - y * v0)
-        out.append((v0 + w * t0 + (y * t2 - z * t1), v1 + w * t1 + (z * t0 - x * t2),
-                    v2 + w * t2 + (x * t1 - y * t0)))
-    vw, aw = out
+    for ``dt``: (world velocity, world angular velocity, position, rotation)."""
+    vw = quat.mul_vec_scalar(root_rot, vel)
+    aw = quat.mul_vec_scalar(root_rot, ang)
     pos = (root_pos[0] + vw[0] * dt, root_pos[1] + vw[1] * dt, root_pos[2] + vw[2] * dt)
-    rot = _normalize_f(*_mul_f(*_exp_half_f(aw[0] * dt, aw[1] * dt, aw[2] * dt), w, x, y, z))
+    rot = quat.normalize_scalar(quat.mul_scalar(
+        quat.from_scaled_angle_axis_scalar((aw[0] * dt, aw[1] * dt, aw[2] * dt)), root_rot))
     return vw, aw, pos, rot
 
 
@@ -517,13 +447,6 @@ def _radians(degrees: float) -> float:
             _RADIANS.clear()
         r = _RADIANS[degrees] = float(np.radians(degrees))
     return r
-
-
-def _rotation_distance_f(a, b) -> float:
-    """``qs.norm(qs.to_scaled_angle_axis(qs.abs_(qs.mul_inv(a, b))))``: the angle from rotation ``b`` to
-    ``a`` (radians), in plain floats (the same operations, tests/test_frame_cost.py)."""
-    x, y, z = _log_mul_inv_f(*a, *b)
-    return math.sqrt(x * x + y * y + z * z)
 
 
 def _array_of(floats: tuple):
@@ -555,16 +478,18 @@ class CharacterController(Controller):
         # own copy: set_weights replaces the arrays, so two controllers never see each other's weights
         self.features = copy.copy(features)
         self.tuning = tuning if tuning is not None else Tuning()
-        for ch, w in zip(self.features.layout, self.features.weights):
-            self.tuning.feature_weights.setdefault(ch.name, float(w))
         self.tuning.validate()
+        # a channel the tuning does not name keeps its schema weight (the tuning is only read, never written)
+        self._schema_weights = {ch.name: float(w) for ch, w in zip(self.features.layout, self.features.weights)}
+        self._weights_stale = True  # a feature weight changed since the features were last weighted
+        self.tuning.events.connect(self._on_tuning_change)
         self.parents = [int(p) for p in db.parents]
         self.n_bones = db.n_bones
         self.traj_offsets = trajectory_offsets(self.features)
         self._traj_index = {int(o): i for i, o in enumerate(self.traj_offsets)}
         self._traj_times = tuple((self.traj_offsets / db.fps).tolist())  # the offsets in seconds
         self._query_columns = trajectory_query_columns(self.features, self._traj_index)
-        self._weights_seen = None  # (tuning's feature weights, the weights array they gave), see below
+        self._weights_seen = None  # the weights array the tuning's feature weights gave, see below
         feet = ("left_foot", "right_foot")
         toes = ("left_toe", "right_toe")
         self.toe_bones = [db.bone(t) for t in toes]
@@ -654,18 +579,23 @@ class CharacterController(Controller):
         """The source's pose right after a reset (advance by zero)."""
         return self._advance_pose(0.0)
 
+    def _on_tuning_change(self, change) -> None:
+        """A tuning change event: feature weights are applied at the next step (or reset)."""
+        if change.field == "feature_weights":
+            self._weights_stale = True
+
     def _apply_feature_weights(self) -> bool:
-        fw = self.tuning.feature_weights
-        seen = self._weights_seen
-        # every tick: a dict comparison while neither the tuning's weights nor the features' changed
-        if seen is not None and seen[1] is self.features.weights and seen[0] == fw:
+        # every tick: nothing to do unless a weight changed (an event) or the features' weights were replaced
+        if not self._weights_stale and self._weights_seen is self.features.weights:
             return False
-        new = np.array([fw.get(ch.name, w) for ch, w in zip(self.features.layout, self.features.weights)],
+        self._weights_stale = False
+        fw = self.tuning.feature_weights
+        new = np.array([fw.get(ch.name, self._schema_weights[ch.name]) for ch in self.features.layout],
                        dtype=np.float32)
         changed = self.features.set_weights(new)
         if changed:
             self._on_features_changed()
-        self._weights_seen = (dict(fw), self.features.weights)
+        self._weights_seen = self.features.weights
         return changed
 
     # ------------------------------------------------------------------------------------------
@@ -737,7 +667,7 @@ class CharacterController(Controller):
         self.shown = ShownPose(pos, rot, offsets, src)
 
         # root integration (character space velocities -> world), in plain floats (one 3-vector/quaternion)
-        root_vel_world, root_ang_world, root_pos, root_rot = _integrate_root_f(
+        root_vel_world, root_ang_world, root_pos, root_rot = _integrate_root(
             self._root_position_t, self._root_rotation_t, vel0, ang0, dt)
         # the integrated root as floats (tuples, never written): read by the foot locks' root shift
         integrated = (root_pos, root_rot)
@@ -806,7 +736,7 @@ class CharacterController(Controller):
             # 1e-15), so its rate stays under the threshold; skip the logarithm
             rot_rate = 0.0
         else:
-            rot_rate = _rotation_distance_f(des_rot, prev_rot) / dt
+            rot_rate = quat.norm_scalar(quat.angle_axis_difference_scalar(des_rot, prev_rot)) / dt
         forced = False
         if vel_rate > threshold:
             self._velocity_change_high = True
@@ -889,12 +819,8 @@ class CharacterController(Controller):
                     changed = sorted(j for i in key for j in self.leg_chains[i])
                     found = self._subtrees[key] = (changed, subtree_joints(parents, changed))
                 changed, joints = found
-                for j in changed:  # local = parent^-1 * global (qs.mul(qs.conj(parent), global))
-                    aw, ax, ay, az = g_rl[parents[j]]
-                    ax, ay, az = -ax, -ay, -az
-                    bw, bx, by, bz = g_rl[j]
-                    rl[j] = (aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
-                             aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw)
+                for j in changed:  # local = parent^-1 * global
+                    rl[j] = quat.inv_mul_scalar(g_rl[parents[j]], g_rl[j])
                 # only the legs changed: forward kinematics of their subtrees, not of the whole skeleton
                 forward_kinematics_update_lists(g_rl, g_pl, rl, pl, parents, joints)
         else:
@@ -913,26 +839,13 @@ class CharacterController(Controller):
         integrated root). Plain floats, the operations of ``toes - (position + quat.mul_vec(rotation,
         quat.inv_mul_vec(self.root_rotation, toes - self.root_position)))``."""
         px, py, pz = self._root_position_t
-        rw, rx, ry, rz = self._root_rotation_t
+        root_rot = self._root_rotation_t
         ox, oy, oz = position.tolist() if isinstance(position, np.ndarray) else position
-        w, x, y, z = rotation.tolist() if isinstance(rotation, np.ndarray) else rotation
+        rotation = rotation.tolist() if isinstance(rotation, np.ndarray) else rotation
         out = []
         for t in toes:
-            # local = inv_mul_vec(root rotation, toe - root position), as qs.inv_mul_vec
-            v0, v1, v2 = t[0] - px, t[1] - py, t[2] - pz
-            t0 = 2.0 * (-ry * v2 - -rz * v1)
-            t1 = 2.0 * (-rz * v0 - -rx * v2)
-            t2 = 2.0 * (-rx * v1 - -ry * v0)
-            l0 = v0 + rw * t0 + (-ry * t2 - -rz * t1)
-            l1 = v1 + rw * t1 + (-rz * t0 - -rx * t2)
-            l2 = v2 + rw * t2 + (-rx * t1 - -ry * t0)
-            # back = mul_vec(rotation, local), as qs.mul_vec
-            t0 = 2.0 * (y * l2 - z * l1)
-            t1 = 2.0 * (z * l0 - x * l2)
-            t2 = 2.0 * (x * l1 - y * l0)
-            out.append((t[0] - (ox + (l0 + w * t0 + (y * t2 - z * t1))),
-                        t[1] - (oy + (l1 + w * t1 + (z * t0 - x * t2))),
-                        t[2] - (oz + (l2 + w * t2 + (x * t1 - y * t0)))))
+            back = quat.mul_vec_scalar(rotation, quat.inv_mul_vec_scalar(root_rot, (t[0] - px, t[1] - py, t[2] - pz)))
+            out.append((t[0] - (ox + back[0]), t[1] - (oy + back[1]), t[2] - (oz + back[2])))
         return out
 
     def _ground_offset_target(self) -> float:
@@ -973,7 +886,7 @@ class CharacterController(Controller):
         quaternion), written out: the same operations as the numpy form (tested), a fraction of the time."""
         tun = self.tuning
         sim_state = self.sim.state
-        (sx, sy, sz), (sw, sqx, sqy, sqz) = sim_state[0], sim_state[3]
+        (sx, sy, sz), sim_rot = sim_state[0], sim_state[3]
         px, py, pz = root_pos
         rw, rx, ry, rz = root_rot
         if tun.adjustment_enabled and dt > 0:
@@ -987,7 +900,7 @@ class CharacterController(Controller):
                     k = cap / length
                     dx, dy, dz = dx * k, dy * k, dz * k
             px, py, pz = px + dx, py + dy, pz + dz
-            dx, dy, dz = _log_mul_inv_f(sw, sqx, sqy, sqz, rw, rx, ry, rz)
+            dx, dy, dz = quat.angle_axis_difference_scalar(sim_rot, (rw, rx, ry, rz))
             factor = _damper_factor(tun.adjustment_rotation_halflife_s, dt)
             dx, dy, dz = dx * factor, dy * factor, dz * factor
             if tun.adjustment_by_velocity:
@@ -997,7 +910,8 @@ class CharacterController(Controller):
                 if length > cap:
                     k = cap / length
                     dx, dy, dz = dx * k, dy * k, dz * k
-            rw, rx, ry, rz = _normalize_f(*_mul_f(*_exp_half_f(dx, dy, dz), rw, rx, ry, rz))
+            rw, rx, ry, rz = quat.normalize_scalar(quat.mul_scalar(quat.from_scaled_angle_axis_scalar((dx, dy, dz)),
+                                                                   (rw, rx, ry, rz)))
         if tun.clamping_enabled:
             ox, oy, oz = px - sx, py - sy, pz - sz
             dist = math.sqrt(ox * ox + oy * oy + oz * oz)
@@ -1005,12 +919,13 @@ class CharacterController(Controller):
             if dist > max_dist:
                 k = max_dist / dist
                 px, py, pz = sx + ox * k, sy + oy * k, sz + oz * k
-            dx, dy, dz = _log_mul_inv_f(rw, rx, ry, rz, sw, sqx, sqy, sqz)
+            dx, dy, dz = quat.angle_axis_difference_scalar((rw, rx, ry, rz), sim_rot)
             angle = math.sqrt(dx * dx + dy * dy + dz * dz)
             max_angle = _radians(tun.clamp_max_angle_deg)
             if angle > max_angle:
                 k = max_angle / angle
-                rw, rx, ry, rz = _normalize_f(*_mul_f(*_exp_half_f(dx * k, dy * k, dz * k), sw, sqx, sqy, sqz))
+                rw, rx, ry, rz = quat.normalize_scalar(quat.mul_scalar(
+                    quat.from_scaled_angle_axis_scalar((dx * k, dy * k, dz * k)), sim_rot))
         self._set_root((px, py, pz), (rw, rx, ry, rz))
 
     def _set_root(self, position, rotation) -> None:

@@ -138,10 +138,32 @@ class DebugSnapshot:
     search_note: str = ""
 
 
+@dataclass(frozen=True)
+class Capabilities:
+    """What a controller offers beyond stepping, so that the studio asks for a capability instead of
+    reaching for a controller by its name."""
+    latent_dims: int = 0                 # its snapshots carry a ``latent`` of this size (0: none)
+    networks_path: str | None = None     # the learned networks' file it runs (a compressor may lie beside it)
+    latent_table: bool = False           # :meth:`Controller.set_latent_table` gives its snapshots ``matched_latent``
+    idle_set_table: bool = False         # :meth:`Controller.warm_up` builds its idle set's table (worth doing early)
+
+
 class Controller(ABC):
     """A character animation controller: reset, then step once per tick."""
 
     name: str = "controller"
+
+    def capabilities(self) -> Capabilities:
+        """What this controller offers beyond the contract (none by default)."""
+        return Capabilities()
+
+    def set_latent_table(self, table) -> None:
+        """Attach a latent per database frame (only where ``capabilities().latent_table``)."""
+        raise NotImplementedError(f"controller {self.name!r} takes no latent table")
+
+    def warm_up(self) -> None:
+        """Build the tables a first use would build mid-tick (a hitch); may run on another thread
+        before the first step. Nothing by default."""
 
     @abstractmethod
     def reset(self, position=None, rotation=None, frame: int | None = None) -> None:

@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from lmm.character import CharacterController, SearchOutcome, SourcePose
-from lmm.controller import Candidates
+from lmm.controller import Candidates, Capabilities
 from lmm.mm import default_start_frame
 from lmm.nn import MLP, pose_vector_slices, pose_vector_tick_columns
 from lmm.search import SearchIndex
@@ -383,6 +383,14 @@ class LearnedMotionMatchingController(CharacterController):
         out = {name: int(getattr(self.nets, name).nbytes()) for name in RUNTIME_NETWORKS}
         out["decompressor"] += self._run_decompressor_tick.nbytes
         return out
+
+    def capabilities(self) -> Capabilities:
+        path = self.nets.path
+        return Capabilities(latent_dims=int(self.nets.n_latent), networks_path=None if path is None else str(path),
+                            idle_set_table=True)
+
+    def warm_up(self) -> None:
+        self.idle_states()
 
     # -- the idle set ------------------------------------------------------------------------------
     def idle_set_active(self) -> bool:

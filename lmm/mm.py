@@ -6,7 +6,7 @@ import math
 import numpy as np
 
 from lmm.character import CharacterController, SearchOutcome, SourcePose, database_source_pose, root_local_velocities
-from lmm.controller import Candidates
+from lmm.controller import Candidates, Capabilities
 from lmm.data.derived import cached
 from lmm.search import SearchIndex, biased_search, brute_force_search, candidate_mask
 from lmm.tuning import DEFAULT_TAG_BIAS, IDLE_TAG, Tuning, TuningError
@@ -55,10 +55,8 @@ class MotionMatchingController(CharacterController):
         self.latent_table: np.ndarray | None = None
         self.tag_error: str | None = None  # a tag filter or bias that could not apply (the search used all frames)
         self._tag_groups: tuple | None = None  # (key, [(bias, mask)]) cached for the tuning it was made for
+        self._tag_tuning: tuple | None = None  # (tags, bias, excluded, unknown) of the tuning's tag fields, see below
         super().__init__(db, features, tuning)
-        for tag in db.tag_names:
-            self.tuning.tag_bias.setdefault(tag, 0.0)
-            self.tuning.tag_excluded.setdefault(tag, False)
 
     def set_latent_table(self, table: np.ndarray | None) -> None:
         """Attach the compressor latent of every database frame, (N, L) (see
@@ -71,6 +69,9 @@ class MotionMatchingController(CharacterController):
                 raise ValueError(f"a latent table needs one row per database frame ({self.db.n_frames}), "
                                  f"got shape {table.shape}")
         self.latent_table = table
+
+    def capabilities(self) -> Capabilities:
+        return Capabilities(latent_table=True)
 
     def memory_bytes(self) -> dict[str, int]:
         """Pose data (Y), normalised features (X) and, once the first search has built it, the search
@@ -115,6 +116,11 @@ class MotionMatchingController(CharacterController):
         if self.index is not None:
             self.index.update(self.features.normalized)
 
+    def _on_tuning_change(self, change) -> None:
+        super()._on_tuning_change(change)
+        if change.field in ("tag_bias", "tag_excluded"):
+            self._tag_tuning = None
+
     def candidate_mask(self) -> np.ndarray:
         """Frames that may be jumped to under the current tuning (the last frame of a range never)."""
         end = max(int(self.tuning.exclude_range_end_frames), 1)
@@ -134,16 +140,19 @@ class MotionMatchingController(CharacterController):
         frames of excluded tags, restricted to the idle set while it is active, one group per distinct sum
         of tag biases. An exclusion or idle set leaving no frame, or a bias or exclusion on a tag the
         database lacks, sets ``tag_error`` (a TuningError's one line) and is ignored."""
-        tun = self.tuning
         mask = self.candidate_mask()
         idle = self.idle_set_active()
-        tags = list(self.db.tag_names)
-        bias = tuple(float(tun.tag_bias.get(t, 0.0)) for t in tags)
-        excluded = tun.excluded_tags(tags)
-        # a bias or exclusion the user set on a tag this database lacks is worth a note; a shipped default is not
-        unknown = tuple(sorted([("tag_bias", t) for t, b in tun.tag_bias.items()
-                                if b != DEFAULT_TAG_BIAS.get(t, 0.0) and t not in tags]
-                               + [("tag_excluded", t) for t, on in tun.tag_excluded.items() if on and t not in tags]))
+        tags = tuple(self.db.tag_names)
+        if self._tag_tuning is None or self._tag_tuning[0] != tags:   # again after a tag field's change event
+            tun = self.tuning
+            # a bias or exclusion the user set on a tag this database lacks is worth a note; a shipped default
+            # is not
+            self._tag_tuning = (
+                tags, tuple(float(tun.tag_bias.get(t, 0.0)) for t in tags), tun.excluded_tags(tags),
+                tuple(sorted([("tag_bias", t) for t, b in tun.tag_bias.items()
+                              if b != DEFAULT_TAG_BIAS.get(t, 0.0) and t not in tags]
+                             + [("tag_excluded", t) for t, on in tun.tag_excluded.items() if on and t not in tags])))
+        _, bias, excluded, unknown = self._tag_tuning
         key = (id(mask), idle, bias, excluded, unknown)
         if self._tag_groups is not None and self._tag_groups[0] == key:
             return self._tag_groups[1]

@@ -10,6 +10,15 @@ The studio builds its grouped sliders from the field metadata::
 :meth:`Tuning.set` (one field, what a slider calls) and :meth:`Tuning.validate`: validation lives here only. Nothing reads a tunable once and keeps it: a value changed between two steps
 acts on the next step.
 
+Every change is announced on ``tuning.events`` as a :class:`TuningChange` (field, channel, old, new),
+whatever made it (:meth:`Tuning.set`, a preset, a reset, an attribute or dict entry written directly)::
+
+    tuning.events.connect(callback)     # callback(change: TuningChange); a bound method is held weakly
+
+Controllers, panels, undo and the session log subscribe instead of polling. The runtime only reads a
+tuning: a per-name entry it does not name (a database's own channel or tag) counts as the default the
+controller knows (the schema's weight, no bias, not excluded).
+
 Defaults follow the reference demo (see ``notes/reference.md``) except where the shipped data asks for
 something else: the locomotion set is LAFAN1 at its captured speed, whose root speeds reach about
 3.5 m/s forward, 2 m/s sideways and 1 m/s backwards, so the run speeds are lowered to what the data
@@ -23,6 +32,9 @@ import math
 import numbers
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any, Callable
+
+from lmm.events import Emitter
 
 from lmm.errors import InputError
 from lmm.features import DEFAULT_LAYOUT
@@ -58,6 +70,73 @@ def _default_tag_bias() -> dict[str, float]:
 
 def _default_tag_excluded() -> dict[str, bool]:
     return {t: False for t in DEFAULT_TAGS}
+
+
+@dataclass(frozen=True)
+class TuningChange:
+    """One change of a tuning value: ``field`` (a field name), ``channel`` (the entry of a per-name field,
+    else None), and the values before and after (None for an entry that did not exist / was removed)."""
+    field: str
+    channel: str | None
+    old: Any
+    new: Any
+
+
+_MISSING = object()
+
+
+class Entries(dict):
+    """The entries of a per-name field (``feature_weights``, ``tag_bias``, ``tag_excluded``): a dict whose
+    every write is announced, so an entry written in place reaches the subscribers as a slider's does."""
+
+    __slots__ = ("_announce",)
+
+    def __init__(self, *args, announce: Callable[[str, Any, Any], None] | None = None, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._announce = announce
+
+    def __setitem__(self, key, value) -> None:
+        old = self.get(key, _MISSING)
+        super().__setitem__(key, value)
+        if self._announce is not None and (old is _MISSING or old != value or type(old) is not type(value)):
+            self._announce(key, None if old is _MISSING else old, value)
+
+    def __delitem__(self, key) -> None:
+        old = self[key]
+        super().__delitem__(key)
+        if self._announce is not None:
+            self._announce(key, old, None)
+
+    def pop(self, key, *default):
+        if key not in self:
+            return super().pop(key, *default)
+        old = self[key]
+        del self[key]
+        return old
+
+    def popitem(self):
+        key = next(reversed(self))
+        return key, self.pop(key)
+
+    def clear(self) -> None:
+        for key in list(self):
+            del self[key]
+
+    def setdefault(self, key, default=None):
+        if key not in self:
+            self[key] = default
+        return self[key]
+
+    def update(self, *args, **kwargs) -> None:
+        for key, value in dict(*args, **kwargs).items():
+            self[key] = value
+
+    def __ior__(self, other):
+        self.update(other)
+        return self
+
+    def __reduce__(self):
+        return dict, (dict(self),)
 
 
 @dataclass
@@ -165,6 +244,35 @@ class Tuning:
         0.04, "ik", 0.0, 0.2, "m", "A foot unlocked by the unlock radius (the last resort, during a contact) "
         "steps back to the animation with about this much lift instead of sliding.")
 
+    # -- change events ------------------------------------------------------------------------------
+    def __post_init__(self):
+        object.__setattr__(self, "events", Emitter())
+
+    def __setattr__(self, name: str, value) -> None:
+        """Store a field's value (a per-name field as :class:`Entries`) and announce what changed."""
+        if name not in _FIELD_NAMES:
+            object.__setattr__(self, name, value)
+            return
+        old = self.__dict__.get(name, _MISSING)
+        if isinstance(value, dict):
+            value = Entries(value, announce=lambda key, o, n, name=name: self._announce(name, key, o, n))
+        object.__setattr__(self, name, value)
+        if old is _MISSING:
+            return
+        if isinstance(value, dict):
+            old = old if isinstance(old, dict) else {}
+            for key in [*old, *(k for k in value if k not in old)]:
+                o, n = old.get(key), value.get(key)
+                if o != n or type(o) is not type(n):
+                    self._announce(name, key, o, n)
+        elif old != value or type(old) is not type(value):
+            self._announce(name, None, old, value)
+
+    def _announce(self, name: str, channel, old, new) -> None:
+        events = self.__dict__.get("events")
+        if events is not None:
+            events.emit(TuningChange(name, channel, old, new))
+
     # -- introspection ------------------------------------------------------------------------------
     @staticmethod
     def groups() -> tuple[str, ...]:
@@ -201,6 +309,17 @@ class Tuning:
             raise TuningError(f"tuning field {name!r}: unknown {what} {str(channel)[:80]!r} "
                               f"({what}s: {', '.join(entries) or 'none'})")
         entries[channel] = _entry(f, channel, value)
+
+    def name_database_entries(self, channel_weights: dict, tags) -> None:
+        """Give a database's feature channels (name -> schema weight) and tags the entries this tuning
+        lacks, at the values a controller uses for an unnamed entry (so nothing acts differently), so
+        that :meth:`set` and the studio's sliders can set them. The studio calls this; a controller never
+        writes into the tuning it reads."""
+        for name, weight in channel_weights.items():
+            self.feature_weights.setdefault(name, float(weight))
+        for tag in tags:
+            self.tag_bias.setdefault(tag, self.neutral_entry("tag_bias"))
+            self.tag_excluded.setdefault(tag, self.neutral_entry("tag_excluded"))
 
     def reset_group(self, group: str) -> None:
         """Put every field of ``group`` back to its default."""
@@ -313,6 +432,8 @@ class Tuning:
         ``channels``: the feature channel names ``feature_weights`` may name (see :meth:`from_dict`)."""
         return cls.from_preset(cls.read_preset(path), path, channels)
 
+
+_FIELD_NAMES = frozenset(f.name for f in dataclasses.fields(Tuning))
 
 #: Most entries in a per-name field (feature_weights, tag_bias, tag_excluded): a schema has ~10 channels, a
 #: database a handful of tags. Names are channel or tag names, short identifiers.

@@ -5,7 +5,7 @@ import json
 import pytest
 
 from lmm.features import DEFAULT_LAYOUT
-from lmm.tuning import GROUPS, Tuning, TuningError
+from lmm.tuning import GROUPS, Tuning, TuningChange, TuningError
 
 
 def test_every_field_has_slider_metadata():
@@ -147,3 +147,91 @@ def test_unknown_feature_channels_are_refused_when_the_channels_are_known(tmp_pa
     assert str(e.value).startswith(f"{p}: ")
     p.write_text(json.dumps({"feature_weights": {"hip_velocity": 2.0}}))
     assert Tuning.load(p, channels=channels).feature_weights["hip_velocity"] == 2.0
+
+
+def test_every_change_is_announced_once_with_field_channel_old_and_new():
+    t = Tuning()
+    seen = []
+    t.events.connect(seen.append)
+    t.set("stick_deadzone", 0.3)
+    t.set("feature_weights", 2.0, channel="hip_velocity")
+    t.tag_bias["walk"] = 1.5                      # an entry written in place is announced as well
+    t.top_k = 8                                   # unchanged: no event
+    t.reset_group("search")
+    assert seen == [TuningChange("stick_deadzone", None, 0.2, 0.3),
+                    TuningChange("feature_weights", "hip_velocity", 1.0, 2.0),
+                    TuningChange("tag_bias", "walk", 0.0, 1.5),
+                    TuningChange("tag_bias", "walk", 1.5, 0.0)]
+    seen.clear()
+    t.assign(Tuning.from_dict({"ik_enabled": False, "tag_excluded": {"run": True}}))
+    assert {(c.field, c.channel, c.new) for c in seen} == {
+        ("stick_deadzone", None, 0.2), ("feature_weights", "hip_velocity", 1.0),
+        ("ik_enabled", None, False), ("tag_excluded", "run", True)}
+
+
+def test_replaying_the_changes_backwards_gives_the_starting_tuning_back():
+    """What an undo needs: each event carries enough to revert it (old None: the entry was added)."""
+    t = Tuning()
+    start = t.to_dict()
+    seen = []
+    t.events.connect(seen.append)
+    t.set("search_interval_s", 0.5)
+    t.set("feature_weights", 0.0, channel="hip_velocity")
+    t.tag_bias.setdefault("dance", 0.0)
+    t.set("tag_bias", -1.0, channel="dance")
+    t.assign(Tuning.from_dict({"top_k": 3}))
+    t.events.disconnect(seen.append)
+    for c in reversed(seen):
+        if c.channel is None:
+            setattr(t, c.field, c.old)
+        elif c.old is None:
+            del getattr(t, c.field)[c.channel]
+        else:
+            getattr(t, c.field)[c.channel] = c.old
+    assert t.to_dict() == start
+    assert [(c.field, c.channel) for c in seen[:4]] == [("search_interval_s", None), ("feature_weights", "hip_velocity"),
+                                                       ("tag_bias", "dance"), ("tag_bias", "dance")]
+
+
+def test_a_dropped_subscriber_is_not_kept_alive_nor_called():
+    t = Tuning()
+
+    class Listener:
+        calls = 0
+
+        def on(self, change):
+            Listener.calls += 1
+
+    listener = Listener()
+    t.events.connect(listener.on)
+    t.set("top_k", 9)
+    del listener
+    t.set("top_k", 10)
+    assert Listener.calls == 1 and len(t.events) == 0
+
+
+def test_naming_a_databases_entries_changes_no_value_the_runtime_reads():
+    t = Tuning()
+    t.name_database_entries({"hip_velocity": 9.0, "head_velocity": 0.5}, ["walk", "dance"])
+    assert t.feature_weights["hip_velocity"] == 1.0 and t.feature_weights["head_velocity"] == 0.5
+    assert t.tag_bias["dance"] == 0.0 and t.tag_excluded["dance"] is False
+    t.set("tag_bias", 2.0, channel="dance")      # now its slider can set it
+    assert t.tag_bias["dance"] == 2.0
+
+
+def test_controllers_read_the_tuning_and_never_write_into_it(db, features):
+    """A controller's defaults for the entries a tuning does not name are its own (the schema's weights,
+    no tag bias); a feature weight change reaches it by an event at its next step."""
+    from lmm.controller import InputState
+    from lmm.mm import MotionMatchingController
+
+    t = Tuning.from_dict({"feature_weights": {features.layout[0].name: 2.0}})
+    del t.feature_weights[features.layout[1].name]
+    before = t.to_dict()
+    c = MotionMatchingController(db, features, t)
+    c.step(InputState(left_y=1.0), 1 / 60)
+    assert t.to_dict() == before
+    assert c.features.weights[0] == 2.0 and c.features.weights[1] == features.weights[1]
+    t.set("feature_weights", 3.0, channel=features.layout[0].name)
+    c.step(InputState(left_y=1.0), 1 / 60)
+    assert c.features.weights[0] == 3.0 and t.to_dict() != before
