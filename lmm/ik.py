@@ -21,7 +21,8 @@ import math
 
 import numpy as np
 
-
+from lmm import quat
+from lmm.springs import halflife_to_damping
 
 # One leg is a handful of 3-vectors: plain Python floats are several times faster than numpy calls here.
 
@@ -52,31 +53,6 @@ def _clamp1(x):
 
 def _angle_between(u, v) -> float:
     return math.acos(_clamp1(_dot(_unit(u), _unit(v))))
-
-
-def _axis_angle(axis, angle):
-    s = math.sin(angle * 0.5)
-    return (math.cos(angle * 0.5), axis[0] * s, axis[1] * s, axis[2] * s)
-
-
-def _qmul(a, b):
-    aw, ax, ay, az = a
-    bw, bx, by, bz = b
-    return (aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
-            aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw)
-
-
-def _qrot(q, v):
-    w, x, y, z = q
-    t = _cross((x, y, z), v)
-    t = (2.0 * t[0], 2.0 * t[1], 2.0 * t[2])
-    u = _cross((x, y, z), t)
-    return (v[0] + w * t[0] + u[0], v[1] + w * t[1] + u[1], v[2] + w * t[2] + u[2])
-
-
-def _qnormalize(q):
-    n = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
-    return (q[0] / n, q[1] / n, q[2] / n, q[3] / n)
 
 
 def two_bone_ik_floats(a, b, c, t, hip_rot, knee_rot, eps: float = 1e-4):
@@ -130,7 +106,7 @@ def two_bone_ik_floats(a, b, c, t, hip_rot, knee_rot, eps: float = 1e-4):
     x, y, z = ac1 * ab2 - ac2 * ab1, ac2 * ab0 - ac0 * ab2, ac0 * ab1 - ac1 * ab0
     n = math.sqrt(x * x + y * y + z * z)
     if n < 1e-9:
-        x, y, z = _qrot(knee_rot, (0.0, 0.0, 1.0))
+        x, y, z = quat.mul_vec_scalar(knee_rot, (0.0, 0.0, 1.0))
         n = math.sqrt(x * x + y * y + z * z)
     bend = (x / n, y / n, z / n) if n > 1e-9 else (1.0, 0.0, 0.0)
     # turn axis: ac x at
@@ -138,34 +114,14 @@ def two_bone_ik_floats(a, b, c, t, hip_rot, knee_rot, eps: float = 1e-4):
     n = math.sqrt(x * x + y * y + z * z)
     turn = (x / n, y / n, z / n) if n > 1e-9 else bend
 
-    # r0, r1 about the bend axis, r2 about the turn axis (_axis_angle); hip = r2 r0 hip_rot,
-    # knee = r2 r0 r1 knee_rot (_qmul), both normalised (_qnormalize)
-    bx, by, bz = bend
-    h = (ac_ab_1 - ac_ab_0) * 0.5
-    sn = math.sin(h)
-    r0w, r0x, r0y, r0z = math.cos(h), bx * sn, by * sn, bz * sn
-    h = (ba_bc_1 - ba_bc_0) * 0.5
-    sn = math.sin(h)
-    r1w, r1x, r1y, r1z = math.cos(h), bx * sn, by * sn, bz * sn
-    h = ac_at_0 * 0.5
-    sn = math.sin(h)
-    r2w, r2x, r2y, r2z = math.cos(h), turn[0] * sn, turn[1] * sn, turn[2] * sn
-
-    bw, bx, by, bz = hip_rot
-    mw, mx, my, mz = (r0w * bw - r0x * bx - r0y * by - r0z * bz, r0w * bx + r0x * bw + r0y * bz - r0z * by,
-                      r0w * by - r0x * bz + r0y * bw + r0z * bx, r0w * bz + r0x * by - r0y * bx + r0z * bw)
-    hw, hx, hy, hz = (r2w * mw - r2x * mx - r2y * my - r2z * mz, r2w * mx + r2x * mw + r2y * mz - r2z * my,
-                      r2w * my - r2x * mz + r2y * mw + r2z * mx, r2w * mz + r2x * my - r2y * mx + r2z * mw)
-    bw, bx, by, bz = knee_rot
-    mw, mx, my, mz = (r1w * bw - r1x * bx - r1y * by - r1z * bz, r1w * bx + r1x * bw + r1y * bz - r1z * by,
-                      r1w * by - r1x * bz + r1y * bw + r1z * bx, r1w * bz + r1x * by - r1y * bx + r1z * bw)
-    mw, mx, my, mz = (r0w * mw - r0x * mx - r0y * my - r0z * mz, r0w * mx + r0x * mw + r0y * mz - r0z * my,
-                      r0w * my - r0x * mz + r0y * mw + r0z * mx, r0w * mz + r0x * my - r0y * mx + r0z * mw)
-    kw, kx, ky, kz = (r2w * mw - r2x * mx - r2y * my - r2z * mz, r2w * mx + r2x * mw + r2y * mz - r2z * my,
-                      r2w * my - r2x * mz + r2y * mw + r2z * mx, r2w * mz + r2x * my - r2y * mx + r2z * mw)
-    n = math.sqrt(hw * hw + hx * hx + hy * hy + hz * hz)
-    m = math.sqrt(kw * kw + kx * kx + ky * ky + kz * kz)
-    return (hw / n, hx / n, hy / n, hz / n), (kw / m, kx / m, ky / m, kz / m)
+    # r0, r1 about the bend axis, r2 about the turn axis; hip = r2 r0 hip_rot, knee = r2 r0 r1 knee_rot,
+    # both normalised
+    r0 = quat.from_axis_angle_scalar(bend, ac_ab_1 - ac_ab_0)
+    r1 = quat.from_axis_angle_scalar(bend, ba_bc_1 - ba_bc_0)
+    r2 = quat.from_axis_angle_scalar(turn, ac_at_0)
+    mul = quat.mul_scalar
+    return (quat.normalize_scalar(mul(r2, mul(r0, hip_rot))),
+            quat.normalize_scalar(mul(r2, mul(r0, mul(r1, knee_rot)))))
 
 
 def two_bone_ik(hip_pos, knee_pos, ankle_pos, target, hip_rot, knee_rot, eps: float = 1e-4):
@@ -253,7 +209,7 @@ class FootLockState:
         ``contacts`` two bools, ``root_shift`` None or two 3-sequences. Returns the two targets (3-tuples)."""
         locked, released, lowest, lock = self._locked, self._released, self._lowest, self._lock
         off, off_v = self._off, self._off_v
-        y = 2.0 * math.log(2.0) / (blend_halflife + 1e-5)  # halflife_to_damping / 2
+        y = float(halflife_to_damping(blend_halflife)) / 2.0
         e = math.exp(-y * dt)
         targets = []
         for i in range(2):
@@ -388,25 +344,12 @@ def foot_lock_update(state: FootLockState, toe_positions, toe_velocities, contac
     return s, np.array(targets)
 
 
-def _rotated_unit(q, v) -> tuple:
-    """``_unit(_qrot(q, v))`` written out: the same operations in the same order, without the helpers'
-    tuples (the toe's ground test runs it every tick for each locked foot)."""
-    w, x, y, z = q
-    v0, v1, v2 = v
-    t0, t1, t2 = 2.0 * (y * v2 - z * v1), 2.0 * (z * v0 - x * v2), 2.0 * (x * v1 - y * v0)
-    r0 = v0 + w * t0 + (y * t2 - z * t1)
-    r1 = v1 + w * t1 + (z * t0 - x * t2)
-    r2 = v2 + w * t2 + (x * t1 - y * t0)
-    n = math.sqrt(r0 * r0 + r1 * r1 + r2 * r2)
-    return (r0 / n, r1 / n, r2 / n) if n > 1e-9 else (1.0, 0.0, 0.0)
-
-
 def toe_clear_ground_floats(toe_y: float, q, toe_axis_local, toe_length: float, ground_height: float):
     """:func:`toe_clear_ground` on floats (``q`` a 4-tuple, the axis a 3-tuple); None when the toe is left
     as it is."""
     if toe_length <= 0.0:
         return None
-    d = _rotated_unit(q, toe_axis_local)
+    d = _unit(quat.mul_vec_scalar(q, toe_axis_local))
     if toe_y + toe_length * d[1] >= ground_height:
         return None
     want = _clamp1((ground_height - toe_y) / toe_length)
@@ -414,7 +357,7 @@ def toe_clear_ground_floats(toe_y: float, q, toe_axis_local, toe_length: float, 
     axis = _cross(d, (0.0, 1.0, 0.0))
     if _norm(axis) < 1e-9:
         return None
-    return _qnormalize(_qmul(_axis_angle(_unit(axis), angle), q))
+    return quat.normalize_scalar(quat.mul_scalar(quat.from_axis_angle_scalar(_unit(axis), angle), q))
 
 
 def toe_clear_ground(toe_pos, toe_rot, toe_axis_local, toe_length: float, ground_height: float):
@@ -462,8 +405,7 @@ def solve_leg(global_pos, global_rot, chain, toe_target, toe_axis_local, toe_len
 
 def local_rotation_from_global(parent_global, global_rot) -> tuple:
     """parent^-1 * global on 4-tuples (one bone)."""
-    pw, px, py, pz = parent_global
-    return _qmul((pw, -px, -py, -pz), global_rot)
+    return quat.inv_mul_scalar(parent_global, global_rot)
 
 
 def local_rotations_from_global(global_rot, parents, bones) -> dict:

@@ -9,13 +9,11 @@ All functions are vectorised over bones; rotations are (w, x, y, z) and rotation
 on the left (``shown = offset * source``).
 
 The per-tick functions (:func:`inertialize_decay`, :func:`inertialize_apply`) run once per tick on one
-pose of ~20 bones, where a numpy call costs far more than its arithmetic. They perform exactly the float
-operations of the spring and quaternion functions of :mod:`lmm.springs` and :mod:`lmm.quat` (same
-products, same order of sums: the results are bit for bit identical, tested in
-tests/test_inertialize.py) in a few calls on whole arrays: the position and rotation springs run as one
-(2, J, 3) spring, a Hamilton product is 16 signed products summed in four blocks. Operands are laid out
-contiguous and same-shaped where possible (gathers block-major, constants as full arrays): numpy runs
-such an operation about three times faster than one on a 2D slice, a broadcast or a scalar.
+pose of ~20 bones, where a numpy call costs far more than its arithmetic. The decay performs exactly the
+float operations of the springs of :mod:`lmm.springs` (tested in tests/test_inertialize.py) in a few
+calls on whole arrays: the position and rotation springs run as one (2, J, 3) spring. Operands are laid
+out contiguous and same-shaped where possible (constants as full arrays): numpy runs such an operation
+about three times faster than one on a 2D slice, a broadcast or a scalar.
 """
 from __future__ import annotations
 
@@ -59,83 +57,6 @@ def inertialize_transition(shown_positions, shown_velocities, shown_rotations, s
         angular_velocities=np.asarray(shown_angular_velocities - quat.mul_vec(rot, dst_angular_velocities),
                                       dtype=np.float64),
     )
-
-
-# Hamilton product a * b as four blocks of signed products, block k holding term k of each component:
-# w = aw bw - ax bx - ay by - az bz, x = aw bx + ax bw + ay bz - az by, ... (see lmm.quat.mul); a - p is
-# a + (-p) exactly, so summing the blocks left to right is the same arithmetic.
-_MUL_A = np.repeat(np.arange(4), 4)
-_MUL_B = np.array([0, 1, 2, 3, 1, 0, 3, 2, 2, 3, 0, 1, 3, 2, 1, 0])
-_MUL_SIGN = np.array([1.0, 1.0, 1.0, 1.0, -1.0, 1.0, -1.0, 1.0, -1.0, 1.0, 1.0, -1.0, -1.0, -1.0, 1.0, 1.0])
-# cross(a, b) = a[:, L1] * b[:, R1] - a[:, L2] * b[:, R2]: both products from one gather of each
-# operand, with L = L1 + L2 and R = R1 + R2
-_CROSS_L = np.array([1, 2, 0, 2, 0, 1])
-_CROSS_R = np.array([2, 0, 1, 1, 2, 0])
-# the same for the vector part of a quaternion (its columns 1..3)
-_CROSS_QL = _CROSS_L + 1
-
-
-_FLAT_INDICES: dict = {}
-
-
-def _flat_indices(n: int):
-    """Gathers from a (n, 4) quaternion array / (n, 3) vector array, raveled, that lay the operands of the
-    Hamilton product and of the cross products out block-major (every block contiguous: numpy's fast
-    path), remembered per bone count: (a's terms, b's terms, signs) as (4, n, 4); (u's terms for both
-    products of a cross product) as (2, n, 3) from the quaternion's vector part, (the vector's terms)
-    as (2, n, 3), (w repeated) as (n, 3)."""
-    found = _FLAT_INDICES.get(n)
-    if found is None:
-        rows4 = (np.arange(n) * 4)[None, :, None]
-        rows3 = (np.arange(n) * 3)[None, :, None]
-        mul_a = rows4 + _MUL_A.reshape(4, 1, 4)
-        mul_b = rows4 + _MUL_B.reshape(4, 1, 4)
-        sign = np.broadcast_to(_MUL_SIGN.reshape(4, 1, 4), (4, n, 4)).copy()
-        cross_u = rows4 + _CROSS_QL.reshape(2, 1, 3)
-        cross_v = rows3 + _CROSS_R.reshape(2, 1, 3)
-        w3 = np.repeat(np.arange(n) * 4, 3).reshape(n, 3)
-        found = _FLAT_INDICES[n] = (mul_a, mul_b, sign, cross_u, cross_v, w3)
-    return found
-
-
-def _mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """:func:`lmm.quat.mul` of (J, 4) arrays, the same float operations in a few numpy calls: the signed
-    products of each term gathered into a contiguous block, the blocks summed left to right."""
-    mul_a, mul_b, sign = _flat_indices(len(a))[:3]
-    p = a.ravel().take(mul_a)
-    p *= sign
-    p *= b.ravel().take(mul_b)
-    return np.add.reduce(p, 0)          # p[0] + p[1] + p[2] + p[3], left to right
-
-
-def _normalize(q: np.ndarray) -> np.ndarray:
-    """:func:`lmm.quat.normalize` of (J, 4), in place (numpy sums a 4-wide last axis left to right)."""
-    sq = q * q
-    n = np.add.reduce(sq, 1)            # each row's four squares, left to right
-    np.sqrt(n, out=n)
-    np.maximum(n, 1e-10, out=n)
-    q /= n[:, None]
-    return q
-
-
-def _mul_vec(q: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """:func:`lmm.quat.mul_vec` of (J, 4) and (J, 3): v + w t + u x t with t = 2 (u x v), u = q[:, 1:];
-    a cross product is p[0] - p[1] with p = (u's terms) * (the vector's terms), gathered block-major."""
-    cross_u, cross_v, w3 = _flat_indices(len(q))[3:]
-    qf = q.ravel()
-    u = qf.take(cross_u)
-    p = v.ravel().take(cross_v)
-    p *= u
-    t = p[0] - p[1]                     # u x v
-    t *= 2.0
-    p = t.ravel().take(cross_v)
-    p *= u
-    out = qf.take(w3)
-    out *= t                            # w t
-    out += v
-    np.subtract(p[0], p[1], out=t)      # u x t (t was read above, into p and out)
-    out += t                            # (v + w t) + (u x t)
-    return out
 
 
 def _rotation_log2(q: np.ndarray, out: np.ndarray, eps: float = 1e-8) -> None:
@@ -264,7 +185,7 @@ def _apply_velocities(offsets: Offsets, velocities, angular_velocities):
     """The shown velocities and angular velocities: source + offsets (the offset rotation turns the
     source's angular velocities)."""
     return (velocities + offsets.velocities,
-            offsets.angular_velocities + _mul_vec(offsets.rotations, angular_velocities))
+            offsets.angular_velocities + quat.mul_vec(offsets.rotations, angular_velocities))
 
 
 def inertialize_apply_pose(offsets: Offsets, positions, rotations, normalize: bool = True):
@@ -275,29 +196,22 @@ def inertialize_apply_pose(offsets: Offsets, positions, rotations, normalize: bo
     rounding (the learned controller's decoded ones), since a decay's offsets are too (the exponential
     of a rotation vector), so is their product, to a few units in the last place; rotations read from
     float32 data (the database's) are unit only to about 1e-7 and are normalised."""
-    rot = _mul(offsets.rotations, rotations)
-    return positions + offsets.positions, _normalize(rot) if normalize else rot
+    rot = quat.mul(offsets.rotations, rotations)
+    return positions + offsets.positions, quat.normalize(rot) if normalize else rot
 
 
 def inertialize_root_velocities(offsets: Offsets, velocity, angular_velocity) -> tuple[list, tuple]:
     """Bone 0's shown velocity and angular velocity (``velocity``/``angular_velocity``: the source's, 3
-    floats each) in plain floats: the values of :func:`inertialize_apply`'s row 0, bit for bit
-    (:func:`lmm.quat_scalar.mul_vec` sums the rotated vector's terms in the same order as
-    :func:`_mul_vec`)."""
+    floats each) in plain floats: the values of :func:`inertialize_apply`'s row 0, bit for bit (the scalar
+    form of :func:`lmm.quat.mul_vec`)."""
     stack, vel, ang = offsets._stack, offsets.velocities, offsets.angular_velocities
     if stack is not None and stack[1] is vel and stack[2] is ang:
         ov, oa = vel.base[1, :, 0].tolist()   # both rows 0 of the stacked [velocities, angular velocities]
     else:
         ov, oa = vel[0].tolist(), ang[0].tolist()
-    # qs.mul_vec(offset rotation 0, angular_velocity), written out
-    w, x, y, z = offsets.rotations[0].tolist()
-    v0, v1, v2 = angular_velocity
-    t0 = 2.0 * (y * v2 - z * v1)
-    t1 = 2.0 * (z * v0 - x * v2)
-    t2 = 2.0 * (x * v1 - y * v0)
+    r = quat.mul_vec_scalar(offsets.rotations[0].tolist(), angular_velocity)
     return ([velocity[0] + ov[0], velocity[1] + ov[1], velocity[2] + ov[2]],
-            (oa[0] + (v0 + w * t0 + (y * t2 - z * t1)), oa[1] + (v1 + w * t1 + (z * t0 - x * t2)),
-             oa[2] + (v2 + w * t2 + (x * t1 - y * t0))))
+            (oa[0] + r[0], oa[1] + r[1], oa[2] + r[2]))
 
 
 class ShownPose:

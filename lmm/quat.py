@@ -1,15 +1,26 @@
-"""Vectorised quaternion maths.
+"""Quaternion maths, each operation in two forms side by side.
 
-Quaternions are numpy arrays with the scalar first: ``q[..., :] = (w, x, y, z)``.
-Every function broadcasts over leading dimensions (frames, joints, ...), works in
-float32 or float64 and never loops in Python over frames or joints.
-Rotations act on column vectors: ``mul_vec(q, v)`` rotates ``v`` by ``q``.
+Quaternions have the scalar first: ``q = (w, x, y, z)``. Rotations act on column vectors: ``mul_vec(q, v)``
+rotates ``v`` by ``q``.
+
+* The bulk form (``mul``, ``mul_vec``, ...) takes numpy arrays, broadcasts over leading dimensions
+  (frames, joints, ...), works in float32 or float64 and never loops in Python over frames or joints.
+* The scalar form (``mul_scalar``, ``mul_vec_scalar``, ...) takes one quaternion or 3-vector as a tuple
+  of Python floats: the per-tick maths of one character, where a numpy call on a 4-element array costs
+  microseconds of overhead for nanoseconds of arithmetic. It performs exactly the float operations of
+  its bulk namesake on float64 (same order, same association; numpy sums a short last axis left to
+  right), so the two give the same bits (tests/test_quat.py checks every pair). Where numpy's
+  transcendental kernel differs from the C library's in the last bit (``arctan2``), numpy's is called
+  on the scalar.
 """
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
 _AXES = {"x": 0, "y": 1, "z": 2}
+_arctan2 = np.arctan2
 
 
 def identity(shape=(), dtype=np.float64) -> np.ndarray:
@@ -18,8 +29,24 @@ def identity(shape=(), dtype=np.float64) -> np.ndarray:
     return q
 
 
+def norm_scalar(v) -> float:
+    """Length of a 3- or 4-vector (as ``np.linalg.norm(v, axis=-1)``: squares summed left to right)."""
+    s = 0.0
+    first = True
+    for c in v:
+        s = c * c if first else s + c * c
+        first = False
+    return math.sqrt(s)
+
+
 def normalize(q: np.ndarray, eps: float = 1e-10) -> np.ndarray:
     return q / np.maximum(np.linalg.norm(q, axis=-1, keepdims=True), eps)
+
+
+def normalize_scalar(q, eps: float = 1e-10) -> tuple:
+    n = norm_scalar(q)
+    n = n if n > eps else eps
+    return tuple(c / n for c in q)
 
 
 def conj(q: np.ndarray) -> np.ndarray:
@@ -30,19 +57,35 @@ def conj(q: np.ndarray) -> np.ndarray:
 inv = conj
 
 
+def conj_scalar(q) -> tuple:
+    return (q[0], -q[1], -q[2], -q[3])
+
+
 def mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Hamilton product a * b (apply b first, then a)."""
     a, b = np.asarray(a), np.asarray(b)
-    aw, ax, ay, az = a[..., 0], a[..., 1], a[..., 2], a[..., 3]
-    bw, bx, by, bz = b[..., 0], b[..., 1], b[..., 2], b[..., 3]
-    # filled in place: np.stack costs more than the arithmetic for the small arrays of one pose
-    w = aw * bw - ax * bx - ay * by - az * bz
-    out = np.empty(w.shape + (4,), dtype=w.dtype)
-    out[..., 0] = w
-    out[..., 1] = aw * bx + ax * bw + ay * bz - az * by
-    out[..., 2] = aw * by - ax * bz + ay * bw + az * bx
-    out[..., 3] = aw * bz + ax * by - ay * bx + az * bw
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape), dtype=np.result_type(a, b))
+    mul_rows(np.moveaxis(a, -1, 0), np.moveaxis(b, -1, 0), np.moveaxis(out, -1, 0))
     return out
+
+
+def mul_rows(a, b, out) -> None:
+    """:func:`mul` on quaternions given as four component rows each (``a``, ``b``: sequences of four
+    arrays), into the rows of ``out``: the bulk product's one written form."""
+    aw, ax, ay, az = a
+    bw, bx, by, bz = b
+    out[0] = aw * bw - ax * bx - ay * by - az * bz
+    out[1] = aw * bx + ax * bw + ay * bz - az * by
+    out[2] = aw * by - ax * bz + ay * bw + az * bx
+    out[3] = aw * bz + ax * by - ay * bx + az * bw
+
+
+def mul_scalar(a, b) -> tuple:
+    """Hamilton product a * b of two 4-tuples."""
+    aw, ax, ay, az = a
+    bw, bx, by, bz = b
+    return (aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw)
 
 
 def inv_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -50,35 +93,69 @@ def inv_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return mul(conj(a), b)
 
 
+def inv_mul_scalar(a, b) -> tuple:
+    """conj(a) * b (a negation is exact: the bits of :func:`inv_mul`)."""
+    return mul_scalar(conj_scalar(a), b)
+
+
 def mul_inv(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """a * conj(b)."""
     return mul(a, conj(b))
 
 
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    # written out: np.cross costs ~50 us per call on small arrays (axis juggling)
-    a, b = np.asarray(a), np.asarray(b)
-    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
-    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
-    x = a1 * b2 - a2 * b1
-    out = np.empty(x.shape + (3,), dtype=x.dtype)
-    out[..., 0] = x
-    out[..., 1] = a2 * b0 - a0 * b2
-    out[..., 2] = a0 * b1 - a1 * b0
-    return out
+def mul_inv_scalar(a, b) -> tuple:
+    """a * conj(b)."""
+    return mul_scalar(a, conj_scalar(b))
 
 
 def mul_vec(q: np.ndarray, v: np.ndarray) -> np.ndarray:
-    """Rotate vectors v (..., 3) by unit quaternions q (..., 4)."""
-    w = q[..., :1]
-    u = q[..., 1:]
-    t = 2.0 * _cross(u, v)
-    return v + w * t + _cross(u, t)
+    """Rotate vectors v (..., 3) by unit quaternions q (..., 4): v + w t + u x t with t = 2 u x v."""
+    q, v = np.asarray(q), np.asarray(v)
+    out = np.empty(np.broadcast_shapes(q.shape[:-1], v.shape[:-1]) + (3,), dtype=np.result_type(q, v, 2.0))
+    mul_vec_rows(np.moveaxis(q, -1, 0), np.moveaxis(v, -1, 0), np.moveaxis(out, -1, 0))
+    return out
+
+
+def mul_vec_rows(q, v, out, plus=None) -> None:
+    """:func:`mul_vec` on component rows (``q`` four, ``v`` three), into the rows of ``out``, plus the
+    rows of ``plus`` when given (added last, as ``mul_vec(q, v) + plus``): the bulk rotation's one
+    written form."""
+    w, x, y, z = q
+    v0, v1, v2 = v
+    t0 = 2.0 * (y * v2 - z * v1)
+    t1 = 2.0 * (z * v0 - x * v2)
+    t2 = 2.0 * (x * v1 - y * v0)
+    r0 = v0 + w * t0 + (y * t2 - z * t1)
+    r1 = v1 + w * t1 + (z * t0 - x * t2)
+    r2 = v2 + w * t2 + (x * t1 - y * t0)
+    if plus is not None:
+        r0 += plus[0]
+        r1 += plus[1]
+        r2 += plus[2]
+    out[0], out[1], out[2] = r0, r1, r2
+
+
+def mul_vec_scalar(q, v, origin=None) -> tuple:
+    """Rotate the 3-tuple v by the unit quaternion q. With ``origin`` (a 3-tuple) the result is
+    ``origin + v + w t + u x t``, summed in that order: a child's position in single-pose forward
+    kinematics (:mod:`lmm.kinematics`)."""
+    w, x, y, z = q
+    v0, v1, v2 = v
+    t0 = 2.0 * (y * v2 - z * v1)
+    t1 = 2.0 * (z * v0 - x * v2)
+    t2 = 2.0 * (x * v1 - y * v0)
+    if origin is not None:
+        v0, v1, v2 = origin[0] + v0, origin[1] + v1, origin[2] + v2
+    return (v0 + w * t0 + (y * t2 - z * t1), v1 + w * t1 + (z * t0 - x * t2), v2 + w * t2 + (x * t1 - y * t0))
 
 
 def inv_mul_vec(q: np.ndarray, v: np.ndarray) -> np.ndarray:
     """Rotate vectors v by the inverse of q."""
     return mul_vec(conj(q), v)
+
+
+def inv_mul_vec_scalar(q, v) -> tuple:
+    return mul_vec_scalar(conj_scalar(q), v)
 
 
 def from_axis_angle(axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
@@ -88,14 +165,40 @@ def from_axis_angle(axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
     return np.concatenate([np.cos(half), np.sin(half) * axis], axis=-1)
 
 
+def from_axis_angle_scalar(axis, angle: float) -> tuple:
+    """:func:`from_axis_angle` of one 3-tuple axis and angle (the C library's sin and cos: the bulk form's
+    numpy kernels may differ in the last bit)."""
+    half = angle * 0.5
+    s = math.sin(half)
+    return (math.cos(half), s * axis[0], s * axis[1], s * axis[2])
+
+
 def from_scaled_angle_axis(v: np.ndarray, eps: float = 1e-8) -> np.ndarray:
     """Exponential map: rotation vector (axis * angle, radians) -> quaternion."""
     return exp(v * 0.5, eps)
 
 
+def from_scaled_angle_axis_scalar(v, eps: float = 1e-8) -> tuple:
+    return exp_scalar((v[0] * 0.5, v[1] * 0.5, v[2] * 0.5), eps)
+
+
 def to_scaled_angle_axis(q: np.ndarray, eps: float = 1e-8) -> np.ndarray:
     """Logarithm map: quaternion -> rotation vector (axis * angle, radians)."""
     return 2.0 * log(q, eps)
+
+
+def to_scaled_angle_axis_scalar(q, eps: float = 1e-8) -> tuple:
+    x, y, z = log_scalar(q, eps)
+    return (2.0 * x, 2.0 * y, 2.0 * z)
+
+
+def angle_axis_difference(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The rotation vector (axis * angle) taking rotations ``b`` to ``a`` the shorter way round."""
+    return to_scaled_angle_axis(abs_(mul_inv(a, b)))
+
+
+def angle_axis_difference_scalar(a, b) -> tuple:
+    return to_scaled_angle_axis_scalar(abs_scalar(mul_inv_scalar(a, b)))
 
 
 def exp(v: np.ndarray, eps: float = 1e-8) -> np.ndarray:
@@ -107,6 +210,15 @@ def exp(v: np.ndarray, eps: float = 1e-8) -> np.ndarray:
     return normalize(np.concatenate([w, xyz], axis=-1))
 
 
+def exp_scalar(v, eps: float = 1e-8) -> tuple:
+    half = norm_scalar(v)
+    w = math.cos(half)
+    if half < eps:
+        return normalize_scalar((w, v[0], v[1], v[2]))
+    s = math.sin(half) / half
+    return normalize_scalar((w, s * v[0], s * v[1], s * v[2]))
+
+
 def log(q: np.ndarray, eps: float = 1e-8) -> np.ndarray:
     q = abs_(q)
     length = np.linalg.norm(q[..., 1:], axis=-1, keepdims=True)
@@ -116,9 +228,24 @@ def log(q: np.ndarray, eps: float = 1e-8) -> np.ndarray:
     return np.where(small, q[..., 1:], halfangle / safe * q[..., 1:])
 
 
+def log_scalar(q, eps: float = 1e-8) -> tuple:
+    q = abs_scalar(q)
+    length = norm_scalar(q[1:])
+    if length < eps:
+        return (q[1], q[2], q[3])
+    w = q[0]
+    w = -1.0 if w < -1.0 else 1.0 if w > 1.0 else w
+    s = float(_arctan2(length, w)) / length
+    return (s * q[1], s * q[2], s * q[3])
+
+
 def abs_(q: np.ndarray) -> np.ndarray:
     """The quaternion with non-negative w that represents the same rotation."""
     return np.where(q[..., :1] < 0.0, -q, q)
+
+
+def abs_scalar(q) -> tuple:
+    return (-q[0], -q[1], -q[2], -q[3]) if q[0] < 0.0 else tuple(q)
 
 
 def from_euler(angles: np.ndarray, order: str) -> np.ndarray:
@@ -253,7 +380,7 @@ def between(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 def angular_velocity(q0: np.ndarray, q1: np.ndarray, dt: float) -> np.ndarray:
     """World-space angular velocity (rad/s) taking q0 to q1 in dt seconds."""
-    return to_scaled_angle_axis(abs_(mul_inv(q1, q0))) / dt
+    return angle_axis_difference(q1, q0) / dt
 
 
 #: frames per block in bulk per-frame maths (see :func:`frame_blocks`)
@@ -275,35 +402,6 @@ def per_frame_blocks(arrays) -> list[slice] | None:
     if n <= FRAME_BLOCK or any(a.ndim < 3 or a.shape[0] != n for a in arrays):
         return None
     return frame_blocks(n)
-
-
-def mul_rows(a, b, out) -> None:
-    """:func:`mul` on quaternions given as four component rows each (``a``, ``b``: sequences of four
-    arrays), into the rows of ``out``: the same operations in the same order, so the same bits."""
-    aw, ax, ay, az = a
-    bw, bx, by, bz = b
-    out[0] = aw * bw - ax * bx - ay * by - az * bz
-    out[1] = aw * bx + ax * bw + ay * bz - az * by
-    out[2] = aw * by - ax * bz + ay * bw + az * bx
-    out[3] = aw * bz + ax * by - ay * bx + az * bw
-
-
-def mul_vec_rows(q, v, out, plus=None) -> None:
-    """:func:`mul_vec` on component rows (``q`` four, ``v`` three), into the rows of ``out``, plus the
-    rows of ``plus`` when given (added last, as ``mul_vec(q, v) + plus``): the same operations."""
-    w, x, y, z = q
-    v0, v1, v2 = v
-    t0 = 2.0 * (y * v2 - z * v1)
-    t1 = 2.0 * (z * v0 - x * v2)
-    t2 = 2.0 * (x * v1 - y * v0)
-    r0 = v0 + w * t0 + (y * t2 - z * t1)
-    r1 = v1 + w * t1 + (z * t0 - x * t2)
-    r2 = v2 + w * t2 + (x * t1 - y * t0)
-    if plus is not None:
-        r0 += plus[0]
-        r1 += plus[1]
-        r2 += plus[2]
-    out[0], out[1], out[2] = r0, r1, r2
 
 
 def joint_major(a: np.ndarray, dtype) -> np.ndarray:

@@ -10,12 +10,10 @@ goal halves. A halflife of 0 snaps to the goal (the tiny epsilon keeps the maths
 from __future__ import annotations
 
 import functools
-import math
 
 import numpy as np
 
 from lmm import quat
-from lmm import quat_scalar as qs
 
 LN2 = float(np.log(2.0))
 EPS = 1e-5
@@ -27,19 +25,23 @@ def halflife_to_damping(halflife, eps: float = EPS):
 
 
 def damping_to_halflife(damping, eps: float = EPS):
-    return (4.0 * LN2) / (np.asarray(damping, dtype=np.float64) + eps)
+    """The inverse of :func:`halflife_to_damping`: the same relation (4 ln 2 = halflife * damping)."""
+    return halflife_to_damping(damping, eps)
+
+
+def damper_factor(halflife, dt, eps: float = EPS):
+    """The fraction of the way to its goal a damper covers in ``dt``: 1 - exp(-ln2 dt / halflife)."""
+    return 1.0 - np.exp(-LN2 * np.asarray(dt) / (np.asarray(halflife) + eps))
 
 
 def damper_exact(x, goal, halflife, dt, eps: float = EPS):
     """Exponential approach of ``x`` to ``goal``: the distance halves every ``halflife`` seconds."""
-    t = 1.0 - np.exp(-LN2 * np.asarray(dt) / (np.asarray(halflife) + eps))
-    return x + (goal - x) * t
+    return x + (goal - x) * damper_factor(halflife, dt, eps)
 
 
 def damper_exact_quat(q, goal, halflife, dt, eps: float = EPS):
     """The rotation analogue of :func:`damper_exact` (shortest path)."""
-    t = 1.0 - np.exp(-LN2 * np.asarray(dt) / (np.asarray(halflife) + eps))
-    return quat.slerp(q, goal, t)
+    return quat.slerp(q, goal, damper_factor(halflife, dt, eps))
 
 
 def simple_spring_damper_exact(x, v, goal, halflife, dt, eps: float = EPS):
@@ -139,9 +141,6 @@ def spring_rotation_update(q, w, q_goal, halflife, dt, eps: float = EPS):
 # (bit for bit, tested in tests/test_springs.py), without numpy's per-call overhead on 3- and 4-element
 # arrays. Vectors are tuples; ``dts`` is a tuple of horizons (one tick: ``(dt,)``).
 # ------------------------------------------------------------------------------------------------------
-_arctan2 = np.arctan2  # numpy's, as quat_scalar.log (the C library's differs in the last bit)
-
-
 @functools.lru_cache(maxsize=256)
 def decay_factors(y: float, dts: tuple) -> tuple:
     """``exp(-y * dt)`` for each ``dt`` with numpy's exp (the C library's differs in the last bit).
@@ -154,7 +153,7 @@ def spring_character_floats(x, v, a, v_goal, halflife: float, dts: tuple, eps: f
     """:func:`spring_character_update` for one 3-vector state: ``[(x, v, a), ...]``, one per horizon (only
     the ``x`` when ``positions_only``). Written out per component (the same expressions, in the same
     order, as the numpy form)."""
-    y = float((4.0 * LN2) / (halflife + eps) / 2.0)
+    y = float(halflife_to_damping(halflife, eps) / 2.0)
     yy = y * y
     x0, x1, x2 = x
     a0, a1, a2 = a
@@ -184,51 +183,17 @@ def spring_rotation_floats(q, w, goal, halflife: float, dts: tuple, eps: float =
                            normalize: bool = False, rotations_only: bool = False) -> list:
     """:func:`spring_rotation_update` for one rotation: ``[(q, w), ...]``, one per horizon; ``q``
     renormalised (as ``quat.normalize``) only when ``normalize``; only the ``q`` when ``rotations_only``.
-    The exponential map, the product with the goal and the normalisation are written out: the operations
-    of :mod:`lmm.quat_scalar`, in its order."""
-    y = float((4.0 * LN2) / (halflife + eps) / 2.0)
-    sqrt, cos, sin = math.sqrt, math.cos, math.sin
-    # j0 = to_scaled_angle_axis(abs_(q * conj(goal)))
-    aw, ax, ay, az = q
-    gw, gx, gy, gz = goal
-    bx, by, bz = -gx, -gy, -gz
-    dw = aw * gw - ax * bx - ay * by - az * bz
-    dx = aw * bx + ax * gw + ay * bz - az * by
-    dy = aw * by - ax * bz + ay * gw + az * bx
-    dz = aw * bz + ax * by - ay * bx + az * gw
-    if dw < 0.0:
-        dw, dx, dy, dz = -dw, -dx, -dy, -dz
-    length = sqrt(dx * dx + dy * dy + dz * dz)
-    if length >= 1e-8:
-        k = float(_arctan2(length, -1.0 if dw < -1.0 else 1.0 if dw > 1.0 else dw)) / length
-        dx, dy, dz = k * dx, k * dy, k * dz
-    j00, j01, j02 = 2.0 * dx, 2.0 * dy, 2.0 * dz
+    The scalar forms of :mod:`lmm.quat`, so the operations of the numpy form."""
+    y = float(halflife_to_damping(halflife, eps) / 2.0)
+    j00, j01, j02 = quat.angle_axis_difference_scalar(q, goal)
     w0, w1, w2 = w
     b0, b1, b2 = w0 + j00 * y, w1 + j01 * y, w2 + j02 * y      # j1
     by0, by1, by2 = b0 * y, b1 * y, b2 * y
     out = []
     for e, dt in zip(decay_factors(y, dts), dts):
-        # from_scaled_angle_axis(e * (j0 + j1 dt)) = exp(half of it)
-        h0, h1, h2 = e * (j00 + b0 * dt) * 0.5, e * (j01 + b1 * dt) * 0.5, e * (j02 + b2 * dt) * 0.5
-        half = sqrt(h0 * h0 + h1 * h1 + h2 * h2)
-        rw = cos(half)
-        if half >= 1e-8:
-            s = sin(half) / half
-            h0, h1, h2 = s * h0, s * h1, s * h2
-        n = sqrt(rw * rw + h0 * h0 + h1 * h1 + h2 * h2)
-        n = n if n > 1e-10 else 1e-10
-        rw, rx, ry, rz = rw / n, h0 / n, h1 / n, h2 / n
-        # times the goal
-        ow = rw * gw - rx * gx - ry * gy - rz * gz
-        ox = rw * gx + rx * gw + ry * gz - rz * gy
-        oy = rw * gy - rx * gz + ry * gw + rz * gx
-        oz = rw * gz + rx * gy - ry * gx + rz * gw
+        r = quat.mul_scalar(quat.from_scaled_angle_axis_scalar((e * (j00 + b0 * dt), e * (j01 + b1 * dt),
+                                                                 e * (j02 + b2 * dt))), goal)
         if normalize:
-            n = sqrt(ow * ow + ox * ox + oy * oy + oz * oz)
-            n = n if n > 1e-10 else 1e-10
-            ow, ox, oy, oz = ow / n, ox / n, oy / n, oz / n
-        if rotations_only:
-            out.append((ow, ox, oy, oz))
-        else:
-            out.append(((ow, ox, oy, oz), (e * (w0 - by0 * dt), e * (w1 - by1 * dt), e * (w2 - by2 * dt))))
+            r = quat.normalize_scalar(r)
+        out.append(r if rotations_only else (r, (e * (w0 - by0 * dt), e * (w1 - by1 * dt), e * (w2 - by2 * dt))))
     return out

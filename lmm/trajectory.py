@@ -17,7 +17,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from lmm import quat
-from lmm import quat_scalar as qs
 from lmm.springs import (spring_character_floats, spring_character_update, spring_rotation_floats,
                          spring_rotation_update)
 
@@ -140,9 +139,7 @@ _arctan2 = np.arctan2
 
 def yaw_rotation_floats(angle: float) -> tuple:
     """:func:`yaw_rotation` as a tuple (the zero components included: ``sin * 0.0`` keeps its sign)."""
-    half = angle * 0.5
-    s = math.sin(half)
-    return (math.cos(half), s * 0.0, s * 1.0, s * 0.0)
+    return quat.from_axis_angle_scalar((0.0, 1.0, 0.0), angle)
 
 
 def stick_world_floats(x: float, y: float, deadzone: float, camera_azimuth: float) -> tuple:
@@ -156,7 +153,7 @@ def stick_world_floats(x: float, y: float, deadzone: float, camera_azimuth: floa
         else:
             k = min((mag - deadzone) / max(1.0 - deadzone, 1e-6), 1.0) / mag
             sx, sy = x * k, y * k
-    return qs.mul_vec(yaw_rotation_floats(camera_azimuth), (-sx, 0.0, sy))
+    return quat.mul_vec_scalar(yaw_rotation_floats(camera_azimuth), (-sx, 0.0, sy))
 
 
 def desired_velocity_floats(stick_world, simulation_rotation, walk: bool, tuning) -> tuple:
@@ -165,18 +162,18 @@ def desired_velocity_floats(stick_world, simulation_rotation, walk: bool, tuning
         fwd, side, back = tuning.walk_forward_speed_m_s, tuning.walk_sideways_speed_m_s, tuning.walk_backwards_speed_m_s
     else:
         fwd, side, back = tuning.run_forward_speed_m_s, tuning.run_sideways_speed_m_s, tuning.run_backwards_speed_m_s
-    lx, _, lz = qs.inv_mul_vec(simulation_rotation, stick_world)
-    return qs.mul_vec(simulation_rotation, (lx * side, 0.0, lz * (fwd if lz > 0.0 else back)))
+    lx, _, lz = quat.inv_mul_vec_scalar(simulation_rotation, stick_world)
+    return quat.mul_vec_scalar(simulation_rotation, (lx * side, 0.0, lz * (fwd if lz > 0.0 else back)))
 
 
 def desired_rotation_floats(stick_world, right_stick_world, velocity, current_rotation, strafe: bool,
                             camera_azimuth: float) -> tuple:
     """:func:`desired_rotation` on tuples."""
     if strafe:
-        if qs.norm(right_stick_world) > 1e-5:
+        if quat.norm_scalar(right_stick_world) > 1e-5:
             return yaw_rotation_floats(float(_arctan2(right_stick_world[0], right_stick_world[2])))
         return yaw_rotation_floats(camera_azimuth)
-    if qs.norm(velocity) > 1e-5:
+    if quat.norm_scalar(velocity) > 1e-5:
         return yaw_rotation_floats(float(_arctan2(velocity[0], velocity[2])))
     return tuple(current_rotation)
 
@@ -245,29 +242,12 @@ def trajectory_predict_floats(position, velocity, acceleration, rotation, angula
 
 
 def trajectory_in_root_space_floats(positions, rotations, root_position, root_rotation) -> tuple[list, list]:
-    """:func:`trajectory_in_root_space` on tuples: lists of local positions and facing directions. The
-    rotations written out (``quat_scalar.mul_vec``'s operations in its order, zero products included)."""
+    """:func:`trajectory_in_root_space` on tuples: lists of local positions and facing directions.
+    The rotations are the scalar forms of :mod:`lmm.quat` (zero products included), so the bits of the
+    numpy form."""
+    inverse = quat.conj_scalar(root_rotation)
     rx, ry, rz = root_position
-    w, x, y, z = root_rotation
-    x, y, z = -x, -y, -z  # the inverse rotation
-    local_pos = []
-    for px, py, pz in positions:
-        v0, v1, v2 = px - rx, py - ry, pz - rz
-        t0 = 2.0 * (y * v2 - z * v1)
-        t1 = 2.0 * (z * v0 - x * v2)
-        t2 = 2.0 * (x * v1 - y * v0)
-        local_pos.append((v0 + w * t0 + (y * t2 - z * t1), v1 + w * t1 + (z * t0 - x * t2),
-                          v2 + w * t2 + (x * t1 - y * t0)))
-    local_dir = []
-    for qw, qx, qy, qz in rotations:  # the facing: the rotation's +Z
-        t0 = 2.0 * (qy * 1.0 - qz * 0.0)
-        t1 = 2.0 * (qz * 0.0 - qx * 1.0)
-        t2 = 2.0 * (qx * 0.0 - qy * 0.0)
-        v0, v1, v2 = 0.0 + qw * t0 + (qy * t2 - qz * t1), 0.0 + qw * t1 + (qz * t0 - qx * t2), \
-            1.0 + qw * t2 + (qx * t1 - qy * t0)
-        t0 = 2.0 * (y * v2 - z * v1)
-        t1 = 2.0 * (z * v0 - x * v2)
-        t2 = 2.0 * (x * v1 - y * v0)
-        local_dir.append((v0 + w * t0 + (y * t2 - z * t1), v1 + w * t1 + (z * t0 - x * t2),
-                          v2 + w * t2 + (x * t1 - y * t0)))
+    local_pos = [quat.mul_vec_scalar(inverse, (px - rx, py - ry, pz - rz)) for px, py, pz in positions]
+    forward = (0.0, 0.0, 1.0)  # the facing: the rotation's +Z
+    local_dir = [quat.mul_vec_scalar(inverse, quat.mul_vec_scalar(q, forward)) for q in rotations]
     return local_pos, local_dir

@@ -198,7 +198,9 @@ def _two_bone_ik_reference(a, b, c, t, hip_rot, knee_rot, eps=1e-4):
     """The helper-per-3-vector form that two_bone_ik_floats replaces (lmm/ik.py before issue 16)."""
     import math
 
-    from lmm.ik import _angle_between, _axis_angle, _clamp1, _cross, _norm, _qmul, _qnormalize, _qrot, _sub, _unit
+    from lmm.ik import _angle_between, _clamp1, _cross, _norm, _sub, _unit
+    _axis_angle, _qmul, _qnormalize, _qrot = (quat.from_axis_angle_scalar, quat.mul_scalar, quat.normalize_scalar,
+                                              quat.mul_vec_scalar)
     ab, cb, ac, at = _sub(b, a), _sub(b, c), _sub(c, a), _sub(t, a)
     l_ab, l_cb = _norm(ab), _norm(cb)
     l_at = min(max(_norm(at), eps), l_ab + l_cb - eps)
@@ -283,12 +285,22 @@ def test_foot_lock_update_in_place_equals_the_functional_form_and_leaves_its_inp
     assert functional.locked.dtype == bool and functional.lock_position.shape == (2, 3)
 
 
-def test_rotated_unit_is_the_helper_form_bit_for_bit():
-    """The toe's ground test's direction, written out, against _unit(_qrot(q, v)) (null axes included)."""
-    from lmm.ik import _qrot, _rotated_unit, _unit
+def test_rotated_unit_is_the_numpy_definition_bit_for_bit():
+    """The toe's ground test's direction, _unit(quat.mul_vec_scalar(q, v)), against numpy's rotation and
+    length (null axes included)."""
+    from lmm.ik import _unit
+
+    def _rotated_unit(q, v):
+        return _unit(quat.mul_vec_scalar(q, v))
+
+    def _unit_of_rotated(q, v):
+        r = quat.mul_vec(np.array(q), np.array(v))
+        n = np.linalg.norm(r, axis=-1)
+        return tuple((r / n).tolist()) if n > 1e-9 else (1.0, 0.0, 0.0)
+
     rng = np.random.default_rng(5)
     for t in range(3000):
         q = rng.standard_normal(4)
         q = tuple((q / np.linalg.norm(q)).tolist())
         v = tuple((rng.standard_normal(3) * 10.0 ** rng.uniform(-12, 2)).tolist()) if t % 50 else (0.0, 0.0, 0.0)
-        assert _rotated_unit(q, v) == _unit(_qrot(q, v)), t
+        assert _rotated_unit(q, v) == _unit_of_rotated(q, v), t

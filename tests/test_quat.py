@@ -120,3 +120,71 @@ def test_matrix_round_trip(rng):
     q = random_quats(rng, 500)
     back = quat.from_matrix(quat.to_matrix(q))
     np.testing.assert_allclose(back, quat.abs_(q), atol=1e-12)
+
+
+# -- the scalar form of each operation against its bulk form: the same bits on float64 (the recordings
+#    depend on it) -----------------------------------------------------------------------------------
+
+def _edge_quats(rng, n):
+    q = rng.normal(size=(n, 4))
+    q[: n // 8, 1:] *= 1e-9          # near identity (the small-angle branches)
+    q[n // 8: n // 4, 0] *= -1.0     # negative w
+    q[n // 4: n // 4 + 5] = (1.0, 0.0, 0.0, 0.0)
+    return quat.normalize(q)
+
+
+def _edge_vecs(rng, n):
+    v = rng.normal(size=(n, 3)) * rng.uniform(1e-3, 10.0, size=(n, 1))
+    v[: n // 10] *= 1e-10
+    v[n // 10: n // 10 + 3] = 0.0
+    return v
+
+
+def _same_bits(a, b):
+    a, b = np.asarray(a, np.float64), np.asarray(b, np.float64)
+    return a.shape == b.shape and np.array_equal(a, b) and np.array_equal(np.signbit(a), np.signbit(b))
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_every_scalar_form_gives_the_bits_of_its_bulk_form(seed):
+    rng = np.random.default_rng(seed)
+    a, b, v, o = _edge_quats(rng, 3000), _edge_quats(rng, 3000), _edge_vecs(rng, 3000), _edge_vecs(rng, 3000)
+    raw = rng.normal(size=(3000, 4)) * rng.uniform(0.1, 10.0, size=(3000, 1))
+    pairs = {  # scalar name: (bulk result, arguments)
+        "mul_scalar": (quat.mul(a, b), (a, b)), "inv_mul_scalar": (quat.inv_mul(a, b), (a, b)),
+        "mul_inv_scalar": (quat.mul_inv(a, b), (a, b)), "conj_scalar": (quat.conj(a), (a,)),
+        "mul_vec_scalar": (quat.mul_vec(a, v), (a, v)), "inv_mul_vec_scalar": (quat.inv_mul_vec(a, v), (a, v)),
+        "abs_scalar": (quat.abs_(a), (a,)), "normalize_scalar": (quat.normalize(raw), (raw,)),
+        "log_scalar": (quat.log(a), (a,)), "exp_scalar": (quat.exp(v), (v,)),
+        "to_scaled_angle_axis_scalar": (quat.to_scaled_angle_axis(a), (a,)),
+        "from_scaled_angle_axis_scalar": (quat.from_scaled_angle_axis(v), (v,)),
+        "angle_axis_difference_scalar": (quat.angle_axis_difference(a, b), (a, b)),
+        "norm_scalar": (np.linalg.norm(v, axis=-1), (v,)),
+    }
+    for name, (want, args) in pairs.items():
+        fn = getattr(quat, name)
+        got = np.array([fn(*(tuple(x[i].tolist()) for x in args)) for i in range(len(a))])
+        assert _same_bits(got, want), name
+    got = np.array([quat.norm_scalar(tuple(r)) for r in raw.tolist()])
+    assert _same_bits(got, np.linalg.norm(raw, axis=-1)), "norm_scalar of 4-vectors"
+    # with an origin: origin + v + w t + u x t, summed in that order (single-pose forward kinematics)
+    got = np.array([quat.mul_vec_scalar(tuple(a[i].tolist()), tuple(v[i].tolist()), tuple(o[i].tolist()))
+                    for i in range(len(a))])
+    w, u = a[:, :1], a[:, 1:]
+    t = 2.0 * np.cross(u, v)
+    assert _same_bits(got, o + v + w * t + np.cross(u, t)), "mul_vec_scalar with an origin"
+
+
+def test_from_axis_angle_scalar_is_the_bulk_form_to_rounding(rng):
+    axis = quat.normalize(rng.normal(size=(500, 3)))
+    angle = rng.uniform(-7.0, 7.0, size=500)
+    got = np.array([quat.from_axis_angle_scalar(tuple(x), float(t)) for x, t in zip(axis.tolist(), angle)])
+    np.testing.assert_allclose(got, quat.from_axis_angle(axis, angle), rtol=0, atol=1e-15)
+
+
+def test_the_bit_comparison_can_fail():
+    """A different association (x*x + (y*y + z*z)) is caught: the check above is not vacuous."""
+    rng = np.random.default_rng(5)
+    v = _edge_vecs(rng, 3000)
+    other = np.sqrt(v[:, 0] ** 2 + (v[:, 1] ** 2 + v[:, 2] ** 2))
+    assert not _same_bits(other, np.linalg.norm(v, axis=-1))

@@ -1,52 +1,55 @@
-"""The character root's integration and synchronization in written-out floats equal the quat_scalar forms
-bit for bit (the recordings depend on it)."""
+"""The character root's integration and synchronization (plain floats through the scalar forms of
+lmm.quat) against a direct definition with lmm.quat's numpy forms, bit for bit (the recordings depend on it)."""
 import numpy as np
 
-from lmm import quat_scalar as qs
-from lmm.character import CharacterController, _damper_factor, _integrate_root_f, _radians
+from lmm import quat
+from lmm.character import CharacterController, _damper_factor, _integrate_root, _radians
 from lmm.tuning import Tuning
 
 
+def _norm(v):
+    return float(np.linalg.norm(np.asarray(v, dtype=np.float64), axis=-1))
+
+
 def _reference_integrate(root_pos, root_rot, vel, ang, dt):
-    vw = qs.mul_vec(root_rot, vel)
-    aw = qs.mul_vec(root_rot, ang)
-    pos = [p + v * dt for p, v in zip(root_pos, vw)]
-    rot = qs.normalize(qs.mul(qs.from_scaled_angle_axis([w * dt for w in aw]), root_rot))
-    return vw, aw, pos, rot
+    root_rot = np.array(root_rot)
+    vw = quat.mul_vec(root_rot, np.array(vel))
+    aw = quat.mul_vec(root_rot, np.array(ang))
+    pos = np.array(root_pos) + vw * dt
+    rot = quat.normalize(quat.mul(quat.from_scaled_angle_axis(aw * dt), root_rot))
+    return [tuple(x.tolist()) for x in (vw, aw, pos, rot)]
 
 
 def _reference_synchronize(tun, sim_pos, sim_rot, root_pos, root_rot, root_vel_world, root_ang_world, dt):
-    """The quat_scalar form the written-out CharacterController._synchronize replaces."""
+    """Adjustment and clamping on numpy arrays, as the reference demo writes them."""
+    sim_pos, sim_rot, root_pos, root_rot = (np.array(x, dtype=np.float64) for x in (sim_pos, sim_rot, root_pos,
+                                                                                   root_rot))
     if tun.adjustment_enabled and dt > 0:
-        factor = _damper_factor(tun.adjustment_position_halflife_s, dt)
-        delta = [(s - r) * factor for s, r in zip(sim_pos, root_pos)]
+        delta = (sim_pos - root_pos) * _damper_factor(tun.adjustment_position_halflife_s, dt)
         if tun.adjustment_by_velocity:
-            cap = tun.adjustment_max_speed_ratio * qs.norm(root_vel_world) * dt
-            length = qs.norm(delta)
+            cap = tun.adjustment_max_speed_ratio * _norm(root_vel_world) * dt
+            length = _norm(delta)
             if length > cap:
-                delta = [d * (cap / length) for d in delta]
-        root_pos = [r + d for r, d in zip(root_pos, delta)]
-        diff = qs.to_scaled_angle_axis(qs.abs_(qs.mul_inv(sim_rot, root_rot)))
-        factor = _damper_factor(tun.adjustment_rotation_halflife_s, dt)
-        step = [d * factor for d in diff]
+                delta = delta * (cap / length)
+        root_pos = root_pos + delta
+        step = quat.angle_axis_difference(sim_rot, root_rot) * _damper_factor(tun.adjustment_rotation_halflife_s, dt)
         if tun.adjustment_by_velocity:
-            cap = tun.adjustment_max_speed_ratio * qs.norm(root_ang_world) * dt
-            length = qs.norm(step)
+            cap = tun.adjustment_max_speed_ratio * _norm(root_ang_world) * dt
+            length = _norm(step)
             if length > cap:
-                step = [d * (cap / length) for d in step]
-        root_rot = qs.normalize(qs.mul(qs.from_scaled_angle_axis(step), root_rot))
+                step = step * (cap / length)
+        root_rot = quat.normalize(quat.mul(quat.from_scaled_angle_axis(step), root_rot))
     if tun.clamping_enabled:
-        offset = [r - s for r, s in zip(root_pos, sim_pos)]
-        dist = qs.norm(offset)
+        offset = root_pos - sim_pos
+        dist = _norm(offset)
         if dist > tun.clamp_max_distance_m:
-            root_pos = [s + o * (tun.clamp_max_distance_m / dist) for s, o in zip(sim_pos, offset)]
-        diff = qs.to_scaled_angle_axis(qs.abs_(qs.mul_inv(root_rot, sim_rot)))
-        angle = qs.norm(diff)
+            root_pos = sim_pos + offset * (tun.clamp_max_distance_m / dist)
+        diff = quat.angle_axis_difference(root_rot, sim_rot)
+        angle = _norm(diff)
         max_angle = _radians(tun.clamp_max_angle_deg)
         if angle > max_angle:
-            root_rot = qs.normalize(qs.mul(qs.from_scaled_angle_axis([d * (max_angle / angle) for d in diff]),
-                                           sim_rot))
-    return tuple(root_pos), tuple(root_rot)
+            root_rot = quat.normalize(quat.mul(quat.from_scaled_angle_axis(diff * (max_angle / angle)), sim_rot))
+    return tuple(root_pos.tolist()), tuple(root_rot.tolist())
 
 
 class _Sim:
@@ -72,7 +75,7 @@ def _unit(rng, n):
     return q / np.linalg.norm(q)
 
 
-def test_integration_and_synchronization_equal_the_quat_scalar_forms_bit_for_bit():
+def test_integration_and_synchronization_equal_the_numpy_definition_bit_for_bit():
     rng = np.random.default_rng(3)
     hits = {"clamp_pos": 0}
     for trial in range(3000):
@@ -90,7 +93,7 @@ def test_integration_and_synchronization_equal_the_quat_scalar_forms_bit_for_bit
         vel, ang = tuple(rng.normal(size=3) * rng.uniform(0, 3)), tuple(rng.normal(size=3) * rng.uniform(0, 5))
         if trial % 13 == 0:
             ang = (0.0, 0.0, 0.0)
-        got = _integrate_root_f(root_pos, root_rot, vel, ang, dt)
+        got = _integrate_root(root_pos, root_rot, vel, ang, dt)
         want = _reference_integrate(root_pos, root_rot, vel, ang, dt)
         assert [tuple(g) for g in got] == [tuple(w) for w in want]
         sim_pos = np.array(root_pos) + rng.normal(size=3) * rng.uniform(0, 0.6)
