@@ -242,13 +242,13 @@ def test_the_near_frames_of_a_top_1_search_make_the_next_hint(features, db):
     the hint's seeds), outside the playing frame's exclusion window and the answer's (the answer plays
     next, and its neighbours advance with it: they would make no seeds). Fed back as the next search's
     hint, as the controller does, they keep giving seeds: the search seldom falls back to its descent."""
-    from lmm.search import _least
+    from lmm.search_ranking import least_frames
 
     keys = np.array([5.0, np.inf, 1.0, 3.0, np.inf, 2.0], np.float32)
     frames = np.arange(10, 16)
-    assert sorted(_least(frames, keys, 3)) == [12, 13, 15]
-    assert sorted(_least(frames, keys, 6)) == [10, 12, 13, 15]      # the infinite keys left out
-    assert sorted(_least(frames, keys, 20)) == [10, 12, 13, 15]
+    assert sorted(least_frames(frames, keys, 3)) == [12, 13, 15]
+    assert sorted(least_frames(frames, keys, 6)) == [10, 12, 13, 15]      # the infinite keys left out
+    assert sorted(least_frames(frames, keys, 20)) == [10, 12, 13, 15]
     rng = np.random.default_rng(5)
     X = features.normalized
     index = SearchIndex(X)
