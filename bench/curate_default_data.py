@@ -2,7 +2,7 @@
 
     python bench/curate_default_data.py [LAFAN1_FOLDER] > lmm/data/default_manifest.json
 
-For each take it drops every frame near a finding of :mod:`lmm.data.checks` (calibration pose, airborne,
+For each take it drops every frame near a finding of :mod:`lmm.checks` (calibration pose, airborne,
 outliers, contact sliding) and near frames where a hand is raised above its shoulder, the hips are low
 (crouching, crawling, lying), neither toe is on the ground or the arms are straight out (the
 T-pose rule of check-data, moving or not); the rest splits into ranges of at least
@@ -21,7 +21,7 @@ import numpy as np
 
 from lmm import quat
 from lmm.data import bvh
-from lmm.data.checks import check_take, moving_average, runs
+from lmm.checks import check_take, moving_average, runs
 
 TAKES = ("multipleActions1_subject1", "multipleActions1_subject2", "multipleActions1_subject3",
          "multipleActions1_subject4", "obstacles3_subject3", "obstacles3_subject4")

@@ -3,7 +3,7 @@
     lmm-studio run --controller mm --input builtin:random:1 --seconds 600 --record R.bvh --metrics-json M.json
     python bench/motion_trust.py R.bvh [R2.bvh ...] [--idle MANIFEST|default] [--source MANIFEST|default]
 
-For each recording (judged by :func:`lmm.data.checks.recording_report`, the rules check-data applies to
+For each recording (judged by :func:`lmm.checks.recording_report`, the rules check-data applies to
 source takes): the fraction of frames with both toes more than 15 cm above the floor and the longest such
 stretch, T-pose frames (both hands within 25 cm of shoulder height and more than 1.2 m apart) and the
 fraction of ground-level toe frames faster than 30 cm/s. ``--source`` prints the same numbers for the
@@ -25,7 +25,7 @@ def _manifest(arg):
 
 def source_report(manifest_path) -> dict:
     from lmm.data import bvh
-    from lmm.data.checks import motion_report, source_fps
+    from lmm.checks import motion_report, source_fps
     from lmm.data.manifest import load_manifest
 
     m = load_manifest(manifest_path)
@@ -85,7 +85,7 @@ def main() -> int:
     p.add_argument("--idle-input", default="builtin:strafe", help="input of the idle test (default builtin:strafe)")
     p.add_argument("--idle-seconds", type=float, default=120.0)
     args = p.parse_args()
-    from lmm.data.checks import recording_report
+    from lmm.checks import recording_report
 
     for path in args.recordings:
         r = recording_report(path)

@@ -15,7 +15,7 @@ means what it means to the search:
 * :class:`DataDistance`: the nearest database frame to a query and its cost, in the units of the search
   cost (squared distance between normalised vectors, no transition bias).
 
-numpy only; the PNG is drawn by :mod:`lmm.coverage_png`.
+numpy only; the pictures are drawn by :mod:`lmm.reporting`.
 """
 from __future__ import annotations
 

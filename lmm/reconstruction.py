@@ -180,34 +180,5 @@ def format_table(results: list[dict], summary: dict, controller_names) -> str:
     return "\n".join(lines)
 
 
-def write_plots(results: list[dict], controller_names, path) -> None:
-    """Rotation error over time per take (one panel each, a line per controller), PNG via matplotlib."""
-    import io
-
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from lmm.data.atomic import write_bytes_atomic
-
-    colors = {"mm": "#f58f29", "lmm": "#38a8ff"}
-    fig, axes = plt.subplots(len(results), 1, figsize=(9, 1.9 * len(results)), squeeze=False)
-    for ax, r in zip(axes[:, 0], results):
-        for k in controller_names:
-            e = np.asarray(r["controllers"][k]["per_frame_rotation_error_rad"])
-            ax.plot(np.arange(len(e)) / r["compare_fps"], e, color=colors.get(k), lw=1.0, label=k.upper())
-        a, b = r["frames"]
-        ax.set_title(f"{r['take'].split('/')[-1]} [{a}:{b}] ({r['motion']})", fontsize=8)
-        ax.set_ylabel("rad", fontsize=7)
-        ax.tick_params(labelsize=7)
-        ax.legend(fontsize=7, loc="upper right")
-    axes[-1, 0].set_xlabel("seconds", fontsize=8)
-    fig.tight_layout()
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=100)
-    plt.close(fig)
-    write_bytes_atomic(path, buf.getvalue())
-
-
 def to_json(results, summary) -> str:
     return json.dumps({"takes": results, "summary": summary}, indent=1)

@@ -10,7 +10,7 @@ import pytest
 
 from lmm import DEFAULT_MANIFEST
 from lmm.data import bvh
-from lmm.data.checks import check_manifest, check_take, motion_report, runs
+from lmm.checks import check_manifest, check_take, motion_report, runs
 from lmm.data.manifest import ManifestError, load_manifest
 
 TAKE = DEFAULT_MANIFEST.parent / "lafan1" / "multipleActions1_subject3.bvh.gz"
@@ -112,7 +112,7 @@ def test_manifest_tags_per_range_and_clip(tmp_path):
     findings, cov = check_manifest(m)
     assert cov.seconds_per_tag["walk"] == pytest.approx(100 / 30)
     assert cov.seconds_per_tag["s3"] == pytest.approx(200 / 30)
-    assert cov.histogram_s.sum() == pytest.approx(200 / 30)
+    assert cov.speed_turn.seconds.sum() == pytest.approx(200 / 30)
     assert all(f.file == str(TAKE) for f in findings)
 
 

@@ -142,7 +142,7 @@ def _precompute_derived(db) -> None:
 def _warning_lines(manifest_path) -> list[str]:
     """The data checks' findings inside ranges the database uses, one warning line each."""
     from lmm import DEFAULT_MANIFEST
-    from lmm.data.checks import CheckError, check_manifest
+    from lmm.checks import CheckError, check_manifest
     from lmm.data.manifest import ManifestError, load_manifest
 
     try:

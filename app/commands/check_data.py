@@ -3,7 +3,7 @@
     lmm-studio check-data [--manifest M] [--json OUT] [--png OUT]
 
 Checks every take over the whole file (calibration T-pose, airborne/climbing, contact sliding, speed and
-turn outliers, frame rate and units; see :mod:`lmm.data.checks`), marks the findings that fall inside
+turn outliers, frame rate and units; see :mod:`lmm.checks`), marks the findings that fall inside
 ranges the manifest uses, and prints a coverage summary: seconds per tag and a root speed x turn-rate
 table (``--png`` draws it). Frames are the file's own, ``[start, end)``. Exit status 0 even with findings;
 1 when a file cannot be read (one ``error: ...`` line naming it).
@@ -23,7 +23,7 @@ def add_arguments(p) -> None:
 
 def main(args) -> int:
     from lmm import DEFAULT_MANIFEST
-    from lmm.data.checks import CheckError, check_manifest, draw_coverage_png, format_coverage
+    from lmm.checks import CheckError, check_manifest, format_coverage
     from lmm.data.manifest import ManifestError, load_manifest
 
     manifest_path = args.manifest or DEFAULT_MANIFEST
@@ -46,7 +46,10 @@ def main(args) -> int:
             write_json(args.json, {"manifest": str(manifest_path), "findings": [f.to_dict() for f in findings],
                                    "coverage": coverage.to_dict()})
         if args.png:
-            draw_coverage_png(coverage, args.png)
+            from lmm.reporting import draw_speed_turn_png
+            draw_speed_turn_png(coverage.speed_turn, args.png,
+                                title=f"seconds of used source motion by root speed x turn rate "
+                                      f"({coverage.seconds_total:.0f} s in all)")
     except OSError as e:
         print(f"error: cannot write the output: {e}", file=sys.stderr)
         return 1

@@ -43,7 +43,7 @@ def main(args) -> int:
         write_json(args.json, {"manifest": str(manifest), "database": db.name, **cov.to_dict()})
         print(f"wrote     {args.json}")
     if args.png:
-        from lmm.coverage_png import draw_coverage_png
+        from lmm.reporting import draw_coverage_png
 
         draw_coverage_png(cov, args.png, title=db.name)
         print(f"wrote     {args.png}")

@@ -42,7 +42,8 @@ def main(args) -> int:
     from lmm.data.database import load_or_build
     from lmm.data.inputs import open_input
     from lmm.data.weights import load as load_weights
-    from lmm.offline.evaluation import evaluate, load_compressor, write_plots
+    from lmm.offline.evaluation import evaluate, load_compressor, read_loss_csv
+    from lmm.reporting import plot_training
     from lmm.features import build_features
     from lmm.learned import DEFAULT_WEIGHTS, RUNTIME_NETWORKS, LMMNetworks
 
@@ -66,7 +67,7 @@ def main(args) -> int:
     metrics, artifacts = evaluate(db, features, nets, compressor, args.input, args.seconds, args.queries, log)
     if plots_dir:
         loss_csv = weights.with_name("training_log.csv")
-        metrics["plots"] = write_plots(plots_dir, artifacts, loss_csv)
+        metrics["plots"] = plot_training(plots_dir, read_loss_csv(loss_csv) if loss_csv.exists() else None, artifacts)
     from lmm.data.jsonio import json_safe, write_json
 
     if args.json_path:
@@ -86,7 +87,8 @@ def reconstruction(args) -> int:
     from lmm.data.manifest import load_manifest
     from lmm.factory import make_controllers
     from lmm.features import build_features
-    from lmm.reconstruction import HELDOUT_FILE, format_table, load_heldout, run_take, summarize, write_plots
+    from lmm.reconstruction import HELDOUT_FILE, format_table, load_heldout, run_take, summarize
+    from lmm.reporting import plot_rotation_errors
     from lmm.tuning import Tuning
 
     plots_dir = args.plots or (str(Path(args.json_path).parent) if args.json_path else None)
@@ -120,5 +122,5 @@ def reconstruction(args) -> int:
         from lmm.data.jsonio import write_json
         write_json(args.json_path, {"takes": results, "summary": summary})
     if plots_dir:
-        write_plots(results, names, Path(plots_dir) / "reconstruction.png")
+        plot_rotation_errors(results, names, Path(plots_dir) / "reconstruction.png")
     return 0

@@ -73,7 +73,7 @@ def main(args) -> int:
         write_json(args.json, data)
         print(f"wrote     {args.json}")
     if args.png:
-        from lmm.physics.plausibility_png import draw_plausibility_png
+        from lmm.reporting import draw_plausibility_png
 
         draw_plausibility_png(result, args.png, title=str(args.file))
         print(f"wrote     {args.png}")

@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from lmm.coverage import Coverage, DataDistance, build_coverage, first_trajectory_dims, query_speed_turn
-from lmm.coverage_png import PALETTE, category_centres, heat_colors, map_bounds, map_categories, map_image
+from lmm.reporting import PALETTE, category_centres, heat_colors, map_bounds, map_categories, map_image
 
 from ..jobs import Jobs
 from .base import Panel, View

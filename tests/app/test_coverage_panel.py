@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from app.panels.coverage import MAX_CATEGORIES, heat_texture, percentile_in
-from lmm.coverage_png import PALETTE, category_centres, map_bounds, map_categories, map_image
+from lmm.reporting import PALETTE, category_centres, map_bounds, map_categories, map_image
 from lmm.coverage import build_coverage, fit_pca
 
 LAYOUT = """[Window][###10001]
@@ -67,7 +67,7 @@ def test_map_image_draws_every_frame_in_its_class_colour(cov):
 def test_excluded_frames_are_drawn_in_their_own_dim_colour(cov):
     """Frames of excluded tags: a class of their own, in EXCLUDED_COLOR; the other texels keep their class
     colour, and nothing is drawn or dropped beyond that."""
-    from lmm.coverage_png import EXCLUDED_COLOR
+    from lmm.reporting import EXCLUDED_COLOR
 
     labels, cat = map_categories(cov, "tag", MAX_CATEGORIES)
     excluded = cat == 0                                   # every frame of the first class

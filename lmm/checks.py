@@ -2,7 +2,9 @@
 
 Every rule works on the global joint positions of one take at its own frame rate, in metres, vectorised
 over frames, so the same code judges source takes (:func:`check_take`, :func:`check_manifest`) and
-recordings of a running character (:func:`motion_report`).
+recordings of a running character (:func:`motion_report`). Analysis, not data: it judges takes with
+:mod:`lmm.metrics`' rules and measures what the used ranges cover with :mod:`lmm.coverage`'s speed x turn
+cells.
 
 Kinds of finding (frames are the file's own, ``[start_frame, end_frame)`` half-open as manifest ranges):
 
@@ -24,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from lmm import quat
+from lmm.coverage import Heatmap, speed_turn_heatmap
 from lmm.data import bvh
 from lmm.data.manifest import Manifest
 from lmm.data.database import MIN_RANGE_FRAMES
@@ -52,10 +55,6 @@ HUMAN_HEIGHT_M = (1.0, 2.5)      # head height range of a standing adult
 
 KINDS = ("calibration_pose", "airborne", "contact_sliding", "speed_outlier", "turn_outlier",
          "frame_rate", "unit_scale")
-
-# coverage histogram bins
-SPEED_BINS_M_S = (0.0, 0.25, 0.75, 1.25, 1.75, 2.5, 3.25, 4.0, np.inf)
-TURN_BINS_DEG_S = (0.0, 15.0, 45.0, 90.0, 180.0, 360.0, np.inf)
 
 
 class CheckError(InputError):
@@ -95,6 +94,7 @@ class TakeSignals:
     toe_speed_m_s: np.ndarray       # (F, 2) horizontal
     hips_speed_m_s: np.ndarray      # (F,) horizontal, smoothed
     turn_rate_deg_s: np.ndarray     # (F,) facing turn rate, smoothed, absolute
+    turn_signed_deg_s: np.ndarray   # (F,) facing turn rate, smoothed, + toward +x (the coverage's sign)
     tpose: np.ndarray               # (F,) bool
     head_height_m: np.ndarray       # (F,) highest joint above the lower toe
 
@@ -141,13 +141,16 @@ def horizontal_speed(positions: np.ndarray, fps: float) -> np.ndarray:
     return np.linalg.norm(v, axis=-1)
 
 
-def facing_turn_rate(hips_rotations: np.ndarray, fps: float, forward_axis=(0.0, 1.0, 0.0)) -> np.ndarray:
-    """(F,) absolute turn rate (deg/s) of the hips' forward axis projected on the ground."""
+def facing_turn_rate(hips_rotations: np.ndarray, fps: float, forward_axis=(0.0, 1.0, 0.0),
+                     signed: bool = False) -> np.ndarray:
+    """(F,) turn rate (deg/s) of the hips' forward axis projected on the ground: absolute, or ``signed``
+    (+ toward +x, as :func:`lmm.coverage.trajectory_speed_turn`)."""
     fwd = quat.mul_vec(np.asarray(hips_rotations, dtype=np.float64), np.asarray(forward_axis, dtype=np.float64))
     yaw = np.unwrap(np.arctan2(fwd[:, 0], fwd[:, 2]))
     if yaw.shape[0] < 2:
         return np.zeros(yaw.shape)
-    return np.abs(np.degrees(np.gradient(yaw) * fps))
+    rate = np.degrees(np.gradient(yaw) * fps)
+    return rate if signed else np.abs(rate)
 
 
 def source_fps(frame_time: float) -> float:
@@ -182,9 +185,10 @@ def take_signals(global_positions: np.ndarray, global_rotations: np.ndarray | No
     window = max(int(round(SMOOTH_S * fps)), 1)
     hips_speed = moving_average(horizontal_speed(g[:, hips], fps), window)
     if global_rotations is not None:
-        turn = moving_average(facing_turn_rate(global_rotations[:, hips], fps, forward_axis), window)
+        rate = facing_turn_rate(global_rotations[:, hips], fps, forward_axis, signed=True)
+        turn, turn_signed = moving_average(np.abs(rate), window), moving_average(rate, window)
     else:
-        turn = np.zeros(F)
+        turn = turn_signed = np.zeros(F)
     hand = [joint_of_role(names, bones, r) for r in ("left_hand", "right_hand", "left_shoulder", "right_shoulder")]
     if None in hand:
         tpose = np.zeros(F, dtype=bool)
@@ -194,7 +198,7 @@ def take_signals(global_positions: np.ndarray, global_rotations: np.ndarray | No
                  & (np.linalg.norm(lh - rh, axis=-1) > TPOSE_HAND_SPAN_M))
     return TakeSignals(fps=float(fps), ground_m=float(ground_m), toe_height_m=toe_y - ground_m,
                        toe_speed_m_s=horizontal_speed(g[:, toes], fps), hips_speed_m_s=hips_speed,
-                       turn_rate_deg_s=turn, tpose=tpose, head_height_m=g[..., 1].max(axis=1) - toe_y.min(axis=1))
+                       turn_rate_deg_s=turn, turn_signed_deg_s=turn_signed, tpose=tpose, head_height_m=g[..., 1].max(axis=1) - toe_y.min(axis=1))
 
 
 def find_issues(s: TakeSignals, file: str) -> list[Finding]:
@@ -288,27 +292,27 @@ def check_take(path, file: str | None = None, unit_scale: float = 0.01, bones: d
 # ---------------------------------------------------------------------------------------------------
 
 @dataclass
-class Coverage:
+class SourceCoverage:
+    """What a manifest's used ranges cover, in source seconds: per tag, and per speed x turn cell of
+    :mod:`lmm.coverage` (hips speed and facing turn rate of the takes, smoothed over ``SMOOTH_S``)."""
     seconds_per_tag: dict[str, float]
     seconds_total: float
-    speed_bins_m_s: tuple
-    turn_bins_deg_s: tuple
-    histogram_s: np.ndarray         # (speed bins, turn bins) seconds of used frames
+    speed_turn: Heatmap
 
     def to_dict(self) -> dict:
-        edges = lambda e: [float(x) if np.isfinite(x) else None for x in e]  # noqa: E731
         return {"seconds_total": self.seconds_total, "seconds_per_tag": dict(self.seconds_per_tag),
-                "speed_bins_m_s": edges(self.speed_bins_m_s), "turn_bins_deg_s": edges(self.turn_bins_deg_s),
-                "histogram_s": self.histogram_s.round(2).tolist()}
+                "speed_bins_m_s": self.speed_turn.speed_edges_m_s.tolist(),
+                "turn_bins_deg_s": self.speed_turn.turn_edges_deg_s.tolist(),
+                "histogram_s": self.speed_turn.seconds.round(2).tolist()}
 
 
-def check_manifest(manifest: Manifest, progress=None) -> tuple[list[Finding], Coverage]:
+def check_manifest(manifest: Manifest, progress=None) -> tuple[list[Finding], SourceCoverage]:
     """Findings over every take of a manifest (whole files) and the coverage of the ranges it uses.
 
     Seconds are source seconds before mirroring (a mirrored database holds twice as many frames)."""
     findings: list[Finding] = []
     tag_seconds: dict[str, float] = {}
-    hist = np.zeros((len(SPEED_BINS_M_S) - 1, len(TURN_BINS_DEG_S) - 1))
+    speed_turn = speed_turn_heatmap([], [], 1.0)
     total = 0.0
     for i, clip in enumerate(manifest.clips):
         name = clip.source or str(clip.file)
@@ -333,72 +337,27 @@ def check_manifest(manifest: Manifest, progress=None) -> tuple[list[Finding], Co
             total += seconds
             for t in (range_tags or ("untagged",)):
                 tag_seconds[t] = tag_seconds.get(t, 0.0) + seconds
-            h, _, _ = np.histogram2d(s.hips_speed_m_s[a:b], s.turn_rate_deg_s[a:b],
-                                     bins=[np.asarray(SPEED_BINS_M_S), np.asarray(TURN_BINS_DEG_S)])
-            hist += h / s.fps
+            speed_turn.seconds += speed_turn_heatmap(s.hips_speed_m_s[a:b], s.turn_signed_deg_s[a:b], s.fps).seconds
         if progress:
             progress(i + 1, len(manifest.clips), Path(name).name)
-    cov = Coverage(dict(sorted(tag_seconds.items())), total, SPEED_BINS_M_S, TURN_BINS_DEG_S, hist)
-    return findings, cov
+    return findings, SourceCoverage(dict(sorted(tag_seconds.items())), total, speed_turn)
 
 
-def _edge_label(lo, hi, unit):
-    return f"{lo:g}+ {unit}" if not np.isfinite(hi) else f"{lo:g}-{hi:g}"
-
-
-def format_coverage(cov: Coverage) -> str:
-    """The coverage summary as text: seconds per tag and the speed x turn-rate table (seconds)."""
+def format_coverage(cov: SourceCoverage) -> str:
+    """The coverage summary as text: seconds per tag and the speed x turn-rate table (seconds; rows up to
+    the fastest one holding motion, ``.`` for an empty cell)."""
     lines = [f"coverage: {cov.seconds_total:.1f} s of source motion in used ranges (x2 when mirrored)"]
     for tag, sec in cov.seconds_per_tag.items():
         lines.append(f"  {tag:<16} {sec:7.1f} s")
-    tb, sb = cov.turn_bins_deg_s, cov.speed_bins_m_s
-    cols = [_edge_label(tb[i], tb[i + 1], "") for i in range(len(tb) - 1)]
-    lines.append("seconds by root speed (m/s, rows) x turn rate (deg/s, columns):")
-    lines.append(f"  {'':>10} " + " ".join(f"{c:>8}" for c in cols))
-    for i in range(len(sb) - 1):
-        row = " ".join(f"{v:8.1f}" for v in cov.histogram_s[i])
-        lines.append(f"  {_edge_label(sb[i], sb[i + 1], ''):>10} {row}")
+    hm = cov.speed_turn
+    se, te = hm.speed_edges_m_s, hm.turn_edges_deg_s
+    lines.append("seconds by root speed (m/s, rows: lower edge) x turn rate (deg/s, columns: lower edge, "
+                 "+ toward +x):")
+    lines.append(f"  {'':>5} " + "".join(f"{t:>6g}" for t in te[:-1]))
+    filled = np.flatnonzero(hm.seconds.sum(axis=1) > 0)
+    for i in range(int(filled.max()) + 1 if filled.size else 0):
+        lines.append(f"  {se[i]:>5g} " + "".join(f"{v:6.1f}" if v > 0 else f"{'.':>6}" for v in hm.seconds[i]))
     return "\n".join(lines)
-
-
-def draw_coverage_png(cov: Coverage, path) -> Path:
-    """The speed x turn-rate histogram as a heat map PNG (pillow only)."""
-    from PIL import Image, ImageDraw, ImageFont
-
-    from lmm.data.atomic import atomic_write
-
-    tb, sb = cov.turn_bins_deg_s, cov.speed_bins_m_s
-    rows, cols = cov.histogram_s.shape
-    cell_w, cell_h, left, top = 90, 40, 110, 60
-    width, height = left + cols * cell_w + 20, top + rows * cell_h + 60
-    img = Image.new("RGB", (width, height), (24, 24, 28))
-    d = ImageDraw.Draw(img)
-    try:  # pillow's own scalable font (10.1+); the old bitmap font squeezes spaces away
-        d.font = ImageFont.load_default(size=13)
-    except TypeError:  # pragma: no cover - older pillow
-        pass
-    d.text((10, 10), f"seconds of used source motion by root speed x turn rate ({cov.seconds_total:.0f} s total)",
-           fill=(230, 230, 230))
-    d.text((10, 28), "rows: hips speed (m/s), columns: turn rate (deg/s); empty cells: the database lacks it",
-           fill=(170, 170, 170))
-    peak = max(float(cov.histogram_s.max()), 1e-9)
-    for i in range(rows):
-        y = top + (rows - 1 - i) * cell_h   # faster rows on top
-        d.text((10, y + 14), _edge_label(sb[i], sb[i + 1], "m/s"), fill=(210, 210, 210))
-        for j in range(cols):
-            v = float(cov.histogram_s[i, j])
-            a = (v / peak) ** 0.5 if v > 0 else 0.0
-            color = (int(40 + 200 * a), int(60 + 140 * a), int(90 + 40 * (1 - a))) if v > 0 else (48, 20, 20)
-            x = left + j * cell_w
-            d.rectangle([x, y, x + cell_w - 2, y + cell_h - 2], fill=color)
-            d.text((x + 8, y + 14), f"{v:.1f} s", fill=(0, 0, 0) if a > 0.6 else (235, 235, 235))
-    for j in range(cols):
-        d.text((left + j * cell_w + 8, top + rows * cell_h + 8), _edge_label(tb[j], tb[j + 1], "deg/s"),
-               fill=(210, 210, 210))
-    path = Path(path)
-    with atomic_write(path) as f:
-        img.save(f, format="PNG")
-    return path
 
 
 # ---------------------------------------------------------------------------------------------------
