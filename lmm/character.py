@@ -55,7 +55,7 @@ from lmm.features import build_query_from_columns, normalize_with, trajectory_qu
 from lmm.ik import FootLockState, solve_leg_floats
 from lmm.inertialize import (Offsets, ShownPose, inertialize_apply_pose, inertialize_decay,
                              inertialize_root_velocities, inertialize_transition)
-from lmm.springs import LN2, EPS
+from lmm.springs import damper_factor, halflife_to_damping
 from lmm.trajectory import (SimulationFloats, StickWorld, desired_rotation_floats, desired_velocity_floats,
                             simulation_update_floats, trajectory_in_root_space_floats,
                             trajectory_offsets, trajectory_predict_floats)
@@ -424,7 +424,7 @@ def _damper_factor(halflife: float, dt: float) -> float:
     if f is None:
         if len(_DAMPER_FACTORS) > 64:
             _DAMPER_FACTORS.clear()
-        f = _DAMPER_FACTORS[key] = 1.0 - float(np.exp(-LN2 * dt / (halflife + EPS)))
+        f = _DAMPER_FACTORS[key] = float(damper_factor(halflife, dt))
     return f
 
 
@@ -873,7 +873,7 @@ class CharacterController(Controller):
         target = self._ground_offset_target()
         if dt <= 0:
             return
-        y = 2.0 * LN2 / (self.tuning.inertialization_halflife_s + EPS)  # halflife -> damping / 2
+        y = float(halflife_to_damping(self.tuning.inertialization_halflife_s)) / 2.0
         x, v = self._ground_offset - target, self._ground_offset_velocity
         j1 = v + x * y
         e = math.exp(-y * dt)
