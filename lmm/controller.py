@@ -16,20 +16,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-
-@dataclass
-class InputState:
-    """One tick of user input. Sticks in [-1, 1]; y up on the stick means 'away from the camera'."""
-    left_x: float = 0.0
-    left_y: float = 0.0
-    right_x: float = 0.0
-    right_y: float = 0.0
-    walk: bool = False
-    strafe: bool = False
-    camera_azimuth: float = 0.0  # radians, rotation of the camera about +Y (0: camera looks along +Z)
-
-    def copy(self) -> "InputState":
-        return InputState(**self.__dict__)
+from lmm.data.inputs import InputState  # one tick of input: data the logs hold and controllers read
 
 
 @dataclass

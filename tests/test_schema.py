@@ -10,9 +10,10 @@ import pytest
 
 from lmm import DEFAULT_MANIFEST
 from lmm.data.database import Database, load_or_build
+from lmm.data.feature_schema import describe_schema_difference
 from lmm.data.manifest import ManifestError
 from lmm.data.weights import WeightsError, layout_signature
-from lmm.features import DEFAULT_LAYOUT, build_features, describe_schema_difference, schema_of
+from lmm.features import DEFAULT_LAYOUT, build_features, schema_of
 
 TAKE = DEFAULT_MANIFEST.parent / "lafan1" / "obstacles3_subject4.bvh.gz"
 

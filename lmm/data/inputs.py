@@ -21,7 +21,6 @@ from pathlib import Path
 import numpy as np
 
 from lmm import errors
-from lmm.controller import InputState
 from lmm.data.atomic import write_text_atomic
 
 COLUMNS = ("time", "left_x", "left_y", "right_x", "right_y", "walk", "strafe")
@@ -44,6 +43,21 @@ MAX_INPUT_LOG_LINES = 1_000_000
 MAX_INPUT_LOG_BYTES = 64 * 1024 * 1024
 #: Largest |camera_azimuth| (rad) accepted: 160,000 turns of the camera; float64 still resolves 1e-10 rad.
 MAX_CAMERA_AZIMUTH_RAD = 1e6
+
+
+@dataclass
+class InputState:
+    """One tick of user input. Sticks in [-1, 1]; y up on the stick means 'away from the camera'."""
+    left_x: float = 0.0
+    left_y: float = 0.0
+    right_x: float = 0.0
+    right_y: float = 0.0
+    walk: bool = False
+    strafe: bool = False
+    camera_azimuth: float = 0.0  # radians, rotation of the camera about +Y (0: camera looks along +Z)
+
+    def copy(self) -> "InputState":
+        return InputState(**self.__dict__)
 
 
 class InputLogError(errors.InputError):

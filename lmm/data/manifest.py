@@ -10,7 +10,7 @@ tables; a clip-level ``"tags"`` list applies to every range of the clip. Tags ar
 letters, digits, ``_`` and ``-``.
 ``features`` declares the feature schema: the channels matched (kind, bone or role, trajectory sample
 times in frames ahead, default weight), as a list of tables or the name of a JSON file holding one
-(relative to the manifest). Without it the shipped schema is used (:data:`lmm.features.DEFAULT_LAYOUT`).
+(relative to the manifest). Without it the shipped schema is used (:data:`lmm.data.feature_schema.DEFAULT_LAYOUT`).
 Every problem raises :class:`ManifestError` naming the file and the field (paths, never the contents
 of the files they point at). Every number has an accepted range and every list a length limit (the
 ``MAX_``/``MIN_`` constants below, each with what it is derived from), all checked before any work.
@@ -26,7 +26,7 @@ from pathlib import Path
 
 from lmm.errors import InputError
 from lmm.skeleton import MANIFEST_ROLES, default_bones
-from lmm.features import DEFAULT_LAYOUT, SchemaError, layout_from_schema, schema_of
+from lmm.data.feature_schema import DEFAULT_LAYOUT, SchemaError, layout_from_schema, schema_of
 
 try:  # Python 3.11+
     import tomllib

@@ -235,7 +235,7 @@ def load(path, require=None, db_key: str | None = None, layout_dicts: list[dict]
     if layout_dicts is not None:
         theirs = metadata.get("feature_layout", [])
         if layout_signature(theirs) != layout_signature(layout_dicts):
-            from lmm.features import describe_schema_difference
+            from lmm.data.feature_schema import describe_schema_difference
 
             raise WeightsError(f"{path}: trained on another feature schema ("
                                f"{describe_schema_difference(theirs, layout_dicts)}): {fix}")
