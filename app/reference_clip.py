@@ -23,9 +23,11 @@ class ReferenceClip:
 
 
 def load_reference_clip(path) -> ReferenceClip:
-    """A BVH file as global joint positions in metres (centimetre files are detected by size).
+    """A BVH file as global joint positions in metres (the file's unit guessed from its skeleton's size,
+    :func:`lmm.skeleton.guess_unit_scale`).
     Raises ``lmm.data.bvh.BVHError`` / ``OSError`` / ``ValueError`` with a readable message."""
     from lmm.data import bvh
+    from lmm.skeleton import guess_unit_scale
 
     anim = bvh.load(path)
     pos = anim.global_positions()
@@ -33,9 +35,7 @@ def load_reference_clip(path) -> ReferenceClip:
         raise ValueError(f"{path}: no frames to show")
     if not np.isfinite(pos).all():
         raise ValueError(f"{path}: the joint positions are not finite")
-    height = float(np.ptp(pos[0, :, 1])) if pos.shape[1] > 1 else 0.0
-    if height > 10.0:        # centimetres (or larger): bring to metres
-        pos = pos * (0.01 if height < 1000 else 0.001)
+    pos = pos * (guess_unit_scale(anim.names, anim.parents, anim.offsets) or 1.0)
     pos = pos - np.array([pos[0, 0, 0], 0.0, pos[0, 0, 2]])
     return ReferenceClip(Path(path).name, anim.parents, pos.astype(np.float32), float(anim.frame_time),
                          tuple(anim.names))

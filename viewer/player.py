@@ -120,12 +120,12 @@ class Playback:
 class AnimationView:
     """A Scene showing one animated skeleton, its root path on the ground (``path_window_frames``
     before and after the current frame, fading from past to future) and a camera that can follow
-    it. ``set_frame(i)`` poses the skeleton and moves a following camera. ``names``, ``style``
-    and ``shadow`` go to the :class:`Skeleton` (``view.skeleton.style = "sticks"`` switches later)."""
+    it. ``set_frame(i)`` poses the skeleton and moves a following camera. ``names``, ``body_radii``,
+    ``style`` and ``shadow`` go to the :class:`Skeleton` (``view.skeleton.style = "sticks"`` switches later)."""
 
     def __init__(self, ctx: moderngl.Context, parents, positions, aspect: float = 16 / 9,
                  color=(0.95, 0.55, 0.15), follow: bool = True, path_window_frames: int = 120,
-                 names=None, style: str = "capsules", shadow: bool = True):
+                 names=None, style: str = "capsules", shadow: bool = True, body_radii=None):
         self.positions = np.asarray(positions, dtype=np.float32)
         if self.positions.ndim != 3 or self.positions.shape[-1] != 3 or len(self.positions) == 0:
             raise ValueError(f"positions must be (frames, joints, 3) with at least one frame, "
@@ -141,7 +141,8 @@ class AnimationView:
         self.path_window = path_window_frames
         self.path = self.scene.add(Lines(ctx, color=(0.35, 0.75, 0.95), width_px=2.0))
         self.skeleton = self.scene.add(Skeleton(ctx, self.parents, color=color, names=names, style=style,
-                                                shadow=shadow, **radii_for_height(self.props.height)))
+                                                shadow=shadow, body_radii=body_radii,
+                                                **radii_for_height(self.props.height)))
         self.camera = OrbitCamera(yaw_deg=35.0, pitch_deg=12.0)
         self.aspect = aspect
         self.follow = follow

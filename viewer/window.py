@@ -30,7 +30,7 @@ class PlayerWindow:
 
     def __init__(self, parents, positions, frame_time: float, title: str = "lmm-studio view",
                  width: int = 1280, height: int = 720, samples: int | None = None, start_frame: int = 0,
-                 names=None, style: str = "capsules", shadow: bool = True):
+                 names=None, style: str = "capsules", shadow: bool = True, body_radii=None):
         try:
             ok = glfw.init()
         except Exception as e:  # pyGLFW may raise instead of returning False
@@ -52,7 +52,7 @@ class PlayerWindow:
         self.renderer = Renderer(self.ctx, fb_w, fb_h, samples=samples)
         self.screen = self.ctx.detect_framebuffer(0)
         self.view = AnimationView(self.ctx, parents, positions, aspect=fb_w / fb_h, names=names, style=style,
-                                  shadow=shadow)
+                                  shadow=shadow, body_radii=body_radii)
         self.playback = Playback(len(self.view.positions), float(frame_time))
         self.playback.seek(start_frame)
         self.view.reset_camera(self.playback.frame)

@@ -72,8 +72,10 @@ def _load(path: str):
 
 
 def _look(args, names) -> dict:
-    """How the character is drawn: joint names (for body proportions), style, shadow."""
-    return {"names": names, "style": args.style, "shadow": not args.no_shadow}
+    """How the character is drawn: joint names, the body radii they say, style, shadow."""
+    from lmm.skeleton import body_radii
+
+    return {"names": names, "body_radii": body_radii(names), "style": args.style, "shadow": not args.no_shadow}
 
 
 def _screenshot(args, parents, names, positions) -> int:

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from lmm.skeleton import body_radii
 from viewer import Ground, Lines, OrbitCamera, Renderer, Scene, Skeleton
 from viewer.renderables import body
 from viewer.renderables.base import Resources
@@ -33,6 +34,11 @@ def renderer(gl_ctx):
     r.release()
 
 
+def named(names) -> dict:
+    """A Skeleton's names and the body radii they say, as the studio hands them over."""
+    return {"names": names, "body_radii": body_radii(names)}
+
+
 def camera_on(points, pitch=14.0):
     cam = OrbitCamera(yaw_deg=25.0, pitch_deg=pitch)
     cam.fit(points, aspect=W / H, margin=1.3)
@@ -52,16 +58,23 @@ def luminance(img):
 
 # -- body proportions (no GL) ------------------------------------------------------------------------
 
-def test_named_joint_radii_follow_the_body():
+def test_given_joint_radii_follow_the_body():
     lengths = np.ones(len(LAFAN1_PARENTS))
-    r = dict(zip(LAFAN1_NAMES, body.joint_radii(LAFAN1_PARENTS, LAFAN1_NAMES, lengths, height=1.7)))
+    r = dict(zip(LAFAN1_NAMES, body.joint_radii(LAFAN1_PARENTS, body_radii(LAFAN1_NAMES), lengths, height=1.7)))
     assert r["LeftUpLeg"] > r["LeftLeg"] > r["LeftFoot"]          # thigh, shin, ankle
     assert r["LeftArm"] > r["LeftForeArm"] and r["LeftArm"] == r["RightArm"]
     assert r["Spine2"] > r["Neck"] and r["Spine"] > r["LeftForeArm"] and r["Hips"] > r["LeftLeg"]
     assert 0.08 < r["Spine2"] < 0.15 and 0.03 < r["LeftForeArm"] < 0.05   # metres, for a 1.7 m body
     # scales with the height: the same body in centimetres
-    cm = body.joint_radii(LAFAN1_PARENTS, LAFAN1_NAMES, lengths, height=170.0)
+    cm = body.joint_radii(LAFAN1_PARENTS, body_radii(LAFAN1_NAMES), lengths, height=170.0)
     assert np.allclose(cm, 100 * np.array(list(r.values())))
+    # joints of unknown size (NaN) come from the tree, a root of unknown size at least a pelvis's
+    given = np.full(len(LAFAN1_PARENTS), np.nan)
+    given[1] = 0.05
+    mixed = body.joint_radii(LAFAN1_PARENTS, given, lengths)
+    tree = body.joint_radii(LAFAN1_PARENTS, None, lengths)
+    assert mixed[1] == 0.05 and np.array_equal(mixed[2:], tree[2:])
+    assert mixed[0] == max(tree[0], body.PELVIS_RADIUS)
 
 
 def test_unnamed_skeleton_gets_a_body_from_its_tree():
@@ -82,12 +95,12 @@ def test_simulation_bone_and_head_sphere(gl_ctx):
     parents = np.r_[-1, TPOSE_PARENTS + 1]
     parents[1] = 0
     positions = np.r_[[[0.0, 0.0, 0.0]], TPOSE_POSITIONS]
-    skel = Skeleton(gl_ctx, parents, names=names)
+    skel = Skeleton(gl_ctx, parents, **named(names))
     skel.update(positions)
     radii = skel.joint_radii()
     assert radii[0] == 0 and (radii[1:] > 0).all()
     # the hidden bone does not count for the size: the same body as without the Simulation joint
-    plain = Skeleton(gl_ctx, TPOSE_PARENTS, names=TPOSE_NAMES)
+    plain = Skeleton(gl_ctx, TPOSE_PARENTS, **named(TPOSE_NAMES))
     plain.update(TPOSE_POSITIONS)
     assert skel.body_height() == pytest.approx(plain.body_height())
     assert np.allclose(radii[1:], plain.joint_radii())
@@ -128,7 +141,7 @@ def exact(gl_ctx, request):
 def test_capsules_cover_more_than_sticks_and_style_switches(gl_ctx, renderer, out_dir, exact):
     scene = Scene()
     scene.add(Ground(gl_ctx))
-    skel = scene.add(Skeleton(gl_ctx, TPOSE_PARENTS, color=ORANGE, names=TPOSE_NAMES, shadow=False))
+    skel = scene.add(Skeleton(gl_ctx, TPOSE_PARENTS, color=ORANGE, **named(TPOSE_NAMES), shadow=False))
     assert skel.exact == exact
     skel.update(POSE)
     cam = camera_on(POSE)
@@ -140,7 +153,7 @@ def test_capsules_cover_more_than_sticks_and_style_switches(gl_ctx, renderer, ou
     n_capsules, n_sticks = colour_mask(capsules, ORANGE).sum(), colour_mask(sticks, ORANGE).sum()
     assert n_capsules > 2.5 * n_sticks > 0, (n_capsules, n_sticks)
     # sticks are exactly what a sticks skeleton draws; switching back gives the capsules again
-    fresh, _ = render_one(gl_ctx, renderer, cam=cam, names=TPOSE_NAMES, style="sticks", shadow=False)
+    fresh, _ = render_one(gl_ctx, renderer, cam=cam, **named(TPOSE_NAMES), style="sticks", shadow=False)
     assert np.array_equal(sticks, fresh)
     skel.style = "capsules"
     assert np.array_equal(renderer.render(scene, cam), capsules)
@@ -161,8 +174,8 @@ def test_capsules_cover_more_than_sticks_and_style_switches(gl_ctx, renderer, ou
 
 def test_shadow_darkens_the_ground_once_and_only_with_shadow_on(gl_ctx, renderer, out_dir):
     cam = camera_on(np.r_[POSE, [shadow_point(Scene(), p) for p in POSE]], pitch=40.0)
-    on, _ = render_one(gl_ctx, renderer, cam=cam, names=TPOSE_NAMES, shadow=True)
-    off, _ = render_one(gl_ctx, renderer, cam=cam, names=TPOSE_NAMES, shadow=False)
+    on, _ = render_one(gl_ctx, renderer, cam=cam, **named(TPOSE_NAMES), shadow=True)
+    off, _ = render_one(gl_ctx, renderer, cam=cam, **named(TPOSE_NAMES), shadow=False)
     empty, _ = render_one(gl_ctx, renderer, cam=cam, pose=POSE + [0, -50, 0])   # character far below
     Image.fromarray(on).save(out_dir / "body_shadow_on.png")
     Image.fromarray(off).save(out_dir / "body_shadow_off.png")
@@ -260,7 +273,7 @@ def test_any_skeleton_from_a_bvh_draws(gl_ctx, renderer, tmp_path, out_dir, exac
     for with_names in (True, False):
         scene = Scene()
         scene.add(Ground(gl_ctx))
-        skel = scene.add(Skeleton(gl_ctx, anim.parents, color=ORANGE, names=anim.names if with_names else None))
+        skel = scene.add(Skeleton(gl_ctx, anim.parents, color=ORANGE, **(named(anim.names) if with_names else {})))
         skel.update(pose)
         cam = camera_on(pose)
         img = renderer.render(scene, cam)

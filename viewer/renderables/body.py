@@ -1,10 +1,11 @@
 """Body proportions for drawing a skeleton as capsules (pure numpy, no GL).
 
 Every joint gets a radius; a bone is the rounded cone between its two joint spheres, so bones
-meeting at a joint blend without gaps. Radii are fractions of the character's height: from the
-joint's name when it says what it is (hips, spine, thigh, forearm... in the usual BVH namings:
-LAFAN1, CMU, Mixamo, SMPL-like), otherwise from the joint's place in the tree (joints far from the
-tips of the limbs and carrying many of them are thicker), so any skeleton gets a plausible body.
+meeting at a joint blend without gaps. Radii are fractions of the character's height: handed in per
+joint when the caller knows what the joints are (``body_radii``: the studio sizes them from the joint
+names with ``lmm.skeleton.body_radii``; NaN for a joint it does not know), otherwise from the joint's
+place in the tree (joints far from the tips of the limbs and carrying many of them are thicker), so
+any skeleton gets a plausible body.
 Leaf joints (the loaders drop BVH end sites) get an extension so hands, toes and the head do not
 end at the wrist, the ball of the foot or the base of the skull.
 """
@@ -13,26 +14,6 @@ from __future__ import annotations
 import re
 
 import numpy as np
-
-# (pattern on the lower-cased name, radius / height); the first match wins, so specific names
-# come before the general ones ("forearm" before "arm", "upleg" before "leg", "hand_index" before "hand")
-NAME_RADII = (
-    (r"^simulation$", 0.0),
-    (r"finger|thumb|index|middle|ring|pinky|little", 0.007),
-    (r"toe|ball", 0.017),
-    (r"head|skull", 0.055),
-    (r"neck", 0.034),
-    (r"forearm|lowerarm|fore_arm|lower_arm|elbow|radius|ulna", 0.024),
-    (r"hand|wrist", 0.021),
-    (r"clavicle|collar|shoulder", 0.036),
-    (r"upperarm|upper_arm|arm|humerus", 0.032),
-    (r"upleg|up_leg|upperleg|upper_leg|thigh|femur|\bhip\b|(left|right|^l|^r)_?hip", 0.047),
-    (r"foot|ankle", 0.022),
-    (r"leg|knee|shin|calf|tibia", 0.032),
-    (r"hips|pelvis|root", 0.056),
-    (r"chest|spine\D*[2-9]|torso|thorax|upper_?back", 0.072),
-    (r"spine|back|abdomen|belly|waist|lumbar", 0.064),
-)
 
 # leaf joints: extension along the parent -> leaf direction, as (length / height, end radius / leaf radius)
 NAME_LEAF_EXTENSIONS = (
@@ -44,7 +25,7 @@ NAME_LEAF_EXTENSIONS = (
 )
 
 SIMULATION_NAME = "simulation"   # the database's ground projection of the root: not drawn
-PELVIS_RADIUS = 0.056            # an unnamed root is the pelvis
+PELVIS_RADIUS = 0.056            # a root of unknown size is the pelvis
 GENERIC_LEAF_EXTENSION = 0.4   # of the parent bone's length, for leaves of unknown names
 HEAD_CENTER_OFFSET = 0.55      # head sphere centre past the head joint, in head radii
 HEIGHT_PER_TREE_DIAMETER = 1.0 / 1.35   # a human's longest joint-to-joint path (hand to toe) ~1.35 heights
@@ -136,29 +117,34 @@ def topology_radii(parents, lengths) -> np.ndarray:
     return 0.014 + 0.032 * reach + 0.016 * np.sqrt(share)
 
 
-def joint_radii(parents, names=None, lengths=None, height: float = 1.0) -> np.ndarray:
-    """(J,) radius of each joint sphere, in the units of ``height``. Names that say what a joint
-    is take their radius from ``NAME_RADII``; the others (or all, without names) from the tree.
-    A joint named ``Simulation`` (the database's ground projection of the root) gets 0: it and
-    its bones are not drawn."""
+def _known(body_radii, n: int) -> np.ndarray:
+    """(J,) whether the caller gave a joint's radius (a finite ``body_radii`` entry)."""
+    if body_radii is None:
+        return np.zeros(n, dtype=bool)
+    return np.isfinite(np.asarray(body_radii, dtype=np.float64).reshape(n))
+
+
+def joint_radii(parents, body_radii=None, lengths=None, height: float = 1.0) -> np.ndarray:
+    """(J,) radius of each joint sphere, in the units of ``height``. ``body_radii`` (J,): radius /
+    height of the joints the caller knows (NaN for the others); the others (or all, without it)
+    from the tree, a root of unknown size at least a pelvis's."""
     parents = np.asarray(parents, dtype=np.int64)
     if lengths is None:
         lengths = np.ones(len(parents))
     radii = topology_radii(parents, lengths)
-    if names is not None:
-        for j, name in enumerate(names):
-            row = _match(str(name), NAME_RADII)
-            if row is not None:
-                radii[j] = row[1]
-        if len(parents) and parents[0] < 0 and radii[0] > 0 and _match(str(names[0]), NAME_RADII) is None:
+    if body_radii is not None:
+        known = _known(body_radii, len(parents))
+        radii[known] = np.asarray(body_radii, dtype=np.float64).reshape(-1)[known]
+        if len(parents) and parents[0] < 0 and radii[0] > 0 and not known[0]:
             radii[0] = max(radii[0], PELVIS_RADIUS)
     return radii * float(height)
 
 
-def leaf_extensions(parents, names=None, lengths=None, height: float = 1.0):
+def leaf_extensions(parents, names=None, lengths=None, height: float = 1.0, body_radii=None):
     """For each leaf joint: (length, end radius factor) of the segment that continues its parent
     bone past it, in the units of ``height``. Returns (lengths (J,), end factors (J,)); 0 for
-    joints that are not leaves or get no extension."""
+    joints that are not leaves or get no extension. A leaf of a name not in
+    ``NAME_LEAF_EXTENSIONS`` and of unknown size (``body_radii``) continues its bone a little."""
     parents = np.asarray(parents, dtype=np.int64)
     lengths = np.ones(len(parents)) if lengths is None else np.asarray(lengths, dtype=np.float64)
     is_leaf = np.ones(len(parents), dtype=bool)
@@ -166,11 +152,12 @@ def leaf_extensions(parents, names=None, lengths=None, height: float = 1.0):
     is_leaf &= parents >= 0
     ext = np.zeros(len(parents))
     end = np.ones(len(parents))
+    known = _known(body_radii, len(parents))
     for j in np.nonzero(is_leaf)[0]:
         row = _match(str(names[j]), NAME_LEAF_EXTENSIONS) if names is not None else None
         if row is not None:
             ext[j], end[j] = row[1] * height, row[2]
-        elif names is None or _match(str(names[j]), NAME_RADII) is None:
+        elif not known[j]:
             ext[j], end[j] = GENERIC_LEAF_EXTENSION * lengths[j], 0.8
     return ext, end
 

@@ -39,13 +39,13 @@ class SkeletonPose:
 
 class Skeleton(Renderable):
     """``Skeleton(ctx, parents, color, alpha, joint_radius, bone_radius, names=None,
-    style="capsules", shadow=True, height=None, thickness=1.0)``; ``update(positions)`` with
-    global joint positions (J, 3).
+    style="capsules", shadow=True, height=None, thickness=1.0, body_radii=None)``;
+    ``update(positions)`` with global joint positions (J, 3).
 
     - ``style="capsules"``: a body of rounded cones, one per bone, between joint spheres whose
-      radii follow the joint ``names`` (hips, spine, thigh, forearm...) or, for names it does not
-      know or without names, the joint's place in the tree; leaf joints are extended (hands,
-      toes) and a leaf ``Head`` is a sphere. Sizes are fractions of ``height`` (the character's
+      radii are ``body_radii`` (J,) (fractions of the height, e.g. from the joint names by
+      ``lmm.skeleton.body_radii``) or, where it is NaN or not given, from the joint's place in the
+      tree; leaf joints are extended (hands, toes, by their ``names``) and a leaf ``Head`` is a sphere. Sizes are fractions of ``height`` (the character's
       height in scene units), estimated from the bone lengths of the first pose when None;
       ``thickness`` scales every radius. ``radii`` (J,) can be set to override the joint radii.
     - ``style="sticks"``: thin cylinders of ``bone_radius`` and joint spheres of ``joint_radius``.
@@ -66,12 +66,15 @@ class Skeleton(Renderable):
     def __init__(self, ctx: moderngl.Context, parents, color=(0.95, 0.55, 0.15), alpha: float = 1.0,
                  joint_radius: float = 0.028, bone_radius: float = 0.019, names=None,
                  style: str = "capsules", shadow: bool = True, height: float | None = None,
-                 thickness: float = 1.0):
+                 thickness: float = 1.0, body_radii=None):
         self.ctx = ctx
         self.parents = np.asarray(parents, dtype=np.int64).ravel()
         if names is not None and len(names) != len(self.parents):
             raise ValueError(f"{len(names)} joint names for {len(self.parents)} joints")
         self.names = None if names is None else [str(n) for n in names]
+        if body_radii is not None and len(body_radii) != len(self.parents):
+            raise ValueError(f"{len(body_radii)} body radii for {len(self.parents)} joints")
+        self.body_radii = None if body_radii is None else np.asarray(body_radii, dtype=np.float64).copy()
         self.color = tuple(float(c) for c in color[:3])
         self.alpha = float(alpha)
         self.joint_radius = float(joint_radius)
@@ -201,9 +204,9 @@ class Skeleton(Renderable):
             if self.radii is not None:
                 radii = np.broadcast_to(np.asarray(self.radii, dtype=np.float64), (self.n_joints,)).copy()
             else:
-                radii = body.joint_radii(self.parents, self.names, self._lengths, h)
+                radii = body.joint_radii(self.parents, self.body_radii, self._lengths, h)
             radii = radii * self.thickness * self._shown
-            ext, end = body.leaf_extensions(self.parents, self.names, self._lengths, h)
+            ext, end = body.leaf_extensions(self.parents, self.names, self._lengths, h, self.body_radii)
             bone_end = radii.copy()
             for j in self._heads:   # the neck keeps its own radius up to the head sphere
                 bone_end[j] = min(radii[j], radii[self.parents[j]])
