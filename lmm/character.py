@@ -53,12 +53,14 @@ from lmm.data.derived import cached
 from lmm.controller import Candidates, Controller, DebugSnapshot, InputState, LazyField, Pose
 from lmm.features import build_query_from_columns, normalize_with, trajectory_query_columns
 from lmm.ik import FootLockState, solve_leg_floats
+from lmm.kinematics import PoseSkeleton, leg_update, pose_forward_kinematics, pose_forward_kinematics_update
 from lmm.inertialize import (Offsets, ShownPose, inertialize_apply_pose, inertialize_decay,
                              inertialize_root_velocities, inertialize_transition)
 from lmm.springs import damper_factor, halflife_to_damping
 from lmm.trajectory import (SimulationFloats, StickWorld, desired_rotation_floats, desired_velocity_floats,
                             simulation_update_floats, trajectory_in_root_space_floats,
                             trajectory_offsets, trajectory_predict_floats)
+from lmm.skeleton import subtree
 from lmm.tuning import Tuning
 
 
@@ -162,103 +164,6 @@ def root_local_velocities(db):
     return both[:, :3], both[:, 3:]
 
 
-def _fk_links_into(g: list, p: list, local_rot, local_pos, links) -> None:
-    """Forward kinematics along ``links`` ((joint, parent) pairs, each parent's entry of ``g``/``p`` already
-    set), in place: the one loop every forward kinematics of a single pose here runs. Plain Python
-    floats: for one pose of ~20 bones this is several times faster than numpy calls on tiny arrays (see
-    :func:`lmm.kinematics.forward_kinematics` for frames in bulk)."""
-    mul, mul_vec = quat.mul_scalar, quat.mul_vec_scalar
-    for j, pj in links:
-        parent = g[pj]
-        g[j] = mul(parent, local_rot[j])
-        p[j] = mul_vec(parent, local_pos[j], p[pj])
-
-
-def skeleton_links(parents) -> tuple[list[int], list[tuple[int, int]]]:
-    """``(roots, links)`` of a skeleton: the joints without a parent, and (joint, parent) for the others in
-    index order (a parent before its children)."""
-    return ([j for j, pj in enumerate(parents) if pj < 0],
-            [(j, int(pj)) for j, pj in enumerate(parents) if pj >= 0])
-
-
-def forward_kinematics_links(local_rot, local_pos, roots, links) -> tuple[list, list]:
-    """Global rotations and positions of one pose given as lists (per joint a 4- and a 3-sequence of
-    floats), the skeleton as :func:`skeleton_links` gives it; returns two lists of tuples."""
-    n = len(local_rot)
-    g = [None] * n
-    p = [None] * n
-    for j in roots:
-        g[j] = tuple(local_rot[j])
-        p[j] = tuple(local_pos[j])
-    _fk_links_into(g, p, local_rot, local_pos, links)
-    return g, p
-
-
-def forward_kinematics_lists(local_rot, local_pos, parents) -> tuple[list, list]:
-    """:func:`forward_kinematics_links` for a skeleton given by its ``parents``."""
-    return forward_kinematics_links(local_rot, local_pos, *skeleton_links(parents))
-
-
-def forward_kinematics_pose(local_rot: np.ndarray, local_pos: np.ndarray, parents) -> tuple[np.ndarray, np.ndarray]:
-    """Global rotations (J, 4) and positions (J, 3) of one pose (:func:`forward_kinematics_lists` on arrays)."""
-    g, p = forward_kinematics_lists(local_rot.tolist(), local_pos.tolist(), parents)
-    return np.array(g), np.array(p)
-
-
-def subtree_joints(parents, joints) -> list[int]:
-    """``joints`` and all their descendants, in topological (index) order."""
-    inside = set(int(j) for j in joints)
-    for j, pj in enumerate(parents):
-        if pj in inside:
-            inside.add(j)
-    return sorted(inside)
-
-
-def forward_kinematics_update_lists(global_rot: list, global_pos: list, local_rot, local_pos, parents,
-                                    joints) -> None:
-    """:func:`forward_kinematics_lists` recomputed in place only for ``joints`` (a topologically ordered list
-    that holds every descendant of each of its joints, see :func:`subtree_joints`); the other joints keep
-    their entries of ``global_rot``/``global_pos``. The same float operations per joint, so the result is
-    bit for bit the full pass's (after IK only the legs change: a few joints instead of the whole skeleton)."""
-    links = []
-    for j in joints:
-        pj = parents[j]
-        if pj < 0:
-            global_rot[j] = tuple(local_rot[j])
-            global_pos[j] = tuple(local_pos[j])
-        else:
-            links.append((j, pj))
-    _fk_links_into(global_rot, global_pos, local_rot, local_pos, links)
-
-
-def forward_kinematics_update(global_rot: np.ndarray, global_pos: np.ndarray, local_rot: np.ndarray,
-                              local_pos: np.ndarray, parents, joints) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`forward_kinematics_update_lists` on arrays: new (J, 4) and (J, 3) arrays."""
-    g = global_rot.tolist()
-    p = global_pos.tolist()
-    forward_kinematics_update_lists(g, p, local_rot.tolist(), local_pos.tolist(), parents, joints)
-    return np.array(g), np.array(p)
-
-
-def _leg_update(global_rot: list, global_pos: list, local_rot: list, local_pos, chain, parent: int, solved) -> None:
-    """One leg after IK, in place: the local rotations of ``chain`` (hip, knee, foot, toe; each the parent of
-    the next, ``parent`` the hip's parent) from their ``solved`` global rotations (parent^-1 * global, the
-    parent's global as solved), then forward kinematics of the chain from the hip's parent (unchanged). The
-    hip's global position depends only on bones that did not change: it is kept. The float operations of
-    the local-from-global loop and :func:`forward_kinematics_update_lists`, so the same bits."""
-    solved_parent = global_rot[parent]   # the parent's global rotation as solved (and kept)
-    updated_parent = solved_parent        # the parent's global rotation after the update
-    pj = -1                               # the parent of j once past the hip
-    for j, q in zip(chain, solved):
-        local_rot[j] = local = quat.inv_mul_scalar(solved_parent, q)
-        solved_parent = q
-        rotation = updated_parent
-        updated_parent = global_rot[j] = quat.mul_scalar(rotation, local)
-        if pj >= 0:  # (the hip's position, its parent's plus its rotated offset, did not change)
-            global_pos[j] = quat.mul_vec_scalar(rotation, local_pos[j], global_pos[pj])
-        pj = j
-
-
 def bone_heights(db, bones) -> np.ndarray:
     """World heights (F, len(bones)) of the given bones in every database frame: forward kinematics along
     each bone's chain only (a handful of bones, not the whole skeleton; see
@@ -291,25 +196,6 @@ def _range_contact_heights(db, toe_bones, min_frames: int) -> np.ndarray:
         h = heights[int(start):int(stop)][contacts[int(start):int(stop)]]
         out[r] = float(np.median(h)) if len(h) >= min_frames else overall
     return out
-
-
-class _FKPlan:
-    """A skeleton's forward kinematics in the form the per-tick code wants: ``roots`` and ``links`` for
-    :func:`forward_kinematics_links`; ``legs`` per leg chain (hip, knee, foot, toe) ``(chain, hip's parent,
-    the rest of the chain's subtree)`` for :func:`_leg_update`, or None when the legs do not have the shape it
-    needs (each bone of a chain the parent of the next, the legs' subtrees disjoint and the hips' parents
-    outside both)."""
-    __slots__ = ("roots", "links", "legs")
-
-    def __init__(self, parents, leg_chains):
-        self.roots, self.links = skeleton_links(parents)
-        subtrees = [subtree_joints(parents, [chain[0]]) for chain in leg_chains]
-        inside = [j for sub in subtrees for j in sub]
-        ok = len(set(inside)) == len(inside) and all(
-            all(parents[b] == a for a, b in zip(chain, chain[1:])) and parents[chain[0]] >= 0
-            and parents[chain[0]] not in inside for chain in leg_chains)
-        self.legs = [(tuple(chain), parents[chain[0]], [j for j in sub if j not in chain])
-                     for chain, sub in zip(leg_chains, subtrees)] if ok else None
 
 
 _PACKERS: dict = {}
@@ -690,7 +576,7 @@ class CharacterController(Controller):
             ghost_pos = src.positions.copy()
             ghost_rot[0] = root_rot
             ghost_pos[0] = root_pos
-            return forward_kinematics_pose(ghost_rot, ghost_pos, parents)[1].astype(np.float32)
+            return np.array(pose_forward_kinematics(ghost_rot, ghost_pos, parents)[1]).astype(np.float32)
 
         pose = Pose(local_positions=local_pos, local_rotations=local_rot, global_positions=g_pos, global_rotations=g_rot,
                     contacts=np.array(src.contacts, dtype=bool))
@@ -771,8 +657,8 @@ class CharacterController(Controller):
         hip_pos[1] += self._ground_offset
         plan = self._fk_plan
         if plan is None:
-            plan = self._fk_plan = _FKPlan(self.parents, self.leg_chains)
-        g_rl, g_pl = forward_kinematics_links(rl, pl, plan.roots, plan.links)
+            plan = self._fk_plan = PoseSkeleton(self.parents, self.leg_chains)
+        g_rl, g_pl = pose_forward_kinematics(rl, pl, plan)
         toe_now = [g_pl[t] for t in self.toe_bones]
         locks = self.foot_lock
         if tun.ik_enabled:
@@ -805,9 +691,9 @@ class CharacterController(Controller):
                 # the generic form's below, bit for bit)
                 for i, rots in solved:
                     chain, parent, rest = plan.legs[i]
-                    _leg_update(g_rl, g_pl, rl, pl, chain, parent, rots)
+                    leg_update(g_rl, g_pl, rl, pl, chain, parent, rots)
                     if rest:
-                        forward_kinematics_update_lists(g_rl, g_pl, rl, pl, self.parents, rest)
+                        pose_forward_kinematics_update(g_rl, g_pl, rl, pl, self.parents, rest)
             elif solved:
                 parents = self.parents
                 for i, rots in solved:
@@ -817,12 +703,12 @@ class CharacterController(Controller):
                 found = self._subtrees.get(key)
                 if found is None:
                     changed = sorted(j for i in key for j in self.leg_chains[i])
-                    found = self._subtrees[key] = (changed, subtree_joints(parents, changed))
+                    found = self._subtrees[key] = (changed, subtree(parents, changed))
                 changed, joints = found
                 for j in changed:  # local = parent^-1 * global
                     rl[j] = quat.inv_mul_scalar(g_rl[parents[j]], g_rl[j])
                 # only the legs changed: forward kinematics of their subtrees, not of the whole skeleton
-                forward_kinematics_update_lists(g_rl, g_pl, rl, pl, parents, joints)
+                pose_forward_kinematics_update(g_rl, g_pl, rl, pl, parents, joints)
         else:
             self.foot_lock = locks = FootLockState()
         locked = np.array([locks.is_locked(0), locks.is_locked(1)])

@@ -2,14 +2,16 @@
 
 The bulk forms work on frames in numpy (the database build, training, analysis): the loop is over
 joints (tens), vectorised over everything else (frames), a block of frames at a time for long takes
-(:func:`lmm.quat.frame_blocks`). With :mod:`lmm.quat` this is the bottom 'maths' layer; ``lmm.data``
-may import it.
+(:func:`lmm.quat.frame_blocks`). The single-pose forms work on one pose in plain Python floats (the
+runtime's per tick: the whole pose, a partial update after IK, one leg). With :mod:`lmm.quat` this is the
+bottom 'maths' layer; ``lmm.data`` may import it.
 """
 from __future__ import annotations
 
 import numpy as np
 
 from lmm import quat
+from lmm.skeleton import subtree
 
 
 def forward_kinematics(local_rot: np.ndarray, local_pos: np.ndarray, parents) -> tuple[np.ndarray, np.ndarray]:
@@ -57,30 +59,34 @@ def _forward_kinematics_into(local_rot, local_pos, parents, g_rot, g_pos) -> Non
 
 
 def forward_kinematics_velocity(local_rot, local_pos, local_vel, local_angvel, parents):
-    """Global rotations, positions, velocities and angular velocities.
+    """Global rotations, positions, velocities and angular velocities (arrays of ``local_pos``'s type).
 
     local_vel / local_angvel are expressed in the parent's frame (as stored in the
     database); global velocities include the contribution of the parent's spin.
     """
-    shape = local_pos.shape
-    g_rot = np.empty(shape[:-1] + (4,), dtype=local_pos.dtype)
-    g_pos = np.empty(shape, dtype=local_pos.dtype)
-    g_vel = np.empty(shape, dtype=local_pos.dtype)
-    g_ang = np.empty(shape, dtype=local_pos.dtype)
+    joints = (np.moveaxis(np.asarray(a), -2, 0) for a in (local_rot, local_pos, local_vel, local_angvel))
+    out = forward_kinematics_velocity_joints(*joints, parents, quat.mul, quat.mul_vec, np.cross)
+    return tuple(np.stack(x, axis=-2).astype(local_pos.dtype, copy=False) for x in out)
+
+
+def forward_kinematics_velocity_joints(rot, pos, vel, ang, parents, compose, rotate, cross):
+    """The recursion of :func:`forward_kinematics_velocity` in any rotation algebra: ``rot``... per joint
+    (indexable by joint), ``compose(a, b)`` the rotation a * b, ``rotate(r, v)`` and ``cross(a, b)``; returns
+    four lists, one entry per joint. The numpy form runs it on quaternions, training on torch matrices."""
+    g_rot, g_pos, g_vel, g_ang = [], [], [], []
     for j, p in enumerate(parents):
         if p < 0:
-            g_rot[..., j, :] = local_rot[..., j, :]
-            g_pos[..., j, :] = local_pos[..., j, :]
-            g_vel[..., j, :] = local_vel[..., j, :]
-            g_ang[..., j, :] = local_angvel[..., j, :]
+            g_rot.append(rot[j])
+            g_pos.append(pos[j])
+            g_vel.append(vel[j])
+            g_ang.append(ang[j])
         else:
-            pr = g_rot[..., p, :]
-            offset = quat.mul_vec(pr, local_pos[..., j, :])
-            g_rot[..., j, :] = quat.mul(pr, local_rot[..., j, :])
-            g_pos[..., j, :] = offset + g_pos[..., p, :]
-            g_vel[..., j, :] = (g_vel[..., p, :] + quat.mul_vec(pr, local_vel[..., j, :])
-                                + np.cross(g_ang[..., p, :], offset))
-            g_ang[..., j, :] = quat.mul_vec(pr, local_angvel[..., j, :]) + g_ang[..., p, :]
+            pr = g_rot[p]
+            offset = rotate(pr, pos[j])
+            g_rot.append(compose(pr, rot[j]))
+            g_pos.append(offset + g_pos[p])
+            g_vel.append(g_vel[p] + rotate(pr, vel[j]) + cross(g_ang[p], offset))
+            g_ang.append(rotate(pr, ang[j]) + g_ang[p])
     return g_rot, g_pos, g_vel, g_ang
 
 
@@ -108,3 +114,94 @@ def global_to_local(global_rot, global_pos, parents):
         local_rot[s] = lr.transpose(2, 0, 1)
         local_pos[s] = lp.transpose(2, 0, 1)
     return local_rot, local_pos
+
+
+# ---------------------------------------------------------------------------------------------------
+# one pose in plain floats (the runtime's per-tick form): for ~20 bones several times faster than numpy
+# calls on tiny arrays. A child's position is summed as parent + offset + w t + u x t
+# (:func:`lmm.quat.mul_vec_scalar` with an origin): its own order, not the bulk form's.
+# ---------------------------------------------------------------------------------------------------
+
+class PoseSkeleton:
+    """A skeleton in the form single-pose forward kinematics reads: ``roots`` (joints without a parent),
+    ``links`` ((joint, parent) in index order, a parent before its children) and, per leg chain (hip, knee,
+    foot, toe), ``legs[i] = (chain, hip's parent, the rest of the chain's subtree)`` for :func:`leg_update`,
+    or ``legs = None`` when the legs do not have the shape it needs (each bone of a chain the parent of the
+    next, the legs' subtrees disjoint and the hips' parents outside both)."""
+    __slots__ = ("parents", "roots", "links", "legs")
+
+    def __init__(self, parents, leg_chains=()):
+        self.parents = parents = [int(p) for p in parents]
+        self.roots = [j for j, pj in enumerate(parents) if pj < 0]
+        self.links = [(j, pj) for j, pj in enumerate(parents) if pj >= 0]
+        subtrees = [subtree(parents, [chain[0]]) for chain in leg_chains]
+        inside = [j for sub in subtrees for j in sub]
+        ok = len(set(inside)) == len(inside) and all(
+            all(parents[b] == a for a, b in zip(chain, chain[1:])) and parents[chain[0]] >= 0
+            and parents[chain[0]] not in inside for chain in leg_chains)
+        self.legs = [(tuple(chain), parents[chain[0]], [j for j in sub if j not in chain])
+                     for chain, sub in zip(leg_chains, subtrees)] if ok else None
+
+
+def _links_into(g: list, p: list, local_rot, local_pos, links) -> None:
+    """Forward kinematics along ``links`` ((joint, parent) pairs, each parent's entry of ``g``/``p`` already
+    set), in place: the one loop every single-pose forward kinematics runs."""
+    mul, mul_vec = quat.mul_scalar, quat.mul_vec_scalar
+    for j, pj in links:
+        parent = g[pj]
+        g[j] = mul(parent, local_rot[j])
+        p[j] = mul_vec(parent, local_pos[j], p[pj])
+
+
+def pose_forward_kinematics(local_rot, local_pos, skeleton) -> tuple[list, list]:
+    """Global rotations and positions of one pose: ``local_rot``/``local_pos`` per joint a 4- and a
+    3-sequence of floats (or (J, 4)/(J, 3) arrays), ``skeleton`` a :class:`PoseSkeleton` or a parents
+    list. Returns two lists of tuples."""
+    if isinstance(local_rot, np.ndarray):
+        local_rot, local_pos = local_rot.tolist(), local_pos.tolist()
+    if not isinstance(skeleton, PoseSkeleton):
+        skeleton = PoseSkeleton(skeleton)
+    n = len(local_rot)
+    g = [None] * n
+    p = [None] * n
+    for j in skeleton.roots:
+        g[j] = tuple(local_rot[j])
+        p[j] = tuple(local_pos[j])
+    _links_into(g, p, local_rot, local_pos, skeleton.links)
+    return g, p
+
+
+def pose_forward_kinematics_update(global_rot: list, global_pos: list, local_rot, local_pos, parents,
+                                   joints) -> None:
+    """:func:`pose_forward_kinematics` recomputed in place only for ``joints`` (a topologically ordered list
+    that holds every descendant of each of its joints, see :func:`lmm.skeleton.subtree`); the other joints
+    keep their entries. The same float operations per joint, so bit for bit the full pass (after IK only
+    the legs change: a few joints instead of the whole skeleton)."""
+    links = []
+    for j in joints:
+        pj = parents[j]
+        if pj < 0:
+            global_rot[j] = tuple(local_rot[j])
+            global_pos[j] = tuple(local_pos[j])
+        else:
+            links.append((j, pj))
+    _links_into(global_rot, global_pos, local_rot, local_pos, links)
+
+
+def leg_update(global_rot: list, global_pos: list, local_rot: list, local_pos, chain, parent: int, solved) -> None:
+    """One leg after IK, in place: the local rotations of ``chain`` (hip, knee, foot, toe; each the parent of
+    the next, ``parent`` the hip's parent) from their ``solved`` global rotations (parent^-1 * global, the
+    parent's global as solved), then forward kinematics of the chain from the hip's parent (unchanged). The
+    hip's global position depends only on bones that did not change: it is kept. The float operations of
+    the local-from-global loop and :func:`pose_forward_kinematics_update`, so the same bits."""
+    solved_parent = global_rot[parent]   # the parent's global rotation as solved (and kept)
+    updated_parent = solved_parent        # the parent's global rotation after the update
+    pj = -1                               # the parent of j once past the hip
+    for j, q in zip(chain, solved):
+        local_rot[j] = local = quat.inv_mul_scalar(solved_parent, q)
+        solved_parent = q
+        rotation = updated_parent
+        updated_parent = global_rot[j] = quat.mul_scalar(rotation, local)
+        if pj >= 0:  # (the hip's position, its parent's plus its rotated offset, did not change)
+            global_pos[j] = quat.mul_vec_scalar(rotation, local_pos[j], global_pos[pj])
+        pj = j

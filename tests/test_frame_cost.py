@@ -3,7 +3,9 @@ replace (recordings stay byte-identical), and debug-only work is deferred until 
 import numpy as np
 
 from lmm import quat
-from lmm.character import _LazyRootShift, forward_kinematics_pose, forward_kinematics_update, subtree_joints
+from lmm.character import _LazyRootShift
+from lmm.kinematics import PoseSkeleton, pose_forward_kinematics, pose_forward_kinematics_update
+from lmm.skeleton import subtree as subtree_joints
 from lmm.controller import InputState
 from lmm.data.inputs import builtin
 from lmm.mm import MotionMatchingController
@@ -27,6 +29,19 @@ def test_subtree_joints_are_descendants_in_order(db):
     assert db.bone("right_foot") not in joints and 0 not in joints
     for j in joints:
         assert j == hip or parents[j] in joints
+
+
+def forward_kinematics_pose(rot, pos, parents):
+    """:func:`pose_forward_kinematics` as two arrays."""
+    g, p = pose_forward_kinematics(rot, pos, parents)
+    return np.array(g), np.array(p)
+
+
+def forward_kinematics_update(g_rot, g_pos, rot, pos, parents, joints):
+    """:func:`pose_forward_kinematics_update` on copies of array inputs, as two new arrays."""
+    g, p = g_rot.tolist(), g_pos.tolist()
+    pose_forward_kinematics_update(g, p, rot.tolist(), pos.tolist(), parents, joints)
+    return np.array(g), np.array(p)
 
 
 def test_partial_forward_kinematics_is_bit_identical(db):
@@ -130,17 +145,26 @@ def test_world_pose_arrays_match_forward_kinematics_of_the_returned_local_pose(d
     assert locked.dtype == bool and locked.shape == (2,) and locked_seen > 0
 
 
-def test_forward_kinematics_without_parent_tests_is_bit_identical(db):
-    from lmm.character import forward_kinematics_links, forward_kinematics_lists
+def test_single_pose_forward_kinematics_is_the_per_joint_definition_bit_for_bit(db):
+    """One pose in plain floats: per joint g = g_parent * local and p = (p_parent + offset) + w t + u x t
+    (numpy on one joint at a time, that order of sums), and the bulk form to rounding."""
+    from lmm.kinematics import forward_kinematics
 
     parents = [int(p) for p in db.parents]
-    roots = [j for j, p in enumerate(parents) if p < 0]
-    links = [(j, p) for j, p in enumerate(parents) if p >= 0]
     rng = np.random.default_rng(4)
     for _ in range(50):
         rot, pos = _random_pose(rng, db.n_bones)
-        assert forward_kinematics_links(rot.tolist(), pos.tolist(), roots, links) == \
-            forward_kinematics_lists(rot.tolist(), pos.tolist(), parents)
+        want_rot, want_pos = rot.copy(), pos.copy()
+        for j, p in enumerate(parents):
+            if p >= 0:
+                w, u = want_rot[p, :1], want_rot[p, 1:]
+                t = 2.0 * np.cross(u, pos[j])
+                want_pos[j] = want_pos[p] + pos[j] + w * t + np.cross(u, t)
+                want_rot[j] = quat.mul(want_rot[p], rot[j])
+        got_rot, got_pos = forward_kinematics_pose(rot, pos, PoseSkeleton(parents))
+        assert np.array_equal(got_rot, want_rot) and np.array_equal(got_pos, want_pos)
+        bulk_rot, bulk_pos = forward_kinematics(rot, pos, parents)
+        np.testing.assert_allclose(got_pos, bulk_pos, rtol=0, atol=1e-12)
 
 
 def _world_pose_state(c):
@@ -153,15 +177,13 @@ def _set_world_pose_state(c, state):
 
 
 def test_fused_leg_update_and_float32_arrays_equal_the_generic_float64_form(db, features):
-    """Per tick: the per-leg update (:func:`lmm.character._leg_update`) gives the bits of the generic
+    """Per tick: the per-leg update (:func:`lmm.kinematics.leg_update`) gives the bits of the generic
     local-from-global loop plus subtree forward kinematics, and the float32 arrays the step asks for are the
     float64 arrays cast; the foot lock state advances the same."""
-    from lmm.character import _FKPlan
-
     c = MotionMatchingController(db, features)
     log = builtin("zigzag", 4.0)
-    generic = _FKPlan(c.parents, c.leg_chains)
-    fused = _FKPlan(c.parents, c.leg_chains)
+    generic = PoseSkeleton(c.parents, c.leg_chains)
+    fused = PoseSkeleton(c.parents, c.leg_chains)
     assert fused.legs is not None
     generic.legs = None
     both_legs = 0
