@@ -1,5 +1,6 @@
-"""What the 3D view draws of a character, as viewer renderables: skeleton and ghost, and every marker
-(trajectories, features, contacts, trails) batched into one sphere, one arrow and one line renderable."""
+"""What the 3D view draws of a character, as viewer renderables: skeleton and ghost, and its markers
+(trajectories, features, contacts, trails), worked out without GL (:func:`character_parts`) and batched
+with the others' (:mod:`.viewport_markers`)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -9,6 +10,7 @@ import numpy as np
 from lmm import quat
 
 from .common import darker, lighter
+from .viewport_markers import Markers
 
 
 def feature_markers(features, normalized, root_pos, root_rot, bone_positions: dict) -> dict:
@@ -50,151 +52,17 @@ def feature_markers(features, normalized, root_pos, root_rot, bone_positions: di
             "traj": np.concatenate(traj) if traj else z3, "traj_dirs": np.concatenate(dirs) if dirs else z3}
 
 
-class Markers:
-    """Spheres, arrows and polylines gathered as arrays with (count, size, colour) runs: what
-    :class:`MarkerBatch` draws; a character's own markers can be gathered apart (on the tick worker,
-    see :func:`character_parts`) and added to the batch in one call."""
-
-    def __init__(self):
-        self.clear()
-
-    def clear(self) -> None:
-        # each add keeps its points and one (count, size, colour) run; flush repeats the runs
-        self._centers, self._sphere_runs = [], []
-        self._origins, self._vectors, self._arrow_runs = [], [], []
-        self._segments, self._segment_runs = [], []
-
-    def add_spheres(self, centers, radius: float, color) -> None:
-        c = np.asarray(centers, np.float64).reshape(-1, 3)
-        if len(c):
-            self._centers.append(c)
-            self._sphere_runs.append((len(c), radius, tuple(color[:3])))
-
-    def add_arrows(self, origins, vectors, color) -> None:
-        o = np.asarray(origins, np.float64).reshape(-1, 3)
-        v = np.asarray(vectors, np.float64).reshape(-1, 3)
-        n = min(len(o), len(v))
-        if n:
-            self._origins.append(o[:n])
-            self._vectors.append(v[:n])
-            self._arrow_runs.append((n, 0.0, tuple(color[:3])))
-
-    def add_polyline(self, points, color) -> None:
-        p = np.asarray(points, np.float64).reshape(-1, 3)
-        if len(p) >= 2:
-            seg = np.empty((2 * (len(p) - 1), 3))
-            seg[0::2] = p[:-1]
-            seg[1::2] = p[1:]
-            self._segments.append(seg)
-            self._segment_runs.append((len(seg), 0.0, tuple(color[:3])))
-
-    def compacted(self) -> "Markers":
-        """The same markers with each kind's arrays joined into one (``flush`` then copies nothing)."""
-        out = Markers()
-        for name in ("_centers", "_origins", "_vectors", "_segments"):
-            arrays = getattr(self, name)
-            setattr(out, name, [np.concatenate(arrays)] if len(arrays) > 1 else list(arrays))
-        out._sphere_runs, out._arrow_runs = list(self._sphere_runs), list(self._arrow_runs)
-        out._segment_runs = list(self._segment_runs)
-        return out
-
-    def extend(self, other: "Markers") -> None:
-        """Add every marker of ``other`` (after this one's)."""
-        self._centers += other._centers
-        self._sphere_runs += other._sphere_runs
-        self._origins += other._origins
-        self._vectors += other._vectors
-        self._arrow_runs += other._arrow_runs
-        self._segments += other._segments
-        self._segment_runs += other._segment_runs
-
-
-def _joined(arrays: list) -> np.ndarray:
-    return arrays[0] if len(arrays) == 1 else np.concatenate(arrays)
-
-
-class MarkerBatch(Markers):
-    """Every marker of every character, gathered per frame and drawn with one sphere, one arrow and
-    one line renderable (few draw calls matter on software GL, where each costs about a millisecond)."""
-
-    def __init__(self, viewer, ctx):
-        self.spheres = viewer.Spheres(ctx, radius=0.04)
-        self.arrows = viewer.Arrows(ctx, shaft_radius=0.011, head_radius=0.032, head_length=0.07)
-        self.lines = viewer.Lines(ctx, width_px=2.5)
-        self._expanded: dict = {}
-        super().__init__()
-
-    def renderables(self):
-        return [self.lines, self.spheres, self.arrows]
-
-    def clear(self) -> None:
-        super().clear()
-        self._arrow_geometry = None
-
-    def prepare_arrows(self, markers: Markers) -> Markers:
-        """``markers`` compacted, with its arrows' geometry worked out for this batch's arrows (see
-        ``Arrows.prepare``): safe on another thread; ``extend`` by it, and ``flush`` uses that geometry
-        when no other arrow was added."""
-        out = markers.compacted()
-        if out._origins:
-            out.arrow_geometry = (out._origins[0], self.arrows.prepare(out._origins[0], out._vectors[0]))
-        return out
-
-    def extend(self, other: Markers) -> None:
-        had = bool(self._origins)
-        super().extend(other)
-        if other._origins:
-            self._arrow_geometry = None if had else getattr(other, "arrow_geometry", None)
-
-    def _repeat(self, runs):
-        """(per-item sizes (N,), per-item colours (N, 3)) of a list of (count, size, colour) runs; the
-        runs are the same from frame to frame, so their expansions are kept (never written to)."""
-        key = tuple(runs)
-        hit = self._expanded.get(key)
-        if hit is None:
-            counts = [r[0] for r in runs]
-            hit = (np.repeat(np.array([r[1] for r in runs], np.float64), counts),
-                   np.repeat(np.array([r[2] for r in runs], np.float64), counts, axis=0))
-            # read-only: the renderables then know the same array means the same values and keep
-            # the columns they wrote from it
-            for a in hit:
-                a.flags.writeable = False
-            if len(self._expanded) > 64:
-                self._expanded.clear()
-            self._expanded[key] = hit
-        return hit
-
-    def flush(self) -> None:
-        z3 = np.zeros((0, 3))
-        if self._centers:
-            radii, colors = self._repeat(self._sphere_runs)
-            self.spheres.update(_joined(self._centers), radii, colors)
-        else:
-            self.spheres.update(z3)
-        if self._origins:
-            geometry = self._arrow_geometry
-            if geometry is not None and (len(self._origins) != 1 or geometry[0] is not self._origins[0]):
-                geometry = None     # arrows were added after the prepared ones
-            self.arrows.update(_joined(self._origins), _joined(self._vectors), self._repeat(self._arrow_runs)[1],
-                               prepared=None if geometry is None else geometry[1])
-        else:
-            self.arrows.update(z3, z3)
-        if self._segments:
-            self.lines.update(_joined(self._segments), mode="segments", colors=self._repeat(self._segment_runs)[1])
-        else:
-            self.lines.update(z3, mode="segments")
-
-
 class CharacterDrawing:
     """A character's skeleton and ghost; its markers go into the shared :class:`MarkerBatch`."""
 
-    def __init__(self, viewer, ctx, parents, color, names=None, style: str = "capsules", shadow: bool = True):
+    def __init__(self, viewer, ctx, parents, color, names=None, style: str = "capsules", shadow: bool = True,
+                 body_radii=None):
         self.color = color
-        # joint names size the body parts and hide the unnamed simulation bone (see viewer.Skeleton)
+        # joint names hide the unnamed simulation bone, body radii size the body parts (see viewer.Skeleton)
         self.skeleton = viewer.Skeleton(ctx, parents, color=color, names=names, style=style, shadow=shadow,
-                                        joint_radius=0.028, bone_radius=0.02)
+                                        body_radii=body_radii, joint_radius=0.028, bone_radius=0.02)
         self.ghost = viewer.Skeleton(ctx, parents, color=lighter(color, 0.55), alpha=0.32, names=names,
-                                     style=style, shadow=shadow, thickness=0.9,
+                                     body_radii=body_radii, style=style, shadow=shadow, thickness=0.9,
                                      joint_radius=0.024, bone_radius=0.017)
         self.traj_color = lighter(color, 0.35)
         self.trail_color = darker(color, 0.3)
@@ -411,79 +279,64 @@ def _toe_bones(db) -> list:
     return hit[2]
 
 
-PREVIEW_SPACING_M = 1.3     # preview ghosts stand this far apart, to the inspected character's side
-PREVIEW_LIFT = np.array([0.0, 0.025, 0.0])
+SIDE_OFFSET_M = 1.6         # side by side: each character this far to the right of the one before
+TRAIL_SECONDS = 4.0
 
 
-def preview_placement(anchor_pos, anchor_rot, slot: int) -> tuple[np.ndarray, np.ndarray]:
-    """Where preview ghost ``slot`` stands: (origin (3,), rotation matrix (3, 3)) in the world.
+class Characters:
+    """Every running controller's character in the 3D view, side by side (each :data:`SIDE_OFFSET_M` to
+    the right of the one before) or overlaid."""
 
-    The ghost faces the way the anchor (the inspected character's simulation bone) faces and stands
-    ``PREVIEW_SPACING_M * (slot + 1)`` to the anchor's left along world -X (the side-by-side view puts
-    the second character to the right), so every ghost follows the character of the displayed tick."""
-    origin = np.asarray(anchor_pos, np.float64) * np.array([1.0, 0.0, 1.0])
-    origin = origin + np.array([-PREVIEW_SPACING_M * (slot + 1), 0.0, 0.0])
-    return origin, quat.to_matrix(np.asarray(anchor_rot, np.float64))
+    def __init__(self, engine):
+        self.engine = engine                # app.panels.base.EngineFacts: db, dt, features_of
+        self.drawings: dict[str, CharacterDrawing] = {}
+        self.side_by_side = True
 
+    def add(self, viewer, gl, scene, name: str, color, body_style: dict) -> None:
+        d = CharacterDrawing(viewer, gl, self.engine.db.parents, color, **body_style)
+        self.drawings[name] = d
+        scene.add(*d.all())
 
-def place(points, origin, rotation) -> np.ndarray:
-    """Points of a ghost's own frame (root at the origin facing +Z) in the world."""
-    p = np.asarray(points, np.float64).reshape(-1, 3)
-    return p @ np.asarray(rotation).T + origin
+    def offset_of(self, name: str) -> np.ndarray:
+        names = list(self.drawings)
+        if not self.side_by_side or len(names) < 2:
+            return np.zeros(3)
+        i = names.index(name) if name in names else 0
+        return np.array([SIDE_OFFSET_M * i, 0.0, 0.0])
 
+    def parts(self, name: str, snap, view, show: dict) -> CharacterParts:
+        """:func:`character_parts` of a character at the view's tick, with its trail when shown."""
+        trail = None
+        if show["trail"]:
+            n = int(TRAIL_SECONDS / self.engine.dt)
+            trail = view.history.window(name, "root_position", view.tick_number, n)
+        return character_parts(self.drawings[name], snap, self.offset_of(name), show, self.engine.features_of(name),
+                               self.engine.db, trail)
 
-class PreviewDrawings:
-    """The preview ghosts the panels ask for (``Actions.set_preview``): one skeleton per shown pose
-    (made when a pose with another skeleton arrives), their trajectories and points in the shared
-    :class:`MarkerBatch`."""
+    def label_anchor(self, name: str, snap) -> np.ndarray:
+        """Where a character's name label hangs: above its highest joint."""
+        g = np.asarray(snap.pose.global_positions, np.float64)
+        return g[g[:, 1].argmax()] + self.offset_of(name) + [0, 0.25, 0]
 
-    def __init__(self, viewer, ctx, scene):
-        self.viewer, self.ctx, self.scene = viewer, ctx, scene
-        self.skeletons: list = []          # viewer.Skeleton per slot
-        self._parents: list = []           # parents each slot's skeleton was made for
-
-    def _skeleton(self, slot: int, pose, style: str, shadow: bool):
-        parents = np.asarray(pose.parents, np.int64)
-        while len(self.skeletons) <= slot:
-            self.skeletons.append(None)
-            self._parents.append(None)
-        if self.skeletons[slot] is None or not np.array_equal(self._parents[slot], parents):
-            if self.skeletons[slot] is not None:
-                self.scene.remove(self.skeletons[slot])
-                self.skeletons[slot].release()
-            sk = self.viewer.Skeleton(self.ctx, parents, color=pose.color, alpha=0.6,
-                                      names=list(pose.names) if pose.names is not None else None, style=style,
-                                      shadow=shadow, joint_radius=0.024, bone_radius=0.017)
-            self.scene.add(sk)
-            self.skeletons[slot], self._parents[slot] = sk, parents
-        sk = self.skeletons[slot]
-        sk.color = pose.color
-        sk.style, sk.shadow = style, shadow
-        return sk
-
-    def update(self, poses, batch: MarkerBatch, anchor_pos, anchor_rot, style: str, shadow: bool) -> list[dict]:
-        """Draw ``poses`` (a list of :class:`app.panels.base.PreviewPose`) beside the anchor; returns what
-        was drawn per slot (label, world root position and head position) for labels and tests."""
-        drawn = []
-        for slot, pose in enumerate(poses):
-            origin, rot = preview_placement(anchor_pos, anchor_rot, slot)
-            sk = self._skeleton(slot, pose, style, shadow)
-            world = place(pose.positions, origin, rot)
-            sk.visible = True
-            sk.update(world)
-            traj_color = lighter(pose.color, 0.3)
-            if pose.trajectory is not None and len(pose.trajectory):
-                traj = place(pose.trajectory, origin, rot) + PREVIEW_LIFT
-                batch.add_polyline(np.vstack([origin[None] + PREVIEW_LIFT, traj]), traj_color)
-                batch.add_spheres(traj, 0.035, traj_color)
-                if pose.directions is not None and len(pose.directions) == len(traj):
-                    batch.add_arrows(traj, place(pose.directions, np.zeros(3), rot) * 0.3, traj_color)
-            if pose.points is not None and len(pose.points):
-                batch.add_spheres(place(pose.points, origin, rot), 0.03, FEATURE_COLOR)
-            head = world[int(np.argmax(world[:, 1]))]
-            drawn.append({"label": pose.label, "root": [float(x) for x in world[0]],
-                          "origin": [float(x) for x in origin], "head": [float(x) for x in head]})
-        for sk in self.skeletons[len(poses):]:
-            if sk is not None:
-                sk.visible = False
-        return drawn
+    def update(self, view, show: dict, prepared: dict | None, drawn: dict, roots: list) -> list:
+        """Place every character at the view's tick (``prepared``: parts worked out on the tick worker, by
+        name); their roots go into ``drawn`` and ``roots``. Returns their markers, or None when every
+        shown character's were prepared (the prepared join of them all is then used)."""
+        tick = view.tick
+        all_prepared = True
+        markers = []
+        for name, d in self.drawings.items():
+            snap = tick.snapshots.get(name) if tick is not None else None
+            if snap is None:
+                d.hide()
+                continue
+            off = self.offset_of(name)
+            parts = prepared.get(name) if prepared is not None else None
+            all_prepared = all_prepared and parts is not None
+            parts = parts or self.parts(name, snap, view, show)
+            apply_character(d, parts)
+            markers.append(parts.markers)
+            roots.append(np.asarray(snap.pose.global_positions[0], np.float64) + off)
+            drawn["roots"][name] = [float(x) for x in snap.pose.global_positions[0]]
+            drawn["offsets"][name] = [float(x) for x in off]
+        return None if all_prepared else markers

@@ -10,7 +10,7 @@ import pytest
 
 from app import layout_files as layouts
 from app.panels.database import database_preview, range_rows, take_name
-from app.panels.viewport_scene import PREVIEW_SPACING_M, place, preview_placement
+from app.panels.viewport_previews import PREVIEW_SPACING_M, place, preview_placement
 from lmm import DEFAULT_MANIFEST, quat
 from lmm.data.manifest import load_manifest
 from lmm.data.ranges import database_ranges
@@ -231,7 +231,8 @@ def test_preview_hook_takes_any_skeleton_and_hides_unused_ghosts():
     from types import SimpleNamespace
 
     from app.panels.base import PreviewPose
-    from app.panels.viewport_scene import MarkerBatch, PreviewDrawings
+    from app.panels.viewport_markers import MarkerBatch
+    from app.panels.viewport_previews import PreviewDrawings
 
     made = []
 

@@ -19,7 +19,7 @@ from app.panels.search import candidate_rows, column_fractions, frame_label, rol
 from app.frame_times import FrameTimes
 from app.panels.timeline import scrub_target
 from app.panels.tuning import pretty_label, widget_specs
-from app.panels.viewport import separate_labels
+from app.panels.viewport_labels import separate_labels
 from app.panels.viewport_scene import feature_markers
 from app.recording import RecordingResult, recording_paths
 from app.reference_clip import load_reference_clip
