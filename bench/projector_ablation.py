@@ -51,7 +51,10 @@ def main() -> int:
     import torch
 
     from lmm.offline import training as T
-    from lmm.data.database import load_or_build
+    from lmm.offline.decompressor_training import compute_latents
+    from lmm.offline.projector_training import PROJECTOR_WEIGHTS, train_projector
+    from lmm.offline.training_data import prepare
+    from lmm.data.build import load_or_build
     from lmm.offline.evaluation import projector_metrics, projector_runtime_agreement, run_controller
     from lmm.features import build_features
     from lmm.data.inputs import open_input
@@ -64,8 +67,8 @@ def main() -> int:
     features = build_features(db)
     shipped = LMMNetworks.load(DEFAULT_WEIGHTS, db, features)
     compressor = T._load_networks(DEFAULT_WEIGHTS.with_name(T.COMPRESSOR_FILE), ["compressor"], db, features)[0]["compressor"]
-    data = T.prepare(db, features)
-    Z = T.compute_latents(compressor, data)
+    data = prepare(db, features)
+    Z = compute_latents(compressor, data)
     mm = run_controller(MotionMatchingController(db, features), open_input("builtin:random:1", 60.0), 60.0)
 
     results = []
@@ -74,14 +77,14 @@ def main() -> int:
     for name in names:
         skip, weights, margin = VARIANTS[name]
         t0 = time.perf_counter()
-        net, _ = T.train_projector(data, Z, T.StageSettings(args.iterations, args.batch, 2e-3), quiet=True,
-                                   weights=weights, skip=skip, margin=margin)
+        net, _ = train_projector(data, Z, T.StageSettings(args.iterations, args.batch, 2e-3), quiet=True,
+                                 weights=weights, skip=skip, margin=margin)
         wall = time.perf_counter() - t0
         nets = dataclasses.replace(shipped, projector=MLP.from_spec(net.to_arrays("projector"), "projector",
                                                                     net.spec.to_dict()))
         m = projector_metrics(nets, features, Z=Z.numpy())
         m.update(projector_runtime_agreement(nets, features, mm["queries"]))
-        row = {"variant": name, "skip": skip, "weights": {**T.PROJECTOR_WEIGHTS, **weights}, "margin": margin,
+        row = {"variant": name, "skip": skip, "weights": {**PROJECTOR_WEIGHTS, **weights}, "margin": margin,
                "iterations": args.iterations, "train_s": round(wall, 1), **m}
         results.append(row)
         print(f"{name:<20} {m['nn_agreement']:6.3f} {m['nn_within_3_frames']:7.3f} {m['cost_ratio_median']:6.3f} "

@@ -8,8 +8,14 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
-from lmm.offline import training as T  # noqa: E402
-from lmm.data.database import load_or_build  # noqa: E402
+from lmm.offline import projector_training, training as T  # noqa: E402
+from lmm.offline.decompressor_training import decompressor_losses, train_decompressor  # noqa: E402
+from lmm.offline.projector_training import (cell_violation, frame_neighbours, nearest_neighbours,  # noqa: E402
+                                            train_projector)
+from lmm.offline.stepper_training import train_stepper  # noqa: E402
+from lmm.offline.training_data import prepare, window_starts_from  # noqa: E402
+from lmm.offline.training_loop import StageSettings  # noqa: E402
+from lmm.data.build import load_or_build  # noqa: E402
 from lmm.features import build_features  # noqa: E402
 
 SLICE = np.arange(3000)
@@ -24,11 +30,11 @@ def dbf():
 @pytest.fixture(scope="module")
 def data(dbf):
     torch.set_num_threads(1)
-    return T.prepare(*dbf, frames=SLICE)
+    return prepare(*dbf, frames=SLICE)
 
 
 def tiny(iterations=60, batch=32, lr=2e-3):
-    return T.StageSettings(iterations, batch, lr)
+    return StageSettings(iterations, batch, lr)
 
 
 def test_torch_kinematics_reproduce_the_database(data):
@@ -36,16 +42,16 @@ def test_torch_kinematics_reproduce_the_database(data):
     f = torch.arange(0, 3000, 37)
     z = torch.zeros(len(f) * 2, 32)
     y, q = torch.cat([data.Y[f]] * 2), torch.cat([data.Q[f]] * 2)
-    terms = T.decompressor_losses(y, y, q, z, data, len(f))
+    terms = decompressor_losses(y, y, q, z, data, len(f))
     for name, v in terms.items():
         assert float(v) < 1e-5, name
 
 
 def test_decompressor_loss_drops_and_is_seeded(data):
-    c, d, log = T.train_decompressor(data, tiny(), seed=3, hidden=64, log_every=10, quiet=True)
+    c, d, log = train_decompressor(data, tiny(), seed=3, hidden=64, log_every=10, quiet=True)
     assert log.last_loss < 0.85 * log.first_loss
-    c2, d2, log2 = T.train_decompressor(data, tiny(20), seed=3, hidden=64, log_every=10, quiet=True)
-    c3, d3, log3 = T.train_decompressor(data, tiny(20), seed=3, hidden=64, log_every=10, quiet=True)
+    c2, d2, log2 = train_decompressor(data, tiny(20), seed=3, hidden=64, log_every=10, quiet=True)
+    c3, d3, log3 = train_decompressor(data, tiny(20), seed=3, hidden=64, log_every=10, quiet=True)
     assert log2.rows[-1]["loss"] == log3.rows[-1]["loss"]
     np.testing.assert_array_equal(d2.to_arrays("d")["d.W0"], d3.to_arrays("d")["d.W0"])
 
@@ -59,7 +65,7 @@ def test_stepper_loss_drops(data):
     Z = smooth_latents(data)
     # 150 iterations: on the curated data's first 3000 frames 60 were too few to show the drop reliably
     # (measured: 1.82 -> 1.69 after 60, -> 1.40 after 150)
-    stepper, log = T.train_stepper(data, Z, tiny(150, 16), window=8, hidden=64, log_every=10, quiet=True)
+    stepper, log = train_stepper(data, Z, tiny(150, 16), window=8, hidden=64, log_every=10, quiet=True)
     assert log.last_loss < 0.9 * log.first_loss
 
 
@@ -68,7 +74,7 @@ def test_projector_loss_drops(data):
     # neighbour table of every frame costs the square of the frame count (57,500 frames: about 45 s)
     small = dataclasses.replace(data, X=data.X[:12000])
     Z = smooth_latents(small)
-    projector, log = T.train_projector(small, Z, tiny(200, 64), hidden=64, log_every=10, quiet=True)
+    projector, log = train_projector(small, Z, tiny(200, 64), hidden=64, log_every=10, quiet=True)
     assert projector.spec.skip
     # the skip connection starts the projector near the identity, so its first loss is already lower
     # (measured: 6.4 -> 4.8 over these 200 iterations; 0.74-0.76 of the first loss for seeds 1234, 7, 99)
@@ -80,16 +86,16 @@ def test_cell_violation_is_the_distance_inside_the_bisector():
     target = torch.tensor([[0.0, 0.0]])
     rivals = torch.tensor([[[2.0, 0.0], [0.0, 4.0]]])
     # 0.3 inside the first bisector (x = 1), 1.7 inside the second (y = 2)
-    inside = T.cell_violation(torch.tensor([[0.7, 0.3]]), target, rivals, margin=0.5)
+    inside = cell_violation(torch.tensor([[0.7, 0.3]]), target, rivals, margin=0.5)
     assert torch.allclose(inside, torch.tensor([[0.2, 0.0]]), atol=1e-6)
     # across the first bisector by 0.4: violation = margin + 0.4
-    outside = T.cell_violation(torch.tensor([[1.4, 0.0]]), target, rivals, margin=0.5)
+    outside = cell_violation(torch.tensor([[1.4, 0.0]]), target, rivals, margin=0.5)
     assert torch.allclose(outside, torch.tensor([[0.9, 0.0]]), atol=1e-6)
 
 
 def test_frame_neighbours_are_the_nearest_other_frames(data):
     X = data.X[:1500]
-    nb = T.frame_neighbours(X, 5, chunk=400)
+    nb = frame_neighbours(X, 5, chunk=400)
     d = ((X[:, None] - X[None]) ** 2).sum(-1)
     d.fill_diagonal_(float("inf"))
     ref = d.topk(5, dim=1, largest=False)
@@ -102,19 +108,19 @@ def test_frame_neighbours_bound_their_block_without_changing_the_answer(data, mo
     """On a CPU the distance block is cut to CPU_DISTANCE_BLOCK_BYTES (a full LAFAN1 download's 2048-row
     block is 4 GB): rows rank alone, so any block size gives the same neighbours."""
     X = data.X[:1500]
-    whole = T.frame_neighbours(X, 5)                       # one block of every row
-    monkeypatch.setattr(T, "CPU_DISTANCE_BLOCK_BYTES", 7 * 1500 * 4)
+    whole = frame_neighbours(X, 5)                       # one block of every row
+    monkeypatch.setattr(projector_training, "CPU_DISTANCE_BLOCK_BYTES", 7 * 1500 * 4)
     seen = []
     real_topk = torch.Tensor.topk
     monkeypatch.setattr(torch.Tensor, "topk", lambda t, *a, **kw: (seen.append(t.shape[0]), real_topk(t, *a, **kw))[1])
-    assert torch.equal(T.frame_neighbours(X, 5), whole)
+    assert torch.equal(frame_neighbours(X, 5), whole)
     assert max(seen) == 7 and sum(seen) == 1500
 
 
 def test_nearest_neighbours_are_exact(data):
     X = data.X[:2000]
     q = X[:50] + 0.3 * torch.randn(50, X.shape[1])
-    idx, cost = T.nearest_neighbours(q, X, chunk=700)
+    idx, cost = nearest_neighbours(q, X, chunk=700)
     brute = ((q[:, None] - X[None]) ** 2).sum(-1)
     assert torch.equal(idx, brute.argmin(1))
     assert torch.allclose(cost, brute.min(1).values, rtol=1e-5, atol=1e-6)
@@ -122,7 +128,7 @@ def test_nearest_neighbours_are_exact(data):
 
 def test_window_starts_stay_in_ranges(dbf, data):
     db, _ = dbf
-    w = T.window_starts_from(data, 20)
+    w = window_starts_from(data, 20)
     assert len(w) > 0
     assert np.all(db.range_index(w) == db.range_index(w + 19))
     assert np.all(w + 19 < 3000)
