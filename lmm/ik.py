@@ -388,6 +388,23 @@ def solve_leg_floats(global_pos, global_rot, chain, toe_target, toe_axis_local, 
     return hip_rot, knee_rot, global_rot[foot], toe_rot
 
 
+def solve_legs(locks: FootLockState, global_pos, global_rot, leg_chains, targets, toe_axes, toe_length: float,
+               foot_height: float) -> list:
+    """:func:`solve_leg_floats` for every leg whose toe must move this tick (locked, or free and not yet
+    blended back onto the animation): a list of (leg index, new global rotations of its chain). A locked
+    toe keeps the tip of the foot above the ground (its lock height minus the foot height)."""
+    solved = []
+    for i, leg in enumerate(leg_chains):
+        target, toe = targets[i], global_pos[leg[3]]
+        is_locked = locks.is_locked(i)
+        if not is_locked and (abs(target[0] - toe[0]) <= 1e-6 and abs(target[1] - toe[1]) <= 1e-6
+                              and abs(target[2] - toe[2]) <= 1e-6):
+            continue  # free and fully blended back: nothing to solve
+        ground = target[1] - foot_height if is_locked else None
+        solved.append((i, solve_leg_floats(global_pos, global_rot, leg, target, toe_axes[i], toe_length, ground)))
+    return solved
+
+
 def solve_leg(global_pos, global_rot, chain, toe_target, toe_axis_local, toe_length: float,
               ground_height: float | None):
     """New global rotations for (hip, knee, foot, toe) of one leg so the toe reaches ``toe_target``.

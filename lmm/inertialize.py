@@ -219,7 +219,7 @@ class ShownPose:
     :func:`inertialize_apply` returns, with the velocities worked out when first read (by the next
     transition, which most ticks do not have) from the offsets and source pose they came from: the same
     numpy operations on the same arrays (neither is written in place once made), so the same bits.
-    ``source``: the source pose (a :class:`lmm.character.SourcePose`), whose velocities are read only then."""
+    ``source``: the source pose (a :class:`lmm.source_pose.SourcePose`), whose velocities are read only then."""
 
     __slots__ = ("_pos", "_rot", "_offsets", "_vel", "_ang", "_source")
 

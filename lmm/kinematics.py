@@ -128,10 +128,12 @@ class PoseSkeleton:
     foot, toe), ``legs[i] = (chain, hip's parent, the rest of the chain's subtree)`` for :func:`leg_update`,
     or ``legs = None`` when the legs do not have the shape it needs (each bone of a chain the parent of the
     next, the legs' subtrees disjoint and the hips' parents outside both)."""
-    __slots__ = ("parents", "roots", "links", "legs")
+    __slots__ = ("parents", "roots", "links", "leg_chains", "legs", "_subtrees")
 
     def __init__(self, parents, leg_chains=()):
         self.parents = parents = [int(p) for p in parents]
+        self.leg_chains = [tuple(chain) for chain in leg_chains]
+        self._subtrees: dict[tuple, tuple] = {}  # solved legs -> (their bones, their subtrees)
         self.roots = [j for j, pj in enumerate(parents) if pj < 0]
         self.links = [(j, pj) for j, pj in enumerate(parents) if pj >= 0]
         subtrees = [subtree(parents, [chain[0]]) for chain in leg_chains]
@@ -205,3 +207,31 @@ def leg_update(global_rot: list, global_pos: list, local_rot: list, local_pos, c
         if pj >= 0:  # (the hip's position, its parent's plus its rotated offset, did not change)
             global_pos[j] = quat.mul_vec_scalar(rotation, local_pos[j], global_pos[pj])
         pj = j
+
+
+def pose_update_legs(skeleton: PoseSkeleton, global_rot: list, global_pos: list, local_rot: list, local_pos,
+                     solved) -> None:
+    """One pose after leg IK, in place: ``solved`` lists (leg index, the new global rotations of its chain);
+    the chains' local rotations from them, then forward kinematics of the legs' subtrees only. Per leg
+    (:func:`leg_update`) when the skeleton's legs allow it, else the generic local-from-global loop and
+    :func:`pose_forward_kinematics_update`: the same bits either way."""
+    if skeleton.legs is not None:
+        for i, rots in solved:
+            chain, parent, rest = skeleton.legs[i]
+            leg_update(global_rot, global_pos, local_rot, local_pos, chain, parent, rots)
+            if rest:
+                pose_forward_kinematics_update(global_rot, global_pos, local_rot, local_pos, skeleton.parents, rest)
+        return
+    parents = skeleton.parents
+    for i, rots in solved:
+        for j, q in zip(skeleton.leg_chains[i], rots):
+            global_rot[j] = q  # the other leg's solve read none of these bones
+    key = tuple(i for i, _ in solved)
+    found = skeleton._subtrees.get(key)
+    if found is None:
+        changed = sorted(j for i in key for j in skeleton.leg_chains[i])
+        found = skeleton._subtrees[key] = (changed, subtree(parents, changed))
+    changed, joints = found
+    for j in changed:  # local = parent^-1 * global
+        local_rot[j] = quat.inv_mul_scalar(global_rot[parents[j]], global_rot[j])
+    pose_forward_kinematics_update(global_rot, global_pos, local_rot, local_pos, parents, joints)

@@ -26,7 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
-from lmm.character import CharacterController, SearchOutcome, SourcePose
+from lmm.character import CharacterController
+from lmm.source_pose import SearchOutcome, SourcePose
 from lmm.controller import Candidates, Capabilities
 from lmm.mm import default_start_frame
 from lmm.nn import MLP, pose_vector_slices, pose_vector_tick_columns

@@ -5,7 +5,8 @@ import math
 
 import numpy as np
 
-from lmm.character import CharacterController, SearchOutcome, SourcePose, database_source_pose, root_local_velocities
+from lmm.character import CharacterController
+from lmm.source_pose import SearchOutcome, SourcePose, database_source_pose, root_local_velocities
 from lmm.controller import Candidates, Capabilities
 from lmm.data.derived import cached
 from lmm.search import SearchIndex, biased_search, brute_force_search, candidate_mask

@@ -201,6 +201,42 @@ class StickWorld:
         return value
 
 
+class SharpInputChange:
+    """Whether a sharp change of the desired motion just ended: true on the tick the desired velocity's (or
+    rotation's) rate of change falls back under the threshold after exceeding it, when the new trajectory
+    is known (the controller then forces a search)."""
+    __slots__ = ("velocity_high", "rotation_high")
+
+    def __init__(self):
+        self.velocity_high = self.rotation_high = False
+
+    def __call__(self, des_vel, des_rot, prev_vel, prev_rot, threshold: float, dt: float) -> bool:
+        """``des_*``/``prev_*``: this tick's and the last tick's desired velocity (3 floats) and rotation
+        (4 floats)."""
+        if dt <= 0:
+            return False
+        d0, d1, d2 = des_vel[0] - prev_vel[0], des_vel[1] - prev_vel[1], des_vel[2] - prev_vel[2]
+        vel_rate = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2) / dt
+        if des_rot == prev_rot and threshold * dt > 1e-12:
+            # unchanged: q * conj(q)'s vector part is zero up to a rounding or two of its products (under
+            # 1e-15), so its rate stays under the threshold; skip the logarithm
+            rot_rate = 0.0
+        else:
+            rot_rate = quat.norm_scalar(quat.angle_axis_difference_scalar(des_rot, prev_rot)) / dt
+        forced = False
+        if vel_rate > threshold:
+            self.velocity_high = True
+        elif self.velocity_high:
+            self.velocity_high = False
+            forced = True
+        if rot_rate > threshold:
+            self.rotation_high = True
+        elif self.rotation_high:
+            self.rotation_high = False
+            forced = True
+        return forced
+
+
 class SimulationFloats:
     """The simulation object as one tuple of float tuples ``state`` = (position, velocity, acceleration,
     rotation, angular_velocity), what the per-tick code reads and writes; :class:`SimulationState`'s

@@ -3,7 +3,7 @@ replace (recordings stay byte-identical), and debug-only work is deferred until 
 import numpy as np
 
 from lmm import quat
-from lmm.character import _LazyRootShift
+from lmm.root_motion import LazyRootShift, root_shift
 from lmm.kinematics import PoseSkeleton, pose_forward_kinematics, pose_forward_kinematics_update
 from lmm.skeleton import subtree as subtree_joints
 from lmm.controller import InputState
@@ -109,9 +109,10 @@ def test_root_shift_in_floats_is_bit_identical_to_the_numpy_form(db, features):
         position, rotation = rng.normal(size=3), quat.normalize(rng.normal(size=4))
         toes = rng.normal(size=(2, 3))
         want = toes - (position + quat.mul_vec(rotation, quat.inv_mul_vec(c.root_rotation, toes - c.root_position)))
-        got = np.array(c._root_shift([tuple(t) for t in toes.tolist()], position, rotation))
+        root = (c._root_position_t, c._root_rotation_t)
+        got = np.array(root_shift(*root, [tuple(t) for t in toes.tolist()], position, rotation))
         assert np.array_equal(got, want)
-        lazy = _LazyRootShift(c, [tuple(t) for t in toes.tolist()], position, rotation)
+        lazy = LazyRootShift(*root, [tuple(t) for t in toes.tolist()], position, rotation)
         assert np.array_equal(np.array([lazy[1], lazy[0]]), want[::-1])
 
 
@@ -121,12 +122,12 @@ def test_ground_offset_target_follows_the_take_of_the_source_frame(db, features)
     c = MotionMatchingController(db, features)
     c.tuning.ik_ground_calibration = True
     frames = list(range(0, len(db.contacts), 7)) + list(np.random.default_rng(1).integers(0, len(db.contacts), 300))
-    heights = c._range_contact_height
+    heights = c.ground._range_heights
     for f in frames:
         c.frame = int(f)
         h = float(heights[int(db.range_index(int(f)))])
         want = c.tuning.ik_foot_height_m - h if np.isfinite(h) else 0.0
-        assert c._ground_offset_target() == want
+        assert c.ground.target(c.tuning, c._calibration_frame()) == want
 
 
 def test_world_pose_arrays_match_forward_kinematics_of_the_returned_local_pose(db, features):
@@ -168,12 +169,12 @@ def test_single_pose_forward_kinematics_is_the_per_joint_definition_bit_for_bit(
 
 
 def _world_pose_state(c):
-    return (c.foot_lock.copy(), c._prev_toe, c._ground_offset, c._ground_offset_velocity, c._contact_height_span)
+    return (c.foot_lock.copy(), c._prev_toe, c.ground.offset, c.ground.velocity, c.ground._span)
 
 
 def _set_world_pose_state(c, state):
     c.foot_lock = state[0].copy()
-    c._prev_toe, c._ground_offset, c._ground_offset_velocity, c._contact_height_span = state[1:]
+    c._prev_toe, c.ground.offset, c.ground.velocity, c.ground._span = state[1:]
 
 
 def test_fused_leg_update_and_float32_arrays_equal_the_generic_float64_form(db, features):
@@ -217,7 +218,7 @@ def test_packed_rows_are_numpys_cast_bit_for_bit():
     """The pose arrays are packed by struct: the same bits as numpy's cast of the same floats, including
     values that round, overflow to infinity, underflow to zero or are NaN; new writable arrays each call,
     one per block, in the blocks' order and shapes."""
-    from lmm.character import _pack_rows
+    from lmm.pose_rows import pack_rows as _pack_rows
 
     rng = np.random.default_rng(3)
     rows = [tuple(v) for v in (rng.standard_normal((23, 4)) * 10.0 ** rng.integers(-45, 45, (23, 4))).tolist()]

@@ -181,7 +181,7 @@ def test_a_rotation_offset_past_the_threshold_takes_the_shorter_way_as_before():
 def test_shown_pose_and_root_velocities_are_inertialize_apply_bit_for_bit():
     """The step's split of :func:`inertialize_apply` (pose now, bone 0's velocities in floats, every
     bone's velocities when a transition reads them) gives the same bits, after any number of decays."""
-    from lmm.character import SourcePose
+    from lmm.source_pose import SourcePose
     from lmm.inertialize import ShownPose, inertialize_apply_pose, inertialize_root_velocities
 
     rng = np.random.default_rng(7)

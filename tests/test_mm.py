@@ -292,7 +292,7 @@ def test_memory_bytes_counts_pose_features_and_index(db, features):
 
 
 def test_ground_calibration_shifts_each_take_to_foot_height_without_popping(db, features):
-    from lmm.character import range_contact_heights
+    from lmm.ground import range_contact_heights
 
     toes = [db.bone("left_toe"), db.bone("right_toe")]
     heights = range_contact_heights(db, toes)

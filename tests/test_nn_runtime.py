@@ -353,7 +353,7 @@ def test_learned_controller_with_the_tick_decoding_stays_within_ten_micrometres(
     same run evaluating the whole decompressor and decoding with the per-column Gram-Schmidt version
     (what the recordings were made with before): every joint of every tick within 10 um, the same
     projector decisions."""
-    from lmm.character import SourcePose
+    from lmm.source_pose import SourcePose
     from lmm.learned import LearnedMotionMatchingController, load_default_networks
 
     def per_column(y):

@@ -3,7 +3,7 @@ lmm.quat) against a direct definition with lmm.quat's numpy forms, bit for bit (
 import numpy as np
 
 from lmm import quat
-from lmm.character import CharacterController, _damper_factor, _integrate_root, _radians
+from lmm.root_motion import _damper_factor, _radians, integrate_root, synchronize
 from lmm.tuning import Tuning
 
 
@@ -60,16 +60,6 @@ class _Sim:
         self.state = (tuple(position.tolist()), None, None, tuple(rotation.tolist()), None)
 
 
-class _Root:
-    """Just what _synchronize reads and writes."""
-
-    def __init__(self, tun, sim):
-        self.tuning, self.sim = tun, sim
-
-    def _set_root(self, position, rotation):
-        self.got = (tuple(position), tuple(rotation))
-
-
 def _unit(rng, n):
     q = rng.normal(size=n)
     return q / np.linalg.norm(q)
@@ -93,16 +83,15 @@ def test_integration_and_synchronization_equal_the_numpy_definition_bit_for_bit(
         vel, ang = tuple(rng.normal(size=3) * rng.uniform(0, 3)), tuple(rng.normal(size=3) * rng.uniform(0, 5))
         if trial % 13 == 0:
             ang = (0.0, 0.0, 0.0)
-        got = _integrate_root(root_pos, root_rot, vel, ang, dt)
+        got = integrate_root(root_pos, root_rot, vel, ang, dt)
         want = _reference_integrate(root_pos, root_rot, vel, ang, dt)
         assert [tuple(g) for g in got] == [tuple(w) for w in want]
         sim_pos = np.array(root_pos) + rng.normal(size=3) * rng.uniform(0, 0.6)
         sim_rot = np.array(_unit(rng, 4)) if trial % 4 else np.array(root_rot)
-        fake = _Root(tun, _Sim(sim_pos, sim_rot))
-        CharacterController._synchronize(fake, got[2], got[3], got[0], got[1], dt)
+        synchronized = synchronize(tun, _Sim(sim_pos, sim_rot).state, got[2], got[3], got[0], got[1], dt)
         ref = _reference_synchronize(tun, sim_pos.tolist(), tuple(sim_rot.tolist()), list(got[2]), got[3],
                                      got[0], got[1], dt)
-        assert fake.got == ref
+        assert synchronized == ref
         offset = np.array(ref[0]) - sim_pos
         hits["clamp_pos"] += bool(tun.clamping_enabled and np.isclose(np.linalg.norm(offset),
                                                                       tun.clamp_max_distance_m))

@@ -77,7 +77,7 @@ def test_mapped_database_equals_read_database(tmp_path, monkeypatch):
 
 
 def test_derived_arrays_are_cached_bit_identical(tmp_path, monkeypatch):
-    from lmm.character import root_local_velocities
+    from lmm.source_pose import root_local_velocities
     from lmm.features import build_features
 
     monkeypatch.setenv("LMM_TEST_TAKES", str(DATA_DIR / "lafan1"))

@@ -127,7 +127,8 @@ class _DerivedBeside:
 def _precompute_derived(db) -> None:
     """Fill the per-database cache beside the file (features, root velocities, contact heights, start
     frame, source skating; see lmm/data/derived.py) so the first run does not read every frame."""
-    from lmm.character import range_contact_heights, root_local_velocities
+    from lmm.ground import range_contact_heights
+    from lmm.source_pose import root_local_velocities
     from lmm.features import build_features
     from lmm.metrics import source_ground_skating
     from lmm.mm import default_start_frame
