@@ -159,7 +159,7 @@ def logs_dir():
     from pathlib import Path
 
     try:
-        from lmm.data.database import default_cache_dir
+        from lmm.data.cache import default_cache_dir
 
         return Path(default_cache_dir()) / "logs"
     except Exception:  # noqa: BLE001 - the database module itself may be what is broken

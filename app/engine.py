@@ -41,7 +41,7 @@ class StudioOptions:
 def load_session(opts: StudioOptions, report_error: Callable[[str, str], None]) -> tuple[Session, str | None]:
     """The session for ``opts`` and why LMM is not running (None when it is). A broken manifest opens
     the default database; a problem with the LMM weights is reported and the studio runs MM only."""
-    from lmm.data.database import load_or_build
+    from lmm.data.build import load_or_build
     from lmm.features import build_features
 
     try:

@@ -21,7 +21,7 @@ sys.path.insert(0, str(ROOT))
 
 from lmm import DEFAULT_MANIFEST
 from lmm.data import bvh  # noqa: E402
-from lmm.data.database import load_or_build  # noqa: E402
+from lmm.data.build import load_or_build  # noqa: E402
 from lmm.features import build_features  # noqa: E402
 from lmm.data.manifest import load_manifest  # noqa: E402
 from bench_bvh import median_time  # noqa: E402  (same folder)

@@ -154,7 +154,7 @@ def warm_caches(weights: str | None) -> str:
     database, its derived arrays and, on a background thread that competes with the GUI for the GIL for
     several seconds, the compressor latent of every frame), so the measured frames are those of a studio
     started before on this machine, not of a first start. Returns a line saying what was done."""
-    from lmm.data.database import load_or_build
+    from lmm.data.build import load_or_build
     from lmm.data.weights import WeightsError
     from lmm.features import build_features
     from lmm.latents import cached_database_latents

@@ -13,7 +13,7 @@ import argparse
 import numpy as np
 
 from lmm.data import bvh
-from lmm.data.database import load_or_build
+from lmm.data.build import load_or_build
 from lmm.metrics import ground_skating, source_ground_skating
 
 

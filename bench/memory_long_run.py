@@ -32,7 +32,7 @@ def main() -> None:
     ap.add_argument("--record", metavar="DIR", help="also stream the recording (BVH + input CSV) into DIR")
     args = ap.parse_args()
 
-    from lmm.data.database import load_or_build
+    from lmm.data.build import load_or_build
     from lmm.data.inputs import InputCsvWriter, open_input
     from lmm.data.recording import BVHRecorder
     from lmm.factory import make_controller

@@ -48,7 +48,7 @@ def idle_report(manifest_path, controller: str = "mm", input_spec: str = "builti
     range (MM: the frame it plays; LMM: whether an idle-tagged frame is (one of) the database frames
     nearest its state's features; the default data's idle ranges repeat standing stretches of locomotion
     ranges, so a standing pose has an idle-tagged and an untagged twin at the same distance)."""
-    from lmm.data.database import load_or_build
+    from lmm.data.build import load_or_build
     from lmm.data.inputs import open_input
     from lmm.factory import make_controller
     from lmm.features import build_features

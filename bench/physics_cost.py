@@ -12,7 +12,7 @@ import numpy as np
 
 
 def main() -> None:
-    from lmm.data.database import load_or_build
+    from lmm.data.build import load_or_build
     from lmm.physics.body import body_for_database
     from lmm.physics.env import ImitationEnv
     from lmm.physics.plausibility import plausibility

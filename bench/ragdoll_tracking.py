@@ -46,7 +46,7 @@ def main(argv=None) -> int:
     p.add_argument("--json", help="write the numbers here")
     args = p.parse_args(argv)
 
-    from lmm.data.database import load_or_build
+    from lmm.data.build import load_or_build
     from lmm.data.inputs import open_input
     from lmm.factory import make_controllers
     from lmm.features import build_features

@@ -29,7 +29,7 @@ from lmm import quat
 from lmm.coverage import Heatmap, speed_turn_heatmap
 from lmm.data import bvh
 from lmm.data.manifest import Manifest
-from lmm.data.database import MIN_RANGE_FRAMES
+from lmm.data.build import MIN_RANGE_FRAMES
 from lmm.errors import InputError
 from lmm.skeleton import bones_with_defaults, joint_of_role
 

@@ -62,7 +62,7 @@ class RootPath:
 def take_root_path(anim, manifest, path: str = "", frames: tuple[int, int] | None = None) -> RootPath:
     """The simulation bone of a loaded take (the database's definition, with the manifest's bones,
     unit scale and smoothing), over the file frames ``[a, b)`` (default: all)."""
-    from lmm.data.database import simulation_bone
+    from lmm.data.preparation import simulation_bone
 
     missing = [manifest.bones[k] for k in ("hips", "spine") if manifest.bones[k] not in anim.names]
     if missing:

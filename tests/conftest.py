@@ -7,7 +7,7 @@ import pytest
 
 @pytest.fixture(scope="session")
 def db():
-    from lmm.data.database import load_or_build
+    from lmm.data.build import load_or_build
     return load_or_build()[0]
 
 

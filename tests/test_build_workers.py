@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from lmm import DATA_DIR
-from lmm.data.database import build
+from lmm.data.build import build
 from lmm.data.manifest import ManifestError, load_manifest
 from lmm.errors import InputError
 
@@ -60,9 +60,9 @@ def test_workers_raise_the_same_error(tmp_path, bad_clip, field):
 
 
 def test_workers_check_the_frame_limit_in_order(tmp_path, monkeypatch):
-    import lmm.data.database as database
+    import lmm.data.build as database_build
 
-    monkeypatch.setattr(database, "MAX_DATABASE_FRAMES", 1700)  # clips[0] fills it, clips[1] passes it
+    monkeypatch.setattr(database_build, "MAX_DATABASE_FRAMES", 1700)  # clips[0] fills it, clips[1] passes it
     m = _manifest(tmp_path, CLIPS)
     messages = []
     for workers in (0, 2):

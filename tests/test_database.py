@@ -13,8 +13,10 @@ import pytest
 
 from lmm import DEFAULT_MANIFEST, quat
 from lmm.data import bvh
-from lmm.data.database import (Database, DatabaseError, build, load_or_build, manifest_key,
-                                mirror_local, mirror_map)
+from lmm.data.build import build, load_or_build
+from lmm.data.cache import manifest_key
+from lmm.data.database import Database, DatabaseError
+from lmm.data.preparation import mirror_local, mirror_map
 from lmm.filters import median_filter
 from lmm.data.manifest import ManifestError, load_manifest
 
@@ -283,14 +285,15 @@ def test_broken_bvh_in_manifest_is_reported(tmp_path):
 
 def test_cache_from_other_build_code_is_rebuilt(tmp_path, monkeypatch):
     """A cache written by different build code is not served, even under the same key."""
-    import lmm.data.database as database
+    import lmm.data.build as database_build
+    from lmm.data.cache import build_code_fingerprint
 
     cache = tmp_path / "cache"
     m = small_manifest(tmp_path)
     db1, info1 = load_or_build(m, cache_dir=cache)
-    assert db1.build_fingerprint == database.build_code_fingerprint()
+    assert db1.build_fingerprint == build_code_fingerprint()
     assert load_or_build(m, cache_dir=cache)[1].cached
-    monkeypatch.setattr(database, "build_code_fingerprint", lambda: "edited build code")
+    monkeypatch.setattr(database_build, "build_code_fingerprint", lambda: "edited build code")
     db2, info2 = load_or_build(m, cache_dir=cache)
     assert not info2.cached and db2.key == db1.key and info2.path == info1.path
 
@@ -354,12 +357,12 @@ def test_a_range_resampled_below_four_frames_is_refused(tmp_path):
 
 
 def test_database_frame_limit_stops_the_build_before_resampling(tmp_path, monkeypatch):
-    import lmm.data.database as database
+    import lmm.data.build as database_build
 
     calls = []
-    real = database.resample
-    monkeypatch.setattr(database, "resample", lambda *a, **k: calls.append(1) or real(*a, **k))
-    monkeypatch.setattr(database, "MAX_DATABASE_FRAMES", 1500)  # the first range: 599 x 2 mirrored
+    real = database_build.resample
+    monkeypatch.setattr(database_build, "resample", lambda *a, **k: calls.append(1) or real(*a, **k))
+    monkeypatch.setattr(database_build, "MAX_DATABASE_FRAMES", 1500)  # the first range: 599 x 2 mirrored
     with pytest.raises(ManifestError, match=r"clips\[0\]\.ranges\[1\].*pass 1500 frames"):
         build(load_manifest(small_manifest(tmp_path, clips=[
             {"file": str(DATA / "lafan1" / "obstacles3_subject4.bvh.gz"), "ranges": [[100, 400], [500, 620]]}])))
@@ -380,13 +383,13 @@ def test_unwritable_out_is_an_oserror_and_unwritable_cache_is_reported(tmp_path,
 
 
 def test_unreadable_take_is_a_manifest_error(tmp_path, monkeypatch):
-    import lmm.data.database as database
-    from lmm.data.database import manifest_key
+    import lmm.data.cache as cache
+    from lmm.data.cache import manifest_key
 
     def refuse(path):
         raise PermissionError(13, "Permission denied", str(path))
 
-    monkeypatch.setattr(database, "_file_digest", refuse)
+    monkeypatch.setattr(cache, "_file_digest", refuse)
     with pytest.raises(ManifestError, match=r"clips\[0\]\.file.*Permission denied"):
         manifest_key(load_manifest(small_manifest(tmp_path)))
 

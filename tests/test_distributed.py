@@ -55,7 +55,7 @@ def test_ddp_smoke_two_cpu_processes(tmp_path):
     assert summary["processes"] == 2 and summary["device"] == "cpu"
     assert set(summary["final_loss"]) == {"decompressor", "stepper", "projector"}
 
-    from lmm.data.database import load_or_build
+    from lmm.data.build import load_or_build
     from lmm.features import build_features
     from lmm.learned import LMMNetworks
     import numpy as np

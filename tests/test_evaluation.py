@@ -6,7 +6,7 @@ import json
 import numpy as np
 import pytest
 
-from lmm.data.database import load_or_build
+from lmm.data.build import load_or_build
 from lmm.offline.evaluation import nearest, projector_metrics
 from lmm.features import build_features
 from lmm.learned import DEFAULT_WEIGHTS, LMMNetworks

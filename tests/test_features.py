@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from lmm import quat
-from lmm.data.database import load_or_build
+from lmm.data.build import load_or_build
 from lmm.features import DEFAULT_LAYOUT, Channel, build_features, build_query
 
 

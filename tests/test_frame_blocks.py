@@ -8,10 +8,11 @@ import json
 import numpy as np
 import pytest
 
-import lmm.data.database as database
 import lmm.filters as filters
 from lmm import DATA_DIR, kinematics, quat
+from lmm.data.build import build
 from lmm.data.manifest import load_manifest
+from lmm.data.preparation import quat_central_difference, resampled_length
 
 PARENTS = [-1, 0, 1, 2, 3, 0, 5, 6, 7, 0, 9, 10, 11, 12, 11, 14, 15, 11, 17, 18]
 
@@ -63,9 +64,9 @@ def test_angular_velocities_in_blocks(monkeypatch, dtype):
     rot, _ = _motion(300, dtype)
     rot[150:] *= -1.0   # a sign flip on the way: abs_ takes the short way round
     monkeypatch.setattr(quat, "FRAME_BLOCK", 10**9)
-    whole = database.quat_central_difference(rot, 1 / 60)
+    whole = quat_central_difference(rot, 1 / 60)
     monkeypatch.setattr(quat, "FRAME_BLOCK", 64)
-    assert _same(whole, database.quat_central_difference(rot, 1 / 60))
+    assert _same(whole, quat_central_difference(rot, 1 / 60))
     inner = quat.to_scaled_angle_axis(quat.abs_(quat.mul_inv(rot[2:], rot[:-2]))) / (2 / 60)
     assert _same(whole[1:-1], inner.astype(np.float64))
 
@@ -104,10 +105,10 @@ def test_a_database_built_in_small_blocks_is_the_same(tmp_path, monkeypatch):
     m = load_manifest(path)
     monkeypatch.setattr(quat, "FRAME_BLOCK", 10**9)
     monkeypatch.setattr(filters, "CATMULL_ROM_BLOCK", 10**9)
-    whole, whole_meta = database.build(m).to_archive()
+    whole, whole_meta = build(m).to_archive()
     monkeypatch.setattr(quat, "FRAME_BLOCK", 97)
     monkeypatch.setattr(filters, "CATMULL_ROM_BLOCK", 101)
-    blocks, blocks_meta = database.build(m).to_archive()
+    blocks, blocks_meta = build(m).to_archive()
     assert whole_meta == blocks_meta and set(whole) == set(blocks)
     for name in whole:
         assert _same(np.asarray(whole[name]), np.asarray(blocks[name])), name
@@ -123,7 +124,7 @@ def test_workers_leave_no_spill_files(tmp_path, monkeypatch):
     path.write_text(json.dumps({"name": "spill", "clips": [
         {"file": str(DATA_DIR / "lafan1" / "obstacles3_subject4.bvh.gz"), "ranges": [[0, 200]]},
         {"file": str(DATA_DIR / "lafan1" / "obstacles3_subject3.bvh.gz"), "ranges": [[0, 150]]}]}))
-    db = database.build(load_manifest(path), workers=2)
-    assert db.n_frames == 2 * (database.resampled_length(200, 30, 60) + database.resampled_length(150, 30, 60))
+    db = build(load_manifest(path), workers=2)
+    assert db.n_frames == 2 * (resampled_length(200, 30, 60) + resampled_length(150, 30, 60))
     assert not list(tmp_path.glob("lmm-build-*"))
     assert isinstance(db.positions, np.ndarray) and not isinstance(db.positions, np.memmap)

@@ -47,7 +47,7 @@ def test_the_written_log_replays_bit_exact(derived, tmp_path):
 
 
 def test_a_controller_follows_the_same_simulation_object(derived):
-    from lmm.data.database import load_or_build
+    from lmm.data.build import load_or_build
     from lmm.factory import make_controller
     from lmm.features import build_features
     db, _ = load_or_build(None)

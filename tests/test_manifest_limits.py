@@ -127,7 +127,7 @@ def test_feature_schema_file_nested_deep(tmp_path):
 
 def test_error_about_a_clip_path_never_echoes_the_file(tmp_path):
     """A manifest naming a system-like text file: the error says which clip, not what the file holds."""
-    from lmm.data.database import build
+    from lmm.data.build import build
 
     secret = tmp_path / "passwd"
     secret.write_text("root:x:0:0:secret-line:/root:/bin/bash\n")

@@ -5,7 +5,7 @@ import pytest
 
 def test_env_smoke():
     pytest.importorskip("mujoco")
-    from lmm.data.database import load_or_build
+    from lmm.data.build import load_or_build
     from lmm.physics.env import REWARD_TERMS, ImitationEnv
 
     db, _ = load_or_build(None)

@@ -8,7 +8,7 @@ import pytest
 
 from lmm import DEFAULT_MANIFEST
 from lmm.data import bvh
-from lmm.data.database import build, load_or_build
+from lmm.data.build import build, load_or_build
 from lmm.data.manifest import load_manifest
 from lmm.data.ranges import (RangeSelectionError, check_selection, database_ranges, manifest_range,
                              range_of_frame)

@@ -21,7 +21,7 @@ def test_heldout_ranges_are_not_used_by_the_default_database():
 
 
 def test_a_held_out_range_through_mm(tmp_path):
-    from lmm.data.database import load_or_build
+    from lmm.data.build import load_or_build
     from lmm.factory import make_controller
     from lmm.features import build_features
     db, _ = load_or_build(None)

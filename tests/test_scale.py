@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from lmm import DATA_DIR
-from lmm.data.database import MAPPED_ARRAYS, Database, load_or_build
+from lmm.data.build import load_or_build
+from lmm.data.database import MAPPED_ARRAYS, Database
 from lmm.data.manifest import ManifestError, load_manifest
 from lmm.data.npz_mmap import map_members
 

@@ -9,7 +9,8 @@ from pathlib import Path
 import pytest
 
 from lmm import DEFAULT_MANIFEST
-from lmm.data.database import Database, load_or_build
+from lmm.data.build import load_or_build
+from lmm.data.database import Database
 from lmm.data.feature_schema import describe_schema_difference
 from lmm.data.manifest import ManifestError
 from lmm.data.weights import WeightsError, layout_signature

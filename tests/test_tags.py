@@ -148,7 +148,7 @@ def test_a_filter_that_matches_nothing_is_reported_in_the_snapshot():
     """The idle set on a database with no idle range: every frame is searched, and the snapshot says why
     in one line naming the tuning field (the studio's Search Candidates panel shows it)."""
     from lmm.controller import InputState
-    from lmm.data.database import load_or_build
+    from lmm.data.build import load_or_build
     from lmm.factory import make_controller
     from lmm.features import build_features
     import json, tempfile

@@ -365,7 +365,7 @@ def benchmark_lmm(runs: LearnedRuns) -> dict:
     }
     figures.update({f"network.{name}_us": median_us(getattr(nets, name), xs) for name, xs in samples.items()})
     from app.commands import cpp_reference
-    from lmm.data.database import default_cache_dir
+    from lmm.data.cache import default_cache_dir
 
     cpp, why = cpp_reference.measure({name: getattr(nets, name) for name in samples}, samples, default_cache_dir())
     if cpp is None:
@@ -450,7 +450,7 @@ def main(args) -> int:
         from lmm.data.atomic import check_writable
         check_writable(args.json_path)  # before minutes of benchmarking
 
-    from lmm.data.database import load_or_build
+    from lmm.data.build import load_or_build
     from lmm.features import build_features
 
     db, _ = load_or_build(args.manifest)

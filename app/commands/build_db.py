@@ -28,7 +28,7 @@ def _os_error_line(e: OSError, out) -> str:
 def main(args) -> int:
     import os
 
-    from lmm.data.database import MAX_BUILD_WORKERS, load_or_build
+    from lmm.data.build import MAX_BUILD_WORKERS, load_or_build
     from lmm.errors import InputError
     from lmm.progress import ProgressCallback
 
@@ -84,7 +84,7 @@ def main(args) -> int:
 
 class _DerivedBeside:
     """The derived arrays of a database just built, computed in a second process while this one writes
-    the database file (``start`` is :func:`lmm.data.database.load_or_build`'s ``before_save``): writing
+    the database file (``start`` is :func:`lmm.data.build.load_or_build`'s ``before_save``): writing
     600 MB and filling the cache were one after the other before (about 2 s and 5 s for the 0.5 M-frame
     set). Only with cores to spare and ``fork`` (the child reads the database this process holds)."""
 

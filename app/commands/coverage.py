@@ -21,7 +21,7 @@ def add_arguments(p) -> None:
 def main(args) -> int:
     from lmm import DEFAULT_MANIFEST
     from lmm.coverage import build_coverage
-    from lmm.data.database import load_or_build
+    from lmm.data.build import load_or_build
     from lmm.features import build_features
 
     if not args.png and not args.json:

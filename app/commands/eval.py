@@ -39,7 +39,7 @@ def main(args) -> int:
     if (args.json_path or args.plots) and not require("eval", "matplotlib", purpose=" for its plots"):
         return 2
     from lmm.data.atomic import check_writable
-    from lmm.data.database import load_or_build
+    from lmm.data.build import load_or_build
     from lmm.data.inputs import open_input
     from lmm.data.weights import load as load_weights
     from lmm.offline.evaluation import evaluate, load_compressor, read_loss_csv
@@ -83,7 +83,7 @@ def reconstruction(args) -> int:
     from app.commands.extras import require
     from lmm import DEFAULT_MANIFEST
     from lmm.data.atomic import check_writable
-    from lmm.data.database import load_or_build
+    from lmm.data.build import load_or_build
     from lmm.data.manifest import load_manifest
     from lmm.factory import make_controllers
     from lmm.features import build_features

@@ -79,7 +79,7 @@ def main(args) -> int:
         from lmm.learned import RUNTIME_NETWORKS
         load_weights(args.weights, require=RUNTIME_NETWORKS)  # metadata and arrays, before the database
 
-    from lmm.data.database import load_or_build
+    from lmm.data.build import load_or_build
     from lmm.features import build_features
     from lmm.data.recording import BVHRecorder
     from lmm.factory import make_controller

@@ -56,7 +56,7 @@ def main(args) -> int:
     from pathlib import Path
 
     from lmm.data.atomic import check_writable
-    from lmm.data.database import load_or_build
+    from lmm.data.build import load_or_build
     from lmm.features import build_features
     from lmm.offline.training import NETWORKS, Recipe, train_pipeline
 

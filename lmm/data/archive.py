@@ -2,8 +2,8 @@
 networks and search caches.
 
 An archive is an uncompressed, pickle-free ``.npz``: one ``.npy`` member per array and one member
-``metadata`` holding UTF-8 JSON as a uint8 array (keys sorted, so the same content is the same bytes:
-the search index names its cache after an encoder file's hash). Uncompressed, so a database's per-frame
+``metadata`` holding UTF-8 JSON as a uint8 array (keys sorted by default, so the same content is the same
+bytes: the search index names its cache after an encoder file's hash). Uncompressed, so a database's per-frame
 arrays can be memory-mapped where they lie (:mod:`lmm.data.npz_mmap`). Written whole or not at all
 (:func:`lmm.data.atomic.atomic_write`).
 
@@ -36,18 +36,20 @@ class ArchiveError(InputError):
     """An archive that cannot be read; the message names the file and the member or field."""
 
 
-def encode_metadata(metadata) -> np.ndarray:
-    """The metadata record: UTF-8 JSON bytes (keys sorted) as a uint8 array."""
-    return np.frombuffer(json.dumps(metadata, sort_keys=True).encode("utf-8"), dtype=np.uint8)
+def encode_metadata(metadata, sort_keys: bool = True) -> np.ndarray:
+    """The metadata record: UTF-8 JSON bytes as a uint8 array."""
+    return np.frombuffer(json.dumps(metadata, sort_keys=sort_keys).encode("utf-8"), dtype=np.uint8)
 
 
-def write(path, arrays: dict[str, np.ndarray], metadata) -> Path:
-    """Write ``arrays`` and ``metadata`` to ``path`` atomically (a killed writer never leaves half a file)."""
+def write(path, arrays: dict[str, np.ndarray], metadata, sort_keys: bool = True) -> Path:
+    """Write ``arrays`` and ``metadata`` to ``path`` atomically (a killed writer never leaves half a file).
+    ``sort_keys`` False keeps the metadata's own order (a database's bone roles and feature schema read
+    back in the manifest's order)."""
     if METADATA in arrays:
         raise ValueError(f"an archive array may not be named {METADATA!r}")
     path = Path(path)
     with atomic_write(path) as f:
-        np.savez(f, **arrays, **{METADATA: encode_metadata(metadata)})
+        np.savez(f, **arrays, **{METADATA: encode_metadata(metadata, sort_keys)})
     return path
 
 

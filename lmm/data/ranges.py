@@ -109,7 +109,7 @@ def database_ranges(db, manifest=None) -> list[RangeInfo]:
 
 
 def _manifest_files(db, manifest) -> list[str] | None:
-    """The file of every database range in build order (see lmm.data.database.build), or None when the
+    """The file of every database range in build order (see lmm.data.build.build), or None when the
     manifest does not have this database's number of ranges."""
     if manifest is None:
         return None

@@ -256,7 +256,7 @@ def embedder_identity(embedder) -> str:
 # --- the index -----------------------------------------------------------------------------------------
 
 def default_cache_folder() -> Path:
-    from lmm.data.database import default_cache_dir
+    from lmm.data.cache import default_cache_dir
 
     return Path(default_cache_dir()) / "motion_search"
 

@@ -9,7 +9,7 @@ frames (:mod:`lmm.motion_search.windows`), their action labels and the held-out 
   shares a frame with a query. Every take keeps its label in both parts (LAFAN1 has a single ``walk``
   and a single ``push`` take, so holding out whole takes would leave those labels untrained).
 * **Cache**: the frames of a folder are cached in ``search/frames-<key>.npz`` under the cache folder
-  (:func:`lmm.data.database.default_cache_dir`), the key a hash of the files' paths, sizes and
+  (:func:`lmm.data.cache.default_cache_dir`), the key a hash of the files' paths, sizes and
   modification times and of the window representation, written atomically.
 """
 from __future__ import annotations
@@ -89,7 +89,7 @@ def load_takes(folder=None, cache: bool = True, log=None) -> list[Take]:
     """The takes of ``folder`` (default: :data:`DEFAULT_DATA_DIR`), from the cache when it is current.
     A file that cannot be read or whose key joints cannot be matched raises its one-line error (naming
     the file); a take shorter than one window is kept (it has no windows)."""
-    from lmm.data.database import default_cache_dir
+    from lmm.data.cache import default_cache_dir
 
     folder = Path(folder) if folder is not None else DEFAULT_DATA_DIR
     files = bvh_files(folder)

@@ -80,7 +80,7 @@ def cached_embeddings(db: Database, embedder, key: str, log=None) -> tuple[np.nd
     """The database's embeddings by ``embedder``, from the cache folder when present; (vectors, seconds
     spent embedding, 0 when cached)."""
     from lmm.data.atomic import atomic_write
-    from lmm.data.database import default_cache_dir
+    from lmm.data.cache import default_cache_dir
 
     path = default_cache_dir() / "search" / f"emb-{key}.npy"
     if path.is_file():

@@ -44,7 +44,7 @@ def lmm_weights(tmp_path_factory):
     here (needs torch), else None (the studio then runs MM only and the LMM checks are skipped)."""
     import numpy as np
 
-    from lmm.data.database import load_or_build
+    from lmm.data.build import load_or_build
     from lmm.features import build_features
 
     db, _ = load_or_build()

@@ -18,7 +18,7 @@ from lmm.data.ranges import database_ranges
 
 @pytest.fixture(scope="module")
 def dbf():
-    from lmm.data.database import load_or_build
+    from lmm.data.build import load_or_build
     from lmm.features import build_features
 
     db, _ = load_or_build()
@@ -144,7 +144,7 @@ def test_the_data_layout_shows_the_database_panel(data_run):
 
 @pytest.mark.gui
 def test_selecting_a_range_previews_its_first_frame_beside_the_character(data_run):
-    from lmm.data.database import load_or_build
+    from lmm.data.build import load_or_build
 
     db, _ = load_or_build()
     sel = labels(data_run)["selected"]
