@@ -8,6 +8,7 @@ from __future__ import annotations
 import torch
 import torch.nn.functional as F
 
+from lmm.kinematics import forward_kinematics_velocity_joints
 from lmm.nn import pose_vector_size, pose_vector_slices
 from lmm.offline.distributed import Parallel
 from lmm.offline.networks import NormalizedMLP, default_specs
@@ -36,19 +37,14 @@ def gram_schmidt(xy: torch.Tensor) -> torch.Tensor:
 
 
 def fk_torch(rot: torch.Tensor, pos: torch.Tensor, vel: torch.Tensor, ang: torch.Tensor, parents):
-    """Forward kinematics with velocities on rotation matrices. Shapes (B, J, 3, 3) / (B, J, 3)."""
-    g_rot, g_pos, g_vel, g_ang = [], [], [], []
-    for j, p in enumerate(parents):
-        if p < 0:
-            g_rot.append(rot[:, j]); g_pos.append(pos[:, j]); g_vel.append(vel[:, j]); g_ang.append(ang[:, j])
-        else:
-            pr = g_rot[p]
-            offset = (pr @ pos[:, j, :, None])[..., 0]
-            g_rot.append(pr @ rot[:, j])
-            g_pos.append(offset + g_pos[p])
-            g_vel.append(g_vel[p] + (pr @ vel[:, j, :, None])[..., 0] + torch.linalg.cross(g_ang[p], offset))
-            g_ang.append((pr @ ang[:, j, :, None])[..., 0] + g_ang[p])
-    return (torch.stack(g_rot, 1), torch.stack(g_pos, 1), torch.stack(g_vel, 1), torch.stack(g_ang, 1))
+    """Forward kinematics with velocities on rotation matrices (the recursion of
+    :func:`lmm.kinematics.forward_kinematics_velocity_joints`). Shapes (B, J, 3, 3) / (B, J, 3)."""
+    def rotate(m, v):
+        return (m @ v[..., None])[..., 0]
+
+    out = forward_kinematics_velocity_joints(rot.unbind(1), pos.unbind(1), vel.unbind(1), ang.unbind(1), parents,
+                                             torch.matmul, rotate, torch.linalg.cross)
+    return tuple(torch.stack(x, 1) for x in out)
 
 
 # ---------------------------------------------------------------------------------------------
