@@ -121,7 +121,8 @@ class Studio(SessionActions):
         from .panels.motion_search import MotionSearchPanel
         from .panels.physics import PhysicsPanel
         from .panels.recording import RecordingPanel
-        from .panels.search import CandidatesPanel, SearchPanel
+        from .panels.candidates import CandidatesPanel
+        from .panels.search import SearchPanel
         from .panels.stats import StatsPanel
         from .panels.timeline import TimelinePanel
         from .panels.tuning import TuningPanel

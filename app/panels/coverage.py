@@ -18,12 +18,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from lmm.coverage import Coverage, DataDistance, build_coverage, first_trajectory_dims, query_speed_turn
+from lmm.coverage import Coverage, DataDistance, build_coverage, first_trajectory_dims
 from lmm.reporting import PALETTE, category_centres, heat_colors, map_bounds, map_categories, map_image
 
 from ..jobs import Jobs
 from .base import Panel, View
 from .common import COLORS, SHORT, fmt_num, short_channel_name
+from .coverage_query import QueryReport, distance_for
 
 MAP_TEXELS = 200            # the map image's side: every database frame is drawn into it
 TRAIL_S = 2.0               # seconds of queries behind the current one
@@ -52,35 +53,6 @@ def percentile_in(hist_edges: np.ndarray, hist_counts: np.ndarray, value: float)
         return float("nan")
     cum = np.concatenate([[0.0], np.cumsum(hist_counts, dtype=np.float64)])
     return float(100.0 * np.interp(value, hist_edges, cum) / max(cum[-1], 1.0))
-
-
-class QueryReport:
-    """What the panel shows about one controller's query at the displayed tick (plain data)."""
-
-    def __init__(self, cov: Coverage, distance: DataDistance, features, snap, trail_queries: np.ndarray,
-                 horizon: int, fps: float):
-        q = np.asarray(snap.query, np.float64)
-        self.xy = cov.project_query(q, features.inv_scale)
-        trail = trail_queries[np.all(np.isfinite(trail_queries), axis=1)] if trail_queries.ndim == 2 else q[None]
-        self.trail = cov.project_query(trail, features.inv_scale) if len(trail) else self.xy[None]
-        self.nearest_frame, self.cost = distance.nearest(q)
-        self.speed, self.turn = query_speed_turn(snap.trajectory_positions, snap.trajectory_rotations,
-                                                 snap.trajectory_offsets, snap.pose.global_positions[0],
-                                                 snap.pose.global_rotations[0], horizon, fps)
-        self.cell_seconds = cov.heatmap.seconds_at(self.speed, self.turn)
-        self.raw = features.denormalize(np.asarray(snap.query, np.float32)).astype(np.float64)
-
-    def to_dict(self) -> dict:
-        f = lambda v: None if v is None or not np.isfinite(v) else float(v)  # noqa: E731
-        return {"xy": self.xy.tolist(), "trail_points": int(len(self.trail)), "nearest_frame": int(self.nearest_frame),
-                "cost": f(self.cost), "speed_m_s": f(self.speed), "turn_deg_s": f(self.turn),
-                "cell_seconds": f(self.cell_seconds)}
-
-
-def _distance_for(features) -> tuple:
-    """(the normalised features it was built on, :class:`DataDistance` over them): a panel's nearest-frame
-    search, made again when a weight change replaces the array."""
-    return features.normalized, DataDistance(features.normalized)
 
 
 class CoveragePanel(Panel):
@@ -188,7 +160,7 @@ class CoveragePanel(Panel):
                 cov = build_coverage(engine.db, engine.features)
                 horizon = first_trajectory_dims(engine.features.layout)[2]
                 # the running controllers' nearest-frame indexes too (0.17 s each for 0.5 M frames)
-                distance = {n: _distance_for(engine.features_of(n))
+                distance = {n: distance_for(engine.features_of(n))
                             for n in CONTROLLERS if n in engine.controller_names()}
             except Exception as e:  # noqa: BLE001 - a layout without trajectory channels: said, studio runs on
                 raise RuntimeError(f"no coverage: {e}") from e
@@ -242,7 +214,7 @@ class CoveragePanel(Panel):
         features = self.ctx.engine.features_of(name)
         have = self._distance.get(name)
         if have is None or have[0] is not features.normalized:   # the array itself: a weight change replaces it
-            have = self._distance[name] = _distance_for(features)
+            have = self._distance[name] = distance_for(features)
         distance = have[1]
         # motion matching's nearest frame among those it may pick; the learned controller's networks do
         # not know the exclusions, so its nearest frame is any

@@ -1,12 +1,8 @@
-"""Search panels.
-
-* "Nearest Neighbour vs Projector": at each search of the learned controller, the exact nearest
-  database frame of the query and its cost beside the projector's output (its nearest frame) and its
-  cost, their feature distance, the agreement rate over time, and a cost timeline (MM best cost, LMM
-  exact and projected cost, searches and transitions marked).
-* "Search Candidates": the ranked top-K candidates of the inspected controller with per-channel
-  costs (green = cheapest to red = dearest in each column), sortable by any column; clicking a row
-  previews that database frame (the Database panel and a ghost in the 3D view).
+"""The "Nearest Neighbour vs Projector" panel: at each search of the learned controller, the exact nearest
+database frame of the query and its cost beside the projector's output (its nearest frame) and its cost,
+their feature distance, the agreement rate over time, and a cost timeline (MM best cost, LMM exact and
+projected cost, searches and transitions marked). Database frames are named here (:func:`frame_label`)
+for the candidates panel too (:mod:`.candidates`).
 """
 from __future__ import annotations
 
@@ -17,9 +13,7 @@ import numpy as np
 from app.history import masks_agreement, search_masks
 
 from .base import Panel, View
-from .common import COLORS, GOOD, SHORT, cost_color, decimate, fmt_num, seconds_axis, short_channel_name
-
-MAX_ROWS = 64
+from .common import COLORS, GOOD, decimate, fmt_num, seconds_axis
 
 
 def frame_label(db, frame: int) -> tuple[str, float]:
@@ -41,57 +35,6 @@ def frame_tags(db, frame: int) -> str:
     if db is None or frame is None or not 0 <= frame < db.n_frames:
         return ""
     return ", ".join(db.tags_of(int(frame)))
-
-
-def candidate_rows(candidates, db=None) -> list[dict]:
-    """One dict per ranked candidate (pure, for tests): rank, frame, clip, tags, t, total, bias, channels."""
-    rows = []
-    if candidates is None:
-        return rows
-    frames = np.asarray(candidates.frames)
-    for i in range(len(frames)):
-        clip, t = frame_label(db, int(frames[i])) if db is not None else ("-", float("nan"))
-        rows.append({"rank": i + 1, "frame": int(frames[i]), "clip": clip, "tags": frame_tags(db, int(frames[i])),
-                     "t": t,
-                     "total": float(candidates.costs[i]), "bias": float(candidates.bias[i]),
-                     "channels": [float(c) for c in np.asarray(candidates.channel_costs[i])]})
-    return rows
-
-
-def sort_rows(rows: list[dict], key: str, descending: bool = False) -> list[dict]:
-    """Sort candidate rows by a column key (``rank``, ``frame``, ``clip``, ``t``, ``total``, ``bias``
-    or ``ch<i>``); NaNs last."""
-    def value(r):
-        if key.startswith("ch"):
-            v = r["channels"][int(key[2:])]
-        else:
-            v = r[key]
-        if isinstance(v, str):
-            return (0, v)
-        return (1 if not np.isfinite(v) else 0, v)
-    out = sorted(rows, key=value, reverse=descending)
-    if descending:  # keep NaNs last
-        out = [r for r in out if value(r)[0] == 0] + [r for r in out if value(r)[0] == 1]
-    return out
-
-
-def column_fractions(rows: list[dict], key: str, digits: int = 3) -> list[float]:
-    """Each row's value of a cost column placed in the column's min..max as [0, 1], for colouring.
-
-    Values are compared as shown (rounded to ``digits``): values that read the same get the same
-    colour, and a column whose values all read the same is all 0 (green); a missing value is 1.
-    """
-    vals = np.array([r[key] if not key.startswith("ch") else r["channels"][int(key[2:])] for r in rows], float)
-    if vals.size == 0:
-        return []
-    shown = np.round(vals, digits)
-    finite = shown[np.isfinite(shown)]
-    if finite.size == 0:
-        return [0.5] * len(rows)
-    lo, hi = float(finite.min()), float(finite.max())
-    if hi - lo < 0.5 * 10.0 ** -digits:
-        return [0.0 if np.isfinite(v) else 1.0 for v in shown]
-    return [float((v - lo) / (hi - lo)) if np.isfinite(v) else 1.0 for v in shown]
 
 
 def rolling_agreement(searched, nn, got, window: int, tolerance: int = 0) -> np.ndarray:
@@ -295,150 +238,3 @@ class SearchPanel(Panel):
 
     def state(self) -> dict:
         return {k: (None if isinstance(v, float) and not np.isfinite(v) else v) for k, v in self.last.items()}
-
-
-class CandidatesPanel(Panel):
-    """Ranked candidates of the inspected controller's last search."""
-    key = "candidates"
-
-    def __init__(self, ctx):
-        super().__init__(ctx)
-        self.sort_key = "total"
-        self.descending = False
-        self._shown_for = None
-        self._highlighted: dict = {}     # (row, column) -> the colour dearpygui has for the cell (None: none)
-        self.rows: list[dict] = []
-        self.columns: list[str] = []
-
-    def build(self, window_kwargs: dict) -> None:
-        dpg = self.dpg
-        names = self.ctx.engine.channel_names
-        self.columns = (["rank", "frame", "clip", "tags", "t", "total", "bias"]
-                        + [f"ch{i}" for i in range(len(names))])
-        labels = ["#", "frame", "clip", "tags", "t (s)", "total", "bias"] + [short_channel_name(n) for n in names]
-        with self.window(window_kwargs):
-            dpg.add_text("", tag="cand_status")
-            with dpg.table(tag="cand_table", header_row=True, sortable=True, callback=self._on_sort,
-                           borders_innerV=True, borders_outerH=True, borders_outerV=True, resizable=True,
-                           policy=dpg.mvTable_SizingFixedFit, scrollY=True, scrollX=True, freeze_rows=1,
-                           height=-1):
-                widths = {"rank": 18, "frame": 50, "clip": 150, "tags": 90, "t": 40, "total": 46, "bias": 40}
-                for i, (key, label) in enumerate(zip(self.columns, labels)):
-                    dpg.add_table_column(label=label, tag=f"cand_col_{key}", user_data=key,
-                                         default_sort=(key == "total"), prefer_sort_ascending=True,
-                                         width_fixed=True, init_width_or_weight=widths.get(key, 64))
-                for r in range(MAX_ROWS):
-                    with dpg.table_row(tag=f"cand_row_{r}", show=r < 8):
-                        for key in self.columns:
-                            if key == "rank":   # the whole row is clickable: preview its frame
-                                dpg.add_selectable(label="", tag=f"cand_{r}_{key}", span_columns=True,
-                                                   callback=self._on_click, user_data=r)
-                            else:
-                                dpg.add_text("", tag=f"cand_{r}_{key}")
-
-    def _on_sort(self, sender, sort_specs):
-        if not sort_specs:
-            return
-        col, direction = sort_specs[0]
-        key = self.dpg.get_item_user_data(col)
-        self.sort_key = key or "total"
-        self.descending = direction < 0
-        self._shown_for = None  # redraw
-
-    def _on_click(self, sender, value, r):
-        self.dpg.set_value(sender, False)      # a click previews; the row does not stay selected
-        self.click_row(r)
-
-    def click_row(self, r: int) -> None:
-        """Preview the database frame of the shown row ``r`` (0 = top)."""
-        if 0 <= r < len(self.rows):
-            self.ctx.actions.preview_database_frame(int(self.rows[r]["frame"]))
-
-    def set_sort(self, key: str, descending: bool = False) -> None:
-        self.sort_key, self.descending = key, descending
-        self._shown_for = None
-
-    def prepare_key(self, view: View) -> tuple:
-        return (self.sort_key, self.descending)
-
-    def prepare(self, view: View) -> dict | None:
-        """The sorted rows of the inspected controller's candidates and their colour fractions. Reading
-        the candidates runs motion matching's ranked search when the tick's search left it for the first
-        reader (see :class:`lmm.mm.MotionMatchingController`): on the tick worker, not the GUI thread."""
-        snap = view.snap()
-        if snap is None:
-            return None
-        cands = snap.candidates
-        rows = sort_rows(candidate_rows(cands, self.ctx.engine.db), self.sort_key, self.descending)
-        fractions = {k: column_fractions(rows, k) for k in self.columns if k == "total" or k.startswith("ch")}
-        return {"candidates": cands, "rows": rows, "fractions": fractions}
-
-    def update(self, view: View, prepared: dict | None = None) -> None:
-        dpg = self.dpg
-        snap = view.snap()
-        cands = None if snap is None else snap.candidates
-        key = (id(cands), self.sort_key, self.descending, view.inspected)
-        if snap is None:
-            self.text.set("cand_status", "no search yet")
-            return
-        name = SHORT.get(view.inspected, view.inspected)
-        searched = "searched this tick" if snap.searched else "last search"
-        forced = " (forced)" if snap.forced_search else ""
-        tags = frame_tags(self.ctx.engine.db, snap.matched_frame)
-        status = (f"{name}: {searched}{forced}, best frame {snap.matched_frame}"
-                  + (f" [{tags}]" if tags else "") + f", cost {fmt_num(snap.best_cost)}")
-        if snap.search_note:
-            status += f"\n{snap.search_note}"
-        self.text.set("cand_status", status)
-        if key == self._shown_for:
-            return
-        self._shown_for = key
-        if prepared is None or prepared["candidates"] is not cands:
-            prepared = self.prepare(view)
-        rows, fractions = prepared["rows"], prepared["fractions"]
-        self.rows = rows
-        for r in range(MAX_ROWS):
-            show = r < len(rows)
-            self.text.configure(f"cand_row_{r}", show=show)
-            if not show:
-                continue
-            row = rows[r]
-            for c, k in enumerate(self.columns):
-                if k.startswith("ch"):
-                    v = row["channels"][int(k[2:])]
-                    txt = f"{v:.3f}"
-                elif k == "clip":
-                    txt = row["clip"][:24]
-                elif k == "tags":
-                    txt = row["tags"][:20]
-                elif k == "t":
-                    txt = f"{row['t']:.2f}"
-                elif k in ("total", "bias"):
-                    txt = f"{row[k]:.3f}"
-                else:
-                    txt = str(row[k])
-                if k == "rank":
-                    if self.text.get(f"cand_{r}_{k}") != txt:
-                        self.text.values[f"cand_{r}_{k}"] = txt
-                        dpg.configure_item(f"cand_{r}_{k}", label=txt)
-                    continue
-                self.text.set(f"cand_{r}_{k}", txt)
-                if k in fractions:
-                    self._highlight(r, c, cost_color(fractions[k][r]))
-            self._highlight(r, 1, (60, 110, 200, 170) if row["frame"] == snap.matched_frame else None)
-
-    def _highlight(self, row: int, column: int, color) -> None:
-        """Colour one cell of the table (None: none), telling dearpygui only of a change (a call costs
-        microseconds; a new search rewrote some fifty cells' colours, most of them the same)."""
-        lit = self._highlighted
-        if lit.get((row, column)) == color:
-            return
-        lit[(row, column)] = color
-        if color is None:
-            self.dpg.unhighlight_table_cell("cand_table", row, column)
-        else:
-            self.dpg.highlight_table_cell("cand_table", row, column, color)
-
-    def state(self) -> dict:
-        return {"sort": self.sort_key, "descending": self.descending,
-                "rows": [{k: v for k, v in r.items()} for r in self.rows]}

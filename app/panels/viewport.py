@@ -85,26 +85,6 @@ class ViewportPanel(Panel):
             self.cam.follow = self._follow
 
     @property
-    def camera(self):
-        return self.cam.camera if self.cam is not None else None
-
-    @property
-    def readback_why(self):
-        return self.tex.readback_why
-
-    @property
-    def drawings(self) -> dict:
-        return self.characters.drawings
-
-    @property
-    def side_by_side(self) -> bool:
-        return self.characters.side_by_side
-
-    @side_by_side.setter
-    def side_by_side(self, on: bool) -> None:
-        self.characters.side_by_side = bool(on)
-
-    @property
     def reference_overlay(self) -> bool:
         """A followed reference is drawn over the inspected character (else to the characters' left)."""
         return self.reference.overlay
@@ -121,8 +101,8 @@ class ViewportPanel(Panel):
                 dpg.add_text("Inspect:")
                 dpg.add_radio_button([SHORT[n] for n in COLORS], tag="vp_inspect", horizontal=True,
                                      default_value=SHORT[self._inspected_shown], callback=self._on_inspect)
-                dpg.add_checkbox(label="Side by side", tag="vp_side", default_value=self.side_by_side,
-                                 callback=lambda s, a: setattr(self, "side_by_side", bool(a)))
+                dpg.add_checkbox(label="Side by side", tag="vp_side", default_value=self.characters.side_by_side,
+                                 callback=lambda s, a: setattr(self.characters, "side_by_side", bool(a)))
                 dpg.add_checkbox(label="Follow", tag="vp_follow", default_value=self.follow,
                                  callback=lambda s, a: setattr(self, "follow", bool(a)))
                 with dpg.tooltip("vp_side"):
@@ -150,7 +130,7 @@ class ViewportPanel(Panel):
     def _on_toggle(self, sender, value, key):
         self.show[key] = bool(value)
         if key in ("sticks", "shadow"):
-            for d in self.drawings.values():
+            for d in self.characters.drawings.values():
                 d.set_style(self._style(), self.show["shadow"])
             for sk in (self.reference.skeleton, self.ragdoll and self.ragdoll.skeleton):
                 if sk is not None:
@@ -201,7 +181,8 @@ class ViewportPanel(Panel):
         self.scene.add(self.ground)
         parents = self.ctx.engine.db.parents
         for name in self.ctx.engine.controller_names():
-            self.characters.add(viewer, self.gl, self.scene, name, COLORS.get(name, (0.8, 0.8, 0.8)), self._body_style())
+            self.characters.add(viewer, self.gl, self.scene, name, COLORS.get(name, (0.8, 0.8, 0.8)),
+                                self._body_style())
         self.batch = MarkerBatch(viewer, self.gl)
         self.previews.drawings = PreviewDrawings(viewer, self.gl, self.scene)
         self.scene.add(*self.batch.renderables())
@@ -219,7 +200,7 @@ class ViewportPanel(Panel):
 
     def add_controller(self, name: str) -> None:
         """A controller appeared (e.g. LMM weights loaded at run time)."""
-        if self.gl is None or name in self.drawings:
+        if self.gl is None or name in self.characters.drawings:
             return
         self.characters.add(self.viewer, self.gl, self.scene, name, COLORS.get(name, (0.8, 0.8, 0.8)),
                             self._body_style())
@@ -283,7 +264,7 @@ class ViewportPanel(Panel):
         return self.characters.offset_of(name)
 
     def prepare_key(self, view: View) -> tuple:
-        return (tuple(self.drawings), tuple(sorted(self.show.items())), self.side_by_side,
+        return (tuple(self.characters.drawings), tuple(sorted(self.show.items())), self.characters.side_by_side,
                 tuple(sorted(view.ragdoll.items())), self.ragdoll is not None, self.reference.shown)
 
     def prepare(self, view: View) -> dict:
@@ -294,7 +275,7 @@ class ViewportPanel(Panel):
         if self.renderer is None or tick is None:
             return out
         heads = {}
-        for name in self.drawings:
+        for name in self.characters.drawings:
             snap = tick.snapshots.get(name)
             if snap is not None:
                 out[name] = self.characters.parts(name, snap, view, self.show)
@@ -331,7 +312,7 @@ class ViewportPanel(Panel):
         self.drawn["labels"] = self.labels.update(
             view, self.characters, None if prepared is None else prepared.get(_HEADS),
             None if ragdoll is None else (ragdoll["controller"], self.ragdoll.head(view, self.reference.shown)),
-            self.drawn.get("previews", []), self.camera, self.size, self.ctx.engine.dt)
+            self.drawn.get("previews", []), self.cam.camera, self.size, self.ctx.engine.dt)
         self.tex.readback_ms = 0.0
         self.render_ms = 0.0
         key = self._scene_key(view)
@@ -352,7 +333,7 @@ class ViewportPanel(Panel):
             return
         self._render_due = False
         t0 = time.perf_counter()
-        self.renderer.render_to(self.scene, self.camera)
+        self.renderer.render_to(self.scene, self.cam.camera)
         self.render_ms = (time.perf_counter() - t0) * 1e3
         self.renders += 1
         self.tex.unread = True
@@ -373,7 +354,7 @@ class ViewportPanel(Panel):
         picture, so a paused, untouched view is not drawn again (on software GL that is most of a frame);
         as a safety net it is drawn again every :attr:`REDRAW_EVERY` frames."""
         return (id(view.tick), view.tick_number, view.inspected, self.cam.key(),
-                tuple(self.show.items()), self.side_by_side, self.reference_overlay, self.previews.version,
+                tuple(self.show.items()), self.characters.side_by_side, self.reference_overlay, self.previews.version,
                 self.tex.tag)    # a new texture tag with every new size
 
     def finish(self) -> None:
@@ -401,8 +382,8 @@ class ViewportPanel(Panel):
         out["view_path"] = self.view_path()
         out["gl_renderer"] = self.gl_renderer
         out["renders"] = self.renders
-        out["readback_why"] = self.readback_why
-        out["side_by_side"] = self.side_by_side
+        out["readback_why"] = self.tex.readback_why
+        out["side_by_side"] = self.characters.side_by_side
         if self.cam is not None:
             out["camera"] = self.cam.state()
         return out

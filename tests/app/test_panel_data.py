@@ -15,7 +15,8 @@ from app.panels.common import cost_color, decimate, fmt_bytes, overlapping, shor
 from app.panels.menu import hidden_note
 from app.panels.features import bar_layout, bar_values, channel_errors
 from app.panels.latent import diverging_lut, heat_image, latent_scale
-from app.panels.search import candidate_rows, column_fractions, frame_label, rolling_agreement, sort_rows
+from app.panels.candidates import candidate_rows, column_fractions, sort_rows
+from app.panels.search import frame_label, rolling_agreement
 from app.frame_times import FrameTimes
 from app.panels.timeline import scrub_target
 from app.panels.tuning import pretty_label, widget_specs
@@ -33,7 +34,7 @@ from studio_testutil import CORPUS
 
 @pytest.fixture(scope="module")
 def dbf():
-    from lmm.data.build import load_or_build
+    from lmm.data.database import load_or_build
     from lmm.features import build_features
 
     db, _ = load_or_build()
