@@ -97,7 +97,7 @@ def main(args) -> int:
         from lmm.data.atomic import check_writable
         check_writable(args.json_path)  # before minutes of benchmarking
 
-    from lmm.data.database import load_or_build
+    from lmm.data.build import load_or_build
     from lmm.features import build_features
 
     db, _ = load_or_build(args.manifest)

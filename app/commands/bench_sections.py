@@ -175,7 +175,7 @@ def benchmark_lmm(runs: LearnedRuns) -> dict:
     }
     figures.update({f"network.{name}_us": median_us(getattr(nets, name), xs) for name, xs in samples.items()})
     from app.commands import cpp_reference
-    from lmm.data.database import default_cache_dir
+    from lmm.data.cache import default_cache_dir
 
     cpp, why = cpp_reference.measure({name: getattr(nets, name) for name in samples}, samples, default_cache_dir())
     if cpp is None:
