@@ -34,7 +34,7 @@ from studio_testutil import CORPUS
 
 @pytest.fixture(scope="module")
 def dbf():
-    from lmm.data.database import load_or_build
+    from lmm.data.build import load_or_build
     from lmm.features import build_features
 
     db, _ = load_or_build()
