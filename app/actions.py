@@ -1,13 +1,13 @@
-"""What the user (menus, panels, test scripts) can do to the simulation: replay input, open and follow a
-reference clip, load presets and weights, reset, inspect a controller, record.
+"""What the studio's commands (:mod:`app.studio_commands`) do to the simulation and the shell: replay
+input, open and follow a reference clip, load presets and weights, reset, inspect a controller, record;
+open dialogs, switch layouts, orbit the camera, quit.
 
 :class:`SessionActions` is a part of :class:`app.studio.Studio`; it uses the studio's ``session``,
-``playback``, ``errors``, ``viewport``, ``panels`` and ``dump``. Each action reports a bad file in the
-error dialog and returns False instead of raising.
+``playback``, ``errors``, ``viewport``, ``panels``, ``layouts``, ``dialogs`` and ``observer``. Each action
+reports a bad file in the error dialog and returns False instead of raising.
 """
 from __future__ import annotations
 
-from pathlib import Path
 
 from lmm.factory import make_controller
 
@@ -168,9 +168,7 @@ class SessionActions:
             self.errors.show("Recording", f"{path}: {e}")
             return False
         self.last_recording = "recording to " + ", ".join(p.name for p in paths.values())
-        if self.dump is not None:
-            self.dump.data["recordings"].append({"started": self.frame_index,
-                                                 "paths": {k: str(v) for k, v in paths.items()}})
+        self.observer.recording_started(self.frame_index, paths)
         return True
 
     def stop_recording(self) -> None:
@@ -180,8 +178,28 @@ class SessionActions:
             self.errors.show("Recording", f"cannot finish the recording: {e}")
             return
         self.last_recording = result.message
-        if self.dump is not None and self.dump.data["recordings"]:
-            self.dump.data["recordings"][-1].update(
-                written={k: str(v) for k, v in result.paths.items()}, stopped=self.frame_index,
-                frames=result.frames, message=result.message,
-                exists={k: Path(v).exists() for k, v in result.paths.items()})
+        self.observer.recording_stopped(self.frame_index, result)
+
+    # -- the shell: dialogs, layouts, camera, previews, quit -------------------------------------
+    def open_dialog(self, kind: str) -> None:
+        self.dialogs.open(kind, self.panels["recording"].path() if kind == "record" else None)
+
+    def switch_layout(self, name_or_path: str) -> bool:
+        ok = self.layouts.switch(name_or_path, self.frame_index)
+        self.menu.sync_window_checks()
+        return ok
+
+    def orbit_camera(self, d_azimuth: float) -> None:
+        """The input layer owns the camera azimuth (sticks and keys are camera relative)."""
+        if self.input is not None:
+            self.input.add_camera_orbit(d_azimuth)
+
+    def quit(self) -> None:
+        self.running = False
+
+    def preview_database_frame(self, frame: int) -> None:
+        """A clicked search candidate: the Database panel previews that frame (its window is shown)."""
+        panel = self.panels.get("database")
+        if panel is not None:
+            self.layouts.show_window("database", True)
+            panel.show_frame(int(frame))

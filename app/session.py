@@ -77,7 +77,8 @@ class Session:
         then carry ``matched_latent``). ``latent_table_status`` says why there is none (yet)."""
         from lmm.latents import cached_database_latents
 
-        mm = self.controllers.get("mm")
+        caps = {name: c.capabilities() for name, c in self.controllers.items()}
+        mm = next((self.controllers[n] for n, cap in caps.items() if cap.latent_table), None)
         if mm is None:
             self._latent_status = "MM is not running: no MM latents"
             return
@@ -86,11 +87,11 @@ class Session:
             self._latent_job.cancel()  # superseded: its table is dropped
             self._latent_job = None
         path = None
-        nets = getattr(self.controllers.get("lmm"), "nets", None)
+        networks = next((cap.networks_path for cap in caps.values() if cap.networks_path), None)
         if weights_path is not None:
             path = Path(weights_path)
-        elif nets is not None and getattr(nets, "path", None) is not None:
-            path = Path(nets.path)
+        elif networks is not None:
+            path = Path(networks)
         if path is None:
             self._latent_status = "no LMM networks: no compressor latents"
             return
@@ -101,9 +102,8 @@ class Session:
         self._latent_status = "computing the compressor latent of every frame..."
 
         def work(job):
-            lmm = self.controllers.get("lmm")
-            if lmm is not None and hasattr(lmm, "idle_states"):
-                lmm.idle_states()   # the LMM idle set's small table, so the first stop does not hitch (~80 ms)
+            for c in list(self.controllers.values()):
+                c.warm_up()   # e.g. the LMM idle set's small table, so the first stop does not hitch (~80 ms)
             return cached_database_latents(comp, self.db, self.features)
 
         def attach(table):

@@ -12,8 +12,10 @@ Both controllers step on a worker thread while dearpygui draws (it releases the 
 controllers' time overlaps the drawing; a tick handed over in frame N is shown in frame N+1, and a
 slider moved in frame N acts on that tick. Every panel and the 3D view show the same displayed tick
 (:mod:`app.playback`). The simulation lives in :class:`app.session.Session`; the look in
-:mod:`app.theme`; layouts in :mod:`app.layouts`; file dialogs in :mod:`app.dialogs`; what the user
-can do to the simulation in :mod:`app.actions`; test hooks in :mod:`app.scripting`.
+:mod:`app.theme`; layouts in :mod:`app.layouts`; file dialogs in :mod:`app.dialogs`; everything a
+user can do is a command of :mod:`app.studio_commands` (menus, shortcuts, scripts and panels run them
+by id), those on the simulation done in :mod:`app.actions`; test scripts in :mod:`app.scripting`
+and the frame loop's observer (the test dump) in :mod:`app.state_dump`.
 """
 from __future__ import annotations
 
@@ -28,14 +30,18 @@ from lmm.controller import InputState
 
 from . import layout_files
 from .actions import SessionActions
+from .command_registry import CommandRegistry
 from .dialogs import FileDialogs
 from .frame_times import FrameTimes, per_tick_ms
+from .input.keyboard import SHORTCUT_KEYS
 from .layouts import LayoutManager
-from .panels.base import Actions, EngineFacts, PanelContext, RecordingStatus, View
+from .panels.base import EngineFacts, PanelContext, RecordingStatus, View
 from .panels.common import window_alias, window_tag
 from .panels.errors import ErrorDialog
 from .playback import Playback
-from .scripting import Screenshots, Script, StateDump
+from .scripting import Screenshots, Script
+from .state_dump import FrameObserver, StateDump, final_state, panel_state
+from .studio_commands import register_studio_commands
 from .engine import StudioOptions, load_session
 from .prepared import Preparer
 from .tick_worker import TickWorker
@@ -63,7 +69,8 @@ class Studio(SessionActions):
         self.running = True
         self.exit_code = 0
         self.script = Script.load(options.script) if options.script else Script([])
-        self.dump = StateDump(options.dump_state) if options.dump_state else None
+        self.observer = StateDump(options.dump_state) if options.dump_state else FrameObserver()
+        self.commands = register_studio_commands(CommandRegistry(), self)
         self.fixed_step = bool(options.fixed_step or options.frames is not None or options.script)
         self.input = None
         self._last_time = None
@@ -80,25 +87,14 @@ class Studio(SessionActions):
             self.open_input(self.opts.input)
 
     def panel_context(self) -> PanelContext:
-        s, p = self.session, self.playback
-        nets = getattr(s.controllers.get("lmm"), "nets", None)
-        engine = EngineFacts(db=s.db, features=s.features, dt=s.dt, latent_dims=int(getattr(nets, "n_latent", 32)),
+        s = self.session
+        caps = [c.capabilities() for c in s.controllers.values()]
+        engine = EngineFacts(db=s.db, features=s.features, dt=s.dt,
+                             latent_dims=next((c.latent_dims for c in caps if c.latent_dims), 32),
                              controller_names=lambda: s.names, memory=lambda: s.memory,
                              features_of=lambda n: getattr(s.controllers.get(n), "features", None) or s.features,
                              manifest=self._manifest())
-        actions = Actions(pause=p.pause, resume=p.resume, toggle_pause=p.toggle_pause, step=p.step,
-                          scrub_to=p.scrub_to, go_live=p.go_live, start_recording=self.start_recording,
-                          stop_recording=self.stop_recording, open_dialog=self.open_dialog,
-                          open_input=self.open_input, live_input=self.live_input,
-                          reset_characters=self.reset_characters, set_inspected=self.set_inspected,
-                          show_window=self.layouts.show_window, switch_layout=self.switch_layout,
-                          orbit_camera=self.orbit_camera, show_error=self.errors.show,
-                          show_info=self.errors.inform, quit=self.quit,
-                          set_preview=lambda owner, poses: self.viewport.set_preview(owner, poses),
-                          preview_database_frame=self.preview_database_frame,
-                          follow_reference=self.follow_reference, set_reference_overlay=self.set_reference_overlay,
-                          set_ragdoll=self.set_ragdoll, reset_ragdolls=self.reset_ragdolls)
-        return PanelContext(dpg=self.dpg, tuning=s.tuning, actions=actions, theme=self.theme, engine=engine)
+        return PanelContext(dpg=self.dpg, tuning=s.tuning, commands=self.commands, theme=self.theme, engine=engine)
 
     def _manifest(self):
         """The manifest the database was built from (None when it cannot be read: ranges are then named
@@ -113,19 +109,8 @@ class Studio(SessionActions):
 
     def build_ui(self) -> None:
         dpg = self.dpg
-        from .panels.coverage import CoveragePanel
-        from .panels.database import DatabasePanel
-        from .panels.features import FeaturesPanel
-        from .panels.latent import LatentPanel
+        from .panels.catalog import dock_panels
         from .panels.menu import MenuBar
-        from .panels.motion_search import MotionSearchPanel
-        from .panels.physics import PhysicsPanel
-        from .panels.recording import RecordingPanel
-        from .panels.candidates import CandidatesPanel
-        from .panels.search import SearchPanel
-        from .panels.stats import StatsPanel
-        from .panels.timeline import TimelinePanel
-        from .panels.tuning import TuningPanel
         from .panels.viewport import ViewportPanel
 
         ini = self.layouts.choose(self.opts.layout)
@@ -142,9 +127,7 @@ class Studio(SessionActions):
                                       render_scale=float(min(max(self.opts.render_scale, 0.25), 1.0)),
                                       readback=self.opts.readback_3d)
         self.panels = {"viewport": self.viewport}
-        for cls in (FeaturesPanel, LatentPanel, SearchPanel, CandidatesPanel, TuningPanel, StatsPanel,
-                    TimelinePanel, RecordingPanel, DatabasePanel, CoveragePanel,
-                    MotionSearchPanel, PhysicsPanel):
+        for cls in dock_panels():
             self.panels[cls.key] = cls(ctx)
         self.preparer = Preparer(self.panels)
         self.menu.build()
@@ -174,7 +157,8 @@ class Studio(SessionActions):
         dpg = self.dpg
         self.keyboard = KeyboardInput()
         self.key_lookup = build_key_lookup(lambda c: getattr(dpg, c, None))
-        self._shortcut_keys = (dpg.mvKey_Spacebar, dpg.mvKey_Home, dpg.mvKey_Comma, dpg.mvKey_Period, dpg.mvKey_F)
+        # shortcut key code -> command id, from the commands that declare a shortcut
+        self._shortcut_keys = {getattr(dpg, SHORTCUT_KEYS[key]): c.id for key, c in self.commands.shortcuts().items()}
         try:
             from .input.manager import InputManager
 
@@ -184,30 +168,6 @@ class Studio(SessionActions):
         except Exception as e:  # the input layer must never stop the studio
             self.input = None
             print(f"lmm-studio: gamepad input unavailable: {e}", file=sys.stderr)
-
-    # -- actions the shell owns ----------------------------------------------------------------
-    def open_dialog(self, kind: str) -> None:
-        self.dialogs.open(kind, self.panels["recording"].path() if kind == "record" else None)
-
-    def switch_layout(self, name_or_path: str) -> bool:
-        ok = self.layouts.switch(name_or_path, self.frame_index)
-        self.menu.sync_window_checks()
-        return ok
-
-    def orbit_camera(self, d_azimuth: float) -> None:
-        """The input layer owns the camera azimuth (sticks and keys are camera relative)."""
-        if self.input is not None:
-            self.input.add_camera_orbit(d_azimuth)
-
-    def quit(self) -> None:
-        self.running = False
-
-    def preview_database_frame(self, frame: int) -> None:
-        """A clicked search candidate: the Database panel previews that frame (its window is shown)."""
-        panel = self.panels.get("database")
-        if panel is not None:
-            self.layouts.show_window("database", True)
-            panel.show_frame(int(frame))
 
     def gamepad_names(self) -> list[str]:
         if self.input is None:
@@ -225,15 +185,12 @@ class Studio(SessionActions):
         dpg = self.dpg
         names = set(self.script.keys)
         down = [name for code, name in self.key_lookup.items() if dpg.is_key_down(code)]
-        pressed = [key for key in self._shortcut_keys if dpg.is_key_pressed(key)]
+        pressed = [command for key, command in self._shortcut_keys.items() if dpg.is_key_pressed(key)]
         # typing() asks every text item whether it is being edited: only worth it when a key is down
         if (down or pressed) and not self.typing():
             names.update(down)
-            shortcuts = {dpg.mvKey_Spacebar: self.playback.toggle_pause, dpg.mvKey_Home: self.playback.go_live,
-                         dpg.mvKey_Comma: lambda: self.playback.step(-1),
-                         dpg.mvKey_Period: lambda: self.playback.step(1), dpg.mvKey_F: self.viewport.toggle_follow}
-            for key in pressed:
-                shortcuts[key]()
+            for command in pressed:
+                self.commands.run(command)
         self.keyboard.set_keys(names)
 
     def _live_input(self, frame_dt: float) -> InputState:
@@ -289,26 +246,18 @@ class Studio(SessionActions):
             self.errors.show("Recording", self.last_recording)
         replaced = self.preparer.receive(self.worker.take_prepared())   # freed on the worker (submit)
         step_ms = per_tick_ms(finished, self.session.names)
-        dump_s = 0.0      # the state dump's own work (a test and benchmark instrument): not the studio's
-        if self.dump is not None:
-            td = time.perf_counter()
-            self.dump.ticks(finished)
-            dump_s = time.perf_counter() - td
+        self.observer.ticks_finished(finished)
         # events and actions may change the session now: the worker is idle until submit()
         queue = dpg.get_callback_queue()
         if queue or self.frame_index % 10 == 0:
             self.layouts.forget_shown()     # a callback may show or hide a window; the x button is seen here
         dpg.run_callbacks(queue)
-        self.script.run(self, self.frame_index)
+        self.script.run(self.commands, self.frame_index)
         self._keys()
         live = self._live_input(self.session.dt if self.fixed_step else frame_dt)
         n = self.playback.ticks_due(frame_dt)
         inputs = [self.session.input_for_next_tick(live, ahead=k) for k in range(n)]
-        tuning_seen = None
-        if self.dump is not None and n:
-            td = time.perf_counter()
-            tuning_seen = self.session.tuning.to_dict()
-            dump_s += time.perf_counter() - td
+        self.observer.ticks_due(self.session, n)
         t1 = time.perf_counter()
         view = self.view(live)
         prep = self.preparer
@@ -331,10 +280,7 @@ class Studio(SessionActions):
         self.viewport.render()          # the 3D view, once the panels are done (see there)
         self.viewport.finish()          # and its pixels in dearpygui's texture
         t_read = time.perf_counter()
-        record = None
-        if self.dump is not None:
-            record = self.dump.frame(self.frame_index, view, self.session, n, tuning_seen,
-                                     self.viewport.drawn.get("roots", {}))
+        self.observer.frame_shown(self.frame_index, view, self.session, n, self.viewport.drawn.get("roots", {}))
         for label in self.script.captures:
             self.capture(label)
         self.script.captures.clear()
@@ -345,17 +291,13 @@ class Studio(SessionActions):
         dpg.render_dearpygui_frame()
         t4 = time.perf_counter()
         vp = self.viewport
-        parts = {"input": (t1 - t0 - dump_s) * 1e3, "viewport": (t2 - t1) * 1e3,
+        # the observer's own work (a test and benchmark instrument) is not the studio's
+        parts = {"input": (t1 - t0 - self.observer.spent_s()) * 1e3, "viewport": (t2 - t1) * 1e3,
                  "render": vp.render_ms, "readback": vp.readback_ms, "panels": (t3 - t2) * 1e3,
                  "ui": (t4 - t_read) * 1e3}
-        if self.dump is not None:
-            parts["dump"] = dump_s * 1e3
         parts.update(step_ms)   # per-tick controller time of the ticks finished for this frame (in parallel)
+        self.observer.frame_timed((t4 - t0) * 1e3, parts)
         self.frame_times.add((t4 - t0) * 1e3, parts)
-        if record is not None:
-            record.update({"ms": {k: round(float(v), 4) for k, v in parts.items()},
-                           "frame_ms": round((t4 - t0) * 1e3, 4), "t": round(time.perf_counter(), 6),
-                           "cpu": round(time.process_time(), 6)})
         self.frame_index += 1
 
     # -- run -----------------------------------------------------------------------------------
@@ -416,9 +358,7 @@ class Studio(SessionActions):
         dpg = self.dpg
         if getattr(self, "worker", None) is not None:
             try:
-                finished = self.worker.wait()     # the ticks stepped during the last frame
-                if self.dump is not None:
-                    self.dump.ticks(finished)
+                self.observer.ticks_finished(self.worker.wait())     # the ticks stepped during the last frame
             finally:
                 self.worker.close()
         if getattr(self, "session", None) is not None and self.session.recording is not None:
@@ -428,20 +368,11 @@ class Studio(SessionActions):
                 self.layouts.save(str(layout_files.user_layout_path()))
             except Exception as e:
                 print(f"lmm-studio: could not save the layout: {e}", file=sys.stderr)
-        if self.dump is not None:
-            self._write_dump()
+        self.observer.finish(lambda: final_state(self))
         if self.input is not None:
             self.input.close()
         dpg.destroy_context()
         self.layouts.close()
-
-    # -- test dump -----------------------------------------------------------------------------
-    def panel_state(self) -> dict:
-        out = {key: panel.state() for key, panel in self.panels.items()}
-        out["windows"] = self.layouts.window_state()
-        out["menu"] = self.menu.state()
-        out["dialog"] = {"title": self.errors.title, "shown": self.errors.visible}
-        return out
 
     def _apply_ui_antialiasing(self) -> None:
         """dearpygui's anti-aliased lines and fills, as ``--ui-antialiasing`` says: with "auto", off where
@@ -455,19 +386,7 @@ class Studio(SessionActions):
 
     def capture(self, label: str) -> None:
         """Record what every panel shows now under ``label`` (test scripts)."""
-        self.dump.capture(label, self.frame_index, self.playback.displayed_tick(), self.panel_state())
-
-    def _write_dump(self) -> None:
-        s, ft = self.session, self.frame_times
-        self.dump.write(
-            frames_run=self.frame_index, tick_count=s.tick, controllers=s.names,
-            shared_tuning=all(getattr(c, "tuning", None) is s.tuning for c in s.controllers.values()),
-            lmm_problem=self.lmm_problem, errors=list(self.errors.shown), layout=self.layouts.name,
-            layout_switches=self.layouts.switches, final=self.panel_state(),
-            frame_times={"median_ms": ft.median(), "parts_ms": {k: ft.median(k) for k in ft.parts}},
-            prepared=self.preparer.state(),
-            ui_antialiasing={k: v for k, v in self.dpg.get_app_configuration().items() if k.startswith("anti_")},
-            user_layout=str(layout_files.user_layout_path()))
+        self.observer.capture(label, self.frame_index, self.playback.displayed_tick(), lambda: panel_state(self))
 
 
 def run_studio(options: StudioOptions) -> int:

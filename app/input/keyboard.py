@@ -81,6 +81,10 @@ DEARPYGUI_KEYS: dict[str, tuple[str, ...]] = {
     "ctrl": ("mvKey_LControl", "mvKey_RControl"),
 }
 
+# a command's shortcut key name (see app.command_registry.Command.shortcut) -> its dearpygui constant name
+SHORTCUT_KEYS: dict[str, str] = {"Space": "mvKey_Spacebar", "Home": "mvKey_Home", ",": "mvKey_Comma",
+                                 ".": "mvKey_Period", "F": "mvKey_F"}
+
 
 def normalize_key_name(name) -> str:
     """``'LShift'`` -> ``'shift'``, ``'ArrowUp'`` -> ``'up'``, ``'W'`` -> ``'w'``."""

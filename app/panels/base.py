@@ -1,8 +1,10 @@
 """What a panel is and what it may touch.
 
-A panel gets a :class:`PanelContext` once (the tuning it may write, the named :class:`Actions` it may
-call, the theme, and read-only :class:`EngineFacts`) and a typed :class:`View` of the displayed tick
-every frame. It never sees the studio, the session or another panel.
+A panel declares what it uses: ``commands``, the ids of :mod:`app.studio_commands` it runs (it gets
+them, and only them, as ``self.ctx.actions.ID(...)``), and ``reads``, the :class:`View` fields its
+update reads. It gets a :class:`PanelContext` once (dearpygui for its own items, the tuning it may
+write, its commands, the theme and read-only :class:`EngineFacts`) and a :class:`View` of the displayed
+tick every frame. It never sees the studio, the session or another panel.
 
 A panel subclasses :class:`Panel` and implements ``build(window_kwargs)`` (create every item once, in
 ``self.window(window_kwargs)``), ``update(view)`` (only ``set_value``/``configure_item`` on its own items)
@@ -11,9 +13,11 @@ dump that ``state()`` returns).
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Callable
 
+from app.command_registry import CommandRegistry, CommandView
 from app.frame_times import FrameTimes
 from app.history import History, Tick
 from lmm.tuning import Tuning
@@ -22,52 +26,22 @@ from .common import WINDOWS, TextCache, window_tag
 
 if TYPE_CHECKING:
     from app.theme import Theme
-
-
-@dataclass(frozen=True)
-class Actions:
-    """Everything a panel may ask the studio to do, by name."""
-    pause: Callable[[], None]
-    resume: Callable[[], None]
-    toggle_pause: Callable[[], None]
-    step: Callable[[int], None]                         # n ticks (negative: back)
-    scrub_to: Callable[[int], None]                     # show that tick (pauses)
-    go_live: Callable[[], None]
-    start_recording: Callable[[str, tuple], bool]       # base path, controllers
-    stop_recording: Callable[[], None]
-    open_dialog: Callable[[str], None]                  # a file dialog kind (see app.dialogs.DIALOGS)
-    open_input: Callable[[str], bool]                   # replay a CSV or builtin:NAME
-    live_input: Callable[[], None]
-    reset_characters: Callable[[], None]
-    set_inspected: Callable[[str], None]                # controller the single-controller panels show
-    show_window: Callable[[str, bool], None]
-    switch_layout: Callable[[str], bool]                # built-in name or .ini path
-    orbit_camera: Callable[[float], None]               # turn the camera azimuth by radians
-    show_error: Callable[[str, str], None]              # title, message
-    show_info: Callable[[str, str], None]               # title, message (not an error)
-    quit: Callable[[], None]
-    # preview ghosts in the 3D view: owner (a panel key) -> its poses (an empty tuple clears them)
-    set_preview: Callable[[str, tuple], None] = lambda owner, poses: None
-    preview_database_frame: Callable[[int], None] = lambda frame: None   # show a database frame (Database panel)
-    follow_reference: Callable[[bool], bool] = lambda on: False         # the reference drives the characters
-    set_reference_overlay: Callable[[bool], None] = lambda overlay: None  # draw it over them (else beside)
-    # the simulated ragdolls (lmm.physics.ragdoll): a setting by name ("enabled", "residual": bool; "drawn":
-    # a controller name), and back onto the tracked poses
-    set_ragdoll: Callable[[str, object], None] = lambda key, value: None
-    reset_ragdolls: Callable[[], None] = lambda: None
+    from lmm.data.database import Database
+    from lmm.data.manifest import Manifest
+    from lmm.features import Features
 
 
 @dataclass(frozen=True)
 class EngineFacts:
     """Read-only facts about the engine that panels label and lay out with."""
-    db: Any                                             # lmm.data.database.Database: frame labels, skeleton
-    features: Any                                       # lmm.features.Features of the database
+    db: "Database"                                      # frame labels, skeleton
+    features: "Features"                                # the database's features
     dt: float                                           # seconds per tick
-    latent_dims: int                                    # LMM latent size (32 without networks)
+    latent_dims: int                                    # a running controller's latent size (32 without one)
     controller_names: Callable[[], list[str]]           # running controllers (LMM may appear later)
-    features_of: Callable[[str], Any]                   # the features a controller searches
+    features_of: Callable[[str], "Features"]            # the features a controller searches
     memory: Callable[[], dict]                          # controller -> part -> bytes kept at run time
-    manifest: Any = None                                # lmm.data.manifest.Manifest the database was built from
+    manifest: "Manifest | None" = None                  # the manifest the database was built from
 
     @property
     def channel_names(self) -> list[str]:
@@ -76,7 +50,7 @@ class EngineFacts:
 
 @dataclass(frozen=True)
 class PreviewPose:
-    """A pose a panel asks the 3D view to show as a preview ghost (``Actions.set_preview``).
+    """A pose a panel asks the 3D view to show as a preview ghost (the ``set_preview`` command).
 
     Everything is in the ghost's own frame: its root (simulation bone) at the origin facing +Z, metres.
     The 3D view places each ghost beside the inspected character of the displayed tick, facing the same
@@ -93,11 +67,17 @@ class PreviewPose:
 
 @dataclass
 class PanelContext:
-    dpg: Any                                            # dearpygui.dearpygui
-    tuning: Tuning                                      # the one object panels write
-    actions: Actions
+    dpg: Any                                            # dearpygui.dearpygui (for the panel's own items)
+    tuning: Tuning                                      # the one object panels write (its events say what changed)
+    commands: CommandRegistry | None                    # every command; a panel gets its declared ones as ``actions``
     theme: "Theme"
     engine: EngineFacts
+    actions: CommandView | None = None                  # the panel's declared commands (set by Panel.__init__)
+
+    def for_commands(self, ids) -> "PanelContext":
+        """This context with ``actions`` limited to the command ids ``ids``."""
+        view = self.commands.view(ids) if self.commands is not None else None
+        return dataclasses.replace(self, actions=view)
 
 
 @dataclass(frozen=True)
@@ -156,11 +136,14 @@ class View:
 
 
 class Panel:
-    """A dockable window of the studio. Subclasses set ``key`` (see :data:`app.panels.common.WINDOWS`)."""
+    """A dockable window of the studio. Subclasses set ``key`` (see :data:`app.panels.common.WINDOWS`)
+    and declare the ``commands`` they run and the :class:`View` fields their update ``reads``."""
     key = ""
+    commands: tuple[str, ...] = ()
+    reads: tuple[str, ...] = ()
 
     def __init__(self, ctx: PanelContext):
-        self.ctx = ctx
+        self.ctx = ctx.for_commands(self.commands)
         self.dpg = ctx.dpg
         self.tag = window_tag(self.key)
         self.title = WINDOWS[self.key][1]

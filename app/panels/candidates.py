@@ -66,6 +66,8 @@ def column_fractions(rows: list[dict], key: str, digits: int = 3) -> list[float]
 class CandidatesPanel(Panel):
     """Ranked candidates of the inspected controller's last search."""
     key = "candidates"
+    commands = ("preview_database_frame",)
+    reads = ("inspected", "snap")
 
     def __init__(self, ctx):
         super().__init__(ctx)

@@ -57,6 +57,7 @@ def percentile_in(hist_edges: np.ndarray, hist_counts: np.ndarray, value: float)
 
 class CoveragePanel(Panel):
     key = "coverage"
+    reads = ("history", "snap_of", "tick", "tick_number")
 
     def __init__(self, ctx, jobs: Jobs | None = None):
         super().__init__(ctx)

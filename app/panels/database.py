@@ -51,6 +51,8 @@ def range_rows(ranges: list[RangeInfo]) -> list[dict]:
 
 class DatabasePanel(Panel):
     key = "database"
+    commands = ("show_error", "set_preview")
+    reads = ("frame", "inspected", "snap", "tick_number")
 
     def __init__(self, ctx):
         super().__init__(ctx)
@@ -142,6 +144,27 @@ class DatabasePanel(Panel):
 
     def _error(self, message: str) -> None:
         self.ctx.actions.show_error("Database", message)
+
+    def run_command(self, a: dict) -> None:
+        """The ``database`` command: ``op`` ``select`` (range), ``frame`` (db_frame), ``play``, ``pause``,
+        ``scrub`` (source_frame), ``selection`` (start, stop), ``mark`` (end: in/out) or ``copy``."""
+        op = a["op"]
+        if op == "select":
+            self.select_range(int(a["range"]))
+        elif op == "frame":
+            self.show_frame(int(a["db_frame"]), origin="range")
+        elif op in ("play", "pause"):
+            self.set_playing(op == "play")
+        elif op == "scrub":
+            self.scrub_to_source(int(a["source_frame"]))
+        elif op == "selection":
+            self.set_selection(int(a["start"]), int(a["stop"]))
+        elif op == "mark":
+            self.mark(a["end"])
+        elif op == "copy":
+            self.copy_range()
+        else:
+            raise ValueError(f"unknown database op {op!r}")
 
     def select_range(self, index: int) -> bool:
         """Preview database range ``index`` from its first frame; its whole span becomes the selection."""

@@ -76,6 +76,8 @@ def total_error(features, a: np.ndarray, b: np.ndarray) -> float:
 
 class FeaturesPanel(Panel):
     key = "features"
+    commands = ()
+    reads = ("inspected", "snap", "snap_of")
     _weights = None
     _bar_x = None      # bar x positions per shift (the layout's x never changes)
 

@@ -73,6 +73,8 @@ def latent_scale(values: np.ndarray, floor: float = 0.5) -> float:
 
 class LatentPanel(Panel):
     key = "latent"
+    commands = ()
+    reads = ("frame", "history", "latent_status", "problems", "tick_number")
 
     def __init__(self, ctx):
         super().__init__(ctx)

@@ -1,19 +1,26 @@
 """The menu bar: files (input, reference BVH, presets, weights), layouts, window visibility, help,
-and a status line (mode, fps, tick, last error)."""
+and a status line (mode, fps, tick, last error). Its items are the commands that name a menu
+(:mod:`app.studio_commands`); the keys help lists the commands' shortcuts."""
 from __future__ import annotations
 
 from app.layout_files import builtin_names
 
+from app.command_registry import CommandRegistry
+
 from .base import PanelContext, View
 from .common import WINDOWS, TextCache, built_windows, window_tag
 
-KEYS_HELP = """Keyboard (the 3D view does not need focus; text fields do take the keys):
-  W A S D / arrows   move (camera relative)      Shift  walk        Ctrl  strafe
-  I J K L            aim (right stick)           Q / E  turn the camera
-  Space              pause / play                , .    step back / forward (paused)
-  Home               back to live                F      toggle camera follow
-Mouse on the 3D view: left-drag orbit, right/middle-drag pan, wheel zoom.
-Gamepads (glfw or raw HID): left stick move, right stick aim/camera, LB walk, RB strafe."""
+MENUS = ("File", "Layout", "Windows", "Help")
+
+
+def keys_help(commands: CommandRegistry) -> str:
+    """The Help > Keys and mouse text: the character keys, then every command's shortcut."""
+    shortcuts = [f"  {key:<19}{c.help or c.label}" for key, c in commands.shortcuts().items()]
+    return "\n".join(["Keyboard (the 3D view does not need focus; text fields do take the keys):",
+                      "  W A S D / arrows   move (camera relative)      Shift  walk        Ctrl  strafe",
+                      "  I J K L            aim (right stick)           Q / E  turn the camera", *shortcuts,
+                      "Mouse on the 3D view: left-drag orbit, right/middle-drag pan, wheel zoom.",
+                      "Gamepads (glfw or raw HID): left stick move, right stick aim/camera, LB walk, RB strafe."])
 
 
 def hidden_note(hidden) -> str:
@@ -25,52 +32,57 @@ def hidden_note(hidden) -> str:
 
 
 class MenuBar:
-    """Not a window: the viewport's menu bar. Same context as the panels."""
+    """Not a window: the viewport's menu bar. It lists the registry's commands, so it gets all of them."""
+    reads = ("frame", "frame_times", "hidden_windows", "input_name", "layout", "mode", "problems", "recording",
+             "tick_number")
 
     def __init__(self, ctx: PanelContext):
         self.ctx = ctx
+        self.commands: CommandRegistry = ctx.commands
         self.dpg = ctx.dpg
         self.text = TextCache(ctx.dpg)
         self._fps = None        # (frame, fps) last worked out
 
     def build(self) -> None:
         dpg = self.dpg
-        act = self.ctx.actions
         with dpg.viewport_menu_bar(tag="menu_bar"):
             with dpg.menu(label="File"):
-                dpg.add_menu_item(label="Replay input CSV...", callback=lambda: act.open_dialog("input"))
-                dpg.add_menu_item(label="Open reference BVH...", callback=lambda: act.open_dialog("reference"))
-                dpg.add_separator()
-                dpg.add_menu_item(label="Load tuning preset...", callback=lambda: act.open_dialog("preset_load"))
-                dpg.add_menu_item(label="Save tuning preset...", callback=lambda: act.open_dialog("preset_save"))
-                dpg.add_menu_item(label="Load LMM weights...", callback=lambda: act.open_dialog("weights"))
-                dpg.add_separator()
-                dpg.add_menu_item(label="Reset characters", callback=lambda: act.reset_characters())
-                dpg.add_menu_item(label="Quit", callback=lambda: act.quit())
+                self._add_commands("File")
             with dpg.menu(label="Layout"):
                 for name in builtin_names():
                     dpg.add_menu_item(label=name.capitalize(), callback=self._on_layout, user_data=name,
                                       tag=f"menu_layout_{name}")
                 dpg.add_separator()
-                dpg.add_menu_item(label="Load layout file...", callback=lambda: act.open_dialog("layout_load"))
-                dpg.add_menu_item(label="Save layout as...", callback=lambda: act.open_dialog("layout_save"))
+                self._add_commands("Layout")
             with dpg.menu(label="Windows"):
                 for key, (tag, title) in WINDOWS.items():
                     dpg.add_menu_item(label=title, check=True, default_value=True, tag=f"menu_show_{key}",
                                       callback=self._on_show, user_data=key)
             with dpg.menu(label="Help"):
-                dpg.add_menu_item(label="Keys and mouse", callback=self.show_keys_help)
+                self._add_commands("Help")
             dpg.add_spacer(width=30)
             dpg.add_text("", tag="menu_status", color=(170, 200, 170))
 
+    def _add_commands(self, menu: str) -> None:
+        """The commands that name ``menu``, a separator where their section changes."""
+        section = None
+        for c in self.commands.in_menu(menu):
+            if section is not None and c.section != section:
+                self.dpg.add_separator()
+            section = c.section
+            self.dpg.add_menu_item(label=c.label, callback=self._on_command, user_data=c.id)
+
+    def _on_command(self, sender, value, command_id):
+        self.commands.run(command_id)
+
     def show_keys_help(self, *args) -> None:
-        self.ctx.actions.show_info("Keys and mouse", KEYS_HELP)
+        self.commands.run("show_info", "Keys and mouse", keys_help(self.commands))
 
     def _on_layout(self, sender, value, name):
-        self.ctx.actions.switch_layout(name)
+        self.commands.run("layout", name)
 
     def _on_show(self, sender, value, key):
-        self.ctx.actions.show_window(key, bool(value))
+        self.commands.run("show", key, bool(value))
 
     def sync_window_checks(self) -> None:
         dpg = self.dpg

@@ -43,6 +43,8 @@ def parse_frames(text: str, where: str) -> tuple[int, int]:
 
 class MotionSearchPanel(Panel):
     key = "motion_search"
+    commands = ("show_error", "show")
+    reads = ("frame", "history", "inspected", "snap_of", "tick", "tick_number")
 
     def __init__(self, ctx, jobs: Jobs | None = None):
         super().__init__(ctx)
@@ -205,7 +207,7 @@ class MotionSearchPanel(Panel):
         runs on its next update (with the tick the studio shows then, as a click would) and waits for its
         job, so that the script's next step sees the results."""
         dpg = self.dpg
-        self.ctx.actions.show_window(self.key, True)
+        self.ctx.actions.show(self.key, True)
         dpg.set_value("ms_source", SOURCES[1] if action.get("source") == "file" else SOURCES[0])
         for key, tag in (("seconds", "ms_seconds"), ("file", "ms_file"), ("frames", "ms_frames"), ("in", "ms_in"),
                          ("top", "ms_top")):

@@ -16,6 +16,8 @@ CONTACT_ROWS = [(name, side) for name in COLORS for side in ("left", "right")]  
 
 class PhysicsPanel(Panel):
     key = "physics"
+    commands = ("ragdoll", "reset_ragdolls")
+    reads = ("history", "physics_status", "ragdoll", "tick_number")
 
     def build(self, window_kwargs: dict) -> None:
         dpg = self.dpg
@@ -24,9 +26,9 @@ class PhysicsPanel(Panel):
             dpg.add_text("", tag="phys_status", wrap=0, color=(240, 190, 90))
             with dpg.group(horizontal=True, tag="phys_controls"):
                 dpg.add_checkbox(label="Simulate", tag="phys_enabled", default_value=True,
-                                 callback=lambda s, a: act.set_ragdoll("enabled", bool(a)))
+                                 callback=lambda s, a: act.ragdoll("enabled", bool(a)))
                 dpg.add_checkbox(label="Residual force", tag="phys_residual", default_value=True,
-                                 callback=lambda s, a: act.set_ragdoll("residual", bool(a)))
+                                 callback=lambda s, a: act.ragdoll("residual", bool(a)))
                 dpg.add_text("Draw:")
                 dpg.add_radio_button([SHORT[n] for n in COLORS], tag="phys_drawn", horizontal=True,
                                      default_value=SHORT["mm"], callback=self._on_drawn)
@@ -63,7 +65,7 @@ class PhysicsPanel(Panel):
     def _on_drawn(self, sender, value):
         for name in COLORS:
             if SHORT[name] == value:
-                self.ctx.actions.set_ragdoll("drawn", name)
+                self.ctx.actions.ragdoll("drawn", name)
 
     def update(self, view: View) -> None:
         dpg = self.dpg

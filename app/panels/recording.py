@@ -20,6 +20,10 @@ def default_recording_path() -> Path:
 
 class RecordingPanel(Panel):
     key = "recording"
+    commands = ("dialog_record", "dialog_input", "dialog_reference", "open_input", "live_input", "reset_characters",
+                "follow", "reference_overlay", "record_start", "record_stop")
+    reads = ("devices", "following", "frame", "history", "input_name", "last_recording", "recording", "reference",
+             "replay_line", "tick", "tick_number")
     _recording = False
 
     def __init__(self, ctx):
@@ -37,7 +41,7 @@ class RecordingPanel(Panel):
                 dpg.add_checkbox(label="LMM", tag="rec_lmm", default_value="lmm" in names, enabled="lmm" in names)
             with dpg.group(horizontal=True):
                 dpg.add_input_text(tag="rec_path", default_value=str(default_recording_path()), width=-70)
-                dpg.add_button(label="Browse", callback=lambda: act.open_dialog("record"))
+                dpg.add_button(label="Browse", callback=lambda: act.dialog_record())
             with dpg.group(horizontal=True):
                 dpg.add_button(label="Record", tag="rec_button", width=90, callback=self._on_record)
                 dpg.add_text("", tag="rec_status", wrap=0)
@@ -45,7 +49,7 @@ class RecordingPanel(Panel):
             dpg.add_text("Input", color=(200, 200, 210))
             dpg.add_text("", tag="inp_status", wrap=0)
             with dpg.group(horizontal=True):
-                dpg.add_button(label="Replay CSV...", callback=lambda: act.open_dialog("input"))
+                dpg.add_button(label="Replay CSV...", callback=lambda: act.dialog_input())
                 dpg.add_combo(BUILTINS, tag="inp_builtin", default_value="circle", width=100)
                 dpg.add_button(label="Play", callback=lambda: act.open_input("builtin:" + dpg.get_value("inp_builtin")))
             with dpg.group(horizontal=True):
@@ -54,13 +58,13 @@ class RecordingPanel(Panel):
             dpg.add_text("", tag="inp_devices", color=(150, 150, 160), wrap=0)
             dpg.add_separator()
             with dpg.group(horizontal=True):
-                dpg.add_button(label="Reference BVH...", callback=lambda: act.open_dialog("reference"))
+                dpg.add_button(label="Reference BVH...", callback=lambda: act.dialog_reference())
                 dpg.add_text("", tag="ref_status")
             with dpg.group(horizontal=True):
                 dpg.add_checkbox(label="Follow reference", tag="ref_follow",
-                                 callback=lambda s, a: act.follow_reference(bool(a)))
+                                 callback=lambda s, a: act.follow(bool(a)))
                 dpg.add_checkbox(label="Overlay", tag="ref_overlay",
-                                 callback=lambda s, a: act.set_reference_overlay(bool(a)))
+                                 callback=lambda s, a: act.reference_overlay(bool(a)))
             with dpg.tooltip("ref_follow"):
                 dpg.add_text("The reference's root path, turned into stick and buttons, drives both characters\n"
                              "from a reset; the plot shows each one's pose error against the reference\n"
@@ -91,9 +95,9 @@ class RecordingPanel(Panel):
 
     def _on_record(self, *args):
         if self._recording:
-            self.ctx.actions.stop_recording()
+            self.ctx.actions.record_stop()
         else:
-            self.ctx.actions.start_recording(self.path(), self.which())
+            self.ctx.actions.record_start(self.path(), self.which())
 
     def update(self, view: View) -> None:
         dpg = self.dpg
@@ -117,7 +121,7 @@ class RecordingPanel(Panel):
     def set_overlay(self, overlay: bool) -> None:
         """Tick the Overlay box (scripts) and draw the reference that way."""
         self.dpg.set_value("ref_overlay", bool(overlay))
-        self.ctx.actions.set_reference_overlay(bool(overlay))
+        self.ctx.actions.reference_overlay(bool(overlay))
 
     def _follow(self, view: View) -> dict:
         """The follow controls and the pose error plot: each controller's error over the history (its

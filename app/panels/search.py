@@ -63,6 +63,7 @@ def _window_sums(mask: np.ndarray, window: int) -> np.ndarray:
 class SearchPanel(Panel):
     """Nearest neighbour vs projector, with the cost timeline."""
     key = "search"
+    reads = ("history", "problems", "snap_of", "tick_number")
     seconds = 10.0
     tolerance = 6
 

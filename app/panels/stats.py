@@ -36,6 +36,8 @@ def _axis(start: int, stop: int) -> np.ndarray:
 
 class StatsPanel(Panel):
     key = "stats"
+    commands = ()
+    reads = ("frame", "frame_times", "history", "render_info", "snap", "tick")
     _last_text_frame = -100
     _last_limit_frame = -100
 

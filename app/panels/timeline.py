@@ -22,6 +22,8 @@ def scrub_target(history, current: int, delta: int) -> int:
 
 class TimelinePanel(Panel):
     key = "timeline"
+    commands = ("toggle_pause", "step", "live", "scrub")
+    reads = ("history", "live", "mode", "paused", "tick", "tick_number")
     _line_value = 0.0
     _slider_range = None
     _slider_value = None      # the tick this panel last put in the slider
@@ -37,7 +39,7 @@ class TimelinePanel(Panel):
                 dpg.add_button(label="<", tag="tl_back", width=26, callback=lambda: act.step(-1))
                 dpg.add_button(label=">", tag="tl_fwd", width=26, callback=lambda: act.step(1))
                 dpg.add_button(label="<<1s", tag="tl_back_s", callback=lambda: act.step(-second))
-                dpg.add_button(label="Live", tag="tl_live", callback=lambda: act.go_live())
+                dpg.add_button(label="Live", tag="tl_live", callback=lambda: act.live())
                 dpg.add_slider_int(tag="tl_slider", width=-185, min_value=0, max_value=1, default_value=1,
                                    callback=self._on_slider, format="tick %d")
                 # whether the user holds the slider, from dearpygui's events (asking each frame costs
@@ -62,7 +64,7 @@ class TimelinePanel(Panel):
             self.ctx.theme.series(f"tl_speed_{name}", COLORS[name], weight=1.5)
 
     def _on_slider(self, sender, value):
-        self.ctx.actions.scrub_to(int(value))
+        self.ctx.actions.scrub(int(value))
 
     def prepare_key(self, view: View) -> tuple:
         return tuple(self.ctx.engine.controller_names())
@@ -98,7 +100,7 @@ class TimelinePanel(Panel):
         line = float(dpg.get_value("tl_drag"))
         want = (view.tick_number - newest) * dt
         if abs(line - self._line_value) > 1e-6 and dpg.is_item_hovered("tl_plot"):
-            self.ctx.actions.scrub_to(int(round(newest + line / dt)))
+            self.ctx.actions.scrub(int(round(newest + line / dt)))
             want = line
         if line != want:
             dpg.set_value("tl_drag", want)

@@ -1,7 +1,8 @@
 """Tuning: one widget per field of :class:`lmm.tuning.Tuning`, generated from the field metadata
 (group, range, unit, doc), grouped, with reset-to-default per group and presets saved to / loaded from
 JSON files. A widget's callback writes the tuning object through :meth:`lmm.tuning.Tuning.set`, which
-validates (the model, not the panel, knows the ranges); both controllers read it on their next step."""
+validates (the model, not the panel, knows the ranges); both controllers read it on their next step.
+The widgets follow the tuning's change events, so a preset, a reset or any other writer shows at once."""
 from __future__ import annotations
 
 import dataclasses
@@ -94,6 +95,8 @@ def widget_tag(spec: dict) -> str:
 
 class TuningPanel(Panel):
     key = "tuning"
+    commands = ("dialog_preset_load", "dialog_preset_save", "show_error")
+    reads = ()
 
     def __init__(self, ctx):
         super().__init__(ctx)
@@ -101,15 +104,17 @@ class TuningPanel(Panel):
         engine = getattr(ctx, "engine", None)
         db = getattr(engine, "db", None)
         self.specs = widget_specs(self.ctx.tuning, None if db is None else list(db.tag_names))
+        self._widgets = {(spec["field"], spec["channel"]): spec for spec in self.specs}
         self.changes = 0
+        self.tuning.events.connect(self._on_tuning_change)
 
     def build(self, window_kwargs: dict) -> None:
         dpg = self.dpg
         act = self.ctx.actions
         with self.window(window_kwargs):
             with dpg.group(horizontal=True):
-                dpg.add_button(label="Load preset...", callback=lambda: act.open_dialog("preset_load"))
-                dpg.add_button(label="Save preset...", callback=lambda: act.open_dialog("preset_save"))
+                dpg.add_button(label="Load preset...", callback=lambda: act.dialog_preset_load())
+                dpg.add_button(label="Save preset...", callback=lambda: act.dialog_preset_save())
                 dpg.add_button(label="Reset all", callback=self.reset_all)
             dpg.add_text("acts on the next frame of both characters", color=(150, 150, 160))
             current_group = None
@@ -167,16 +172,23 @@ class TuningPanel(Panel):
             self.changes += 1
         except TuningError as e:
             self.ctx.actions.show_error("Tuning", str(e))
-            self.sync()
+            self._show(self._widgets[(field, channel)])     # the tuning kept its value: so does the widget
+
+    def _on_tuning_change(self, change) -> None:
+        """A tuning change event: its widget (when the panel has one and it is built) shows the new value."""
+        spec = self._widgets.get((change.field, change.channel))
+        if spec is not None and self.dpg.does_item_exist(widget_tag(spec)):
+            self._show(spec)
+
+    def _show(self, spec: dict) -> None:
+        self.dpg.set_value(widget_tag(spec), self._value(spec))
 
     def _on_reset_group(self, sender, value, group):
         self.tuning.reset_group(group)
-        self.sync()
 
     def reset_all(self, *args):
         for g in Tuning.groups():
             self.tuning.reset_group(g)
-        self.sync()
 
     def set_field(self, field: str, value, channel=None) -> None:
         """Set a widget as a user would and fire its callback (the test scripts use this)."""
@@ -185,16 +197,10 @@ class TuningPanel(Panel):
         self.dpg.set_value(tag, value)
         self.dpg.get_item_callback(tag)(tag, self.dpg.get_value(tag), self.dpg.get_item_user_data(tag))
 
-    def sync(self) -> None:
-        """Every widget shows the tuning object's value (after a preset load or a reset)."""
-        for spec in self.specs:
-            self.dpg.set_value(widget_tag(spec), self._value(spec))
-
     def load_preset(self, path) -> None:
         # TuningError with the file and field; a feature channel the running controllers lack is one
         t = Tuning.load(path, channels=list(self.tuning.feature_weights))
         self.tuning.assign(t)   # the database's own tags and channels keep their widgets' entries
-        self.sync()
 
     def state(self) -> dict:
         return {"changes": self.changes, "widgets": len(self.specs)}

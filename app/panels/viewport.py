@@ -34,6 +34,7 @@ _ALL_MARKERS, _RAGDOLL, _HEADS = " markers", " ragdoll", " heads"    # prepared 
 class ViewportPanel(Panel):
     """The 3D view. GL objects are created in ``init_gl`` after dearpygui's first frame."""
     key = "viewport"
+    commands = ("inspect", "orbit_camera")
 
     TOGGLES = (("ghost", "Ghost", True), ("trajectory", "Trajectory", True), ("matched", "Matched traj.", True),
                ("contacts", "Contacts", True), ("features", "Features", True), ("trail", "Trail", True),
@@ -125,7 +126,7 @@ class ViewportPanel(Panel):
     def _on_inspect(self, sender, value):
         for name in COLORS:
             if SHORT[name] == value:
-                self.ctx.actions.set_inspected(name)
+                self.ctx.actions.inspect(name)
 
     def _on_toggle(self, sender, value, key):
         self.show[key] = bool(value)

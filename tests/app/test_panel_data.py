@@ -177,7 +177,42 @@ def test_every_tunable_has_a_widget():
 
 
 def test_widget_values_reach_the_tuning_object():
-    # what a widget's callback does: Tuning.set, which validates (needs H1's Tuning.set)
+    """A slider moved through dearpygui (its value set, its callback fired as a drag fires it) reaches the
+    Tuning; a bad value is refused with one line and the widget shows the tuning's value again; a change
+    made elsewhere (a group reset) moves the widget through the tuning's change events."""
+    import dearpygui.dearpygui as dpg
+
+    from app.command_registry import CommandRegistry
+    from app.panels.base import PanelContext
+    from app.panels.tuning import TuningPanel
+
+    t = Tuning()
+    commands, errors = CommandRegistry(), []
+    commands.add("dialog_preset_load", "Load", lambda: None)
+    commands.add("dialog_preset_save", "Save", lambda: None)
+    commands.add("show_error", "Error", lambda title, message: errors.append(message), args=("title", "message"))
+    dpg.create_context()
+    try:
+        panel = TuningPanel(PanelContext(dpg=dpg, tuning=t, commands=commands, theme=None, engine=None))
+        panel.build({})
+
+        def move(tag, value):
+            dpg.set_value(tag, value)
+            dpg.get_item_callback(tag)(tag, dpg.get_value(tag), dpg.get_item_user_data(tag))
+
+        move("tun_run_forward_speed_m_s", 2.25)
+        move("tun_top_k", 12)
+        move("tun_ik_enabled", False)
+        move("tun_feature_weights__hip_velocity", 0.0)
+        assert (t.run_forward_speed_m_s, t.top_k, t.ik_enabled, t.feature_weights["hip_velocity"]) == (2.25, 12, False, 0.0)
+        assert panel.state()["changes"] == 4 and errors == []
+        move("tun_top_k", 0)                         # below the field's range (a typed value can be)
+        assert t.top_k == 12 and dpg.get_value("tun_top_k") == 12 and "'top_k'" in errors[0]
+        t.reset_group("speeds")
+        assert dpg.get_value("tun_run_forward_speed_m_s") == pytest.approx(3.5)
+    finally:
+        dpg.destroy_context()
+    # what a widget's callback does: Tuning.set, which validates
     t = Tuning()
     t.set("run_forward_speed_m_s", 2.25)
     t.set("top_k", 12)

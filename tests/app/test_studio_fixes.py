@@ -54,10 +54,14 @@ def test_recording_help_stats_and_labels(run_studio, tmp_path, lmm_weights):
     parts = d["frame_times"]["parts_ms"]
     for name in d["controllers"]:
         assert parts[name] is not None and parts[name] > 0.05, parts
-    # g: the character labels do not overlap
+    # g: the character labels (and the ragdoll's) do not overlap; the check used to run only for exactly two
+    # labels, so it stopped checking once the ragdoll got its own
     labels = d["final"]["viewport"].get("labels", {})
-    if len(labels) == 2:
-        assert not _overlap(*labels.values()), labels
+    assert {"mm", "lmm"} <= set(labels) and d["controllers"] == ["mm", "lmm"], labels
+    names = sorted(labels)
+    for i, a in enumerate(names):
+        for b in names[i + 1:]:
+            assert not _overlap(labels[a], labels[b]), (a, b, labels)
 
 
 def test_restored_layout_says_which_panels_are_hidden(run_studio, tmp_path):
