@@ -55,12 +55,11 @@ def write_png(path, image) -> Path:
     return write_bytes_atomic(path, buf.getvalue())
 
 
-def figure_pixels(fig, dpi: float) -> np.ndarray:
-    """A matplotlib figure rendered at ``dpi`` as an ``(H, W, 4)`` uint8 array (what ``savefig`` would
+def figure_pixels(fig) -> np.ndarray:
+    """A matplotlib figure rendered at its dpi as an ``(H, W, 4)`` uint8 array (what ``savefig`` would
     encode), and closed."""
     import matplotlib.pyplot as plt
 
-    fig.set_dpi(dpi)
     fig.canvas.draw()
     pixels = np.array(fig.canvas.buffer_rgba())
     plt.close(fig)
@@ -329,10 +328,10 @@ def draw_plausibility_png(result, path, title: str = "") -> Path:
 # ---------------------------------------------------------------------------------------------------
 
 def save_figure(fig, path, dpi: float = 100) -> Path:
-    """A matplotlib figure, laid out tightly, as a PNG at ``path`` (through :func:`write_png`)."""
+    """A matplotlib figure, laid out tightly at ``dpi``, as a PNG at ``path`` (through :func:`write_png`)."""
     fig.set_dpi(dpi)
     fig.tight_layout()
-    return write_png(path, figure_pixels(fig, dpi))
+    return write_png(path, figure_pixels(fig))
 
 
 def plot_rotation_errors(results: list[dict], controller_names, path) -> Path:
@@ -360,6 +359,7 @@ def plot_training(out_dir, losses: dict | None, artifacts: dict) -> list[str]:
     error; the paths written."""
     plt = _pyplot()
     out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
     written = []
 
     def save(fig, name):
