@@ -40,6 +40,9 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "input-from": ("input_from", "derive the controller input that follows a take's root path (an input log)"),
     "physics": ("physics", "is this motion physically possible: root residual force, penetration, sliding (needs mujoco)"),
     "eval-search": ("eval_search", "motion search by example: learned encoder vs classifier vs features on a folder"),
+    "replay": ("replay", "re-simulate a session file headless, check its pose fingerprints, or branch it (--tuning)"),
+    "trace": ("trace", "one row per tick and controller of a session (matched frame, costs, root, contacts): CSV or parquet"),
+    "ab": ("ab", "compare a session's recorded arm A with arm B under another tuning: metrics JSON and PNG plots"),
 }
 
 

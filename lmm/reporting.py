@@ -11,7 +11,8 @@ only) the reconstruction and training plots, which are rendered to pixels and wr
   :func:`draw_coverage_png` (map, speed x turn heat map, histograms);
 * :func:`draw_speed_turn_png`: the speed x turn heat map alone (``check-data --png``);
 * :func:`draw_plausibility_png`: residual force, penetration and sliding over the frames;
-* :func:`plot_rotation_errors`, :func:`plot_training`: matplotlib figures (``eval``).
+* :func:`plot_rotation_errors`, :func:`plot_training`: matplotlib figures (``eval``);
+* :func:`draw_lines_png`: stacked line charts (pillow), the A/B comparison of a session (``ab``).
 """
 from __future__ import annotations
 
@@ -397,3 +398,64 @@ def plot_training(out_dir, losses: dict | None, artifacts: dict) -> list[str]:
         ax.set_title("decompressor: character-space joint position error")
         save(fig, "per_joint_error.png")
     return written
+
+
+# ---------------------------------------------------------------------------------------------------
+# line charts (pillow): session comparisons
+# ---------------------------------------------------------------------------------------------------
+
+def draw_lines_png(panels, path, title: str = "", width: int = 1100, panel_height: int = 190,
+                   marker_x: float | None = None) -> Path:
+    """Stacked line charts over one x axis as a PNG: ``panels`` is a list of ``(label, x_label,
+    {series name: (x, y)})``; each panel scales to its own finite y range; ``marker_x`` draws a dashed
+    vertical line (a branch tick). NaN values leave gaps."""
+    from PIL import Image, ImageDraw
+
+    top = 30 if title else 8
+    canvas = Image.new("RGB", (width, top + panel_height * len(panels) + 8), BACKGROUND)
+    d = ImageDraw.Draw(canvas)
+    font = _font(d)
+    if title:
+        d.text((10, 8), title, fill=TEXT, font=font)
+    for p, (label, x_label, series) in enumerate(panels):
+        x0, y0 = 8, top + p * panel_height
+        box = (x0, y0, width - 8, y0 + panel_height - 8)
+        d.rectangle(box, fill=PANEL)
+        gx0, gy0, gx1, gy1 = box[0] + 70, box[1] + 26, box[2] - 150, box[3] - 24
+        xs = [np.asarray(x, np.float64) for x, _ in series.values()]
+        ys = [np.asarray(y, np.float64) for _, y in series.values()]
+        finite = np.concatenate([y[np.isfinite(y)] for y in ys] + [np.zeros(0)])
+        xall = np.concatenate(xs) if any(x.size for x in xs) else np.zeros(1)
+        xlo, xhi = float(xall.min()), float(max(xall.max(), xall.min() + 1e-9))
+        ylo, yhi = (float(finite.min()), float(finite.max())) if finite.size else (0.0, 1.0)
+        if yhi - ylo < 1e-12:
+            ylo, yhi = ylo - 0.5, yhi + 0.5
+        d.text((box[0] + 8, box[1] + 6), label, fill=TEXT, font=font)
+        d.text((box[0] + 8, gy0), f"{yhi:.3g}", fill=DIM_TEXT, font=font)
+        d.text((box[0] + 8, gy1 - 12), f"{ylo:.3g}", fill=DIM_TEXT, font=font)
+        d.text((gx0, gy1 + 6), f"{xlo:g}", fill=DIM_TEXT, font=font)
+        d.text((gx1 - 60, gy1 + 6), f"{xhi:g} {x_label}", fill=DIM_TEXT, font=font)
+        d.line([(gx0, gy1), (gx1, gy1)], fill=DIM_TEXT)
+
+        def px(x, y):
+            return (gx0 + (x - xlo) / (xhi - xlo) * (gx1 - gx0), gy1 - (y - ylo) / (yhi - ylo) * (gy1 - gy0))
+
+        if marker_x is not None and xlo <= marker_x <= xhi:
+            mx = px(marker_x, ylo)[0]
+            for y in range(int(gy0), int(gy1), 8):
+                d.line([(mx, y), (mx, y + 4)], fill=DIM_TEXT)
+        for i, ((name, _), x, y) in enumerate(zip(series.items(), xs, ys)):
+            color = palette(len(PALETTE) - 1 - i)      # the character colours first (orange, blue), then others
+            run = []
+            for xv, yv in zip(x, y):
+                if np.isfinite(yv):
+                    run.append(px(xv, yv))
+                elif run:
+                    d.line(run, fill=color) if len(run) > 1 else d.point(run, fill=color)
+                    run = []
+            if len(run) > 1:
+                d.line(run, fill=color)
+            ly = gy0 + 16 * i
+            d.rectangle([gx1 + 14, ly + 3, gx1 + 24, ly + 13], fill=color)
+            d.text((gx1 + 30, ly), name, fill=TEXT, font=font)
+    return write_png(path, canvas)

@@ -31,12 +31,15 @@ def step_controllers(controllers: dict[str, Controller], inp: InputState, dt: fl
 
 
 def run_headless(controller, input_source, seconds: float, dt: float = 1.0 / 60.0, recorder=None, on_step=None,
-                 input_writer=None, realtime: bool = False, reset: bool = True) -> dict:
+                 input_writer=None, realtime: bool = False, reset: bool = True, before_step=None,
+                 after_step=None) -> dict:
     """Step ``controller`` for ``seconds`` at ``dt`` and return its metrics (see :mod:`lmm.metrics`).
 
     ``input_source(t) -> InputState`` (an :class:`lmm.data.inputs.InputLog` works); ``recorder.write(pose)``
     and ``input_writer.write(t, input)`` stream the run; ``on_step(pose, snapshot)`` sees every tick.
     ``realtime`` paces the ticks to the wall clock (for interactive recordings and crash tests).
+    ``before_step(i, input)`` runs before tick ``i`` is stepped (a session's events act there) and
+    ``after_step(i, poses)`` after it (a session writer's fingerprints and commits, :mod:`lmm.session`).
     """
     if dt <= 0:
         raise ValueError(f"dt must be positive, got {dt}")
@@ -51,11 +54,15 @@ def run_headless(controller, input_source, seconds: float, dt: float = 1.0 / 60.
         inp = input_source(t)
         if input_writer is not None:
             input_writer.write(t, inp)
+        if before_step is not None:
+            before_step(i, inp)
         poses, snaps, _ = step_controllers(controllers, inp, dt)
         pose, snap = poses[controller.name], snaps[controller.name]
         if recorder is not None:
             recorder.write(pose)
         metrics.update(snap)
+        if after_step is not None:
+            after_step(i, poses)
         if on_step is not None:
             on_step(pose, snap)
         if realtime:

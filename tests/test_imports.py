@@ -9,8 +9,8 @@ Layers of ``lmm``, lowest first; a module may import its own layer and the layer
 * ``engine``: what a controller's tick computes with (features, search, networks, trajectory,
   inertialization, IK, tuning);
 * ``runtime``: the controllers, the tick loop, the builder and the metrics the tick loop measures;
-* ``analysis``: coverage, data checks, comparisons (following a reference), physics, motion search and
-  the pictures;
+* ``analysis``: coverage, data checks, comparisons (following a reference), physics, motion search,
+  sessions (record, replay, trace, A/B) and the pictures;
 * ``offline``: training, evaluation and export (torch).
 
 ``viewer`` stands alone (numpy, moderngl and its own modules; pillow for screenshots); ``app`` sits on top
@@ -39,7 +39,7 @@ LAYERS = {  # layer -> module prefixes (the longest matching prefix decides a mo
                 "lmm.tick_snapshot", "lmm.mm", "lmm.learned", "lmm.latents", "lmm.factory", "lmm.runner",
                 "lmm.metrics", "lmm.input_from_motion"),
     "analysis": ("lmm.coverage", "lmm.checks", "lmm.compare", "lmm.follow", "lmm.reconstruction",
-                 "lmm.physics", "lmm.motion_search", "lmm.reporting"),
+                 "lmm.physics", "lmm.motion_search", "lmm.reporting", "lmm.session"),
     "offline": ("lmm.offline",),
     "viewer": ("viewer",),
     "app": ("app",),

@@ -5,7 +5,9 @@
 
 Deterministic: the same input gives a byte-identical recording on the same machine. ``--record``
 streams the character to BVH (crash-safe, see :mod:`lmm.data.recording`) and the input to CSV beside it
-(``OUT.input.csv``, or ``--record-input``). Bad input (unreadable or broken logs, unknown scenarios,
+(``OUT.input.csv``, or ``--record-input``). ``--session OUT.lmmsession`` keeps the run as a session
+(:mod:`lmm.session`: replay it with ``lmm-studio replay``), ``--events EVENTS.json`` changes the tuning and
+resets the character at given ticks (the session's event format). Bad input (unreadable or broken logs, unknown scenarios,
 bad presets or weights, an unwritable target) raises an :class:`lmm.errors.InputError` or ``OSError``
 naming the file, line and column, which ``app/cli.py`` prints as one line (exit 1); bad numbers on the
 command line are refused by argparse (exit 2). Every target is checked before the run starts.
@@ -16,6 +18,7 @@ import sys
 from pathlib import Path
 
 from app.cli import number_in
+from app.commands.session_common import add_session_run_arguments, check_outputs, session_run
 from lmm.data.inputs import MAX_INPUT_SECONDS
 
 #: Tick rates accepted (Hz). Below 1 Hz one tick is longer than every halflife and the search interval
@@ -41,6 +44,7 @@ def add_arguments(p) -> None:
     p.add_argument("--manifest", help="dataset manifest (default: the shipped LAFAN1 locomotion set)")
     p.add_argument("--realtime", action="store_true", help="pace the ticks to the wall clock")
     p.add_argument("--quiet", action="store_true", help="print nothing but errors")
+    add_session_run_arguments(p)
 
 
 def _close(stream) -> OSError | None:
@@ -74,6 +78,12 @@ def main(args) -> int:
     for target in (record_input, args.metrics_json):
         if target is not None:
             check_writable(target)
+    check_outputs([("--session", args.session)],
+                  [args.input, args.tuning, args.events, args.record, record_input, args.metrics_json])
+    raw_events = None
+    if args.events:
+        from lmm.session.actions import read_events_file
+        raw_events = read_events_file(args.events)
     if args.controller == "lmm" and args.weights:
         from lmm.data.weights import load as load_weights
         from lmm.learned import RUNTIME_NETWORKS
@@ -110,12 +120,15 @@ def main(args) -> int:
             notes.append(snap.search_note)
             print(f"note: tick {snap.tick}: {snap.search_note}", file=sys.stderr)
 
+    session = None
     try:
+        session = session_run(args, raw_events, db, features, tuning, controller, seconds)
+        hooks = {} if session is None else {"before_step": session.before_step, "after_step": session.after_step}
         metrics = run_headless(controller, source, seconds, dt=1.0 / args.fps, recorder=recorder,
-                               input_writer=writer, realtime=args.realtime, on_step=note_once)
+                               input_writer=writer, realtime=args.realtime, on_step=note_once, **hooks)
     finally:
-        # both streams are closed even when one fails (a full disk); the first error is the one reported
-        close_errors = [e for e in (_close(recorder), _close(writer)) if e is not None]
+        # the streams are closed even when one fails (a full disk); the first error is the one reported
+        close_errors = [e for e in (_close(recorder), _close(writer), _close(session)) if e is not None]
     if close_errors:
         raise close_errors[0]
 
@@ -124,6 +137,8 @@ def main(args) -> int:
     metrics["ground_skating_fraction_source"] = source_ground_skating(db)["fraction"]
     report = {"controller": args.controller, "input": args.input, "seconds": seconds, "fps": args.fps,
               "frames": metrics["ticks"], "metrics": metrics, "search_notes": notes}
+    if args.session:
+        report["session"] = str(args.session)
     if args.record:
         report["recording"] = {"bvh": str(args.record), "frames": recorder.frames_written,
                                "input_csv": str(writer.path)}
