@@ -24,7 +24,7 @@ BAD = {
     "foreign_sqlite.lmmsession": ("an SQLite file of another program", "not a session"),
     "version_99.lmmsession": ("format version 99 (a newer writer)", "version"),
     "wrong_schema.lmmsession": ("the inputs table without its camera_azimuth column", "inputs"),
-    "events_out_of_order.lmmsession": ("an event at tick 3 after one at tick 60", "tick"),
+    "events_out_of_order.lmmsession": ("an event at tick 3 after the last one (tick 70 or later)", "tick"),
     "input_tick_huge.lmmsession": ("an input row at tick 10^12", "tick"),
     "meta_ticks_huge.lmmsession": ("meta ticks 10^15", "ticks"),
     "unknown_field.lmmsession": ("a tuning change of a field that does not exist", "no_such_field"),
@@ -63,8 +63,12 @@ def _edit(good: Path, out: Path, *statements) -> None:
         con.close()
 
 
-def _event(kind: str, payload, tick: int = 100) -> tuple:
+def _event(kind: str, payload, tick: int | None = None) -> tuple:
+    """An event appended to the session (at the last event's tick unless ``tick`` is given)."""
     text = payload if isinstance(payload, str) else json.dumps(payload)
+    if tick is None:
+        return ("INSERT INTO events (tick, kind, payload) VALUES ((SELECT coalesce(max(tick), 0) FROM events), ?, ?)",
+                (kind, text))
     return ("INSERT INTO events (tick, kind, payload) VALUES (?, ?, ?)", (tick, kind, text))
 
 
@@ -93,7 +97,7 @@ def make_bad(good: Path, folder: Path, only=None) -> dict[str, Path]:
         elif name == "wrong_schema.lmmsession":
             _edit(good, out, "ALTER TABLE inputs DROP COLUMN camera_azimuth")
         elif name == "events_out_of_order.lmmsession":
-            _edit(good, out, _event("tuning", {"field": "stick_deadzone", "channel": None, "old": 0.25, "new": 0.3},
+            _edit(good, out, _event("tuning", {"field": "stick_deadzone", "channel": None, "new": 0.3},
                                     tick=3))
         elif name == "input_tick_huge.lmmsession":
             _edit(good, out, "UPDATE inputs SET tick = 1000000000000 WHERE tick = (SELECT max(tick) FROM inputs)")
@@ -104,7 +108,7 @@ def make_bad(good: Path, folder: Path, only=None) -> dict[str, Path]:
         elif name == "unknown_channel.lmmsession":
             _edit(good, out, _event("tuning", {"field": "feature_weights", "channel": "no_such_channel", "new": 1.0}))
         elif name == "value_out_of_range.lmmsession":
-            _edit(good, out, _event("tuning", {"field": "stick_deadzone", "channel": None, "old": 0.25, "new": 5.0}))
+            _edit(good, out, _event("tuning", {"field": "stick_deadzone", "channel": None, "new": 5.0}))
         elif name == "unknown_kind.lmmsession":
             _edit(good, out, _event("explode", {}))
         elif name == "payload_not_json.lmmsession":

@@ -1,0 +1,260 @@
+"""Sessions (issue 33, headless): ``run --session/--events``, ``replay``, ``trace`` and ``ab`` end to end.
+
+Short sessions on the default data: a 15 s run with 34 tuning changes and five actions from an events file
+is replayed bit for bit (the BVH and every fingerprint) for MM and LMM; a branch differs only after its
+tick; a run killed at any moment leaves no file or one that replays to its last committed tick; hostile
+files give one line and exit 1; the trace's columns and values are the run's own snapshots.
+"""
+from __future__ import annotations
+
+import csv
+import json
+import os
+import signal
+import sqlite3
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from app.cli import main as cli_main
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "tests" / "corpus"))
+import session_files  # noqa: E402
+
+SECONDS = 15
+FPS = 60
+
+
+def cli(capsys, *argv) -> tuple[int, str, str]:
+    """``lmm-studio ARGV`` in this process: (exit code, stdout, stderr)."""
+    rc = cli_main([str(a) for a in argv])
+    out = capsys.readouterr()
+    return rc, out.out, out.err
+
+
+def _events() -> dict:
+    """34 tuning changes (plain fields, feature weights, tag biases, a boolean) and five actions over 15 s."""
+    changes = [("search_interval_s", None, 0.05), ("transition_cost", None, 0.3), ("stick_deadzone", None, 0.25),
+               ("feature_weights", "left_foot_position", 1.5), ("inertialization_halflife_s", None, 0.15),
+               ("tag_bias", "walk", -0.2), ("feature_weights", "trajectory_position", 1.2),
+               ("exclude_current_window_frames", None, 30), ("ik_enabled", None, False),
+               ("run_forward_speed_m_s", None, 3.0), ("feature_weights", "hip_velocity", 0.5)]
+    events, tick = [], 20
+    for i in range(34):
+        field, channel, value = changes[i % len(changes)]
+        if i >= len(changes):       # the second and third round move the values again
+            value = (not value) if isinstance(value, bool) else (value + 0.01 * (i // len(changes))
+                                                                 if isinstance(value, float) else value + i // 11)
+        payload = {"field": field, "new": value}
+        if channel:
+            payload["channel"] = channel
+        events.append({"tick": tick, "kind": "tuning", "payload": payload})
+        tick += 25
+    actions = [{"tick": 150, "kind": "teleport", "payload": {"position": [2.0, 0.0, -1.0], "yaw_deg": 45.0}},
+               {"tick": 300, "kind": "reset", "payload": {}},
+               {"tick": 420, "kind": "command", "payload": {"id": "camera_follow"}},
+               {"tick": 600, "kind": "reset", "payload": {"position": [0.0, 0.0, 3.0], "rotation": [0.0, 0.0, 1.0, 0.0]}},
+               {"tick": 750, "kind": "teleport", "payload": {"position": [-1.0, 0.0, 0.0]}}]
+    merged = sorted(events + actions, key=lambda e: e["tick"])
+    return {"events": merged}
+
+
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory):
+    """{controller: (session, bvh, events file)} of a 15 s run with the events, recorded."""
+    folder = tmp_path_factory.mktemp("sessions")
+    events = folder / "events.json"
+    events.write_text(json.dumps(_events()))
+    out = {}
+    for controller in ("mm", "lmm"):
+        session, bvh = folder / f"{controller}.lmmsession", folder / f"{controller}.bvh"
+        rc = cli_main(["run", "--controller", controller, "--input", "builtin:random:1", "--seconds", str(SECONDS),
+                       "--events", str(events), "--session", str(session), "--record", str(bvh), "--quiet"])
+        assert rc == 0
+        out[controller] = (session, bvh, events)
+    return out
+
+
+@pytest.mark.parametrize("controller", ["mm", "lmm"])
+def test_replay_reproduces_the_run_bit_for_bit(recorded, controller, tmp_path, capsys):
+    session, bvh, _ = recorded[controller]
+    con = sqlite3.connect(session)
+    kinds = [k for (k,) in con.execute("SELECT kind FROM events ORDER BY seq")]
+    fingerprints = con.execute("SELECT count(*) FROM fingerprints").fetchone()[0]
+    con.close()
+    assert kinds.count("tuning") >= 30 and kinds.count("reset") == 2 and kinds.count("teleport") == 2
+    assert fingerprints == SECONDS            # one a second, the last tick included
+    again = tmp_path / "again.bvh"
+    metrics = tmp_path / "m.json"
+    rc, out, err = cli(capsys, "replay", session, "--record", again, "--metrics-json", metrics)
+    assert rc == 0 and err == "", err
+    assert f"all {SECONDS} fingerprints match" in out
+    assert again.read_bytes() == bvh.read_bytes()     # cmp
+    report = json.loads(metrics.read_text())
+    assert report["fingerprints"] == {"checked": SECONDS, "differing": 0, "unexpected": []}
+    assert report["controllers"][controller]["ticks"] == SECONDS * FPS
+
+
+def test_a_session_changes_nothing_in_the_run(tmp_path, capsys):
+    """``run --session`` without events records the same bytes as a plain ``run``."""
+    plain, kept = tmp_path / "plain.bvh", tmp_path / "kept.bvh"
+    base = ["run", "--controller", "mm", "--input", "builtin:circle", "--seconds", "10", "--quiet"]
+    assert cli(capsys, *base, "--record", plain)[0] == 0
+    assert cli(capsys, *base, "--record", kept, "--session", tmp_path / "s.lmmsession")[0] == 0
+    assert plain.read_bytes() == kept.read_bytes()
+
+
+def test_a_branch_differs_only_after_its_tick(recorded, tmp_path, capsys):
+    session = recorded["mm"][0]
+    preset = tmp_path / "b.json"
+    preset.write_text(json.dumps({"feature_weights": {"trajectory_direction": 3.0}}))
+    rc, out, err = cli(capsys, "ab", session, "--tuning", preset, "--from-tick", 200, "--json", tmp_path / "ab.json",
+                       "--report", tmp_path / "plots")
+    assert rc == 0, err
+    report = json.loads((tmp_path / "ab.json").read_text())
+    diff = report["controllers"]["mm"]["pose_difference_m"]
+    assert diff["before_branch_max"] == 0.0 and diff["first_differing_tick"] >= 200 and diff["after_branch_max"] > 0
+    assert report["arm_a"]["fingerprints_differing"] == 0
+    for arm in ("a", "b"):
+        assert report["controllers"]["mm"][arm]["ticks"] == SECONDS * FPS
+    assert report["controllers"]["mm"]["a"] != report["controllers"]["mm"]["b"]
+    assert (tmp_path / "plots" / "ab_mm.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    rc, out, err = cli(capsys, "replay", session, "--tuning", preset, "--from-tick", 200)
+    assert rc == 0 and "fingerprints before the branch match" in out, err
+
+
+def test_a_killed_run_leaves_no_file_or_one_that_replays(tmp_path, capsys):
+    """SIGKILL of ``run --session`` (paced to the wall clock) at several moments, one within its first
+    0.5 s: no file, or one that opens and replays to its last committed tick."""
+    procs = []
+    for i, delay in enumerate((0.3, 0.45, 2.4, 3.3)):
+        out = tmp_path / f"killed{i}.lmmsession"
+        p = subprocess.Popen([sys.executable, "-m", "app.cli", "run", "--input", "builtin:random:1", "--seconds", "30",
+                              "--realtime", "--session", str(out), "--quiet"], cwd=ROOT, env=dict(os.environ))
+        procs.append((p, delay, out))
+    start = time.monotonic()
+    for p, delay, _ in sorted(procs, key=lambda x: x[1]):
+        time.sleep(max(0.0, start + delay - time.monotonic()))
+        p.send_signal(signal.SIGKILL)
+    from lmm.session.reader import open_session
+    kept = 0
+    for p, delay, out in procs:
+        p.wait()
+        if not out.exists():
+            continue
+        ticks = open_session(out).ticks
+        rc, text, err = cli(capsys, "replay", out)
+        assert rc == 0 and err == "" and f"replayed {ticks} ticks" in text, (delay, err)
+        kept += ticks > 0
+    assert kept >= 1          # the later kills leave sessions with ticks in them
+
+
+@pytest.mark.parametrize("name", sorted(session_files.BAD))
+def test_hostile_sessions_give_one_line(recorded, tmp_path, capsys, name):
+    made = session_files.make_bad(recorded["mm"][0], tmp_path, only={name})
+    start = time.perf_counter()
+    rc, out, err = cli(capsys, "replay", made[name])
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert rc == 1 and len(lines) == 1 and "Traceback" not in err, err
+    assert name in lines[0] and lines[0].startswith("lmm-studio replay: error: ")
+    word = session_files.BAD[name][1]
+    assert word is None or word.lower() in lines[0].lower(), lines[0]
+    assert time.perf_counter() - start < 20
+
+
+def test_another_program_version_is_a_warning(recorded, tmp_path, capsys):
+    copy = tmp_path / "old.lmmsession"
+    copy.write_bytes(recorded["mm"][0].read_bytes())
+    con = sqlite3.connect(copy)
+    con.execute("UPDATE meta SET value = '\"0.0.1\"' WHERE key = 'program_version'")
+    con.commit()
+    con.close()
+    rc, out, err = cli(capsys, "replay", copy)
+    assert rc == 0 and "fingerprints match" in out
+    assert err.startswith("warning: ") and err.count("\n") == 1 and "0.0.1" in err and str(copy) in err
+
+
+def test_bad_events_files_are_refused_before_the_run(tmp_path, capsys):
+    cases = {"unknown_field": [{"tick": 1, "kind": "tuning", "payload": {"field": "nope", "new": 1}}],
+             "after_the_run": [{"tick": 10 ** 6, "kind": "reset", "payload": {}}],
+             "out_of_order": [{"tick": 9, "kind": "reset", "payload": {}}, {"tick": 3, "kind": "reset", "payload": {}}],
+             "out_of_range": [{"tick": 1, "kind": "tuning", "payload": {"field": "top_k", "new": 1000}}]}
+    for name, events in cases.items():
+        path = tmp_path / f"{name}.json"
+        path.write_text(json.dumps({"events": events}))
+        rc, _, err = cli(capsys, "run", "--input", "builtin:circle", "--seconds", "1", "--events", path,
+                         "--session", tmp_path / f"{name}.lmmsession", "--quiet")
+        assert rc == 1 and err.count("\n") == 1 and path.name in err, (name, err)
+        assert not (tmp_path / f"{name}.lmmsession").exists()
+
+
+def test_outputs_never_overwrite_the_inputs(recorded, tmp_path, capsys):
+    session, _, events = recorded["mm"]
+    before = session.read_bytes()
+    alias = tmp_path / "same.csv"
+    os.link(session, alias)                  # the session under another name: still the input
+    for argv in (["replay", session, "--record", session], ["trace", session, "--out", alias],
+                 ["ab", session, "--tuning", events, "--json", events]):
+        rc, _, err = cli(capsys, *argv)
+        assert rc == 1 and "overwrite" in err and err.count("\n") == 1, err
+    assert session.read_bytes() == before
+
+
+def test_trace_csv_holds_the_runs_own_snapshots(db, features, tmp_path, capsys):
+    """A session made through the API while its snapshots are kept; the trace's rows equal them."""
+    from lmm.data.inputs import open_input
+    from lmm.factory import make_controller
+    from lmm.runner import run_headless
+    from lmm.session import trace
+    from lmm.session.player import SessionRecorder
+    from lmm.session.writer import SessionWriter
+    from lmm.tuning import Tuning
+
+    tuning = Tuning()
+    tuning.name_database_entries({ch.name: float(w) for ch, w in zip(features.layout, features.weights)},
+                                 db.tag_names)
+    controller = make_controller("mm", db, features, tuning)
+    path = tmp_path / "api.lmmsession"
+    writer = SessionWriter(path, fps=FPS, db=db, manifest=None, controllers={"mm": controller}, tuning=tuning,
+                           start={"input": "builtin:zigzag", "seconds": 4.0, "reset": {}})
+    session = SessionRecorder(tuning, {"mm": controller}, [], writer)
+    seen = {}
+
+    def keep(pose, snap):
+        seen[snap.tick] = (int(snap.matched_frame), pose.global_positions[0].astype(float).tolist(),
+                           [bool(c) for c in snap.foot_contacts], bool(snap.transitioned))
+
+    run_headless(controller, open_input("builtin:zigzag", 4.0), 4.0, dt=1.0 / FPS, on_step=keep,
+                 before_step=session.before_step, after_step=session.after_step)
+    session.close()
+    out = tmp_path / "t.csv"
+    rc, text, err = cli(capsys, "trace", path, "--out", out)
+    assert rc == 0, err
+    with open(out, newline="") as f:
+        rows = list(csv.DictReader(f))
+    assert list(rows[0]) == trace.columns(features.names)
+    assert len(rows) == 4 * FPS
+    ticks = sorted(seen)                    # the controller's own tick numbers, one per step in order
+    for i in (0, 1, 37, 120, len(rows) - 1):
+        frame, root, contacts, transitioned = seen[ticks[i]]
+        row = rows[i]
+        assert int(row["tick"]) == i and row["controller"] == "mm"
+        assert int(row["frame"]) == frame
+        assert [float(row[k]) for k in ("root_x", "root_y", "root_z")] == root
+        assert [row["contact_left"], row["contact_right"]] == ["1" if c else "0" for c in contacts]
+        assert row["transitioned"] == ("1" if transitioned else "0")
+        assert row["clip"] == db.range_names[int(db.range_index(frame))]
+
+
+def test_parquet_without_pyarrow_is_one_line(recorded, tmp_path, capsys):
+    try:
+        import pyarrow  # noqa: F401
+        pytest.skip("pyarrow is installed")
+    except ImportError:
+        pass
+    rc, _, err = cli(capsys, "trace", recorded["mm"][0], "--out", tmp_path / "t.parquet")
+    assert rc == 1 and "pyarrow" in err and err.count("\n") == 1
