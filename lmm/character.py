@@ -62,8 +62,8 @@ from lmm.pose_rows import pack_rows
 from lmm.root_motion import LazyRootShift, integrate_root, synchronize
 from lmm.source_pose import SearchOutcome, SourcePose
 from lmm.tick_snapshot import SnapshotFeatures, TickQuery, array_of, ghost_positions
-from lmm.trajectory import (SharpInputChange, SimulationFloats, StickWorld, desired_rotation_floats,
-                            desired_velocity_floats, simulation_update_floats, trajectory_offsets)
+from lmm.trajectory import (SharpInputChange, SimulationState, StickWorld, desired_rotation, desired_velocity,
+                            simulation_update, trajectory_offsets)
 from lmm.tuning import Tuning
 
 
@@ -160,7 +160,7 @@ class CharacterController(Controller):
         rotation = np.array([1.0, 0, 0, 0]) if rotation is None else quat.normalize(np.asarray(rotation, np.float64))
         self._apply_feature_weights()
         p, q = tuple(position.tolist()), tuple(rotation.tolist())
-        self.sim = SimulationFloats((p, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), q, (0.0, 0.0, 0.0)))
+        self.sim = SimulationState((p, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), q, (0.0, 0.0, 0.0)))
         self._desired_t = ((0.0, 0.0, 0.0), q)  # the desired velocity and rotation as float tuples
         self._left_stick, self._right_stick = StickWorld(), StickWorld()
         self._set_root(position.tolist(), rotation.tolist())
@@ -256,8 +256,8 @@ class CharacterController(Controller):
         left = self._left_stick(inp.left_x, inp.left_y, tun.stick_deadzone, inp.camera_azimuth)
         self.stick_released_s = self.stick_released_s + dt if not any(left) else 0.0
         right = self._right_stick(inp.right_x, inp.right_y, tun.stick_deadzone, inp.camera_azimuth)
-        des_vel = desired_velocity_floats(left, self.sim.state[3], inp.walk, tun)
-        des_rot = desired_rotation_floats(left, right, des_vel, self._desired_t[1], inp.strafe, inp.camera_azimuth)
+        des_vel = desired_velocity(left, self.sim.state[3], inp.walk, tun)
+        des_rot = desired_rotation(left, right, des_vel, self._desired_t[1], inp.strafe, inp.camera_azimuth)
         forced = self._sharp_change(des_vel, des_rot, *self._desired_t, tun.forced_search_threshold, dt)
         self._desired_t = (des_vel, des_rot)
         return des_vel, des_rot, forced
@@ -265,9 +265,9 @@ class CharacterController(Controller):
     def _simulate(self, des_vel, des_rot, dt: float) -> tuple:
         """The simulation object one spring step towards the desired motion; returns its state tuple."""
         tun = self.tuning
-        state = simulation_update_floats(*self.sim.state, des_vel, des_rot, tun.simulation_velocity_halflife_s,
+        state = simulation_update(*self.sim.state, des_vel, des_rot, tun.simulation_velocity_halflife_s,
                                          tun.simulation_rotation_halflife_s, dt)
-        self.sim = SimulationFloats(state)
+        self.sim = SimulationState(state)
         return state
 
     def _search_when_due(self, state, des_vel, des_rot, forced: bool, dt: float, timings: dict) -> tuple:

@@ -147,11 +147,11 @@ def query_speed_turn(trajectory_positions, trajectory_rotations, trajectory_offs
     if offset not in offsets:
         return float("nan"), float("nan")
     i = offsets.index(offset)
-    local_pos, local_dir = trajectory_in_root_space(np.asarray(trajectory_positions, np.float64)[i:i + 1],
-                                                    np.asarray(trajectory_rotations, np.float64)[i:i + 1],
-                                                    np.asarray(root_position, np.float64),
-                                                    np.asarray(root_rotation, np.float64))
-    speed, turn = trajectory_speed_turn(local_pos[0, [0, 2]], local_dir[0, [0, 2]], offset / fps)
+    (lp,), (ld,) = trajectory_in_root_space(
+        [tuple(np.asarray(trajectory_positions, np.float64)[i].tolist())],
+        [tuple(np.asarray(trajectory_rotations, np.float64)[i].tolist())],
+        tuple(np.asarray(root_position, np.float64).tolist()), tuple(np.asarray(root_rotation, np.float64).tolist()))
+    speed, turn = trajectory_speed_turn(np.array([lp[0], lp[2]]), np.array([ld[0], ld[2]]), offset / fps)
     return float(speed), float(turn)
 
 

@@ -11,9 +11,8 @@ joint) would go below the ground.
 
 One pose's worth of 3-vectors and quaternions is done in plain Python floats (tuples): several
 times faster than numpy calls on tiny arrays. The controller calls :meth:`FootLockState.update` and
-:func:`solve_leg_floats` once per tick on a pose kept as lists of tuples; :func:`foot_lock_update`,
-:func:`solve_leg`, :func:`two_bone_ik` and :func:`toe_clear_ground` are the same maths with numpy
-arrays in and out.
+:func:`solve_legs` once per tick on a pose kept as lists of tuples; :func:`foot_lock_update` is the
+lock update as a function of a state it leaves alone.
 """
 from __future__ import annotations
 
@@ -55,12 +54,16 @@ def _angle_between(u, v) -> float:
     return math.acos(_clamp1(_dot(_unit(u), _unit(v))))
 
 
-def two_bone_ik_floats(a, b, c, t, hip_rot, knee_rot, eps: float = 1e-4):
-    """:func:`two_bone_ik` on tuples of floats (positions 3-tuples, rotations 4-tuples); returns two 4-tuples.
+def two_bone_ik(a, b, c, t, hip_rot, knee_rot, eps: float = 1e-4):
+    """Global rotations (hip, knee) that bring the ankle ``c`` onto the target ``t`` (or as close as the leg
+    reaches); ``a``/``b`` the hip and knee positions. Sequences of floats in (positions 3, rotations 4),
+    two 4-tuples out.
 
-    Written out (no helper per 3-vector), with the float operations of the helper form in the same order
-    (tests/test_ik.py keeps that form as the reference): ``a - b`` is exactly ``-(b - a)``, so the knee's
-    angle reuses the thigh and shin directions."""
+    Law of cosines: first the knee is bent (and the hip swung in the leg's plane) so the hip-ankle
+    distance equals the hip-target distance, then the hip turns the leg onto the target. The leg's
+    plane is kept (no twist); a straight leg bends in the plane of its knee's local Z axis.
+    Written out per component (tests/test_ik.py checks it against a helper-per-3-vector form): ``a - b``
+    is exactly ``-(b - a)``, so the knee's angle reuses the thigh and shin directions."""
     a0, a1, a2 = a
     b0, b1, b2 = b
     c0, c1, c2 = c
@@ -122,24 +125,6 @@ def two_bone_ik_floats(a, b, c, t, hip_rot, knee_rot, eps: float = 1e-4):
     mul = quat.mul_scalar
     return (quat.normalize_scalar(mul(r2, mul(r0, hip_rot))),
             quat.normalize_scalar(mul(r2, mul(r0, mul(r1, knee_rot)))))
-
-
-def two_bone_ik(hip_pos, knee_pos, ankle_pos, target, hip_rot, knee_rot, eps: float = 1e-4):
-    """Global rotations (hip, knee) that bring the ankle onto ``target`` (or as close as the leg reaches).
-
-    Law of cosines: first the knee is bent (and the hip swung in the leg's plane) so the hip-ankle
-    distance equals the hip-target distance, then the hip turns the leg onto the target. The leg's
-    plane is kept (no twist); a straight leg bends in the plane of its knee's local Z axis.
-    Returns two (4,) arrays.
-    """
-    hip, knee = two_bone_ik_floats(*(_floats(x) for x in (hip_pos, knee_pos, ankle_pos, target, hip_rot, knee_rot)),
-                                   eps=eps)
-    return np.array(hip), np.array(knee)
-
-
-def _floats(x) -> tuple:
-    """A small vector (numpy array or sequence) as a tuple of Python floats."""
-    return tuple(x.tolist()) if isinstance(x, np.ndarray) else tuple(float(v) for v in x)
 
 
 class FootLockState:
@@ -344,9 +329,10 @@ def foot_lock_update(state: FootLockState, toe_positions, toe_velocities, contac
     return s, np.array(targets)
 
 
-def toe_clear_ground_floats(toe_y: float, q, toe_axis_local, toe_length: float, ground_height: float):
-    """:func:`toe_clear_ground` on floats (``q`` a 4-tuple, the axis a 3-tuple); None when the toe is left
-    as it is."""
+def toe_clear_ground(toe_y: float, q, toe_axis_local, toe_length: float, ground_height: float):
+    """The toe's global rotation ``q`` bent up (about the horizontal axis across the foot) so the tip of the
+    foot, ``toe_length`` along ``toe_axis_local`` from the toe joint (at height ``toe_y``), is not below
+    ``ground_height``: a 4-tuple, or None when the toe is left as it is."""
     if toe_length <= 0.0:
         return None
     d = _unit(quat.mul_vec_scalar(q, toe_axis_local))
@@ -360,29 +346,23 @@ def toe_clear_ground_floats(toe_y: float, q, toe_axis_local, toe_length: float, 
     return quat.normalize_scalar(quat.mul_scalar(quat.from_axis_angle_scalar(_unit(axis), angle), q))
 
 
-def toe_clear_ground(toe_pos, toe_rot, toe_axis_local, toe_length: float, ground_height: float):
-    """The toe's global rotation bent up (about the horizontal axis across the foot) so the tip of the
-    foot, ``toe_length`` along ``toe_axis_local`` from the toe joint, is not below ``ground_height``."""
-    new = toe_clear_ground_floats(float(toe_pos[1]), _floats(toe_rot), _floats(toe_axis_local), toe_length,
-                                  ground_height)
-    return toe_rot if new is None else np.array(new)
-
-
-def solve_leg_floats(global_pos, global_rot, chain, toe_target, toe_axis_local, toe_length: float,
-                     ground_height: float | None) -> tuple:
-    """:func:`solve_leg` on one pose kept as lists of tuples of floats (``global_pos[j]`` a 3-tuple,
-    ``global_rot[j]`` a 4-tuple, target and axis 3-tuples). Returns the new global rotations of (hip, knee,
-    foot, toe), 4-tuples in the order of ``chain`` (the foot's is its own, unchanged)."""
+def solve_leg(global_pos, global_rot, chain, toe_target, toe_axis_local, toe_length: float,
+              ground_height: float | None) -> tuple:
+    """New global rotations for (hip, knee, foot, toe) of one leg so the toe reaches ``toe_target``, in the
+    order of ``chain`` (bone indices). The foot keeps its global rotation (so the toe's offset from the
+    ankle is unchanged); the ankle's target is the toe target minus that offset; with a ``ground_height``
+    the toe is bent up to keep the tip of the foot above it. One pose as lists of tuples of floats
+    (``global_pos[j]`` a 3-tuple, ``global_rot[j]`` a 4-tuple; arrays work too)."""
     hip, knee, foot, toe = chain
     tp, fp = global_pos[toe], global_pos[foot]
-    # toe_target - (toe - foot), as the numpy form computes it
+    # toe_target - (toe - foot)
     ankle_target = (toe_target[0] - (tp[0] - fp[0]), toe_target[1] - (tp[1] - fp[1]),
                     toe_target[2] - (tp[2] - fp[2]))
-    hip_rot, knee_rot = two_bone_ik_floats(global_pos[hip], global_pos[knee], fp, ankle_target,
+    hip_rot, knee_rot = two_bone_ik(global_pos[hip], global_pos[knee], fp, ankle_target,
                                            global_rot[hip], global_rot[knee])
     toe_rot = global_rot[toe]
     if ground_height is not None:
-        bent = toe_clear_ground_floats(toe_target[1], toe_rot, toe_axis_local, toe_length, ground_height)
+        bent = toe_clear_ground(toe_target[1], toe_rot, toe_axis_local, toe_length, ground_height)
         if bent is not None:
             toe_rot = bent
     return hip_rot, knee_rot, global_rot[foot], toe_rot
@@ -390,7 +370,7 @@ def solve_leg_floats(global_pos, global_rot, chain, toe_target, toe_axis_local, 
 
 def solve_legs(locks: FootLockState, global_pos, global_rot, leg_chains, targets, toe_axes, toe_length: float,
                foot_height: float) -> list:
-    """:func:`solve_leg_floats` for every leg whose toe must move this tick (locked, or free and not yet
+    """:func:`solve_leg` for every leg whose toe must move this tick (locked, or free and not yet
     blended back onto the animation): a list of (leg index, new global rotations of its chain). A locked
     toe keeps the tip of the foot above the ground (its lock height minus the foot height)."""
     solved = []
@@ -401,31 +381,5 @@ def solve_legs(locks: FootLockState, global_pos, global_rot, leg_chains, targets
                               and abs(target[2] - toe[2]) <= 1e-6):
             continue  # free and fully blended back: nothing to solve
         ground = target[1] - foot_height if is_locked else None
-        solved.append((i, solve_leg_floats(global_pos, global_rot, leg, target, toe_axes[i], toe_length, ground)))
+        solved.append((i, solve_leg(global_pos, global_rot, leg, target, toe_axes[i], toe_length, ground)))
     return solved
-
-
-def solve_leg(global_pos, global_rot, chain, toe_target, toe_axis_local, toe_length: float,
-              ground_height: float | None):
-    """New global rotations for (hip, knee, foot, toe) of one leg so the toe reaches ``toe_target``.
-
-    ``chain`` = (hip, knee, foot, toe) bone indices. The foot keeps its global rotation (so the toe's
-    offset from the ankle is unchanged); the ankle's target is the toe target minus that offset.
-    Returns a dict bone -> new global rotation ((4,) arrays).
-    """
-    pos = {j: _floats(global_pos[j]) for j in chain}
-    rot = {j: _floats(global_rot[j]) for j in chain}
-    out = solve_leg_floats(pos, rot, chain, _floats(toe_target), _floats(toe_axis_local), toe_length,
-                           None if ground_height is None else float(ground_height))
-    return {j: np.array(q) for j, q in zip(chain, out)}
-
-
-def local_rotation_from_global(parent_global, global_rot) -> tuple:
-    """parent^-1 * global on 4-tuples (one bone)."""
-    return quat.inv_mul_scalar(parent_global, global_rot)
-
-
-def local_rotations_from_global(global_rot, parents, bones) -> dict:
-    """Local rotations (parent^-1 * global) of the given bones of one pose, as (4,) arrays."""
-    return {j: np.array(local_rotation_from_global(_floats(global_rot[parents[j]]), _floats(global_rot[j])))
-            for j in bones}

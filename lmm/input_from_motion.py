@@ -32,8 +32,8 @@ from lmm import quat
 from lmm.controller import InputState
 from lmm.errors import InputError
 from lmm.springs import halflife_to_damping
-from lmm.trajectory import (SimulationState, desired_rotation, desired_velocity, simulation_update,
-                            stick_to_world, stick_with_deadzone, yaw_rotation)
+from lmm.trajectory import (SimulationState, desired_rotation, desired_velocity, simulation_update, stick_world,
+                            yaw_rotation)
 from lmm.tuning import Tuning
 
 WALK_BELOW_M_S = 1.2        # walk button held below this desired speed (run above WALK_UNTIL_M_S)
@@ -158,16 +158,22 @@ def _stick_for(velocity_world, sim_rotation, walk: bool, tuning: Tuning) -> tupl
     return x * raw / m, y * raw / m, clamped
 
 
+def _at_rest() -> tuple:
+    """The simulation object at the origin facing +Z, at rest, and that desired rotation."""
+    zero, facing = (0.0, 0.0, 0.0), (1.0, 0.0, 0.0, 0.0)
+    return SimulationState((zero, zero, zero, facing, zero)), facing
+
+
 def input_step(sim: SimulationState, desired_rot, inp: InputState, tuning: Tuning, dt: float):
     """Exactly the controller's input step (:meth:`lmm.character.CharacterController.step`): the stick
     through the deadzone and the camera to a desired velocity and rotation, then one spring step.
     Returns the new simulation object and desired rotation."""
-    left = stick_to_world(stick_with_deadzone(inp.left_x, inp.left_y, tuning.stick_deadzone), inp.camera_azimuth)
-    right = stick_to_world(stick_with_deadzone(inp.right_x, inp.right_y, tuning.stick_deadzone), inp.camera_azimuth)
-    des_vel = desired_velocity(left, sim.rotation, inp.walk, tuning)
+    left = stick_world(inp.left_x, inp.left_y, tuning.stick_deadzone, inp.camera_azimuth)
+    right = stick_world(inp.right_x, inp.right_y, tuning.stick_deadzone, inp.camera_azimuth)
+    des_vel = desired_velocity(left, sim.state[3], inp.walk, tuning)
     desired_rot = desired_rotation(left, right, des_vel, desired_rot, inp.strafe, inp.camera_azimuth)
-    sim = simulation_update(sim, des_vel, desired_rot, tuning.simulation_velocity_halflife_s,
-                            tuning.simulation_rotation_halflife_s, dt)
+    sim = SimulationState(simulation_update(*sim.state, des_vel, desired_rot, tuning.simulation_velocity_halflife_s,
+                                            tuning.simulation_rotation_halflife_s, dt))
     return sim, desired_rot
 
 
@@ -181,8 +187,7 @@ def derive_input(root: RootPath, tuning: Tuning | None = None, dt: float = 1.0 /
     p_r, v_r, a_r, j_r, yaw_r, w_r, dw_r = _sample(ref, (np.arange(n) + 1) * dt)
     y_vel = float(halflife_to_damping(tuning.simulation_velocity_halflife_s)) / 2.0
     y_rot = float(halflife_to_damping(tuning.simulation_rotation_halflife_s)) / 2.0
-    sim = SimulationState()
-    des_rot = np.array([1.0, 0.0, 0.0, 0.0])
+    sim, des_rot = _at_rest()
     walk = strafe = False
     inputs: list[InputState] = []
     rep_pos = np.zeros((n, 3))
@@ -230,8 +235,7 @@ def replay(inputs, tuning: Tuning | None = None, dt: float = 1.0 / 60.0) -> tupl
     """The simulation object driven by ``inputs`` (an :class:`InputState` per tick): positions (n, 3)
     and yaw (n,), with the controller's input step and springs."""
     tuning = tuning if tuning is not None else Tuning()
-    sim = SimulationState()
-    des_rot = np.array([1.0, 0.0, 0.0, 0.0])
+    sim, des_rot = _at_rest()
     pos, yaw = [], []
     for inp in inputs:
         sim, des_rot = input_step(sim, des_rot, inp, tuning, dt)

@@ -48,11 +48,23 @@ def _radians(degrees: float) -> float:
     return r
 
 
+def _capped(d, velocity, ratio: float, dt: float) -> tuple:
+    """The step ``d`` shortened to at most ``ratio * |velocity| * dt`` (adjustment by velocity)."""
+    dx, dy, dz = d
+    vx, vy, vz = velocity
+    cap = ratio * math.sqrt(vx * vx + vy * vy + vz * vz) * dt
+    length = math.sqrt(dx * dx + dy * dy + dz * dz)
+    if length > cap:
+        k = cap / length
+        return dx * k, dy * k, dz * k
+    return dx, dy, dz
+
+
 def synchronize(tun, sim_state, root_pos, root_rot, root_vel_world, root_ang_world, dt) -> tuple:
     """Adjustment (pull the integrated character root ``root_pos``/``root_rot``, floats, towards the
-    simulation object, ``sim_state`` as :class:`lmm.trajectory.SimulationFloats` keeps it) and clamping:
+    simulation object, ``sim_state`` as :class:`lmm.trajectory.SimulationState` keeps it) and clamping:
     the character root's new (position, rotation) as tuples. Plain floats (one position and one
-    quaternion): the operations of the numpy form (tests/test_root_floats.py), a fraction of the time."""
+    quaternion), a fraction of the time of numpy calls (tests/test_root_floats.py checks it against numpy)."""
     (sx, sy, sz), sim_rot = sim_state[0], sim_state[3]
     px, py, pz = root_pos
     rw, rx, ry, rz = root_rot
@@ -60,23 +72,13 @@ def synchronize(tun, sim_state, root_pos, root_rot, root_vel_world, root_ang_wor
         factor = _damper_factor(tun.adjustment_position_halflife_s, dt)
         dx, dy, dz = (sx - px) * factor, (sy - py) * factor, (sz - pz) * factor
         if tun.adjustment_by_velocity:
-            vx, vy, vz = root_vel_world
-            cap = tun.adjustment_max_speed_ratio * math.sqrt(vx * vx + vy * vy + vz * vz) * dt
-            length = math.sqrt(dx * dx + dy * dy + dz * dz)
-            if length > cap:
-                k = cap / length
-                dx, dy, dz = dx * k, dy * k, dz * k
+            dx, dy, dz = _capped((dx, dy, dz), root_vel_world, tun.adjustment_max_speed_ratio, dt)
         px, py, pz = px + dx, py + dy, pz + dz
         dx, dy, dz = quat.angle_axis_difference_scalar(sim_rot, (rw, rx, ry, rz))
         factor = _damper_factor(tun.adjustment_rotation_halflife_s, dt)
         dx, dy, dz = dx * factor, dy * factor, dz * factor
         if tun.adjustment_by_velocity:
-            vx, vy, vz = root_ang_world
-            cap = tun.adjustment_max_speed_ratio * math.sqrt(vx * vx + vy * vy + vz * vz) * dt
-            length = math.sqrt(dx * dx + dy * dy + dz * dz)
-            if length > cap:
-                k = cap / length
-                dx, dy, dz = dx * k, dy * k, dz * k
+            dx, dy, dz = _capped((dx, dy, dz), root_ang_world, tun.adjustment_max_speed_ratio, dt)
         rw, rx, ry, rz = quat.normalize_scalar(quat.mul_scalar(quat.from_scaled_angle_axis_scalar((dx, dy, dz)),
                                                                (rw, rx, ry, rz)))
     if tun.clamping_enabled:

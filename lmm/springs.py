@@ -89,9 +89,9 @@ def _spring_damper_exact_quat_arrays(q, w, goal, halflife, dt, eps: float = EPS)
 
 def _spring_damper_exact_quat_one(q, w, goal, halflife, dt, eps: float = EPS):
     """:func:`simple_spring_damper_exact_quat` for one rotation (and a scalar ``dt`` or a few horizons):
-    :func:`spring_rotation_floats` with numpy arrays in and out."""
+    :func:`spring_rotation_update` with numpy arrays in and out."""
     dts = np.asarray(dt, dtype=np.float64)
-    out = spring_rotation_floats(tuple(np.asarray(q, dtype=np.float64).tolist()),
+    out = spring_rotation_update(tuple(np.asarray(q, dtype=np.float64).tolist()),
                                  np.asarray(w, dtype=np.float64).tolist(),
                                  tuple(np.asarray(goal, dtype=np.float64).tolist()), halflife,
                                  tuple(dts.ravel().tolist()), eps)
@@ -110,36 +110,10 @@ def decay_spring_damper_exact_quat(q, w, halflife, dt, eps: float = EPS):
     return quat.from_scaled_angle_axis(e * (j0 + j1 * dt)), e * (w - j1 * y * dt)
 
 
-def spring_character_update(x, v, a, v_goal, halflife, dt, eps: float = EPS):
-    """A position driven by a critically damped spring on its *velocity*. Returns (x, v, a).
-
-    v(t) = v_goal + e^{-y t} (j0 + j1 t) with j0 = v0 - v_goal, j1 = a0 + j0 y; x(t) is its exact
-    integral. ``dt`` may be an array of horizons (then x, v, a gain a trailing horizon axis before the
-    vector axis), which is how trajectories are predicted in one call.
-    """
-    y = halflife_to_damping(halflife, eps) / 2.0
-    dt = np.asarray(dt, dtype=np.float64)
-    if dt.ndim:
-        dt = dt[..., None]
-    j0 = v - v_goal
-    j1 = a + j0 * y
-    e = np.exp(-y * dt)
-    x_new = (e * ((-j1) / (y * y) + (-j0 - j1 * dt) / y)
-             + j1 / (y * y) + j0 / y + v_goal * dt + x)
-    v_new = e * (j0 + j1 * dt) + v_goal
-    a_new = e * (a - j1 * y * dt)
-    return x_new, v_new, a_new
-
-
-def spring_rotation_update(q, w, q_goal, halflife, dt, eps: float = EPS):
-    """Rotation and angular velocity of a spring towards a fixed goal rotation; ``dt`` may be an array."""
-    return simple_spring_damper_exact_quat(q, w, q_goal, halflife, dt, eps)
-
-
 # ------------------------------------------------------------------------------------------------------
-# One character per tick in plain Python floats: the same float operations as the numpy forms above
-# (bit for bit, tested in tests/test_springs.py), without numpy's per-call overhead on 3- and 4-element
-# arrays. Vectors are tuples; ``dts`` is a tuple of horizons (one tick: ``(dt,)``).
+# The simulation object's springs, one character per tick in plain Python floats (no numpy per-call
+# overhead on 3- and 4-element arrays; tests/test_motion_floats.py checks them against the closed forms
+# written in numpy). Vectors are tuples; ``dts`` is a tuple of horizons (one tick: ``(dt,)``).
 # ------------------------------------------------------------------------------------------------------
 @functools.lru_cache(maxsize=256)
 def decay_factors(y: float, dts: tuple) -> tuple:
@@ -148,11 +122,13 @@ def decay_factors(y: float, dts: tuple) -> tuple:
     return tuple(np.exp(-y * np.asarray(dts, dtype=np.float64)).tolist())
 
 
-def spring_character_floats(x, v, a, v_goal, halflife: float, dts: tuple, eps: float = EPS,
+def spring_character_update(x, v, a, v_goal, halflife: float, dts: tuple, eps: float = EPS,
                             positions_only: bool = False) -> list:
-    """:func:`spring_character_update` for one 3-vector state: ``[(x, v, a), ...]``, one per horizon (only
-    the ``x`` when ``positions_only``). Written out per component (the same expressions, in the same
-    order, as the numpy form)."""
+    """A position driven by a critically damped spring on its *velocity*: ``[(x, v, a), ...]``, one per
+    horizon in ``dts`` (only the ``x`` when ``positions_only``), which is how a trajectory is predicted.
+
+    v(t) = v_goal + e^{-y t} (j0 + j1 t) with j0 = v0 - v_goal, j1 = a0 + j0 y; x(t) is its exact integral.
+    Written out per component."""
     y = float(halflife_to_damping(halflife, eps) / 2.0)
     yy = y * y
     x0, x1, x2 = x
@@ -179,11 +155,11 @@ def spring_character_floats(x, v, a, v_goal, halflife: float, dts: tuple, eps: f
     return out
 
 
-def spring_rotation_floats(q, w, goal, halflife: float, dts: tuple, eps: float = EPS,
+def spring_rotation_update(q, w, goal, halflife: float, dts: tuple, eps: float = EPS,
                            normalize: bool = False, rotations_only: bool = False) -> list:
-    """:func:`spring_rotation_update` for one rotation: ``[(q, w), ...]``, one per horizon; ``q``
-    renormalised (as ``quat.normalize``) only when ``normalize``; only the ``q`` when ``rotations_only``.
-    The scalar forms of :mod:`lmm.quat`, so the operations of the numpy form."""
+    """Rotation and angular velocity of a spring towards a fixed goal rotation (the closed form of
+    :func:`simple_spring_damper_exact_quat`, for one rotation): ``[(q, w), ...]``, one per horizon; ``q``
+    renormalised (as ``quat.normalize``) only when ``normalize``; only the ``q`` when ``rotations_only``."""
     y = float(halflife_to_damping(halflife, eps) / 2.0)
     j00, j01, j02 = quat.angle_axis_difference_scalar(q, goal)
     w0, w1, w2 = w

@@ -10,7 +10,7 @@ import numpy as np
 
 from lmm.features import build_query_from_columns, normalize_with
 from lmm.kinematics import pose_forward_kinematics
-from lmm.trajectory import trajectory_in_root_space_floats, trajectory_predict_floats
+from lmm.trajectory import trajectory_in_root_space, trajectory_predict
 
 
 def made(value):
@@ -98,7 +98,7 @@ class TickQuery:
     def _trajectory(self) -> tuple:
         traj = self._traj
         if traj is None:
-            traj = self._traj = trajectory_predict_floats(*self._args, self._times)
+            traj = self._traj = trajectory_predict(*self._args, self._times)
         return traj
 
     def positions(self) -> np.ndarray:
@@ -110,7 +110,7 @@ class TickQuery:
     def query(self) -> np.ndarray:
         if self._query is None:
             traj_pos, traj_rot = self._trajectory()
-            local_pos, local_dir = trajectory_in_root_space_floats(traj_pos, traj_rot, *self._root)
+            local_pos, local_dir = trajectory_in_root_space(traj_pos, traj_rot, *self._root)
             raw = build_query_from_columns(made(self._source), self._columns, local_pos, local_dir)
             self._query = normalize_with(raw, self._mean, self._inv_scale)
         return self._query

@@ -8,6 +8,10 @@ Conventions: Y is up; a rotation's forward axis is +Z. The camera's azimuth is i
 The simulation object is a point with a facing, moved by two critically damped springs: one on its
 velocity (towards the desired velocity) and one on its rotation (towards the desired rotation). Its
 future is predicted with the same closed-form springs, holding the desired velocity and rotation.
+
+One character per tick: vectors and quaternions are tuples of Python floats (the scalar forms of
+:mod:`lmm.quat`), a fraction of the cost of numpy calls on 2-, 3- and 4-element arrays; the tests check
+each function against a few lines of numpy (tests/test_motion_floats.py).
 """
 from __future__ import annotations
 
@@ -17,103 +21,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from lmm import quat
-from lmm.springs import (spring_character_floats, spring_character_update, spring_rotation_floats,
-                         spring_rotation_update)
-
-UP = np.array([0.0, 1.0, 0.0])
-FORWARD = np.array([0.0, 0.0, 1.0])
-
-
-def yaw_rotation(angle) -> np.ndarray:
-    """Rotation about +Y by ``angle`` radians."""
-    return quat.from_axis_angle(UP, np.asarray(angle, dtype=np.float64))
-
-
-def facing_rotation(direction) -> np.ndarray:
-    """The yaw rotation whose forward (+Z) points along the ground-plane ``direction``."""
-    d = np.asarray(direction, dtype=np.float64)
-    return yaw_rotation(np.arctan2(d[..., 0], d[..., 2]))
-
-
-def stick_with_deadzone(x: float, y: float, deadzone: float) -> np.ndarray:
-    """Radial deadzone: zero inside, rescaled outside so full deflection stays 1. Returns (2,)."""
-    s = np.array([x, y], dtype=np.float64)
-    mag = float(np.hypot(s[0], s[1]))
-    if mag <= deadzone or mag <= 0.0:
-        return np.zeros(2)
-    scaled = min((mag - deadzone) / max(1.0 - deadzone, 1e-6), 1.0)
-    return s * (scaled / mag)
-
-
-def stick_to_world(stick: np.ndarray, camera_azimuth: float) -> np.ndarray:
-    """Camera-relative stick (2,) -> world ground-plane vector (3,) of the same length."""
-    return quat.mul_vec(yaw_rotation(camera_azimuth), np.array([-stick[0], 0.0, stick[1]]))
-
-
-def desired_velocity(stick_world: np.ndarray, simulation_rotation: np.ndarray, walk: bool, tuning) -> np.ndarray:
-    """World velocity (3,) asked for by the stick.
-
-    The stick is expressed in the simulation object's frame and scaled per axis by the forward,
-    sideways and backwards speeds of the walk or run set, so sidestepping and backpedalling are slower.
-    """
-    if walk:
-        fwd, side, back = tuning.walk_forward_speed_m_s, tuning.walk_sideways_speed_m_s, tuning.walk_backwards_speed_m_s
-    else:
-        fwd, side, back = tuning.run_forward_speed_m_s, tuning.run_sideways_speed_m_s, tuning.run_backwards_speed_m_s
-    local = quat.inv_mul_vec(simulation_rotation, stick_world)
-    local = np.array([local[0] * side, 0.0, local[2] * (fwd if local[2] > 0.0 else back)])
-    return quat.mul_vec(simulation_rotation, local)
-
-
-def desired_rotation(stick_world: np.ndarray, right_stick_world: np.ndarray, velocity: np.ndarray,
-                     current_rotation: np.ndarray, strafe: bool, camera_azimuth: float) -> np.ndarray:
-    """The facing asked for.
-
-    Strafing faces the right stick's direction when it is pushed, else the camera's forward direction.
-    Otherwise the character faces where it is asked to go, and keeps its facing when asked to stand.
-    """
-    if strafe:
-        if np.linalg.norm(right_stick_world) > 1e-5:
-            return facing_rotation(right_stick_world)
-        return yaw_rotation(camera_azimuth)
-    if np.linalg.norm(velocity) > 1e-5:
-        return facing_rotation(velocity)
-    return np.array(current_rotation, dtype=np.float64)
-
-
-@dataclass
-class SimulationState:
-    """The simulation object: where the character should be. World space, float64."""
-    position: np.ndarray = field(default_factory=lambda: np.zeros(3))
-    velocity: np.ndarray = field(default_factory=lambda: np.zeros(3))
-    acceleration: np.ndarray = field(default_factory=lambda: np.zeros(3))
-    rotation: np.ndarray = field(default_factory=lambda: np.array([1.0, 0.0, 0.0, 0.0]))
-    angular_velocity: np.ndarray = field(default_factory=lambda: np.zeros(3))
-
-    def copy(self) -> "SimulationState":
-        return SimulationState(self.position.copy(), self.velocity.copy(), self.acceleration.copy(),
-                               self.rotation.copy(), self.angular_velocity.copy())
-
-
-def simulation_update(state: SimulationState, velocity_goal, rotation_goal, velocity_halflife: float,
-                      rotation_halflife: float, dt: float) -> SimulationState:
-    """One exact spring step of the simulation object."""
-    pos, vel, acc = spring_character_update(state.position, state.velocity, state.acceleration,
-                                            velocity_goal, velocity_halflife, dt)
-    rot, ang = spring_rotation_update(state.rotation, state.angular_velocity, rotation_goal, rotation_halflife, dt)
-    return SimulationState(pos, vel, acc, quat.normalize(rot), ang)
-
-
-def trajectory_predict(state: SimulationState, velocity_goal, rotation_goal, velocity_halflife: float,
-                       rotation_halflife: float, times) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Positions (T, 3), rotations (T, 4) and velocities (T, 3) of the simulation object ``times`` (T,)
-    seconds ahead, holding the current desired velocity and rotation."""
-    times = np.asarray(times, dtype=np.float64)
-    pos, vel, _ = spring_character_update(state.position, state.velocity, state.acceleration,
-                                          velocity_goal, velocity_halflife, times)
-    rot, _ = spring_rotation_update(state.rotation, state.angular_velocity, rotation_goal, rotation_halflife, times)
-    return pos, quat.normalize(rot), vel
-
+from lmm.springs import spring_character_update, spring_rotation_update
 
 def trajectory_offsets(features) -> np.ndarray:
     """Every future frame offset the feature layout's trajectory channels use (sorted, unique)."""
@@ -121,29 +29,18 @@ def trajectory_offsets(features) -> np.ndarray:
     return np.asarray(offs, dtype=np.int64)
 
 
-def trajectory_in_root_space(positions, rotations, root_position, root_rotation):
-    """Trajectory points and facing directions (T, 3) in the space of a root (ground-plane features)."""
-    local_pos = quat.inv_mul_vec(root_rotation, positions - root_position)
-    local_dir = quat.inv_mul_vec(root_rotation, quat.mul_vec(rotations, FORWARD))
-    return local_pos, local_dir
-
-
-# ------------------------------------------------------------------------------------------------------
-# One character per tick in plain Python floats (vectors and quaternions as tuples): the same float
-# operations as the numpy forms above, bit for bit (tested in tests/test_trajectory_floats.py), at a
-# fraction of the cost of numpy calls on 2-, 3- and 4-element arrays.
-# ------------------------------------------------------------------------------------------------------
 _hypot = np.hypot        # numpy's hypot and arctan2 differ from the C library's in the last bit
 _arctan2 = np.arctan2
 
 
-def yaw_rotation_floats(angle: float) -> tuple:
-    """:func:`yaw_rotation` as a tuple (the zero components included: ``sin * 0.0`` keeps its sign)."""
+def yaw_rotation(angle: float) -> tuple:
+    """Rotation about +Y by ``angle`` radians (the zero components included: ``sin * 0.0`` keeps its sign)."""
     return quat.from_axis_angle_scalar((0.0, 1.0, 0.0), angle)
 
 
-def stick_world_floats(x: float, y: float, deadzone: float, camera_azimuth: float) -> tuple:
-    """``stick_to_world(stick_with_deadzone(x, y, deadzone), camera_azimuth)`` as a tuple (3,)."""
+def stick_world(x: float, y: float, deadzone: float, camera_azimuth: float) -> tuple:
+    """A stick (x, y) as a world ground-plane vector (3,): a radial deadzone (zero inside, rescaled outside
+    so full deflection stays 1), then turned by the camera's azimuth."""
     if x == 0.0 and y == 0.0:  # hypot(0, 0) = 0 <= deadzone: skip the call
         sx = sy = 0.0
     else:
@@ -153,11 +50,13 @@ def stick_world_floats(x: float, y: float, deadzone: float, camera_azimuth: floa
         else:
             k = min((mag - deadzone) / max(1.0 - deadzone, 1e-6), 1.0) / mag
             sx, sy = x * k, y * k
-    return quat.mul_vec_scalar(yaw_rotation_floats(camera_azimuth), (-sx, 0.0, sy))
+    return quat.mul_vec_scalar(yaw_rotation(camera_azimuth), (-sx, 0.0, sy))
 
 
-def desired_velocity_floats(stick_world, simulation_rotation, walk: bool, tuning) -> tuple:
-    """:func:`desired_velocity` on tuples."""
+def desired_velocity(stick_world, simulation_rotation, walk: bool, tuning) -> tuple:
+    """World velocity (3,) asked for by the stick: the stick in the simulation object's frame, scaled per
+    axis by the forward, sideways and backwards speeds of the walk or run set (sidestepping and
+    backpedalling are slower)."""
     if walk:
         fwd, side, back = tuning.walk_forward_speed_m_s, tuning.walk_sideways_speed_m_s, tuning.walk_backwards_speed_m_s
     else:
@@ -166,20 +65,22 @@ def desired_velocity_floats(stick_world, simulation_rotation, walk: bool, tuning
     return quat.mul_vec_scalar(simulation_rotation, (lx * side, 0.0, lz * (fwd if lz > 0.0 else back)))
 
 
-def desired_rotation_floats(stick_world, right_stick_world, velocity, current_rotation, strafe: bool,
-                            camera_azimuth: float) -> tuple:
-    """:func:`desired_rotation` on tuples."""
+def desired_rotation(stick_world, right_stick_world, velocity, current_rotation, strafe: bool,
+                     camera_azimuth: float) -> tuple:
+    """The facing asked for. Strafing faces the right stick's direction when it is pushed, else the
+    camera's forward direction; otherwise the character faces where it is asked to go, and keeps its
+    facing when asked to stand."""
     if strafe:
         if quat.norm_scalar(right_stick_world) > 1e-5:
-            return yaw_rotation_floats(float(_arctan2(right_stick_world[0], right_stick_world[2])))
-        return yaw_rotation_floats(camera_azimuth)
+            return yaw_rotation(float(_arctan2(right_stick_world[0], right_stick_world[2])))
+        return yaw_rotation(camera_azimuth)
     if quat.norm_scalar(velocity) > 1e-5:
-        return yaw_rotation_floats(float(_arctan2(velocity[0], velocity[2])))
+        return yaw_rotation(float(_arctan2(velocity[0], velocity[2])))
     return tuple(current_rotation)
 
 
 class StickWorld:
-    """:func:`stick_world_floats` remembering its last answer: a stick rests or is held still on most
+    """:func:`stick_world` remembering its last answer: a stick rests or is held still on most
     ticks. A repeat is recognised only for the same floats with the same signs of zero (``-0.0 == 0.0``,
     but a stick's or the azimuth's sign of zero can reach the answer's zeros)."""
     __slots__ = ("_key", "_signs", "_value")
@@ -196,7 +97,7 @@ class StickWorld:
                 return self._value
         else:
             signs = (copysign(1.0, x), copysign(1.0, y), copysign(1.0, camera_azimuth))
-        value = stick_world_floats(x, y, deadzone, camera_azimuth)
+        value = stick_world(x, y, deadzone, camera_azimuth)
         self._key, self._signs, self._value = key, signs, value
         return value
 
@@ -237,7 +138,7 @@ class SharpInputChange:
         return forced
 
 
-class SimulationFloats:
+class SimulationState:
     """The simulation object as one tuple of float tuples ``state`` = (position, velocity, acceleration,
     rotation, angular_velocity), what the per-tick code reads and writes; :class:`SimulationState`'s
     array fields are built when read (a new array on every read)."""
@@ -252,35 +153,36 @@ class SimulationFloats:
     rotation = property(lambda self: np.array(self.state[3]))
     angular_velocity = property(lambda self: np.array(self.state[4]))
 
-    def copy(self) -> SimulationState:
-        return SimulationState(*(np.array(x) for x in self.state))
+    def copy(self) -> "SimulationState":
+        return SimulationState(self.state)  # tuples are never written
 
 
-def simulation_update_floats(position, velocity, acceleration, rotation, angular_velocity, velocity_goal,
-                             rotation_goal, velocity_halflife: float, rotation_halflife: float, dt: float):
-    """:func:`simulation_update` on tuples: (position, velocity, acceleration, rotation, angular_velocity)."""
-    (pos, vel, acc), = spring_character_floats(position, velocity, acceleration, velocity_goal,
+def simulation_update(position, velocity, acceleration, rotation, angular_velocity, velocity_goal,
+                      rotation_goal, velocity_halflife: float, rotation_halflife: float, dt: float):
+    """One exact spring step of the simulation object: (position, velocity, acceleration, rotation,
+    angular_velocity), the rotation renormalised."""
+    (pos, vel, acc), = spring_character_update(position, velocity, acceleration, velocity_goal,
                                                velocity_halflife, (dt,))
-    (rot, ang), = spring_rotation_floats(rotation, angular_velocity, rotation_goal, rotation_halflife, (dt,),
+    (rot, ang), = spring_rotation_update(rotation, angular_velocity, rotation_goal, rotation_halflife, (dt,),
                                          normalize=True)
     return pos, vel, acc, rot, ang
 
 
-def trajectory_predict_floats(position, velocity, acceleration, rotation, angular_velocity, velocity_goal,
-                              rotation_goal, velocity_halflife: float, rotation_halflife: float,
-                              times: tuple) -> tuple[list, list]:
-    """:func:`trajectory_predict` on tuples: the positions and rotations (lists of tuples), one per time."""
-    positions = spring_character_floats(position, velocity, acceleration, velocity_goal, velocity_halflife, times,
+def trajectory_predict(position, velocity, acceleration, rotation, angular_velocity, velocity_goal,
+                       rotation_goal, velocity_halflife: float, rotation_halflife: float,
+                       times: tuple) -> tuple[list, list]:
+    """Positions and rotations (lists of tuples) of the simulation object ``times`` seconds ahead, holding
+    the current desired velocity and rotation."""
+    positions = spring_character_update(position, velocity, acceleration, velocity_goal, velocity_halflife, times,
                                         positions_only=True)
-    turns = spring_rotation_floats(rotation, angular_velocity, rotation_goal, rotation_halflife, times,
+    turns = spring_rotation_update(rotation, angular_velocity, rotation_goal, rotation_halflife, times,
                                    normalize=True, rotations_only=True)
     return positions, turns
 
 
-def trajectory_in_root_space_floats(positions, rotations, root_position, root_rotation) -> tuple[list, list]:
-    """:func:`trajectory_in_root_space` on tuples: lists of local positions and facing directions.
-    The rotations are the scalar forms of :mod:`lmm.quat` (zero products included), so the bits of the
-    numpy form."""
+def trajectory_in_root_space(positions, rotations, root_position, root_rotation) -> tuple[list, list]:
+    """Trajectory points and facing directions (lists of 3-tuples) in the space of a root (ground-plane
+    features)."""
     inverse = quat.conj_scalar(root_rotation)
     rx, ry, rz = root_position
     local_pos = [quat.mul_vec_scalar(inverse, (px - rx, py - ry, pz - rz)) for px, py, pz in positions]

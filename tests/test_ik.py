@@ -51,7 +51,7 @@ def test_unreachable_target_stretches_towards_it_without_nan():
 def test_solve_leg_puts_the_toe_on_target_and_keeps_the_foot_rotation():
     parents, g_rot, g_pos = _leg()
     target = g_pos[3] + np.array([0.05, 0.04, -0.03])
-    new = solve_leg(g_pos, g_rot, (0, 1, 2, 3), target, np.array([0, 0, 1.0]), 0.0, None)
+    new = np.array(solve_leg(g_pos, g_rot, (0, 1, 2, 3), target, np.array([0, 0, 1.0]), 0.0, None))
     assert np.allclose(new[2], g_rot[2])
     thigh = quat.inv_mul_vec(g_rot[0], g_pos[1] - g_pos[0])
     shin = quat.inv_mul_vec(g_rot[1], g_pos[2] - g_pos[1])
@@ -62,10 +62,10 @@ def test_solve_leg_puts_the_toe_on_target_and_keeps_the_foot_rotation():
 
 def test_toe_is_bent_up_above_the_ground():
     toe_rot = quat.from_axis_angle(np.array([1.0, 0, 0]), 0.4)  # +Z pointing down and forward
-    new = toe_clear_ground(np.array([0, 0.02, 0]), toe_rot, np.array([0, 0, 1.0]), 0.15, 0.0)
+    new = np.array(toe_clear_ground(0.02, tuple(toe_rot.tolist()), (0.0, 0.0, 1.0), 0.15, 0.0))
     tip = np.array([0, 0.02, 0]) + 0.15 * quat.mul_vec(new, np.array([0, 0, 1.0]))
     assert tip[1] == pytest.approx(0.0, abs=1e-9)
-    assert toe_clear_ground(np.array([0, 0.5, 0]), toe_rot, np.array([0, 0, 1.0]), 0.15, 0.0) is toe_rot
+    assert toe_clear_ground(0.5, tuple(toe_rot.tolist()), (0.0, 0.0, 1.0), 0.15, 0.0) is None  # left as it is
 
 
 def _lock_run(anims, contacts, dt=1 / 60, state=None, **kw):
@@ -195,7 +195,7 @@ def test_an_unlocked_foot_near_the_ground_is_not_dragged_by_the_root_adjustment(
 # --- the plain-float forms (issue 16) against the helper forms they replace, bit for bit -------------------
 
 def _two_bone_ik_reference(a, b, c, t, hip_rot, knee_rot, eps=1e-4):
-    """The helper-per-3-vector form that two_bone_ik_floats replaces (lmm/ik.py before issue 16)."""
+    """The helper-per-3-vector form that two_bone_ik replaces (lmm/ik.py before issue 16)."""
     import math
 
     from lmm.ik import _angle_between, _clamp1, _cross, _norm, _sub, _unit
@@ -221,7 +221,6 @@ def _two_bone_ik_reference(a, b, c, t, hip_rot, knee_rot, eps=1e-4):
 
 
 def test_written_out_two_bone_ik_is_bit_identical_to_the_helper_form():
-    from lmm.ik import two_bone_ik_floats
 
     rng = np.random.default_rng(11)
     cases = 0
@@ -234,27 +233,30 @@ def test_written_out_two_bone_ik_is_bit_identical_to_the_helper_form():
         if k % 13 == 0:
             t = a  # target on the hip
         hip, knee = (tuple(quat.normalize(rng.normal(size=4)).tolist()) for _ in range(2))
-        got = two_bone_ik_floats(a, b, c, t, hip, knee)
+        got = two_bone_ik(a, b, c, t, hip, knee)
         want = _two_bone_ik_reference(a, b, c, t, hip, knee)
         assert got == want, (k, got, want)
         cases += 1
     # the comparison can fail: a one-ulp change of the input changes the result
     a, b, c, t = (0.0, 1.0, 0.0), (0.0, 0.55, 0.05), (0.0, 0.1, 0.0), (0.1, 0.2, 0.1)
     hip = knee = (1.0, 0.0, 0.0, 0.0)
-    assert two_bone_ik_floats(a, b, c, t, hip, knee) != _two_bone_ik_reference(
+    assert two_bone_ik(a, b, c, t, hip, knee) != _two_bone_ik_reference(
         a, b, c, (np.nextafter(0.1, 1.0), 0.2, 0.1), hip, knee)
 
 
-def test_float_solve_leg_matches_the_array_form():
-    from lmm.ik import solve_leg_floats
-
+def test_solve_leg_is_its_definition_in_numpy():
+    """The ankle's target is the toe target minus the foot's toe offset (numpy), the hip and knee from
+    two_bone_ik, the foot's rotation kept, the toe bent up by toe_clear_ground when a ground is given."""
     parents, g_rot, g_pos = _leg()
     for ground in (None, 0.05, 0.5):
         target = g_pos[3] + np.array([0.05, -0.6, -0.03])
-        want = solve_leg(g_pos, g_rot, (0, 1, 2, 3), target, np.array([0, 0, 1.0]), 0.15, ground)
-        got = solve_leg_floats([tuple(p) for p in g_pos.tolist()], [tuple(q) for q in g_rot.tolist()], (0, 1, 2, 3),
-                               tuple(target.tolist()), (0.0, 0.0, 1.0), 0.15, ground)
-        assert all(np.array_equal(want[j], np.array(q)) for j, q in zip((0, 1, 2, 3), got))
+        ankle_target = target - (g_pos[3] - g_pos[2])
+        hip, knee = two_bone_ik(g_pos[0], g_pos[1], g_pos[2], ankle_target, g_rot[0], g_rot[1])
+        bent = None if ground is None else toe_clear_ground(target[1], g_rot[3], (0.0, 0.0, 1.0), 0.15, ground)
+        want = [hip, knee, g_rot[2], g_rot[3] if bent is None else bent]
+        got = solve_leg([tuple(p) for p in g_pos.tolist()], [tuple(q) for q in g_rot.tolist()], (0, 1, 2, 3),
+                        tuple(target.tolist()), (0.0, 0.0, 1.0), 0.15, ground)
+        assert all(np.array_equal(np.array(w), np.array(q)) for w, q in zip(want, got))
 
 
 def test_foot_lock_update_in_place_equals_the_functional_form_and_leaves_its_input_alone():

@@ -1,5 +1,6 @@
 """The per-tick motion of one character in plain floats (input -> desired motion -> simulation springs ->
-predicted trajectory -> query) gives bit for bit what the numpy forms give (recordings depend on it), and
+predicted trajectory -> query) against direct definitions in numpy written here (the closed-form
+springs and quaternion maths of lmm.springs and lmm.quat), bit for bit (recordings depend on it), and
 the feature weights are re-applied when, and only when, they change."""
 import numpy as np
 import pytest
@@ -8,14 +9,74 @@ from lmm import quat
 from lmm.controller import InputState
 from lmm.features import build_query, build_query_from_columns, trajectory_query_columns
 from lmm.mm import MotionMatchingController
-from lmm.springs import (_spring_damper_exact_quat_arrays, spring_character_floats, spring_character_update,
-                         spring_rotation_floats)
-from lmm.trajectory import (SimulationState, desired_rotation, desired_rotation_floats, desired_velocity,
-                            desired_velocity_floats, simulation_update, simulation_update_floats,
-                            stick_to_world, stick_with_deadzone, stick_world_floats, trajectory_in_root_space,
-                            trajectory_in_root_space_floats, trajectory_predict, trajectory_predict_floats,
-                            yaw_rotation, yaw_rotation_floats)
+from lmm.springs import _spring_damper_exact_quat_arrays, halflife_to_damping, spring_character_update, spring_rotation_update
+from lmm.trajectory import (desired_rotation, desired_velocity, simulation_update, stick_world, trajectory_in_root_space,
+                            trajectory_predict, yaw_rotation)
 from lmm.tuning import Tuning
+
+UP, FORWARD = np.array([0.0, 1.0, 0.0]), np.array([0.0, 0.0, 1.0])
+
+
+# -- the definitions, in numpy -------------------------------------------------------------------------
+
+def np_yaw_rotation(angle):
+    return quat.from_axis_angle(UP, np.asarray(angle, dtype=np.float64))
+
+
+def np_stick_world(x, y, deadzone, camera_azimuth):
+    """Radial deadzone (zero inside, rescaled outside so full deflection stays 1), then the camera's turn."""
+    s = np.array([x, y], dtype=np.float64)
+    mag = float(np.hypot(s[0], s[1]))
+    s = np.zeros(2) if mag <= deadzone or mag <= 0.0 else s * (min((mag - deadzone) / max(1.0 - deadzone, 1e-6), 1.0) / mag)
+    return quat.mul_vec(np_yaw_rotation(camera_azimuth), np.array([-s[0], 0.0, s[1]]))
+
+
+def np_desired_velocity(stick, simulation_rotation, walk, tuning):
+    t = tuning
+    fwd, side, back = ((t.walk_forward_speed_m_s, t.walk_sideways_speed_m_s, t.walk_backwards_speed_m_s) if walk
+                       else (t.run_forward_speed_m_s, t.run_sideways_speed_m_s, t.run_backwards_speed_m_s))
+    local = quat.inv_mul_vec(simulation_rotation, stick)
+    return quat.mul_vec(simulation_rotation, np.array([local[0] * side, 0.0, local[2] * (fwd if local[2] > 0.0 else back)]))
+
+
+def np_desired_rotation(stick, right_stick, velocity, current_rotation, strafe, camera_azimuth):
+    def facing(d):
+        return np_yaw_rotation(np.arctan2(d[..., 0], d[..., 2]))
+    if strafe:
+        return facing(right_stick) if np.linalg.norm(right_stick) > 1e-5 else np_yaw_rotation(camera_azimuth)
+    return facing(velocity) if np.linalg.norm(velocity) > 1e-5 else np.array(current_rotation, dtype=np.float64)
+
+
+def np_spring_character(x, v, a, v_goal, halflife, dt):
+    """v(t) = v_goal + e^{-y t} (j0 + j1 t), j0 = v0 - v_goal, j1 = a0 + j0 y; x(t) its exact integral; ``dt``
+    may be an array of horizons (a horizon axis before the vector axis)."""
+    y = halflife_to_damping(halflife) / 2.0
+    dt = np.asarray(dt, dtype=np.float64)
+    if dt.ndim:
+        dt = dt[..., None]
+    j0 = v - v_goal
+    j1 = a + j0 * y
+    e = np.exp(-y * dt)
+    x_new = e * ((-j1) / (y * y) + (-j0 - j1 * dt) / y) + j1 / (y * y) + j0 / y + v_goal * dt + x
+    return x_new, e * (j0 + j1 * dt) + v_goal, e * (a - j1 * y * dt)
+
+
+def np_simulation_update(x, v, a, q, w, goal_v, goal_q, vh, rh, dt):
+    x, v, a = np_spring_character(x, v, a, goal_v, vh, dt)
+    q, w = _spring_damper_exact_quat_arrays(q, w, goal_q, rh, dt)
+    return x, v, a, quat.normalize(q), w
+
+
+def np_trajectory_predict(x, v, a, q, w, goal_v, goal_q, vh, rh, times):
+    pos, _, _ = np_spring_character(x, v, a, goal_v, vh, times)
+    rot, _ = _spring_damper_exact_quat_arrays(q, w, goal_q, rh, times)
+    return pos, quat.normalize(rot)
+
+
+def np_trajectory_in_root_space(positions, rotations, root_position, root_rotation):
+    return (quat.inv_mul_vec(root_rotation, positions - root_position),
+            quat.inv_mul_vec(root_rotation, quat.mul_vec(rotations, FORWARD)))
+
 
 TIMES = (20 / 60, 40 / 60, 60 / 60)
 
@@ -43,8 +104,8 @@ def _states(rng, n):
 
 
 def test_the_comparison_sees_the_sign_of_zero():
-    assert not _same(yaw_rotation_floats(-0.0), yaw_rotation_floats(0.0))
-    assert _same(yaw_rotation_floats(-0.0), yaw_rotation(-0.0))
+    assert not _same(yaw_rotation(-0.0), yaw_rotation(0.0))
+    assert _same(yaw_rotation(-0.0), np_yaw_rotation(-0.0))
 
 
 def test_sticks_and_desired_motion():
@@ -56,19 +117,19 @@ def test_sticks_and_desired_motion():
     for i, (x, y) in enumerate(sticks):
         az = [0.0, -0.0, float(rng.uniform(-7, 7))][i % 3]
         dz = [0.0, 0.1, 0.25][i % 3]
-        want = stick_to_world(stick_with_deadzone(x, y, dz), az)
-        got = stick_world_floats(x, y, dz, az)
+        want = np_stick_world(x, y, dz, az)
+        got = stick_world(x, y, dz, az)
         assert _same(got, want), (x, y, dz, az)
-        right = stick_to_world(stick_with_deadzone(y, -x, dz), az)
+        right = np_stick_world(y, -x, dz, az)
         sim_rot, current = rotations[i % len(rotations)], rotations[(i + 1) % len(rotations)]
         for walk in (False, True):
-            vel = desired_velocity(want, sim_rot, walk, tun)
-            vel_t = desired_velocity_floats(got, _t(sim_rot), walk, tun)
+            vel = np_desired_velocity(want, sim_rot, walk, tun)
+            vel_t = desired_velocity(got, _t(sim_rot), walk, tun)
             assert _same(vel_t, vel)
             for strafe in (False, True):
                 for r in (right, np.zeros(3)):
-                    assert _same(desired_rotation_floats(got, _t(r), vel_t, _t(current), strafe, az),
-                                 desired_rotation(want, r, vel, current, strafe, az))
+                    assert _same(desired_rotation(got, _t(r), vel_t, _t(current), strafe, az),
+                                 np_desired_rotation(want, r, vel, current, strafe, az))
 
 
 def test_springs_one_state():
@@ -79,16 +140,16 @@ def test_springs_one_state():
         halflife = [0.0, 0.1, float(rng.uniform(0, 1))][i % 3]
         for dts in ((1 / 60,), (float(rng.uniform(0, 3)),), TIMES):
             dt = np.array(dts) if len(dts) > 1 else dts[0]
-            got = spring_character_floats(_t(x), _t(v), _t(a), _t(goal_v), halflife, dts)
-            for k, want in enumerate(spring_character_update(x, v, a, goal_v, halflife, dt)):
+            got = spring_character_update(_t(x), _t(v), _t(a), _t(goal_v), halflife, dts)
+            for k, want in enumerate(np_spring_character(x, v, a, goal_v, halflife, dt)):
                 assert _same([g[k] for g in got], np.reshape(want, (len(dts), 3)))
-            assert _same(spring_character_floats(_t(x), _t(v), _t(a), _t(goal_v), halflife, dts, positions_only=True),
+            assert _same(spring_character_update(_t(x), _t(v), _t(a), _t(goal_v), halflife, dts, positions_only=True),
                          [g[0] for g in got])
-            got = spring_rotation_floats(_t(q), _t(w), _t(goal_q), halflife, dts)
+            got = spring_rotation_update(_t(q), _t(w), _t(goal_q), halflife, dts)
             want_q, want_w = _spring_damper_exact_quat_arrays(q, w, goal_q, halflife, dt)
             assert _same([g[0] for g in got], np.reshape(want_q, (len(dts), 4)))
             assert _same([g[1] for g in got], np.reshape(want_w, (len(dts), 3)))
-            normed = spring_rotation_floats(_t(q), _t(w), _t(goal_q), halflife, dts, normalize=True)
+            normed = spring_rotation_update(_t(q), _t(w), _t(goal_q), halflife, dts, normalize=True)
             assert _same([g[0] for g in normed], quat.normalize(np.reshape(want_q, (len(dts), 4))))
 
 
@@ -97,17 +158,16 @@ def test_simulation_trajectory_and_root_space():
     for i, (x, v, a, q, w) in enumerate(_states(rng, 200)):
         goal_v, goal_q = rng.normal(size=3) * 3, _quat(rng)
         vh, rh = float(rng.uniform(0, 0.5)), float(rng.uniform(0, 0.5))
-        state = SimulationState(x, v, a, q, w)
-        want = simulation_update(state, goal_v, goal_q, vh, rh, 1 / 60)
-        got = simulation_update_floats(_t(x), _t(v), _t(a), _t(q), _t(w), _t(goal_v), _t(goal_q), vh, rh, 1 / 60)
-        for g, name in zip(got, ("position", "velocity", "acceleration", "rotation", "angular_velocity")):
-            assert _same(g, getattr(want, name)), name
-        want_pos, want_rot, _ = trajectory_predict(want, goal_v, goal_q, vh, rh, np.array(TIMES))
-        got_pos, got_rot = trajectory_predict_floats(*got, _t(goal_v), _t(goal_q), vh, rh, TIMES)
+        want = np_simulation_update(x, v, a, q, w, goal_v, goal_q, vh, rh, 1 / 60)
+        got = simulation_update(_t(x), _t(v), _t(a), _t(q), _t(w), _t(goal_v), _t(goal_q), vh, rh, 1 / 60)
+        for g, w_, name in zip(got, want, ("position", "velocity", "acceleration", "rotation", "angular_velocity")):
+            assert _same(g, w_), name
+        want_pos, want_rot = np_trajectory_predict(*want, goal_v, goal_q, vh, rh, np.array(TIMES))
+        got_pos, got_rot = trajectory_predict(*got, _t(goal_v), _t(goal_q), vh, rh, TIMES)
         assert _same(got_pos, want_pos) and _same(got_rot, want_rot)
         root_pos, root_rot = rng.normal(size=3) * 10, _quat(rng)
-        want_lp, want_ld = trajectory_in_root_space(want_pos, want_rot, root_pos, root_rot)
-        got_lp, got_ld = trajectory_in_root_space_floats(got_pos, got_rot, _t(root_pos), _t(root_rot))
+        want_lp, want_ld = np_trajectory_in_root_space(want_pos, want_rot, root_pos, root_rot)
+        got_lp, got_ld = trajectory_in_root_space(got_pos, got_rot, _t(root_pos), _t(root_rot))
         assert _same(got_lp, want_lp) and _same(got_ld, want_ld)
 
 
@@ -156,16 +216,16 @@ def test_feature_weights_follow_the_tuning(db, features):
 def test_remembered_stick_and_simulation_floats():
     """The remembering stick answers what the plain function answers, signs of zero included; the float
     simulation state reads as the arrays it holds."""
-    from lmm.trajectory import SimulationFloats, StickWorld
+    from lmm.trajectory import SimulationState, StickWorld
     stick = StickWorld()
     rng = np.random.default_rng(7)
     calls = [(0.0, 0.0, 0.1, 0.0), (0.0, 0.0, 0.1, -0.0), (-0.0, 0.5, 0.1, 0.0), (0.0, 0.5, 0.1, 0.0),
              (0.0, 0.5, 0.1, 0.0), (0.3, 0.4, 0.1, 1.0), (0.3, 0.4, 0.1, 1.0), (0.3, 0.4, 0.2, 1.0)]
     calls += [tuple(rng.uniform(-1, 1, 2).tolist()) + (0.1, 0.5) for _ in range(20) for _ in range(2)]
     for args in calls:
-        assert _same(stick(*args), stick_world_floats(*args)), args
+        assert _same(stick(*args), stick_world(*args)), args
     state = tuple(tuple(rng.normal(size=n).tolist()) for n in (3, 3, 3, 4, 3))
-    sim = SimulationFloats(state)
+    sim = SimulationState(state)
     names = ("position", "velocity", "acceleration", "rotation", "angular_velocity")
     for name, want in zip(names, state):
         assert _same(getattr(sim, name), want) and _same(getattr(sim.copy(), name), want)

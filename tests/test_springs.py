@@ -46,23 +46,23 @@ def test_decay_is_spring_to_zero_and_vectorised():
 
 
 def test_character_spring_converges_and_integrates_velocity():
-    x, v, a = np.zeros(3), np.zeros(3), np.zeros(3)
-    goal = np.array([2.0, 0.0, -1.0])
+    zero, goal = (0.0, 0.0, 0.0), (2.0, 0.0, -1.0)
     # many small steps equal one big step (exact solution)
-    xs, vs, as_ = x, v, a
+    xs, vs, as_ = zero, zero, zero
     for _ in range(60):
-        xs, vs, as_ = spring_character_update(xs, vs, as_, goal, 0.27, 1 / 60)
-    xb, vb, ab = spring_character_update(x, v, a, goal, 0.27, 1.0)
+        (xs, vs, as_), = spring_character_update(xs, vs, as_, goal, 0.27, (1 / 60,))
+    (xb, vb, ab), = spring_character_update(zero, zero, zero, goal, 0.27, (1.0,))
     assert np.allclose(xs, xb, atol=1e-9) and np.allclose(vs, vb, atol=1e-9)
     # horizons in one call (trajectory prediction)
-    xh, vh, _ = spring_character_update(x, v, a, goal, 0.27, np.array([1 / 3, 2 / 3, 1.0]))
+    xh = np.array([x for x, _, _ in spring_character_update(zero, zero, zero, goal, 0.27, (1 / 3, 2 / 3, 1.0))])
     assert xh.shape == (3, 3) and np.allclose(xh[-1], xb)
-    x10, v10, _ = spring_character_update(x, v, a, goal, 0.27, 10.0)
+    (x10, v10, _), = spring_character_update(zero, zero, zero, goal, 0.27, (10.0,))
     assert np.allclose(v10, goal, atol=1e-6)
 
 
 def test_zero_halflife_snaps_without_nan():
-    x, v, a = spring_character_update(np.zeros(3), np.zeros(3), np.zeros(3), np.ones(3), 0.0, 1 / 60)
+    (x, v, a), = spring_character_update((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (1.0, 1.0, 1.0), 0.0,
+                                         (1 / 60,))
     assert np.isfinite(x).all() and np.allclose(v, 1.0)
 
 
