@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from corpus_harness import Job
+import session_files
 
 CORPUS = Path(__file__).resolve().parent
 ROOT = CORPUS.parents[1]
@@ -34,6 +35,7 @@ KIND_COMMANDS = {
     "preset": ("run",),
     "weights": ("run", "eval", "export-onnx"),
     "layout": ("loader",),
+    "session": ("replay",),
 }
 
 
@@ -165,7 +167,10 @@ FILES: dict[str, Spec] = {
     "layout/size_zero.ini": Spec("Size=0,0", "Size"),
     "layout/size_negative.ini": Spec("Size=-500,-500", "Size"),
     "layout/pos_huge.ini": Spec("Pos=1e15,1e15", "Pos"),
+    # session files (issue 33), each made from a valid 2 s session (tests/corpus/session_files.py)
+    **{f"session/{name}": Spec(what, word, generated=True) for name, (what, word) in session_files.BAD.items()},
 }
+GOOD_SESSION = "session/good.lmmsession"   # generated too: the control of the session kind
 
 # the older corpora each of whose files is broken in one way: run them through every command too
 EXTERNAL = {"bvh": (ROOT / "tests" / "bvh_corpus", ("*.bvh", "*.bvh.gz")),
@@ -254,6 +259,8 @@ def _argv(kind: str, command: str, path: str, tmp: Path, cid: str) -> dict:
         argv = manifest_cmds[command]
     elif kind == "input":
         argv = ["run", "--input", path, "--quiet"]  # no --seconds: the log's own length
+    elif kind == "session":
+        argv = ["replay", path, "--quiet"]
     elif kind == "preset":
         argv = ["run", "--input", "builtin:circle", "--seconds", "1", "--tuning", path, "--quiet"]
     elif kind == "weights":
@@ -298,7 +305,8 @@ def case_table() -> list[Case]:
                               f"unwritable target ({variant})", "reject", (name, folder),
                               recording=name if cid == "run-record" else None))
     controls = [("bvh", "good/walk.bvh"), ("manifest", "good/manifest.json"), ("input", "good/input.csv"),
-                ("preset", "good/preset.json"), ("weights", "shipped/default.npz"), ("layout", "good/layout.ini")]
+                ("preset", "good/preset.json"), ("weights", "shipped/default.npz"), ("layout", "good/layout.ini"),
+                ("session", GOOD_SESSION)]
     for kind, rel in controls:
         for command in KIND_COMMANDS[kind]:
             if command == "eval":
@@ -421,11 +429,19 @@ def generate(gen: Path, only: set | None = None) -> None:
         (w / "not_a_zip.npz").write_text("this is not a zip file\n")
     if want("weights/extra_1gib_member.npz"):
         _extra_member(w / "extra_1gib_member.npz")
+    sessions = {rel.split("/", 1)[1] for rel in FILES if rel.startswith("session/") and want(rel)}
+    if sessions or want(GOOD_SESSION):
+        good = gen / GOOD_SESSION
+        if not good.exists():
+            session_files.make_good(good)
+        session_files.make_bad(good, gen / "session", only=sessions)
 
 
 def case_path(case: Case, gen: Path) -> Path:
     if case.kind == "control" and case.file.startswith("shipped/"):
         return WEIGHTS
+    if case.file == GOOD_SESSION:
+        return gen / GOOD_SESSION
     spec = FILES.get(case.file)
     if spec is not None and spec.generated:
         return gen / case.file
@@ -489,7 +505,7 @@ def unmount(mounts: list) -> None:
 def build_jobs(cases: list[Case], tmp: Path, targets: dict) -> tuple[list[Job], dict]:
     """Driver jobs for ``cases`` (generating what they need) -> (jobs, {case id: skip reason})."""
     gen = tmp / "generated"
-    needed = {c.file for c in cases if c.file in FILES and FILES[c.file].generated}
+    needed = {c.file for c in cases if (c.file in FILES and FILES[c.file].generated) or c.file == GOOD_SESSION}
     generate(gen, needed)
     (tmp / "out").mkdir(parents=True, exist_ok=True)
     good = CORPUS / "good"
