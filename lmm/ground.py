@@ -8,7 +8,7 @@ import math
 import numpy as np
 
 from lmm.data.derived import cached
-from lmm.springs import halflife_to_damping
+from lmm.springs import decay_spring_damper_scalar, halflife_to_damping
 
 
 def bone_heights(db, bones) -> np.ndarray:
@@ -86,8 +86,5 @@ class GroundCalibration:
         if dt <= 0:
             return
         y = float(halflife_to_damping(tuning.inertialization_halflife_s)) / 2.0
-        x, v = self.offset - target, self.velocity
-        j1 = v + x * y
-        e = math.exp(-y * dt)
-        self.offset = target + e * (x + j1 * dt)
-        self.velocity = e * (v - j1 * y * dt)
+        x, self.velocity = decay_spring_damper_scalar(self.offset - target, self.velocity, y, math.exp(-y * dt), dt)
+        self.offset = target + x

@@ -21,7 +21,7 @@ import math
 import numpy as np
 
 from lmm import quat
-from lmm.springs import halflife_to_damping
+from lmm.springs import decay_spring_damper_scalar, halflife_to_damping
 
 # One leg is a handful of 3-vectors: plain Python floats are several times faster than numpy calls here.
 
@@ -240,9 +240,9 @@ class FootLockState:
                 off[i][0], off[i][2] = cx, cz
             ox, oy, oz = off[i]
             vx, vy, vz = off_v[i]
-            nx, vx = _decay(ox, vx, y, e, dt)
-            ny, vy = _decay(oy, vy, y, e, dt)
-            nz, vz = _decay(oz, vz, y, e, dt)
+            nx, vx = decay_spring_damper_scalar(ox, vx, y, e, dt)
+            ny, vy = decay_spring_damper_scalar(oy, vy, y, e, dt)
+            nz, vz = decay_spring_damper_scalar(oz, vz, y, e, dt)
             if a[1] + ny < lock[i][1] + lift_height and dt > 0.0:
                 # near the ground: the blend may not glide the foot faster than ground_blend_speed
                 step = math.hypot(nx - ox, nz - oz)
@@ -259,12 +259,6 @@ class FootLockState:
             targets.append((a[0] + nx, ty, a[2] + nz))
         self._previous = targets
         return targets
-
-
-def _decay(x: float, v: float, y: float, e: float, dt: float) -> tuple[float, float]:
-    """One component of a critically damped decay towards zero (damping ``y``, ``e = exp(-y dt)``)."""
-    j1 = v + x * y
-    return e * (x + j1 * dt), e * (v - j1 * y * dt)
 
 
 SWING_SPEEDS_M_S = (0.5, 1.5)  # horizontal toe speed where the swing clearance starts and is complete

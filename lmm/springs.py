@@ -101,6 +101,13 @@ def _spring_damper_exact_quat_one(q, w, goal, halflife, dt, eps: float = EPS):
             np.array([w for _, w in out]).reshape(dts.shape + (3,)))
 
 
+def decay_spring_damper_scalar(x: float, v: float, y: float, e: float, dt: float) -> tuple[float, float]:
+    """:func:`decay_spring_damper_exact` of one float, given ``y`` (damping / 2) and ``e = exp(-y dt)`` as the
+    caller computed them once for several components."""
+    j1 = v + x * y
+    return e * (x + j1 * dt), e * (v - j1 * y * dt)
+
+
 def decay_spring_damper_exact_quat(q, w, halflife, dt, eps: float = EPS):
     """Critically damped decay of a rotation offset ``q`` (and its angular velocity) towards identity."""
     y = halflife_to_damping(halflife, eps) / 2.0

@@ -76,3 +76,15 @@ def test_quaternion_spring_reaches_goal_the_short_way():
     assert abs(abs(np.dot(q2, goal)) - 1.0) < 1e-9
     qd, wd = decay_spring_damper_exact_quat(quat.normalize(np.array([0.9, 0.1, 0.3, 0.0])), np.zeros(3), 0.1, 3.0)
     assert abs(abs(qd[0]) - 1.0) < 1e-9
+
+
+def test_decay_of_one_float_is_the_array_form_bit_for_bit():
+    from lmm.springs import decay_spring_damper_scalar
+    rng = np.random.default_rng(12)
+    x, v = rng.normal(size=500), rng.normal(size=500) * 3
+    for halflife, dt in ((0.1, 1 / 60), (0.0, 1 / 60), (0.35, 0.5)):
+        want_x, want_v = decay_spring_damper_exact(x, v, halflife, dt)
+        y = float(halflife_to_damping(halflife)) / 2.0
+        e = float(np.exp(-y * dt))
+        got = np.array([decay_spring_damper_scalar(a, b, y, e, dt) for a, b in zip(x.tolist(), v.tolist())])
+        assert np.array_equal(got[:, 0], want_x) and np.array_equal(got[:, 1], want_v)
