@@ -188,3 +188,16 @@ def test_the_bit_comparison_can_fail():
     v = _edge_vecs(rng, 3000)
     other = np.sqrt(v[:, 0] ** 2 + (v[:, 1] ** 2 + v[:, 2] ** 2))
     assert not _same_bits(other, np.linalg.norm(v, axis=-1))
+
+
+def test_the_per_pose_fast_forms_against_the_bulk_forms():
+    """to_scaled_angle_axis_into gives to_scaled_angle_axis(abs_(q)) bit for bit; the unnormalised
+    exponential is from_scaled_angle_axis to rounding (its length is 1 to a few units in the last place)."""
+    rng = np.random.default_rng(9)
+    q = _edge_quats(rng, 2000)
+    out = np.empty((len(q), 3))
+    quat.to_scaled_angle_axis_into(q, out)
+    assert _same_bits(out, quat.to_scaled_angle_axis(quat.abs_(q)))
+    v = _edge_vecs(rng, 2000)
+    np.testing.assert_allclose(quat.from_scaled_angle_axis_unnormalized(v), quat.from_scaled_angle_axis(v),
+                               rtol=0, atol=1e-15)
