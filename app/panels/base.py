@@ -143,7 +143,8 @@ class Panel:
     reads: tuple[str, ...] = ()
 
     def __init__(self, ctx: PanelContext):
-        self.ctx = ctx.for_commands(self.commands)
+        # a test may hand a plain namespace with only the fields the panel uses: it is taken as it is
+        self.ctx = ctx.for_commands(self.commands) if isinstance(ctx, PanelContext) else ctx
         self.dpg = ctx.dpg
         self.tag = window_tag(self.key)
         self.title = WINDOWS[self.key][1]
