@@ -31,12 +31,11 @@ def identity(shape=(), dtype=np.float64) -> np.ndarray:
 
 def norm_scalar(v) -> float:
     """Length of a 3- or 4-vector (as ``np.linalg.norm(v, axis=-1)``: squares summed left to right)."""
-    s = 0.0
-    first = True
-    for c in v:
-        s = c * c if first else s + c * c
-        first = False
-    return math.sqrt(s)
+    if len(v) == 3:
+        x, y, z = v
+        return math.sqrt(x * x + y * y + z * z)
+    w, x, y, z = v
+    return math.sqrt(w * w + x * x + y * y + z * z)
 
 
 def normalize(q: np.ndarray, eps: float = 1e-10) -> np.ndarray:
@@ -44,9 +43,10 @@ def normalize(q: np.ndarray, eps: float = 1e-10) -> np.ndarray:
 
 
 def normalize_scalar(q, eps: float = 1e-10) -> tuple:
-    n = norm_scalar(q)
+    w, x, y, z = q
+    n = math.sqrt(w * w + x * x + y * y + z * z)
     n = n if n > eps else eps
-    return tuple(c / n for c in q)
+    return (w / n, x / n, y / n, z / n)
 
 
 def conj(q: np.ndarray) -> np.ndarray:
@@ -265,12 +265,13 @@ def exp(v: np.ndarray, eps: float = 1e-8) -> np.ndarray:
 
 
 def exp_scalar(v, eps: float = 1e-8) -> tuple:
-    half = norm_scalar(v)
+    x, y, z = v
+    half = math.sqrt(x * x + y * y + z * z)
     w = math.cos(half)
     if half < eps:
-        return normalize_scalar((w, v[0], v[1], v[2]))
+        return normalize_scalar((w, x, y, z))
     s = math.sin(half) / half
-    return normalize_scalar((w, s * v[0], s * v[1], s * v[2]))
+    return normalize_scalar((w, s * x, s * y, s * z))
 
 
 def log(q: np.ndarray, eps: float = 1e-8) -> np.ndarray:
@@ -283,14 +284,15 @@ def log(q: np.ndarray, eps: float = 1e-8) -> np.ndarray:
 
 
 def log_scalar(q, eps: float = 1e-8) -> tuple:
-    q = abs_scalar(q)
-    length = norm_scalar(q[1:])
+    w, x, y, z = q
+    if w < 0.0:  # abs_
+        w, x, y, z = -w, -x, -y, -z
+    length = math.sqrt(x * x + y * y + z * z)
     if length < eps:
-        return (q[1], q[2], q[3])
-    w = q[0]
+        return (x, y, z)
     w = -1.0 if w < -1.0 else 1.0 if w > 1.0 else w
     s = float(_arctan2(length, w)) / length
-    return (s * q[1], s * q[2], s * q[3])
+    return (s * x, s * y, s * z)
 
 
 def abs_(q: np.ndarray) -> np.ndarray:
