@@ -88,3 +88,21 @@ def test_decay_of_one_float_is_the_array_form_bit_for_bit():
         e = float(np.exp(-y * dt))
         got = np.array([decay_spring_damper_scalar(a, b, y, e, dt) for a, b in zip(x.tolist(), v.tolist())])
         assert np.array_equal(got[:, 0], want_x) and np.array_equal(got[:, 1], want_v)
+
+
+def test_one_rotation_spring_is_bit_identical_to_the_vectorised_form():
+    """The plain-float path of simple_spring_damper_exact_quat (one rotation, scalar dt or a few horizons)
+    against the numpy path it replaces, on the same arguments."""
+    from lmm.springs import _spring_damper_exact_quat_arrays, simple_spring_damper_exact_quat
+
+    rng = np.random.default_rng(7)
+    for i in range(300):
+        q = quat.normalize(rng.normal(size=4))
+        goal = quat.normalize(rng.normal(size=4)) if i % 5 else q.copy()
+        w = rng.normal(size=3) * (0.0 if i % 7 == 0 else 3.0)
+        halflife = float(rng.uniform(0.0, 0.5))
+        for dt in (1 / 60, float(rng.uniform(0, 2)), np.array([20, 40, 60]) / 60.0):
+            got_q, got_w = simple_spring_damper_exact_quat(q, w, goal, halflife, dt)
+            want_q, want_w = _spring_damper_exact_quat_arrays(q, w, goal, halflife, dt)
+            assert got_q.shape == want_q.shape and np.array_equal(got_q, want_q)
+            assert got_w.shape == want_w.shape and np.array_equal(got_w, want_w)

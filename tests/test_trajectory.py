@@ -237,3 +237,24 @@ def test_trajectory_columns_as_a_slice(features):
     kinds = ("trajectory_position", "trajectory_direction")
     want = [d for ch, s in zip(features.layout, features.slices) if ch.kind in kinds for d in range(s.start, s.stop)]
     assert list(range(len(features.mean)))[dims] == want and len(picks) == len(want)
+
+
+def test_rotation_distance_is_the_numpy_definition_bit_for_bit():
+    """The sharp-input test's rotation rate: the angle between two rotations in plain floats is the numpy
+    definition's, bit for bit (negative w, tiny and half-turn differences)."""
+
+    rng = np.random.default_rng(8)
+    for i in range(3000):
+        a = rng.normal(size=4)
+        a /= np.linalg.norm(a)
+        kind = i % 4
+        if kind == 0:
+            b = -a                                            # the same rotation, other sign
+        elif kind == 1:
+            b = a + rng.normal(size=4) * 1e-10                # a tiny difference (the small branch)
+        else:
+            b = rng.normal(size=4)
+            b /= np.linalg.norm(b)
+        a, b = tuple(a.tolist()), tuple(b.tolist())
+        want = np.linalg.norm(quat.angle_axis_difference(np.array(a), np.array(b)), axis=-1)
+        assert quat.norm_scalar(quat.angle_axis_difference_scalar(a, b)) == want

@@ -1,9 +1,10 @@
-"""The character root's integration and synchronization (plain floats through the scalar forms of
+"""The character root's integration, synchronization and toe shift (plain floats through the scalar forms of
 lmm.quat) against a direct definition with lmm.quat's numpy forms, bit for bit (the recordings depend on it)."""
 import numpy as np
 
 from lmm import quat
-from lmm.root_motion import _damper_factor, _radians, integrate_root, synchronize
+from lmm.mm import MotionMatchingController
+from lmm.root_motion import LazyRootShift, _damper_factor, _radians, integrate_root, root_shift, synchronize
 from lmm.tuning import Tuning
 
 
@@ -96,3 +97,18 @@ def test_integration_and_synchronization_equal_the_numpy_definition_bit_for_bit(
         hits["clamp_pos"] += bool(tun.clamping_enabled and np.isclose(np.linalg.norm(offset),
                                                                       tun.clamp_max_distance_m))
     assert hits["clamp_pos"] > 10
+
+
+def test_root_shift_in_floats_is_bit_identical_to_the_numpy_form(db, features):
+    c = MotionMatchingController(db, features)
+    rng = np.random.default_rng(9)
+    for _ in range(200):
+        c._set_root(rng.normal(size=3).tolist(), quat.normalize(rng.normal(size=4)).tolist())
+        position, rotation = rng.normal(size=3), quat.normalize(rng.normal(size=4))
+        toes = rng.normal(size=(2, 3))
+        want = toes - (position + quat.mul_vec(rotation, quat.inv_mul_vec(c.root_rotation, toes - c.root_position)))
+        root = (c._root_position_t, c._root_rotation_t)
+        got = np.array(root_shift(*root, [tuple(t) for t in toes.tolist()], position, rotation))
+        assert np.array_equal(got, want)
+        lazy = LazyRootShift(*root, [tuple(t) for t in toes.tolist()], position, rotation)
+        assert np.array_equal(np.array([lazy[1], lazy[0]]), want[::-1])
