@@ -24,7 +24,7 @@ from lmm.session.schema import (APPLICATION_ID, DDL, FORMAT, INPUT_COLUMNS, SCHE
 
 def database_identity(db, manifest) -> dict:
     """What a session stores of its database: content hash (``db.key``), name, manifest path, frames."""
-    return {"key": db.key, "name": db.name, "manifest": "" if manifest is None else str(manifest),
+    return {"key": db.key, "name": db.name, "manifest": "" if manifest is None else str(Path(manifest).resolve()),
             "frames": db.n_frames}
 
 
