@@ -99,6 +99,18 @@ def test_replay_reproduces_the_run_bit_for_bit(recorded, controller, tmp_path, c
     assert report["controllers"][controller]["ticks"] == SECONDS * FPS
 
 
+def test_a_replay_that_differs_names_the_tick(recorded, tmp_path, capsys):
+    """A recorded fingerprint that the replay does not reproduce: one line naming its tick, exit 1."""
+    copy = tmp_path / "tampered.lmmsession"
+    copy.write_bytes(recorded["mm"][0].read_bytes())
+    con = sqlite3.connect(copy)
+    con.execute("UPDATE fingerprints SET pose = ? WHERE tick = ?", ("0" * 32, 7 * FPS - 1))
+    con.commit()
+    con.close()
+    rc, out, err = cli(capsys, "replay", copy)
+    assert rc == 1 and err.count("\n") == 1 and f"at tick {7 * FPS - 1} " in err and "1 of 15" in err, err
+
+
 def test_a_session_changes_nothing_in_the_run(tmp_path, capsys):
     """``run --session`` without events records the same bytes as a plain ``run``."""
     plain, kept = tmp_path / "plain.bvh", tmp_path / "kept.bvh"
