@@ -178,6 +178,17 @@ def test_hostile_sessions_give_one_line(recorded, tmp_path, capsys, name):
     assert time.perf_counter() - start < 20
 
 
+def test_a_session_of_other_networks_is_refused(recorded, tmp_path, capsys):
+    copy = tmp_path / "other_weights.lmmsession"
+    copy.write_bytes(recorded["lmm"][0].read_bytes())
+    con = sqlite3.connect(copy)
+    con.execute("UPDATE controllers SET weights_sha256 = ? WHERE kind = 'lmm'", ("ab" * 32,))
+    con.commit()
+    con.close()
+    rc, out, err = cli(capsys, "replay", copy)
+    assert rc == 1 and err.count("\n") == 1 and "networks" in err and "abababababab" in err and str(copy) in err
+
+
 def test_another_program_version_is_a_warning(recorded, tmp_path, capsys):
     copy = tmp_path / "old.lmmsession"
     copy.write_bytes(recorded["mm"][0].read_bytes())
