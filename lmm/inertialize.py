@@ -150,7 +150,7 @@ def inertialize_apply_pose(offsets: Offsets, positions, rotations, normalize: bo
     rounding (the learned controller's decoded ones), since a decay's offsets are too (the exponential
     of a rotation vector), so is their product, to a few units in the last place; rotations read from
     float32 data (the database's) are unit only to about 1e-7 and are normalised."""
-    rot = quat.mul(offsets.rotations, rotations)
+    rot = quat.mul_pose(offsets.rotations, rotations)
     return positions + offsets.positions, quat.normalize(rot) if normalize else rot
 
 

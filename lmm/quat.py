@@ -87,6 +87,32 @@ def mul_rows(a, b, out) -> None:
     out[3] = aw * bz + ax * by - ay * bx + az * bw
 
 
+# mul_pose: the Hamilton product as four blocks of signed products, block k holding term k of each
+# component (w = aw bw - ax bx - ay by - az bz, x = aw bx + ax bw + ay bz - az by, ...: mul_rows' terms in
+# its order); a - p is a + (-p) exactly, so summing the blocks left to right is the same arithmetic
+_POSE_MUL_A = np.repeat(np.arange(4), 4)
+_POSE_MUL_B = np.array([0, 1, 2, 3, 1, 0, 3, 2, 2, 3, 0, 1, 3, 2, 1, 0])
+_POSE_MUL_SIGN = np.array([1.0, 1.0, 1.0, 1.0, -1.0, 1.0, -1.0, 1.0, -1.0, 1.0, 1.0, -1.0, -1.0, -1.0, 1.0, 1.0])
+_POSE_MUL_GATHERS: dict = {}
+
+
+def mul_pose(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """:func:`mul` of two (J, 4) arrays (one pose's rotations, every tick) in three numpy calls: the signed
+    products of each term gathered into a contiguous block, the blocks summed left to right (the same
+    bits as :func:`mul` on float64, a quarter of its time on ~20 joints)."""
+    n = len(a)
+    gathers = _POSE_MUL_GATHERS.get(n)
+    if gathers is None:
+        rows = (np.arange(n) * 4)[None, :, None]
+        gathers = _POSE_MUL_GATHERS[n] = (rows + _POSE_MUL_A.reshape(4, 1, 4), rows + _POSE_MUL_B.reshape(4, 1, 4),
+                                          np.broadcast_to(_POSE_MUL_SIGN.reshape(4, 1, 4), (4, n, 4)).copy())
+    take_a, take_b, sign = gathers
+    p = a.ravel().take(take_a)
+    p *= sign
+    p *= b.ravel().take(take_b)
+    return np.add.reduce(p, 0)          # p[0] + p[1] + p[2] + p[3], left to right
+
+
 def mul_scalar(a, b) -> tuple:
     """Hamilton product a * b of two 4-tuples."""
     aw, ax, ay, az = a

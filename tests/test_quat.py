@@ -201,3 +201,11 @@ def test_the_per_pose_fast_forms_against_the_bulk_forms():
     v = _edge_vecs(rng, 2000)
     np.testing.assert_allclose(quat.from_scaled_angle_axis_unnormalized(v), quat.from_scaled_angle_axis(v),
                                rtol=0, atol=1e-15)
+
+
+def test_the_per_pose_product_is_the_bulk_product_bit_for_bit():
+    rng = np.random.default_rng(10)
+    for n in (1, 23, 60):
+        a, b = _edge_quats(rng, n), _edge_quats(rng, n)
+        assert _same_bits(quat.mul_pose(a, b), quat.mul(a, b))
+        assert _same_bits(quat.mul_pose(a, b.astype(np.float32)), quat.mul(a, b.astype(np.float32)))
