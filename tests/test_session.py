@@ -189,6 +189,16 @@ def test_a_session_of_other_networks_is_refused(recorded, tmp_path, capsys):
     assert rc == 1 and err.count("\n") == 1 and "networks" in err and "abababababab" in err and str(copy) in err
 
 
+def test_a_journal_left_by_a_killed_run_does_not_touch_a_new_session(tmp_path, capsys):
+    """A new session at the path of a killed one: the old hot journal beside it is not rolled into it."""
+    path = tmp_path / "again.lmmsession"
+    path.with_name(path.name + "-journal").write_bytes(b"\xd9\xd5\x05\xf9\x20\xa1\x63\xd7" + bytes(4088))
+    rc, _, err = cli(capsys, "run", "--input", "builtin:circle", "--seconds", "2", "--session", path, "--quiet")
+    assert rc == 0, err
+    rc, out, err = cli(capsys, "replay", path)
+    assert rc == 0 and "replayed 120 ticks" in out, err
+
+
 def test_another_program_version_is_a_warning(recorded, tmp_path, capsys):
     copy = tmp_path / "old.lmmsession"
     copy.write_bytes(recorded["mm"][0].read_bytes())

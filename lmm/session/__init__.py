@@ -11,7 +11,11 @@
 * :mod:`lmm.session.trace`: one row per tick and controller (``lmm-studio trace``);
 * :mod:`lmm.session.ab`: two arms of one session in lockstep (``lmm-studio ab``).
 
-Engine only: the studio and the CLI (``app/``) build on it.
+Engine only: the studio and the CLI (``app/``) build on it. The studio's session writes one the way ``run``
+does: ``SessionWriter(path, fps=..., db=..., manifest=..., controllers=session.controllers, tuning=...,
+start=...)``, then ``begin_tick(tick, input)`` / ``end_tick(tick, poses)`` around each
+:func:`lmm.runner.step_controllers`; the tuning's change events are recorded by the writer itself, and each
+:class:`app.command_registry.CommandRun` becomes ``writer.event("reset" | "teleport" | "command", payload)``.
 """
 from lmm.session.schema import SUFFIX, SessionError, pose_fingerprint
 

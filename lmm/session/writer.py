@@ -89,6 +89,8 @@ class SessionWriter:
             con.execute("COMMIT")
         finally:
             con.close()
+        # a journal left beside an older file of this name (a killed run) would be "rolled back" into this one
+        Path(f"{self.path}-journal").unlink(missing_ok=True)
         os.replace(tmp, self.path)
 
     # -- per tick ------------------------------------------------------------------------------------
