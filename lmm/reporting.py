@@ -433,8 +433,8 @@ def draw_lines_png(panels, path, title: str = "", width: int = 1100, panel_heigh
         d.text((box[0] + 8, box[1] + 6), label, fill=TEXT, font=font)
         d.text((box[0] + 8, gy0), f"{yhi:.3g}", fill=DIM_TEXT, font=font)
         d.text((box[0] + 8, gy1 - 12), f"{ylo:.3g}", fill=DIM_TEXT, font=font)
-        d.text((gx0, gy1 + 6), f"{xlo:g}", fill=DIM_TEXT, font=font)
-        d.text((gx1 - 60, gy1 + 6), f"{xhi:g} {x_label}", fill=DIM_TEXT, font=font)
+        d.text((gx0, gy1 + 6), f"{xlo:.4g}", fill=DIM_TEXT, font=font)
+        d.text((gx1 - 60, gy1 + 6), f"{xhi:.4g} {x_label}", fill=DIM_TEXT, font=font)
         d.line([(gx0, gy1), (gx1, gy1)], fill=DIM_TEXT)
 
         def px(x, y):

@@ -62,6 +62,14 @@ def compare(session, db, features, branch: dict, from_tick: int, weights=None) -
     return report, series
 
 
+def _log10(values: np.ndarray) -> np.ndarray:
+    """log10 of positive costs (NaN, a gap in the plot, elsewhere)."""
+    out = np.full(values.shape, np.nan)
+    positive = values > 0
+    out[positive] = np.log10(values[positive])
+    return out
+
+
 def plot(series: dict, report: dict, out_dir) -> list[str]:
     """One PNG per controller in ``out_dir``: pose difference, each arm's played-pose cost and cumulative
     transitions over time, the branch tick marked (:func:`lmm.reporting.draw_lines_png`)."""
@@ -75,8 +83,8 @@ def plot(series: dict, report: dict, out_dir) -> list[str]:
         panels = [
             ("pose difference between the arms (m)", "s",
              {"mean joint": (t, series["mean_difference_m"][name]), "largest joint": (t, series["max_difference_m"][name])}),
-            ("played pose's cost against the query", "s",
-             {"A": (t, series["cost"]["a"][name]), "B": (t, series["cost"]["b"][name])}),
+            ("played pose's cost against the query (log10: rare spikes after sharp input changes)", "s",
+             {"A": (t, _log10(series["cost"]["a"][name])), "B": (t, _log10(series["cost"]["b"][name]))}),
             ("transitions so far", "s",
              {"A": (t, np.cumsum(series["transitions"]["a"][name])), "B": (t, np.cumsum(series["transitions"]["b"][name]))}),
         ]
