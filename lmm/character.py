@@ -113,7 +113,7 @@ class CharacterController(Controller):
             self.leg_chains.append((hip, knee, f, t))
             axis = db.positions[0, t].astype(np.float64)
             self.toe_axes.append(axis / max(math.sqrt(float(axis @ axis)), 1e-9))
-        self.hips_bone = 1  # the child of the simulation bone; its height is the pose's height
+        self.hips_bone = db.bone("hips")  # the manifest's hips role; its height is the pose's height
         self.ground = GroundCalibration(db, self.toe_bones)
         self.reset()
 
