@@ -501,7 +501,7 @@ def test_hid_background_scan_opens_on_a_later_poll():
     hub.plug(b"p", 0x0DF2, DS_BUTTONS)
     pad = HIDGamepad(hub, clock=clock, background_scan=True)
     assert pad.poll() is None                 # the scan runs off the frame thread
-    pad._scan_thread.join(5.0)
+    assert pad._scan_job.wait(5.0)
     assert pad.poll() == parse_dualsense_usb_report(DS_BUTTONS) and pad.name == "DualSense Edge (USB HID)"
     hub.unplug(b"p")
     clock.tick()
@@ -509,7 +509,7 @@ def test_hid_background_scan_opens_on_a_later_poll():
     hub.enumerate_error = OSError("boom")
     clock.tick(1.0)
     assert pad.poll() is None
-    pad._scan_thread.join(5.0)
+    assert pad._scan_job.wait(5.0)
     assert pad.poll() is None and "boom" in pad.last_error
 
 

@@ -32,10 +32,10 @@ seconds. Reading needs permission on the device node (on Linux a udev rule for /
 """
 from __future__ import annotations
 
-import threading
 import time
 from typing import Callable
 
+from ..jobs import Job, Jobs, one_line
 from .state import HAT_CENTRED, GamepadState, hat_buttons
 
 SONY_VENDOR_ID = 0x054C
@@ -149,8 +149,9 @@ class HIDGamepad:
     ``hid_module``: the ``hid`` module (default) or a stand-in with ``enumerate(vendor_id=...)`` and
     ``device()`` (whose objects have ``open_path``, ``set_nonblocking``, ``read(n)``, ``close``).
     ``None`` or a failed import leaves the poller permanently disconnected.
-    ``background_scan``: enumerate on a daemon thread (default: only with the real module, so that
-    stand-ins in tests stay synchronous); the device is always opened and read on the caller's thread.
+    ``background_scan``: enumerate as a background job (:mod:`app.jobs`; default: only with the real
+    module, so that stand-ins in tests stay synchronous); the device is always opened and read on the
+    caller's thread.
     """
 
     def __init__(self, hid_module="auto", rescan_interval: float = 1.0, stale_timeout: float = 1.0,
@@ -158,9 +159,10 @@ class HIDGamepad:
                  background_scan: bool | None = None):
         self._hid = _import_hid() if hid_module == "auto" else hid_module
         # enumerating walks every HID device of the system (milliseconds with many devices): with the
-        # real module it runs on a short-lived daemon thread so the frame loop never waits for it
+        # real module it runs as a background job (app.jobs) so the frame loop never waits for it
         self.background_scan = (hid_module == "auto") if background_scan is None else bool(background_scan)
-        self._scan_thread: threading.Thread | None = None
+        self._jobs = Jobs()
+        self._scan_job: Job | None = None
         self._scan_result = None
         self.rescan_interval = float(rescan_interval)
         self.stale_timeout = float(stale_timeout)
@@ -209,37 +211,37 @@ class HIDGamepad:
                 continue
         return out
 
-    def _scan_worker(self) -> None:
-        try:
-            self._scan_result = self._enumerate()
-        except Exception as e:   # hidapi errors are OSError; a stand-in could raise anything
-            self._scan_result = e
+    def _took_scan(self, result) -> None:
+        self._scan_result = result
 
     def _scan(self, now: float):
-        """The candidates of the latest finished scan (a list, or the exception it raised), or None while
-        no result is ready. Starts a scan when none ran for ``rescan_interval`` seconds."""
-        if self._scan_thread is not None:
-            if self._scan_thread.is_alive():
+        """The candidates of the latest finished scan (a list, or one line saying why it failed), or None
+        while no result is ready. Starts a scan when none ran for ``rescan_interval`` seconds."""
+        if self._scan_job is not None:
+            if not self._scan_job.finished:
                 return None
-            self._scan_thread = None
+            self._scan_job = None
+            self._jobs.poll()
             result, self._scan_result = self._scan_result, None
             return result
         if now - self._last_scan < self.rescan_interval:
             return None
         self._last_scan = now
         if not self.background_scan:
-            self._scan_worker()
-            result, self._scan_result = self._scan_result, None
-            return result
-        self._scan_thread = threading.Thread(target=self._scan_worker, name="hid-gamepad-scan", daemon=True)
-        self._scan_thread.start()
+            try:
+                return self._enumerate()
+            except Exception as e:   # hidapi errors are OSError; a stand-in could raise anything
+                return one_line(e)
+        # the outcome (a list, or the one line of a failure) is taken by a later call
+        self._scan_job = self._jobs.submit("hid-gamepad-scan", lambda job: self._enumerate(),
+                                           on_done=self._took_scan, on_error=self._took_scan)
         return None
 
     def _try_open(self, now: float) -> None:
         candidates = self._scan(now)
         if candidates is None:
             return
-        if isinstance(candidates, Exception):
+        if isinstance(candidates, str):
             self.last_error = f"enumerate: {candidates}"
             return
         for info in candidates:
