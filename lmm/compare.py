@@ -30,8 +30,8 @@ import numpy as np
 
 from lmm import quat
 from lmm.errors import InputError
+from lmm.skeleton import SIMULATION_BONE_NAMES
 
-SIMULATION_BONE_NAMES = ("Simulation", "simulation", "Root", "root")
 
 
 class CompareError(InputError):

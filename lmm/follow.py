@@ -21,7 +21,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from lmm.compare import SIMULATION_BONE_NAMES, error_rotations, geodesic
+from lmm.compare import error_rotations, geodesic
+from lmm.skeleton import SIMULATION_BONE_NAMES
 from lmm.errors import InputError
 from lmm.input_from_motion import DerivedInput, derive_input, take_root_path
 

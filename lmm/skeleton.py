@@ -32,6 +32,11 @@ DEFAULT_BONES = {
     "head": "Head",
 }
 #: the roles a manifest must name (the database build reads them)
+# The database's first joint: the root's projection on the ground that the controllers move (Holden et al.'s
+# "simulation bone"); files written by this program and others' root-motion skeletons name it so.
+SIMULATION_BONE = "Simulation"
+SIMULATION_BONE_NAMES = ("Simulation", "simulation", "Root", "root")
+
 MANIFEST_ROLES = ("hips", "spine", "left_foot", "right_foot", "left_toe", "right_toe")
 #: the six joints any human skeleton is matched by (motion search's windows, the physics body)
 KEY_ROLES = ("hips", "head", "left_hand", "right_hand", "left_foot", "right_foot")

@@ -20,7 +20,8 @@ import numpy as np
 from lmm import DEFAULT_MANIFEST, quat
 from lmm.data import bvh
 from lmm.data.cache import build_code_fingerprint, cache_file_name, default_cache_dir, manifest_key
-from lmm.data.database import SIMULATION_BONE, Database, DatabaseError
+from lmm.data.database import Database, DatabaseError
+from lmm.skeleton import SIMULATION_BONE
 from lmm.data.manifest import Manifest, ManifestError, load_manifest
 from lmm.data.preparation import (foot_contacts, mirror_local, mirror_map, quat_central_difference, resample,
                                   resampled_length, simulation_bone)
@@ -337,6 +338,16 @@ def load_or_build(manifest_path=None, cache_dir=None, progress=None, rebuild: bo
                             not_saved=f"cannot write the cache {path}: {e.strerror or type(e).__name__}")
     db.source_path = path  # its derived arrays are cached beside the file (lmm.data.derived)
     return db, LoadInfo(path, False, time.perf_counter() - t0)
+
+
+def manifest_inputs(manifest_path=None) -> list[tuple[str, Path]]:
+    """The files a build reads, as ``(field, path)`` pairs (the manifest, its feature schema file, each
+    clip): what no output of the same command may overwrite (:func:`lmm.data.outputs.check_outputs`)."""
+    manifest = load_manifest(manifest_path or DEFAULT_MANIFEST)
+    files = [("--manifest", manifest.path)]
+    if manifest.features_file is not None:
+        files.append(("features", manifest.features_file))
+    return files + [(f"clips[{i}]", clip.file) for i, clip in enumerate(manifest.clips)]
 
 
 def load_default(progress=None) -> Database:

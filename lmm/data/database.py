@@ -20,7 +20,6 @@ from lmm.errors import InputError
 from lmm.kinematics import forward_kinematics, forward_kinematics_of, forward_kinematics_velocity
 
 DB_FORMAT_VERSION = 5  # 5: mirrored clips keep the original bone offsets
-SIMULATION_BONE = "Simulation"
 
 
 class DatabaseError(InputError):
