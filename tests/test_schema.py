@@ -57,7 +57,16 @@ def test_schema_from_the_manifest_drives_features_query_and_trajectory(tmp_path)
     for _ in range(5):
         pose, snap = ctrl.step(InputState(left_y=1.0), 1.0 / 60.0)
     assert list(snap.trajectory_offsets) == [10, 30, 50]       # the prediction samples the declared times
-    assert snap.query.shape == (30,) and ctrl.tuning.feature_weights["head_velocity"] == 0.5
+    assert snap.query.shape == (30,)
+    # the schema's weight is the one searched with, and the runtime leaves the shared tuning as it was
+    assert ctrl.features.weights[ctrl.features.channel_index("head_velocity")] == 0.5
+    assert "head_velocity" not in ctrl.tuning.feature_weights
+    ctrl.tuning.name_database_entries({c.name: c.weight for c in f.layout}, db.tag_names)   # as the studio does
+    ctrl.step(InputState(left_y=1.0), 1.0 / 60.0)
+    assert ctrl.features.weights[ctrl.features.channel_index("head_velocity")] == 0.5
+    ctrl.tuning.set("feature_weights", 2.0, channel="head_velocity")     # a slider for the new channel
+    ctrl.step(InputState(left_y=1.0), 1.0 / 60.0)
+    assert ctrl.features.weights[ctrl.features.channel_index("head_velocity")] == 2.0
 
 
 def test_schema_in_its_own_file_and_a_change_updates_the_cache(tmp_path):
