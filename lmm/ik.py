@@ -62,7 +62,7 @@ def two_bone_ik(a, b, c, t, hip_rot, knee_rot, eps: float = 1e-4):
     Law of cosines: first the knee is bent (and the hip swung in the leg's plane) so the hip-ankle
     distance equals the hip-target distance, then the hip turns the leg onto the target. The leg's
     plane is kept (no twist); a straight leg bends in the plane of its knee's local Z axis.
-    Written out per component (tests/test_ik.py checks it against a helper-per-3-vector form): ``a - b``
+    Written out per component (tests/lmm/test_ik.py checks it against a helper-per-3-vector form): ``a - b``
     is exactly ``-(b - a)``, so the knee's angle reuses the thigh and shin directions."""
     a0, a1, a2 = a
     b0, b1, b2 = b

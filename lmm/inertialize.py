@@ -10,7 +10,7 @@ on the left (``shown = offset * source``).
 
 The per-tick functions (:func:`inertialize_decay`, :func:`inertialize_apply`) run once per tick on one
 pose of ~20 bones, where a numpy call costs far more than its arithmetic. The decay performs exactly the
-float operations of the springs of :mod:`lmm.springs` (tested in tests/test_inertialize.py) in a few
+float operations of the springs of :mod:`lmm.springs` (tested in tests/lmm/test_inertialize.py) in a few
 calls on whole arrays: the position and rotation springs run as one (2, J, 3) spring. Operands are laid
 out contiguous and same-shaped where possible (constants as full arrays): numpy runs such an operation
 about three times faster than one on a 2D slice, a broadcast or a scalar.
@@ -92,7 +92,7 @@ def inertialize_decay(offsets: Offsets, halflife: float, dt: float) -> Offsets:
     replaced), it reads the stack as it is, without gathering, and takes the rotation vector the rotations
     were made from instead of their logarithm (the same vector to rounding: a rotation vector differs
     from the logarithm's by at most a few units in the last place, about 1e-16 rad, see
-    ``tests/test_inertialize.py``), unless a component is 1.8 rad or more, where the logarithm is taken
+    ``tests/lmm/test_inertialize.py``), unless a component is 1.8 rad or more, where the logarithm is taken
     to keep the offset on the shorter way round."""
     n = len(offsets.positions)
     y, neg_y, dt_, e = _spring_constants(halflife, dt, n)

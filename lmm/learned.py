@@ -143,7 +143,7 @@ class XformToQuat:
     matrix diagonal, their signs from the off-diagonal differences, and 0.5 scales the result (the
     magnitudes of an orthonormal frame's quaternion sum to one to rounding: it is not normalised again).
     The same rotations as Gram-Schmidt and :func:`lmm.quat.from_xform_xy` to rounding (typically 1e-16;
-    1e-8 bounds a component near zero, whose square root both take: ``tests/test_nn_runtime.py``); a
+    1e-8 bounds a component near zero, whose square root both take: ``tests/lmm/test_nn.py``); a
     degenerate frame (an axis of length zero, parallel axes) gives NaN.
     """
 

@@ -303,7 +303,7 @@ class MLP:
 
         A narrower matrix product sums each output in the same order but BLAS may group the terms
         differently, so the outputs can differ from :meth:`bind_single`'s in the last float32 bit or
-        two (``tests/test_nn_runtime.py``). ReLU networks without a skip connection only."""
+        two (``tests/lmm/test_nn.py``). ReLU networks without a skip connection only."""
         if self.activation != "relu" or self.skip:
             raise ValueError(f"{self.name}: bind_single_split needs a ReLU network without a skip connection")
         last = self._single_plan()[3]

@@ -14,7 +14,7 @@ def pack_rows(blocks, n: int, dtype) -> tuple:
     (``rows``: ``n`` tuples of ``width`` floats), as views of one new buffer: every float packed straight
     into its memory by one :mod:`struct` call (about half the time of ``np.fromiter`` over the chained
     tuples, and one call for a whole pose's arrays). Each float is rounded to float32 as a C cast does, as
-    numpy's cast does (the same bits, ``tests/test_pose_rows.py``); with another dtype, or a Python whose
+    numpy's cast does (the same bits, ``tests/lmm/test_pose_rows.py``); with another dtype, or a Python whose
     packing refuses an out-of-range float, numpy converts."""
     dtype = np.dtype(dtype)
     widths = tuple(w for _, w in blocks)

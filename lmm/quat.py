@@ -9,7 +9,7 @@ rotates ``v`` by ``q``.
   of Python floats: the per-tick maths of one character, where a numpy call on a 4-element array costs
   microseconds of overhead for nanoseconds of arithmetic. It performs exactly the float operations of
   its bulk namesake on float64 (same order, same association; numpy sums a short last axis left to
-  right), so the two give the same bits (tests/test_quat.py checks every pair). Where numpy's
+  right), so the two give the same bits (tests/lmm/test_quat.py checks every pair). Where numpy's
   transcendental kernel differs from the C library's in the last bit (``arctan2``), numpy's is called
   on the scalar.
 """

@@ -64,7 +64,7 @@ def synchronize(tun, sim_state, root_pos, root_rot, root_vel_world, root_ang_wor
     """Adjustment (pull the integrated character root ``root_pos``/``root_rot``, floats, towards the
     simulation object, ``sim_state`` as :class:`lmm.trajectory.SimulationState` keeps it) and clamping:
     the character root's new (position, rotation) as tuples. Plain floats (one position and one
-    quaternion), a fraction of the time of numpy calls (tests/test_root_motion.py checks it against numpy)."""
+    quaternion), a fraction of the time of numpy calls (tests/lmm/test_root_motion.py checks it against numpy)."""
     (sx, sy, sz), sim_rot = sim_state[0], sim_state[3]
     px, py, pz = root_pos
     rw, rx, ry, rz = root_rot

@@ -119,7 +119,7 @@ def decay_spring_damper_exact_quat(q, w, halflife, dt, eps: float = EPS):
 
 # ------------------------------------------------------------------------------------------------------
 # The simulation object's springs, one character per tick in plain Python floats (no numpy per-call
-# overhead on 3- and 4-element arrays; tests/test_trajectory.py checks them against the closed forms
+# overhead on 3- and 4-element arrays; tests/lmm/test_trajectory.py checks them against the closed forms
 # written in numpy). Vectors are tuples; ``dts`` is a tuple of horizons (one tick: ``(dt,)``).
 # ------------------------------------------------------------------------------------------------------
 @functools.lru_cache(maxsize=256)

@@ -11,7 +11,7 @@ future is predicted with the same closed-form springs, holding the desired veloc
 
 One character per tick: vectors and quaternions are tuples of Python floats (the scalar forms of
 :mod:`lmm.quat`), a fraction of the cost of numpy calls on 2-, 3- and 4-element arrays; the tests check
-each function against a few lines of numpy (tests/test_trajectory.py).
+each function against a few lines of numpy (tests/lmm/test_trajectory.py).
 """
 from __future__ import annotations
 

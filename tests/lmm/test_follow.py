@@ -26,7 +26,7 @@ def manifest():
 def anim():
     from pathlib import Path
 
-    return bvh.load(Path(__file__).resolve().parents[1] / TAKE)
+    return bvh.load(Path(__file__).resolve().parents[2] / TAKE)
 
 
 @pytest.fixture(scope="module")

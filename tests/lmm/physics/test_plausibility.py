@@ -11,7 +11,7 @@ import pytest
 
 from lmm.data import bvh
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[3]
 TAKE = ROOT / "lmm/data/lafan1/multipleActions1_subject1.bvh.gz"
 WALK = (545, 645)          # a walking range of the shipped manifest (file frames, 30 fps, centimetres)
 

@@ -15,7 +15,7 @@ torch = pytest.importorskip("torch")
 from lmm import DATA_DIR  # noqa: E402
 from lmm.offline.distributed import DeviceError, Parallel, pick_device  # noqa: E402
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[3]
 
 
 def test_pick_device():
