@@ -33,6 +33,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "train": ("train", "train the learned motion matching networks (needs torch)"),
     "eval": ("eval", "quality metrics of the learned motion matching networks"),
     "export-onnx": ("export_onnx", "export the decompressor, stepper and projector as ONNX"),
+    "export-gltf": ("export_gltf", "a recording, take or session as glTF 2.0 (.glb): skeleton, animation, capsule body"),
     "run": ("run", "drive a controller headless from an input log or built-in scenario (record, metrics)"),
     "bench": ("bench", "runtime benchmarks (search, frame) as a table and nested JSON"),
     "find": ("find", "motion search by example: the windows of a manifest or folder most like a BVH frame range"),
@@ -114,6 +115,15 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     except Exception as e:  # noqa: BLE001 - the one place that turns every error into one line
         return report_error(name, e)
+    finally:
+        _release_output_locks()
+
+
+def _release_output_locks() -> None:
+    """The command's output locks (:mod:`lmm.data.outputs`), released once it returns."""
+    outputs = sys.modules.get("lmm.data.outputs")
+    if outputs is not None:
+        outputs.release_locks()
 
 
 def one_line(text: str) -> str:

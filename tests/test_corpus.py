@@ -69,6 +69,8 @@ def problems(case: cc.Case, r: dict, targets: dict | None = None) -> list[str]:
         out.append(f"took {r['seconds']:.1f} s (> {CASE_LIMIT_S:g} s)")
     if r.get("maxrss") and r["maxrss"] > MEMORY_LIMIT_BYTES:
         out.append(f"peak resident memory {r['maxrss'] / 2**20:.0f} MiB (> {MEMORY_LIMIT_BYTES / 2**20:.0f} MiB)")
+    if r.get("changed"):
+        out.append(f"changed or left files it was given: {', '.join(r['changed'][:4])}")
     if r.get("stray"):
         out.append(f"wrote outside its place: {', '.join(r['stray'][:4])}")
     rc = r.get("rc")

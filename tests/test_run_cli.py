@@ -174,7 +174,7 @@ def test_a_tag_exclusion_that_cannot_apply_is_noted_once(tmp_path):
     bad.write_text(json.dumps({"tag_excluded": {"sprint": True}}))
     good.write_text(json.dumps({"tag_excluded": {"crouch": True}}))
     for preset, expect in ((bad, 1), (good, 0)):
-        out = tmp_path / f"{preset.stem}.json"
+        out = tmp_path / f"{preset.stem}.metrics.json"  # not the preset itself (issue 36: it was)
         r = cli("run", "--input", "builtin:circle", "--seconds", "2", "--tuning", str(preset), "--quiet",
                 "--metrics-json", str(out))
         assert r.returncode == 0, r.stderr

@@ -49,6 +49,10 @@ def main(args) -> int:
             checks = _start_checks(args.manifest, jobs)
 
     try:
+        if args.out:   # never over the manifest or one of its takes
+            from lmm.data.build import manifest_inputs
+            from lmm.data.outputs import check_outputs
+            check_outputs([("--out", args.out)], manifest_inputs(args.manifest))
         # one process needs no workers; more build takes side by side (same database bit for bit)
         db, info = load_or_build(args.manifest, progress=progress, rebuild=args.rebuild, out_path=args.out,
                                  workers=jobs if jobs > 1 else 0, before_save=before_save)

@@ -26,12 +26,16 @@ def main(args) -> int:
     from lmm.checks import CheckError, check_manifest, format_coverage
     from lmm.data.manifest import ManifestError, load_manifest
 
+    from lmm.data.build import manifest_inputs
+    from lmm.data.outputs import check_outputs
+
     manifest_path = args.manifest or DEFAULT_MANIFEST
     try:
+        check_outputs([("--json", args.json), ("--png", args.png)], manifest_inputs(manifest_path))
         manifest = load_manifest(manifest_path)
         findings, coverage = check_manifest(manifest)
     except (ManifestError, CheckError) as e:
-        print(f"error: {e}", file=sys.stderr)
+        print(f"lmm-studio check-data: error: {e}", file=sys.stderr)
         return 1
     used = [f for f in findings if f.in_used_range]
     if not args.quiet:
@@ -51,6 +55,6 @@ def main(args) -> int:
                                 title=f"seconds of used source motion by root speed x turn rate "
                                       f"({coverage.seconds_total:.0f} s in all)")
     except OSError as e:
-        print(f"error: cannot write the output: {e}", file=sys.stderr)
+        print(f"lmm-studio check-data: error: cannot write the output: {e}", file=sys.stderr)
         return 1
     return 0

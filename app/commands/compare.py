@@ -27,10 +27,9 @@ def add_arguments(p) -> None:
 
 def main(args) -> int:
     from lmm.compare import compare_files
-    from lmm.data.atomic import check_writable
+    from lmm.data.outputs import check_outputs
 
-    if args.json:
-        check_writable(args.json)
+    check_outputs([("--json", args.json)], [("A", args.a), ("B", args.b)])
     r = compare_files(args.a, args.b, args.frames_a, args.frames_b, args.window, args.cm_per_unit)
     n, m = r["frames"]
     print(f"{args.a} ({n} frames) vs {args.b} ({m} frames), {r['joints']} joints, window {r['window']}: "

@@ -27,7 +27,11 @@ def main(args) -> int:
     if not args.png and not args.json:
         print("lmm-studio coverage: error: nothing to write: give --png OUT and/or --json OUT", file=sys.stderr)
         return 2
+    from lmm.data.build import manifest_inputs
+    from lmm.data.outputs import check_outputs
+
     manifest = args.manifest or DEFAULT_MANIFEST
+    check_outputs([("--png", args.png), ("--json", args.json)], manifest_inputs(manifest))
     db, _ = load_or_build(manifest)
     features = build_features(db)
     cov = build_coverage(db, features)

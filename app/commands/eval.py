@@ -38,9 +38,9 @@ def main(args) -> int:
     from app.commands.extras import require
     if (args.json_path or args.plots) and not require("eval", "matplotlib", purpose=" for its plots"):
         return 2
-    from lmm.data.atomic import check_writable
-    from lmm.data.build import load_or_build
+    from lmm.data.build import load_or_build, manifest_inputs
     from lmm.data.inputs import open_input
+    from lmm.data.outputs import check_outputs
     from lmm.data.weights import load as load_weights
     from lmm.offline.evaluation import evaluate, load_compressor, read_loss_csv
     from lmm.reporting import plot_training
@@ -50,14 +50,14 @@ def main(args) -> int:
     # everything the user named is checked before the database load and the minutes of evaluation
     weights = Path(args.weights) if args.weights else DEFAULT_WEIGHTS
     comp = Path(args.compressor) if args.compressor else weights.with_name("compressor.npz")
+    plots_dir = args.plots or (str(Path(args.json_path).parent) if args.json_path else None)
+    check_outputs([("--json", args.json_path)] + [("--plots", Path(plots_dir) / name) for name in TRAINING_PLOTS
+                                                  if plots_dir],
+                  [("--weights", weights), ("--compressor", comp), ("--input", _input_file(args.input)),
+                   *manifest_inputs(args.manifest)])
     load_weights(weights, require=RUNTIME_NETWORKS)  # WeightsError names the file and field
     load_weights(comp, require=["compressor"])
     open_input(args.input, args.seconds)
-    plots_dir = args.plots or (str(Path(args.json_path).parent) if args.json_path else None)
-    if args.json_path:
-        check_writable(args.json_path)
-    if plots_dir:
-        check_writable(Path(plots_dir) / "latents.png")
 
     db, _ = load_or_build(args.manifest)
     features = build_features(db)
@@ -76,15 +76,24 @@ def main(args) -> int:
     return 0
 
 
+#: the PNGs lmm.reporting.plot_training writes into the plots folder (checked as outputs before the work)
+TRAINING_PLOTS = ("training_losses.png", "latent_traces.png", "per_joint_error.png")
+
+
+def _input_file(spec):
+    """The file an ``--input`` names, or None for a built-in scenario."""
+    return None if str(spec).startswith("builtin:") else spec
+
+
 def reconstruction(args) -> int:
     """``eval --reconstruction``: the held-out takes through MM and LMM (see :mod:`lmm.reconstruction`)."""
     import time
 
     from app.commands.extras import require
     from lmm import DEFAULT_MANIFEST
-    from lmm.data.atomic import check_writable
-    from lmm.data.build import load_or_build
+    from lmm.data.build import load_or_build, manifest_inputs
     from lmm.data.manifest import load_manifest
+    from lmm.data.outputs import check_outputs
     from lmm.factory import make_controllers
     from lmm.features import build_features
     from lmm.reconstruction import HELDOUT_FILE, format_table, load_heldout, run_take, summarize
@@ -100,10 +109,8 @@ def reconstruction(args) -> int:
     if not takes:
         print("lmm-studio eval: error: no held-out take found (see --data)", file=sys.stderr)
         return 1
-    if args.json_path:
-        check_writable(args.json_path)
-    if plots_dir:
-        check_writable(Path(plots_dir) / "reconstruction.png")
+    check_outputs([("--json", args.json_path), ("--plots", Path(plots_dir) / "reconstruction.png" if plots_dir else None)],
+                  [("--heldout", args.heldout), *manifest_inputs(args.manifest)])
     manifest = load_manifest(args.manifest or DEFAULT_MANIFEST)
     db, _ = load_or_build(args.manifest)
     features = build_features(db)

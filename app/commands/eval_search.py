@@ -18,15 +18,14 @@ def add_arguments(p) -> None:
 
 
 def main(args) -> int:
-    from lmm.data.atomic import check_writable
+    from lmm.data.outputs import check_outputs
     from lmm.motion_search import encoder as enc
     from lmm.offline import search_eval as ev
 
     # everything the user named is checked before the minutes of embedding
     enc.load(args.encoder or enc.DEFAULT_WEIGHTS)
     enc.load(args.classifier or enc.CLASSIFIER_WEIGHTS)
-    if args.json_path:
-        check_writable(args.json_path)
+    check_outputs([("--json", args.json_path)], [("--encoder", args.encoder), ("--classifier", args.classifier)])
     report = ev.evaluate(args.data, args.encoder, args.classifier,
                          ev.EvalSettings(queries_per_take=args.queries_per_take),
                          log=lambda msg: print(msg, file=sys.stderr))

@@ -13,12 +13,14 @@ def main(args) -> int:
     from app.commands.extras import require
     if not require("export-onnx", "onnx"):
         return 2
-    from lmm.data.atomic import check_writable
-    from lmm.learned import DEFAULT_WEIGHTS, LMMNetworks
+    from lmm.data.outputs import check_outputs
+    from lmm.learned import DEFAULT_WEIGHTS, RUNTIME_NETWORKS, LMMNetworks
     from lmm.offline.onnx_export import export_networks
 
-    check_writable(Path(args.out) / "decompressor.onnx")  # a read-only or file --out: one line, exit 1
-    nets = LMMNetworks.load(Path(args.weights) if args.weights else DEFAULT_WEIGHTS)  # WeightsError: file + field
+    weights = Path(args.weights) if args.weights else DEFAULT_WEIGHTS
+    # a read-only or file --out, or one whose files include the weights: one line, exit 1
+    check_outputs([("--out", Path(args.out) / f"{name}.onnx") for name in RUNTIME_NETWORKS], [("--weights", weights)])
+    nets = LMMNetworks.load(weights)  # WeightsError: file + field
     for path in export_networks(nets, args.out):
         print(path)
     return 0

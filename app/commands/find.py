@@ -51,10 +51,10 @@ def main(args) -> int:
         from lmm.motion_search.dtw import have_dtaidistance
 
         suggest("find", "dtaidistance", "re-ranks by DTW in numpy (about 7x slower)", have_dtaidistance())
-    if args.json:
-        from lmm.data.atomic import check_writable
+    from lmm.data.outputs import check_outputs
 
-        check_writable(args.json)  # before the work, not after it
+    # before the work, not after it; never over the query or the manifest
+    check_outputs([("--json", args.json)], [("QUERY", args.query), ("--in", args.where)])
     a, b = args.frames
     if a >= b:
         raise SearchError(f"{args.query}: frames {a}:{b} are an empty range")

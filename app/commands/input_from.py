@@ -38,13 +38,12 @@ def add_arguments(p) -> None:
 def main(args) -> int:
     from lmm import DEFAULT_MANIFEST
     from lmm.data import bvh
-    from lmm.data.atomic import check_writable
     from lmm.data.manifest import load_manifest
+    from lmm.data.outputs import check_outputs
     from lmm.input_from_motion import derive_input, take_root_path, write_input_csv
 
-    check_writable(args.out)
-    if args.json:
-        check_writable(args.json)
+    check_outputs([("--out", args.out), ("--json", args.json)],
+                  [("FILE", args.file), ("--manifest", args.manifest or DEFAULT_MANIFEST)])
     manifest = load_manifest(args.manifest or DEFAULT_MANIFEST)
     anim = bvh.load(args.file)
     root = take_root_path(anim, manifest, str(args.file), args.frames)

@@ -44,13 +44,11 @@ def main(args) -> int:
     if not require("physics", "mujoco"):
         return 2
     from lmm.data import bvh
-    from lmm.data.atomic import check_writable
+    from lmm.data.outputs import check_outputs
     from lmm.physics.body import body_for_animation
     from lmm.physics.plausibility import plausibility
 
-    for out in (args.json, args.png):
-        if out:
-            check_writable(out)
+    check_outputs([("--json", args.json), ("--png", args.png)], [("FILE", args.file)])
     anim = bvh.load(args.file)
     frames = parse_frames(args.frames, anim.n_frames, args.file) if args.frames else slice(None)
     body, pos, rot, scale = body_for_animation(anim, args.unit_scale, args.mass)

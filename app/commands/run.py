@@ -59,27 +59,26 @@ def _close(stream) -> OSError | None:
 
 
 def main(args) -> int:
-    from lmm.data.atomic import check_writable
     from lmm.data.inputs import open_input
     from lmm.tuning import Tuning
 
-    # everything the user typed is checked before the (slower) database load, targets included
-    source = open_input(args.input, args.seconds)
-    preset = Tuning.read_preset(args.tuning) if args.tuning else None
-    tuning = Tuning.from_preset(preset, args.tuning) if preset is not None else Tuning()
-    seconds = args.seconds if args.seconds is not None else max(source.duration, 1.0 / args.fps)
+    # everything the user typed is checked before the (slower) database load, targets first: no output
+    # may be an input or another output (the recording, its input log, the metrics, the session)
     record_input = None
     if args.record:
         out = Path(args.record)
         record_input = Path(args.record_input) if args.record_input else out.with_name(out.stem + ".input.csv")
-        check_writable(out)
     elif args.record_input:
         record_input = Path(args.record_input)
-    for target in (record_input, args.metrics_json):
-        if target is not None:
-            check_writable(target)
-    check_outputs([("--session", args.session)],
-                  [args.input, args.tuning, args.events, args.record, record_input, args.metrics_json])
+    check_outputs([("--record", args.record), ("--record-input", record_input),
+                   ("--metrics-json", args.metrics_json), ("--session", args.session)],
+                  [("--input", None if str(args.input).startswith("builtin:") else args.input),
+                   ("--tuning", args.tuning), ("--events", args.events), ("--weights", args.weights),
+                   ("--manifest", args.manifest)])
+    source = open_input(args.input, args.seconds)
+    preset = Tuning.read_preset(args.tuning) if args.tuning else None
+    tuning = Tuning.from_preset(preset, args.tuning) if preset is not None else Tuning()
+    seconds = args.seconds if args.seconds is not None else max(source.duration, 1.0 / args.fps)
     raw_events = None
     if args.events:
         from lmm.session.actions import read_events_file

@@ -2,30 +2,16 @@
 overwrite an input, a session opened with its database, and the session side of ``run``."""
 from __future__ import annotations
 
-import os
 import sys
-from pathlib import Path
-
 from lmm.errors import InputError
 
 
 def check_outputs(outputs, inputs) -> None:
-    """Refuse (one line) an output path that is one of the input files, then check each can be written.
-    ``outputs``: (option, path or None); ``inputs``: paths or None."""
-    from lmm.data.atomic import check_writable
+    """Every command's one output check (:func:`lmm.data.outputs.check_outputs`): an output that is an
+    input, another output or a special file is refused in one line, the rest probed and locked."""
+    from lmm.data.outputs import check_outputs as check
 
-    given = [Path(p) for p in inputs if p]
-    for option, out in outputs:
-        if not out:
-            continue
-        out = Path(out)
-        for src in given:
-            same = out.resolve() == src.resolve()
-            if not same and out.exists() and src.exists():
-                same = os.path.samefile(out, src)
-            if same:
-                raise InputError(f"{out}: {option} would overwrite the input {src}; choose another path")
-        check_writable(out)
+    check(outputs, inputs)
 
 
 def open_with_database(path, manifest=None, weights=None):

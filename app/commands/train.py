@@ -55,7 +55,6 @@ def main(args) -> int:
     import numpy as np
     from pathlib import Path
 
-    from lmm.data.atomic import check_writable
     from lmm.data.build import load_or_build
     from lmm.features import build_features
     from lmm.offline.training import NETWORKS, Recipe, train_pipeline
@@ -63,7 +62,13 @@ def main(args) -> int:
     from lmm.offline.distributed import pick_device, setup, teardown
 
     pick_device(args.device)  # a device not here fails now (DeviceError: one line), before the database
-    check_writable(Path(args.out) / "default.npz")  # a read-only or file --out fails now, not after training
+    from lmm.data.build import manifest_inputs
+    from lmm.data.outputs import check_outputs
+    from lmm.offline.training import COMPRESSOR_FILE, LOG_FILE, RUNTIME_FILE
+
+    # a read-only or file --out, or one holding the manifest or a take, fails now, not after training
+    check_outputs([("--out", Path(args.out) / name) for name in (RUNTIME_FILE, COMPRESSOR_FILE, LOG_FILE)],
+                  manifest_inputs(args.manifest))
     db, _ = load_or_build(args.manifest)
     features = build_features(db)
     recipe = Recipe(seed=args.seed, threads=args.threads, log_every=args.log_every)

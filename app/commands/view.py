@@ -18,7 +18,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("file", help="BVH file (.bvh or .bvh.gz), any units, Y up")
     parser.add_argument("--screenshot", metavar="PNG",
                         help="render one frame headless (EGL, no display needed) to PNG and exit")
-    parser.add_argument("--frame", type=int, default=0, help="frame to start at / to screenshot (default 0)")
+    parser.add_argument("--frame", type=number_in(0, MAX_FRAME, integer=True), default=0,
+                        help=f"frame to start at / to screenshot, 0..{MAX_FRAME} (default 0)")
     parser.add_argument("--width", type=int, default=1280, help="window or image width (default 1280)")
     parser.add_argument("--height", type=int, default=720, help="window or image height (default 720)")
     parser.add_argument("--samples", type=number_in(0, 16, integer=True), default=None,
@@ -39,10 +40,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 #: colour and depth, ~20 bytes a pixel: 8192 x 8192 is 1.3 GiB), and OpenGL 3.3 drivers in use allow
 #: 8192 x 8192 render targets
 MAX_IMAGE_SIDE = 8192
+#: largest --frame: a BVH file holds at most 10^7 frames (lmm.data.bvh's motion limits keep it below)
+MAX_FRAME = 10_000_000
 
 
 def _error(message: str) -> None:
-    print(f"error: {message}", file=sys.stderr)
+    print(f"lmm-studio view: error: {message}", file=sys.stderr)
 
 
 def _has_display() -> bool:
@@ -54,11 +57,12 @@ def _has_display() -> bool:
 def _load(path: str):
     """(name, parents, joint names, positions (F,J,3), frame_time) or an error message."""
     from lmm.data import bvh
+    from lmm.errors import InputError
 
     try:
         anim = bvh.load(path)
         positions = anim.global_positions()
-    except bvh.BVHError as e:
+    except InputError as e:    # a bad BVH file, or not a regular file
         return str(e)
     except (OSError, EOFError) as e:  # missing file, unreadable, broken gzip
         reason = e.strerror if isinstance(e, OSError) and e.strerror else str(e) or type(e).__name__
@@ -121,13 +125,17 @@ def main(args: argparse.Namespace) -> int:
         _error("no display to open a window on (DISPLAY is not set); "
                "use --screenshot PNG to render a frame headless, or run under Xvfb")
         return 2
+    from lmm.data.outputs import check_outputs
+
+    check_outputs([("--screenshot", args.screenshot), ("--window-screenshot", args.window_screenshot)],
+                  [("FILE", args.file)])
     loaded = _load(args.file)
     if isinstance(loaded, str):
         _error(loaded)
         return 1
     name, parents, names, positions, frame_time = loaded
     n = len(positions)
-    if not -n <= args.frame < n:
+    if not 0 <= args.frame < n:
         _error(f"--frame {args.frame} is out of range: {args.file} has {n} frames")
         return 2
     args.frame %= n

@@ -7,6 +7,7 @@ from __future__ import annotations
 import errno
 import os
 import secrets
+import stat
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -29,7 +30,7 @@ def atomic_write(path, mode: str = "wb", encoding: str | None = None):
             yield f
             f.flush()
             os.fsync(f.fileno())   # the data is on disk before the name points at it (a crash keeps the old file)
-        os.replace(tmp, path)
+        replace_regular(tmp, path)
     except BaseException as e:
         try:
             os.unlink(tmp)
@@ -38,6 +39,18 @@ def atomic_write(path, mode: str = "wb", encoding: str | None = None):
         if isinstance(e, OSError) and e.errno is not None and e.filename in (None, str(tmp), tmp):
             raise type(e)(e.errno, e.strerror, str(path)) from None  # name the file the user asked for
         raise
+
+
+def replace_regular(tmp, path) -> None:
+    """``os.replace(tmp, path)`` unless ``path`` exists and is neither a regular file nor a link: a rename
+    would put a file where a device (``/dev/null``), a FIFO or a socket was. ``OSError`` naming ``path``."""
+    try:
+        mode = os.lstat(path).st_mode
+    except FileNotFoundError:
+        mode = None
+    if mode is not None and not (stat.S_ISREG(mode) or stat.S_ISLNK(mode)):
+        raise OSError(errno.EEXIST, "exists and is not a regular file; not replaced", os.fspath(path))
+    os.replace(tmp, path)
 
 
 def check_writable(path) -> None:

@@ -19,6 +19,7 @@ import numpy as np
 
 from lmm import DEFAULT_MANIFEST, quat
 from lmm.data import bvh
+from lmm.data.motion_files import load_motion
 from lmm.data.cache import build_code_fingerprint, cache_file_name, default_cache_dir, manifest_key
 from lmm.data.database import Database, DatabaseError
 from lmm.skeleton import SIMULATION_BONE
@@ -107,7 +108,7 @@ def _build_take(manifest: Manifest, ci: int, skeleton=None, frames_before: int =
     clip = manifest.clips[ci]
     copies = 2 if manifest.mirror else 1
     try:
-        anim = bvh.load(clip.file)  # BVHError names the file and line
+        anim = load_motion(clip.file)  # BVHError names the file and line (BVH, glTF or FBX)
     except OSError as e:
         raise ManifestError(mpath, f"clips[{ci}].file",
                             f"cannot read {clip.file}: {e.strerror or type(e).__name__}") from None

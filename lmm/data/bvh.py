@@ -55,6 +55,7 @@ import numpy as np
 
 from lmm import kinematics, quat
 from lmm.data.atomic import write_bytes_atomic
+from lmm.data.reading import ascii_float, ascii_int, open_regular
 from lmm.errors import InputError
 
 __all__ = [
@@ -509,7 +510,7 @@ class _Parser:
         values = []
         for t in toks[1:]:
             try:
-                v = float(t)
+                v = ascii_float(t)
             except ValueError:
                 raise self.error(ln, f"expected a number in OFFSET, found {t!r}") from None
             if not math.isfinite(v):
@@ -527,7 +528,7 @@ class _Parser:
         if len(toks) < 2:
             raise self.error(ln, "expected a channel count after CHANNELS")
         try:
-            count = int(toks[1])
+            count = ascii_int(toks[1])
         except ValueError:
             count = -1
         if count < 0 or count > 6:
@@ -554,7 +555,7 @@ class _Parser:
         try:
             if len(rest) != 1:
                 raise ValueError
-            n = int(rest[0])
+            n = ascii_int(rest[0])
             if n < 0:
                 raise ValueError
         except ValueError:
@@ -571,7 +572,7 @@ class _Parser:
         try:
             if len(rest) != 1:
                 raise ValueError
-            t = float(rest[0])
+            t = ascii_float(rest[0])
             if not (math.isfinite(t) and t > 0.0):
                 raise ValueError
         except ValueError:
@@ -642,7 +643,7 @@ class _Parser:
                                      f"found {len(toks)}")
             for k, t in enumerate(toks):
                 try:
-                    v = float(t)
+                    v = ascii_float(t)
                 except ValueError:
                     raise self.error(ln, f"expected a number (value {k + 1} of frame {n_rows + 1}), "
                                          f"found {t[:20]!r}") from None
@@ -745,7 +746,7 @@ def loads(text: str | bytes, path: str | os.PathLike | None = None) -> Animation
 def load(path: str | os.PathLike) -> Animation:
     """Read a ``.bvh`` file, or a gzip-compressed one (detected by its magic bytes)."""
     p = os.fspath(path)
-    with open(p, "rb") as f:
+    with open_regular(p, "BVH file") as f:   # a FIFO or a device is refused, never waited on or read forever
         if os.fstat(f.fileno()).st_size > MAX_TEXT_BYTES and f.read(2) != _GZIP_MAGIC:
             raise _too_big(p, "the file has")  # refused before reading it
         f.seek(0)

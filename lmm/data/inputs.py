@@ -22,6 +22,7 @@ import numpy as np
 
 from lmm import errors
 from lmm.data.atomic import write_text_atomic
+from lmm.data.reading import NotRegularFileError, ascii_float, ascii_int, open_regular
 
 COLUMNS = ("time", "left_x", "left_y", "right_x", "right_y", "walk", "strafe")
 OPTIONAL_COLUMNS = ("camera_azimuth",)
@@ -144,20 +145,34 @@ def header_line(with_camera: bool) -> str:
     return ",".join(COLUMNS + (OPTIONAL_COLUMNS if with_camera else ())) + "\n"
 
 
+#: every byte sequence str.splitlines() ends a line at (what parse_input_csv splits on), as UTF-8: LF,
+#: CR (alone; CRLF counts once), VT, FF, FS, GS, RS, NEL and the Unicode line and paragraph separators
+_LINE_BREAKS = (b"\n", b"\r", b"\x0b", b"\x0c", b"\x1c", b"\x1d", b"\x1e", b"\xc2\x85", b"\xe2\x80\xa8",
+                b"\xe2\x80\xa9")
+
+
+def count_lines(data: bytes) -> int:
+    """The lines :func:`parse_input_csv` will see in ``data``, counted on the bytes before decoding, so
+    the line limit holds whatever separates the rows (a CR-only log of 4.8 M rows got past a ``\\n`` count)."""
+    return sum(data.count(b) for b in _LINE_BREAKS) - data.count(b"\r\n") + 1
+
+
 def load_input_csv(path) -> InputLog:
     path = Path(path)
     try:
-        with open(path, "rb") as f:
+        with open_regular(path, "input log") as f:   # a FIFO or a device is refused, never waited on
             data = f.read(MAX_INPUT_LOG_BYTES + 1)  # never more than the limit in memory
         if len(data) > MAX_INPUT_LOG_BYTES:
             raise InputError(f"input log larger than {MAX_INPUT_LOG_BYTES // (1024 * 1024)} MB "
                              f"(MAX_INPUT_LOG_BYTES; over a million input changes)", path)
-        lines = data.count(b"\n") + 1
+        lines = count_lines(data)
         if lines > MAX_INPUT_LOG_LINES:
             raise InputError(f"input log has {lines} lines, more than {MAX_INPUT_LOG_LINES} "
                              f"(MAX_INPUT_LOG_LINES)", path)
         text = data.decode("utf-8-sig")
         del data
+    except NotRegularFileError as e:
+        raise InputError(str(e).split(": ", 1)[-1], path) from None
     except FileNotFoundError:
         raise InputError("no such input file", path) from None
     except IsADirectoryError:
@@ -210,7 +225,7 @@ def parse_input_csv(text: str, path="<input>") -> InputLog:
                     raise InputError(f"expected 0 or 1, found {cell[:20]!r}", path, line, c, name)
             else:
                 try:
-                    v = float(cell)
+                    v = ascii_float(cell)
                 except ValueError:
                     raise InputError(f"expected a number, found {cell[:20]!r}", path, line, c, name) from None
                 if not math.isfinite(v):
@@ -420,7 +435,7 @@ def builtin(name: str, seconds: float | None = None) -> InputLog:
     if name.startswith("random:"):
         seed_text = name[len("random:"):]
         try:
-            seed = int(seed_text)
+            seed = ascii_int(seed_text)
             if seed < 0:
                 raise ValueError
         except ValueError:

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from lmm.data.atomic import write_text_atomic
+from lmm.data.reading import NotRegularFileError, open_regular
 from lmm.errors import InputError
 
 #: Deepest nesting of arrays/objects accepted. Our files nest at most 5 levels (a manifest's clip ranges
@@ -59,8 +60,10 @@ def read_json(path, what: str = "JSON file", max_bytes: int = MAX_JSON_BYTES, ma
     """The JSON value in the file ``path`` (``what`` names it in errors, e.g. "tuning preset")."""
     path = Path(path)
     try:
-        with open(path, "rb") as f:
+        with open_regular(path, what) as f:   # a FIFO or a device is refused, never waited on
             data = f.read(max_bytes + 1)  # never more than the limit in memory
+    except NotRegularFileError as e:
+        raise JsonError(str(e)) from None
     except FileNotFoundError:
         raise JsonError(f"{path}: no such {what}") from None
     except IsADirectoryError:

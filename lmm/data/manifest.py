@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from lmm.errors import InputError
+from lmm.data.reading import NotRegularFileError, open_regular, read_limited, resolved
 from lmm.skeleton import MANIFEST_ROLES, default_bones
 from lmm.data.feature_schema import DEFAULT_LAYOUT, SchemaError, layout_from_schema, schema_of
 
@@ -312,7 +313,7 @@ def parse_manifest(data: dict, path: Path | None = None, base_dir: Path | None =
             raise ManifestError(path, f"{where}.file", "expected a path string")
         _text(path, f"{where}.file", clip["file"], MAX_PATH_CHARS)
         try:
-            file = (base_dir / clip["file"]).resolve()
+            file = resolved(base_dir / clip["file"])
             found = file.is_file()
         except (OSError, ValueError) as e:  # a name too long for the file system, a loop of links...
             raise ManifestError(path, f"{where}.file", f"cannot use the path ({getattr(e, 'strerror', None) or e})") from None
@@ -390,10 +391,9 @@ def _feature_schema(path, base_dir: Path, value) -> tuple[list[dict], Path | Non
     if isinstance(value, str):
         _text(path, "features", value, MAX_PATH_CHARS)
         try:
-            file = (base_dir / value).resolve()
-            if file.stat().st_size > MAX_SCHEMA_BYTES:
-                raise ManifestError(path, "features", f"{value}: larger than {MAX_SCHEMA_BYTES} bytes")
-            text = file.read_text(encoding="utf-8")
+            file = resolved(base_dir / value)
+            # a regular file of at most MAX_SCHEMA_BYTES (a FIFO or /dev/zero is refused before reading)
+            text = read_limited(file, MAX_SCHEMA_BYTES, "feature schema").decode("utf-8")
         except (OSError, UnicodeDecodeError, ValueError) as e:
             raise ManifestError(path, "features", f"cannot read the feature schema {value!r} "
                                 f"({getattr(e, 'strerror', None) or e})") from None
@@ -426,8 +426,10 @@ def _parse_json(path, text: str):
 def load_manifest(path) -> Manifest:
     path = Path(path)
     try:
-        with open(path, "rb") as f:
+        with open_regular(path, "manifest") as f:   # a FIFO or a device is refused, never waited on
             raw = f.read(MAX_MANIFEST_BYTES + 1)
+    except NotRegularFileError as e:
+        raise ManifestError(path, "<file>", str(e).split(": ", 1)[-1]) from None
     except (OSError, ValueError) as e:  # ValueError: a NUL in the path
         raise ManifestError(path, "<file>", f"cannot read: {getattr(e, 'strerror', None) or e}") from None
     if len(raw) > MAX_MANIFEST_BYTES:

@@ -33,6 +33,8 @@ import mmap
 import os
 from pathlib import Path
 
+from lmm.data.atomic import replace_regular
+
 PAGE = mmap.PAGESIZE
 
 
@@ -128,7 +130,7 @@ class StreamFile:
             _write_all(fd, header + data)
             os.fsync(fd)
             if self.overwrite:
-                os.replace(tmp, self.path)
+                replace_regular(tmp, self.path)   # never over a device or a FIFO
             else:
                 os.link(tmp, self.path)      # fails rather than replace a file made meanwhile
                 os.unlink(tmp)

@@ -21,6 +21,7 @@ import numpy as np
 
 from corpus_harness import Job
 import session_files
+import special_cases
 
 CORPUS = Path(__file__).resolve().parent
 ROOT = CORPUS.parents[1]
@@ -304,6 +305,11 @@ def case_table() -> list[Case]:
             cases.append(Case(f"target-{variant}:{cid}", "target", argv[0], f"{variant}/{name}",
                               f"unwritable target ({variant})", "reject", (name, folder),
                               recording=name if cid == "run-record" else None))
+    for table, what in ((special_cases.COLLISIONS, "an output that would destroy an input, another output or "
+                                                   "a special file"),
+                        (special_cases.SPECIAL_INPUTS, "a special file or a non-ASCII number as input")):
+        for cid, argv, word in table:
+            cases.append(Case(f"special:{cid}", "special", argv[0], cid, what, "reject", (word,)))
     controls = [("bvh", "good/walk.bvh"), ("manifest", "good/manifest.json"), ("input", "good/input.csv"),
                 ("preset", "good/preset.json"), ("weights", "shipped/default.npz"), ("layout", "good/layout.ini"),
                 ("session", GOOD_SESSION)]
@@ -527,6 +533,12 @@ def build_jobs(cases: list[Case], tmp: Path, targets: dict) -> tuple[list[Job], 
             argv = dict((i, v) for i, v, _ in TARGET_CASES)[c.id.split(":", 1)[1]]
             call = {"call": "cli", "argv": [a.format(T=folder, good=good) for a in argv]}
             group = f"target-{variant}"
+        elif c.kind == "special":   # its own folder of copies, checked unchanged by the driver
+            folder = tmp / "special" / _safe(c.file)
+            special_cases.prepare(folder, c.file)
+            argv = dict((i, v) for i, v, _ in special_cases.COLLISIONS + special_cases.SPECIAL_INPUTS)[c.file]
+            call = {"call": "cli", "argv": [a.format(T=folder, good=good) for a in argv], "watch": str(folder)}
+            group = f"special-{c.command}"
         elif c.kind == "control":
             kind = c.call["kind"]
             call = _argv(kind, c.command, str(case_path(c, gen)), tmp, c.id)

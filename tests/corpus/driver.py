@@ -129,6 +129,10 @@ def main() -> int:
                 saved[fd] = os.dup(fd)
                 os.dup2(capture[fd].fileno(), fd)
             rc, extra, uncaught = None, {}, None
+            watched = None
+            if case.get("watch"):   # a folder whose every file must be left as it was
+                from special_cases import fingerprint
+                watched = fingerprint(Path(case["watch"]))
             t0 = time.perf_counter()
             try:
                 rc, extra = _call(case)
@@ -151,6 +155,9 @@ def main() -> int:
                 f.seek(0)
                 out[fd] = f.read(OUTPUT_LIMIT).decode("utf-8", errors="replace")
                 f.close()
+            if watched is not None:
+                now_seen = fingerprint(Path(case["watch"]))
+                extra["changed"] = sorted(k for k in set(watched) | set(now_seen) if watched.get(k) != now_seen.get(k))
             maxrss = peak_rss_bytes()
             result = {"id": case["id"], "argv": case.get("argv") or case.get("path"), "rc": rc, "stdout": out[1], "stderr": out[2], "uncaught": uncaught,
                       "seconds": seconds, "maxrss": maxrss, **extra}

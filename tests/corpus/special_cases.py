@@ -1,0 +1,170 @@
+"""Issue 36's corpus cases: outputs that would destroy an input, another output or a special file;
+special files (FIFOs, devices, loops of links) given as inputs; numbers that are not ASCII.
+
+Each case runs in its own folder ``{T}`` holding fresh copies of the good files and the special files
+made by :func:`prepare` (a FIFO, a link to ``/dev/null``, a hard link of the input log, a loop of links,
+manifests pointing at them). The driver hashes every file of ``{T}`` before and after the case (a
+regular file by content, a FIFO or link by kind and target): a case that changes one fails, whatever
+it printed. Every case must be refused with exit 1 and one line naming the file.
+"""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+from pathlib import Path
+
+CORPUS = Path(__file__).resolve().parent
+GOOD = CORPUS / "good"
+WEIGHTS = CORPUS.parents[1] / "lmm" / "data" / "weights" / "default.npz"
+
+_RUN = ["run", "--input", "builtin:circle", "--seconds", "1", "--quiet"]
+
+# (id, argv ({T}: the case's folder, {good}: tests/corpus/good), a word the error line must hold)
+COLLISIONS = [
+    ("run-record-input-is-record", _RUN + ["--record", "{T}/x.bvh", "--record-input", "{T}/x.bvh"], "x.bvh"),
+    ("run-metrics-is-record", _RUN + ["--record", "{T}/x.bvh", "--metrics-json", "{T}/x.bvh"], "x.bvh"),
+    ("run-record-is-input", ["run", "--input", "{T}/input.csv", "--quiet", "--record", "{T}/input.csv"],
+     "input.csv"),
+    ("run-record-beside-its-input-log", ["run", "--input", "{T}/take.input.csv", "--record", "{T}/take.bvh",
+                                         "--seconds", "2", "--quiet"], "take.input.csv"),
+    ("run-record-is-weights", ["run", "--controller", "lmm", "--weights", "{T}/w.npz", "--input",
+                               "builtin:circle", "--seconds", "1", "--quiet", "--record", "{T}/w.npz"], "w.npz"),
+    ("run-metrics-is-tuning", _RUN + ["--tuning", "{T}/preset.json", "--metrics-json", "{T}/preset.json"],
+     "preset.json"),
+    ("run-metrics-is-a-hard-link-of-the-input", ["run", "--input", "{T}/input.csv", "--quiet", "--metrics-json",
+                                                 "{T}/hard.csv"], "hard.csv"),
+    ("run-record-is-a-link-to-dev-null", _RUN + ["--record", "{T}/null"], "null"),
+    ("run-metrics-is-a-link-to-dev-null", _RUN + ["--metrics-json", "{T}/null"], "null"),
+    ("run-metrics-is-a-fifo", _RUN + ["--metrics-json", "{T}/fifo"], "fifo"),
+    ("run-session-is-the-tuning", _RUN + ["--tuning", "{T}/preset.json", "--session", "{T}/preset.json"],
+     "preset.json"),
+    ("build-db-out-is-the-manifest", ["build-db", "--manifest", "{T}/manifest.json", "--out", "{T}/manifest.json",
+                                      "--quiet", "--no-checks"], "manifest.json"),
+    ("build-db-out-is-a-take", ["build-db", "--manifest", "{T}/manifest.json", "--out", "{T}/walk.bvh", "--quiet",
+                                "--no-checks"], "walk.bvh"),
+    ("build-db-out-is-dev-null", ["build-db", "--manifest", "{T}/manifest.json", "--out", "{T}/null", "--quiet",
+                                  "--no-checks"], "null"),
+    ("train-out-holds-a-fifo", ["train", "decompressor", "--manifest", "{T}/manifest.json", "--out", "{T}/trainout",
+                                "--iterations", "1", "--quiet"], "fifo"),
+    ("export-onnx-out-is-the-weights", ["export-onnx", "--weights", "{T}/decompressor.onnx", "--out", "{T}"],
+     "decompressor.onnx"),
+    ("eval-json-is-the-weights", ["eval", "--weights", "{T}/w.npz", "--compressor", str(WEIGHTS.with_name(
+        "compressor.npz")), "--json", "{T}/w.npz", "--seconds", "1", "--queries", "64"], "w.npz"),
+    ("view-screenshot-is-the-file", ["view", "{T}/walk.bvh", "--screenshot", "{T}/walk.bvh"], "walk.bvh"),
+    ("coverage-json-is-the-manifest", ["coverage", "--manifest", "{T}/manifest.json", "--json", "{T}/manifest.json"],
+     "manifest.json"),
+    ("coverage-png-is-a-take", ["coverage", "--manifest", "{T}/manifest.json", "--png", "{T}/walk.bvh"], "walk.bvh"),
+    ("check-data-json-is-a-take", ["check-data", "--manifest", "{T}/manifest.json", "--quiet", "--json",
+                                   "{T}/walk.bvh"], "walk.bvh"),
+    ("check-data-png-is-the-manifest", ["check-data", "--manifest", "{T}/manifest.json", "--quiet", "--png",
+                                        "{T}/manifest.json"], "manifest.json"),
+    ("compare-json-is-a-motion", ["compare", "{T}/walk.bvh", "{T}/walk.bvh", "--json", "{T}/walk.bvh"], "walk.bvh"),
+    ("input-from-out-is-the-take", ["input-from", "{T}/walk.bvh", "--manifest", "{T}/manifest.json", "--out",
+                                    "{T}/walk.bvh"], "walk.bvh"),
+    ("input-from-json-is-out", ["input-from", "{T}/walk.bvh", "--manifest", "{T}/manifest.json", "--out",
+                                "{T}/o.csv", "--json", "{T}/o.csv"], "o.csv"),
+    ("physics-json-is-the-file", ["physics", "{T}/walk.bvh", "--json", "{T}/walk.bvh"], "walk.bvh"),
+    ("find-json-is-the-query", ["find", "{T}/walk.bvh", "--frames", "0:30", "--in", "{T}/manifest.json", "--json",
+                                "{T}/walk.bvh", "--quiet"], "walk.bvh"),
+]
+
+# special files and non-ASCII numbers given as inputs: (id, argv, a word the error line must hold)
+SPECIAL_INPUTS = [
+    ("run-input-fifo", ["run", "--input", "{T}/fifo", "--quiet"], "fifo"),
+    ("run-input-dev-zero", ["run", "--input", "/dev/zero", "--quiet"], "/dev/zero"),
+    ("run-tuning-fifo", _RUN + ["--tuning", "{T}/fifo"], "fifo"),
+    ("run-tuning-dev-zero", _RUN + ["--tuning", "/dev/zero"], "/dev/zero"),
+    ("run-manifest-fifo", _RUN + ["--manifest", "{T}/fifo"], "fifo"),
+    ("run-events-fifo", _RUN + ["--events", "{T}/fifo"], "fifo"),
+    ("run-weights-fifo", ["run", "--controller", "lmm", "--weights", "{T}/fifo", "--input", "builtin:circle",
+                          "--seconds", "1", "--quiet"], "fifo"),
+    ("run-builtin-random-arabic-indic-seed", ["run", "--input", "builtin:random:\u0663", "--quiet"], "random"),
+    ("run-input-non-ascii-digit", ["run", "--input", "{T}/digits.csv", "--quiet"], "digits.csv"),
+    ("run-input-digit-grouping", ["run", "--input", "{T}/grouping.csv", "--quiet"], "grouping.csv"),
+    ("build-db-manifest-fifo", ["build-db", "--manifest", "{T}/fifo", "--quiet"], "fifo"),
+    ("build-db-features-fifo", ["build-db", "--manifest", "{T}/m_features_fifo.json", "--quiet"], "features"),
+    ("build-db-features-dev-zero", ["build-db", "--manifest", "{T}/m_features_zero.json", "--quiet"], "features"),
+    ("build-db-features-loop", ["build-db", "--manifest", "{T}/m_features_loop.json", "--quiet"], "features"),
+    ("build-db-clip-fifo", ["build-db", "--manifest", "{T}/m_clip_fifo.json", "--quiet"], "clips"),
+    ("build-db-clip-loop", ["build-db", "--manifest", "{T}/m_clip_loop.json", "--quiet"], "clips"),
+    ("build-db-bvh-digit-grouping", ["build-db", "--manifest", "{T}/m_grouping.json", "--quiet"], "grouping.bvh"),
+    ("build-db-bvh-non-ascii-digit", ["build-db", "--manifest", "{T}/m_digits.json", "--quiet"], "digits.bvh"),
+    ("check-data-manifest-fifo", ["check-data", "--manifest", "{T}/fifo", "--quiet"], "fifo"),
+    ("view-fifo", ["view", "{T}/fifo", "--screenshot", "{T}/shot.png"], "fifo"),
+    ("compare-fifo", ["compare", "{T}/fifo", "{good}/walk.bvh"], "fifo"),
+    ("input-from-fifo", ["input-from", "{T}/fifo", "--out", "{T}/o.csv"], "fifo"),
+    ("physics-fifo", ["physics", "{T}/fifo"], "fifo"),
+    ("find-query-fifo", ["find", "{T}/fifo", "--frames", "0:30", "--in", "{good}/manifest.json", "--quiet"], "fifo"),
+]
+
+
+def _manifest(T: Path, name: str, **change) -> None:
+    m = json.loads((GOOD / "manifest.json").read_text())
+    m["clips"] = [{"file": "walk.bvh"}]
+    m.update(change)
+    (T / name).write_text(json.dumps(m))
+
+
+def _bvh_with_value(T: Path, name: str, value: str) -> None:
+    """walk.bvh with its last motion value replaced by ``value``."""
+    text = (GOOD / "walk.bvh").read_text().rstrip("\n")
+    head, _, last = text.rpartition(" ")
+    (T / name).write_text(f"{head} {value}\n")
+
+
+def prepare(T: Path, case_id: str) -> None:
+    """The case folder: copies of the good files and the special files the cases name."""
+    T.mkdir(parents=True, exist_ok=True)
+    for name in ("input.csv", "preset.json", "walk.bvh"):
+        shutil.copyfile(GOOD / name, T / name)
+    shutil.copyfile(GOOD / "input.csv", T / "take.input.csv")
+    _manifest(T, "manifest.json")
+    if "weights" in case_id or "eval" in case_id:
+        shutil.copyfile(WEIGHTS, T / "w.npz")
+    if case_id.startswith("export-onnx"):
+        shutil.copyfile(WEIGHTS, T / "decompressor.onnx")
+    os.mkfifo(T / "fifo")
+    (T / "null").symlink_to(os.devnull)
+    os.link(T / "input.csv", T / "hard.csv")
+    (T / "loop").symlink_to(T / "loop")
+    (T / "trainout").mkdir()
+    os.mkfifo(T / "trainout" / "default.npz")
+    _manifest(T, "m_features_fifo.json", features="fifo")
+    _manifest(T, "m_features_zero.json", features="/dev/zero")
+    _manifest(T, "m_features_loop.json", features="loop")
+    _manifest(T, "m_clip_fifo.json", clips=[{"file": "fifo"}])
+    _manifest(T, "m_clip_loop.json", clips=[{"file": "loop"}])
+    rows = (GOOD / "input.csv").read_text().splitlines()
+    (T / "digits.csv").write_text("\n".join(rows[:2] + ["\u0661," + rows[2].split(",", 1)[1]]) + "\n")
+    (T / "grouping.csv").write_text("\n".join(rows[:2] + ["1_0," + rows[2].split(",", 1)[1]]) + "\n")
+    _bvh_with_value(T, "grouping.bvh", "1_0.0")
+    _bvh_with_value(T, "digits.bvh", "\u0661\u0662")
+    _manifest(T, "m_grouping.json", clips=[{"file": "grouping.bvh"}])
+    _manifest(T, "m_digits.json", clips=[{"file": "digits.bvh"}])
+
+
+def fingerprint(T: Path) -> dict:
+    """Every entry under ``T``: a regular file by its content's hash, anything else by its kind (and a
+    link by its target and the kind of what it points at)."""
+    import hashlib
+    import stat
+
+    out = {}
+    for dirpath, dirnames, filenames in os.walk(T):
+        for name in filenames + [d for d in dirnames if os.path.islink(os.path.join(dirpath, d))]:
+            p = os.path.join(dirpath, name)
+            rel = os.path.relpath(p, T)
+            st = os.lstat(p)
+            if stat.S_ISLNK(st.st_mode):
+                try:
+                    target_mode = stat.S_IFMT(os.stat(p).st_mode)
+                except OSError:
+                    target_mode = None
+                out[rel] = f"link -> {os.readlink(p)} ({target_mode})"
+            elif stat.S_ISREG(st.st_mode):
+                with open(p, "rb") as f:
+                    out[rel] = hashlib.sha256(f.read()).hexdigest()
+            else:
+                out[rel] = f"mode {stat.S_IFMT(st.st_mode)}"
+    return out
