@@ -23,13 +23,13 @@ class ReferenceClip:
 
 
 def load_reference_clip(path) -> ReferenceClip:
-    """A BVH file as global joint positions in metres (the file's unit guessed from its skeleton's size,
+    """A BVH (or glTF, FBX) file as global joint positions in metres (the file's unit guessed from its skeleton's size,
     :func:`lmm.skeleton.guess_unit_scale`).
     Raises ``lmm.data.bvh.BVHError`` / ``OSError`` / ``ValueError`` with a readable message."""
-    from lmm.data import bvh
+    from lmm.data.motion_files import load_motion
     from lmm.skeleton import guess_unit_scale
 
-    anim = bvh.load(path)
+    anim = load_motion(path)
     pos = anim.global_positions()
     if pos.ndim != 3 or len(pos) == 0 or pos.shape[1] == 0:
         raise ValueError(f"{path}: no frames to show")

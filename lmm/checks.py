@@ -28,6 +28,7 @@ import numpy as np
 from lmm import quat
 from lmm.coverage import Heatmap, speed_turn_heatmap
 from lmm.data import bvh
+from lmm.data.motion_files import load_motion
 from lmm.data.manifest import Manifest
 from lmm.data.build import MIN_RANGE_FRAMES
 from lmm.errors import InputError
@@ -257,7 +258,7 @@ def file_issues(file: str, frame_time: float, head_height_m: np.ndarray, n_frame
 
 def _load_take(path: Path):
     try:
-        return bvh.load(path)
+        return load_motion(path)
     except bvh.BVHError as e:
         raise CheckError(str(e)) from None
     except (OSError, EOFError) as e:

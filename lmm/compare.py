@@ -234,7 +234,7 @@ def compare_files(path_a, path_b, frames_a=None, frames_b=None, window: int | No
                   cm_per_unit: float = 1.0, hips_forward_axis=None) -> dict:
     """Load two BVH files and compare them (one-line errors name the files). ``hips_forward_axis``: the
     hips' local forward axis (default: the shipped manifest's, LAFAN1's skeleton)."""
-    from lmm.data import bvh
+    from lmm.data.motion_files import load_motion
 
     if hips_forward_axis is None:
         from lmm import DEFAULT_MANIFEST
@@ -242,6 +242,6 @@ def compare_files(path_a, path_b, frames_a=None, frames_b=None, window: int | No
         hips_forward_axis = load_manifest(DEFAULT_MANIFEST).hips_forward_axis
     motions = []
     for path, frames in ((path_a, frames_a), (path_b, frames_b)):
-        anim = bvh.load(path)
+        anim = load_motion(path)
         motions.append(motion_from_animation(anim, str(path), cm_per_unit, frames, hips_forward_axis))
     return compare_motions(*motions, window=window)

@@ -98,13 +98,13 @@ def sources_from_manifest(path) -> list[Source]:
 
 
 def sources_from_folder(path) -> list[Source]:
-    """Every ``.bvh`` file under ``path`` (any depth, sorted), labelled relative to it."""
+    """Every ``.bvh``, ``.glb``, ``.gltf`` and ``.fbx`` file under ``path`` (any depth, sorted), labelled relative to it."""
     root = Path(path)
     if not root.is_dir():
         raise SearchError(f"{path}: not a folder")
-    files = sorted(p for p in root.rglob("*") if p.suffix.lower() == ".bvh" and p.is_file())
+    files = sorted(p for p in root.rglob("*") if p.suffix.lower() in (".bvh", ".glb", ".gltf", ".fbx") and p.is_file())
     if not files:
-        raise SearchError(f"{path}: the folder holds no .bvh files")
+        raise SearchError(f"{path}: the folder holds no .bvh (or .glb, .gltf, .fbx) files")
     return [Source(p.relative_to(root).as_posix(), p) for p in files]
 
 
@@ -137,9 +137,9 @@ def query_from_bvh(path, frames: tuple[int, int] | None = None) -> np.ndarray:
 
     The features are computed over the whole take and then cut, so that velocities at the range's ends
     and the size reference are the take's (a range cut from an indexed take is exactly its frames)."""
-    from lmm.data import bvh
+    from lmm.data.motion_files import load_motion
 
-    anim = bvh.load(path)
+    anim = load_motion(path)
     n = anim.n_frames
     a, b = (0, n) if frames is None else (int(frames[0]), int(frames[1]))
     if a >= b:
@@ -321,13 +321,13 @@ class MotionIndex:
 
     @classmethod
     def _compute(cls, sources, embedder, fitted_features, progress) -> "MotionIndex":
-        from lmm.data import bvh
+        from lmm.data.motion_files import load_motion
 
         fps, counts, per_take = [], [], []
         for i, s in enumerate(sources):
             if progress:
                 progress(i, len(sources), s.label)
-            anim = bvh.load(s.path)
+            anim = load_motion(s.path)
             tf = take_frames(anim, s.label)
             fps.append(tf.file_fps)
             counts.append(tf.n_file_frames)

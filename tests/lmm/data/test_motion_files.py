@@ -1,0 +1,184 @@
+"""glTF out and glTF / FBX in (lmm.data.gltf_write, lmm.data.gltf, lmm.data.fbx, lmm.data.motion_files).
+
+Checked against files and programs nobody here wrote: Debian's assimp-testmodels (real glTF and FBX files
+with animated skeletons; skipped when /usr/share/assimp/models is absent) and Blender's own glTF and FBX
+importers (skipped without ``blender``). The optional readers are skipped when their extra is not installed.
+"""
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from lmm.data import bvh
+from lmm.data.motion_files import MOTION_UNIT_M, MotionFileError, load_motion
+
+pygltflib = pytest.importorskip("pygltflib")
+
+ROOT = Path(__file__).resolve().parents[3]
+TAKE = ROOT / "lmm/data/lafan1/multipleActions1_subject1.bvh.gz"
+ASSIMP = Path("/usr/share/assimp/models")
+needs_assimp = pytest.mark.skipif(not ASSIMP.is_dir(), reason="Debian's assimp-testmodels is not installed "
+                                  "(apt-get install assimp-testmodels; .ci/run installs it)")
+needs_blender = pytest.mark.skipif(shutil.which("blender") is None, reason="Blender is not installed")
+#: (file under ASSIMP, joints, frames, fps) of the animated skeletons that read
+READ = [("glTF2/simple_skin/simple_skin.gltf", 2, 166, 30.0),
+        ("FBX/animation_with_skeleton.fbx", 16, 21, 24.0),
+        ("FBX/huesitos.fbx", 11, 40, 25.0)]
+#: (file under ASSIMP, what the one line says) of some that are refused
+REFUSED = [("FBX/box.fbx", "has no skeleton"),
+           ("FBX/spider.fbx", "has no skeleton"),
+           ("glTF2/BoxTextured-glTF-Binary/BoxTextured.glb", "has no skin"),
+           ("glTF2/glTF-Sample-Models/AnimatedMorphCube-glTF/AnimatedMorphCube.gltf", "has no skin"),
+           ("glTF2/wrongTypes/badNumber.gltf", "not a glTF 2.0 file"),
+           ("FBX/transparentTest.fbx", "not a readable FBX file")]
+
+
+@pytest.fixture(scope="module")
+def clip():
+    """20 s of a LAFAN1 take (centimetres, 30 fps)."""
+    return bvh.load(TAKE).slice(0, 600)
+
+
+@pytest.fixture(scope="module")
+def glb(clip, tmp_path_factory):
+    from lmm.data.gltf_write import save_glb
+
+    out = tmp_path_factory.mktemp("gltf") / "clip.glb"
+    save_glb(out, clip, 0.01)
+    return out
+
+
+def _one_line(e: Exception, path) -> str:
+    text = str(e)
+    assert "\n" not in text and str(path) in text, text
+    return text
+
+
+def test_the_glb_holds_the_skeleton_skin_and_animation_as_another_reader_sees_them(clip, glb):
+    g = pygltflib.GLTF2().load(str(glb))
+    assert [n.name for n in g.nodes[:clip.n_joints]] == clip.names
+    assert g.skins[0].joints == list(range(clip.n_joints))
+    channels = g.animations[0].channels
+    assert sorted(c.target.node for c in channels if c.target.path == "rotation") == list(range(clip.n_joints))
+    assert [c.target.node for c in channels if c.target.path == "translation"] == [0]      # the hips move
+    times = g.accessors[g.animations[0].samplers[0].input]
+    assert times.count == clip.n_frames and times.max[0] == pytest.approx((clip.n_frames - 1) * clip.frame_time)
+    assert g.meshes[0].name == "capsules" and g.nodes[-1].skin == 0
+    # metres: the hips' rest offset is the file's in centimetres / 100
+    assert g.nodes[0].translation == pytest.approx(list(clip.offsets[0] * 0.01), abs=1e-9)
+
+
+def test_round_trip_bvh_to_glb_to_our_reader_keeps_every_joint_within_0_1_mm(clip, glb):
+    back = load_motion(glb)
+    assert back.names == clip.names and list(back.parents) == list(clip.parents)
+    assert back.n_frames == clip.n_frames and back.fps == pytest.approx(clip.fps, rel=1e-6)
+    error = np.abs(back.global_positions() * MOTION_UNIT_M - clip.global_positions() * 0.01).max()
+    assert error < 1e-4, error
+
+
+def test_export_gltf_command_without_mesh(clip, tmp_path):
+    from app.cli import main
+
+    src = tmp_path / "clip.bvh"
+    bvh.save(src, clip.slice(0, 30))
+    out = tmp_path / "out.glb"
+    assert main(["export-gltf", str(src), "--out", str(out), "--mesh", "none"]) == 0
+    g = pygltflib.GLTF2().load(str(out))
+    assert not g.meshes and len(g.nodes) == clip.n_joints
+
+
+def test_broken_files_are_one_line_naming_the_file(glb, tmp_path):
+    cut = tmp_path / "truncated.glb"
+    cut.write_bytes(glb.read_bytes()[:5000])
+    not_gltf = tmp_path / "other.gltf"
+    not_gltf.write_text(json.dumps({"hello": [1, 2, 3]}))
+    still = tmp_path / "still.glb"
+    g = pygltflib.GLTF2().load(str(glb))
+    g.animations = []
+    g.save(str(still))
+    garbage = tmp_path / "garbage.fbx"
+    garbage.write_bytes(b"Kaydara FBX Binary  \x00\x1a\x00" + bytes(range(256)) * 4)
+    cases = [(cut, "truncated"), (not_gltf, "not a glTF 2.0 file"), (still, "has no animation")]
+    if _has("ufbx"):
+        cases.append((garbage, "not a readable FBX file"))
+    for path, says in cases:
+        with pytest.raises(MotionFileError) as e:
+            load_motion(path)
+        assert says in _one_line(e.value, path)
+
+
+def test_a_bad_file_through_a_command_is_one_line_and_exit_1(tmp_path):
+    bad = tmp_path / "bad.glb"
+    bad.write_bytes(b"glTF\x02\x00\x00\x00")
+    r = subprocess.run([sys.executable, "-m", "app.cli", "export-gltf", str(bad), "--out", str(tmp_path / "o.glb")],
+                       capture_output=True, text=True, cwd=ROOT, timeout=60)
+    assert r.returncode == 1 and len(r.stderr.strip().splitlines()) == 1 and str(bad) in r.stderr, r.stderr
+
+
+def _has(module: str) -> bool:
+    try:
+        __import__(module)
+    except ImportError:
+        return False
+    return True
+
+
+@needs_assimp
+@pytest.mark.parametrize("name,joints,frames,fps", READ)
+def test_real_animated_skeletons_read(name, joints, frames, fps):
+    if name.lower().endswith(".fbx") and not _has("ufbx"):
+        pytest.skip("ufbx (the formats extra) is not installed")
+    anim = load_motion(ASSIMP / name)
+    assert (anim.n_joints, anim.n_frames, anim.fps) == (joints, frames, pytest.approx(fps))
+    assert np.isfinite(anim.global_positions()).all() and np.ptp(anim.motion, axis=0).max() > 0     # it moves
+
+
+@needs_assimp
+@pytest.mark.parametrize("name,says", REFUSED)
+def test_real_files_without_an_animated_skeleton_are_refused_in_one_line(name, says):
+    if name.lower().endswith(".fbx") and not _has("ufbx"):
+        pytest.skip("ufbx (the formats extra) is not installed")
+    with pytest.raises(MotionFileError) as e:
+        load_motion(ASSIMP / name)
+    assert says in _one_line(e.value, ASSIMP / name)
+
+
+def _blender_joints(path: Path, fps: float, frames: int, tmp_path: Path) -> dict:
+    out = tmp_path / "blender.json"
+    subprocess.run(["blender", "-b", "--factory-startup", "--python", str(Path(__file__).with_name("blender_joints.py")), "--",
+                    str(path), str(out), repr(fps), str(frames)], check=True, capture_output=True, timeout=120)
+    return json.loads(out.read_text())["joints"]
+
+
+@pytest.mark.slow
+@needs_blender
+def test_blender_imports_our_glb_with_the_joints_where_the_bvh_has_them(clip, tmp_path):
+    from lmm.data.gltf_write import save_glb
+
+    short = clip.slice(0, 90)
+    path = tmp_path / "short.glb"
+    save_glb(path, short, 0.01)
+    joints = _blender_joints(path, short.fps, short.n_frames, tmp_path)
+    pos = short.global_positions() * 0.01
+    error = max(np.abs(np.array(joints[n]) - pos[:, j]).max() for j, n in enumerate(short.names))
+    assert error < 1e-3, error
+
+
+@pytest.mark.slow
+@needs_blender
+@needs_assimp
+@pytest.mark.parametrize("name", [n for n, *_ in READ])
+def test_our_readers_agree_with_blenders_import_of_real_files_within_1_mm(name, tmp_path):
+    if name.lower().endswith(".fbx") and not _has("ufbx"):
+        pytest.skip("ufbx (the formats extra) is not installed")
+    anim = load_motion(ASSIMP / name)
+    joints = _blender_joints(ASSIMP / name, anim.fps, anim.n_frames, tmp_path)
+    pos = anim.global_positions() * MOTION_UNIT_M
+    error = max(np.abs(np.array(joints[n]) - pos[:, j]).max() for j, n in enumerate(anim.names))
+    assert error < 1e-3, error
