@@ -23,19 +23,33 @@ def recording_paths(base, which: tuple[str, ...]) -> dict[str, Path]:
     return out
 
 
+def session_path_of(paths: dict) -> Path:
+    """The session file beside a recording's files (:mod:`app.session_log`): ``take_input.csv`` ->
+    ``take.lmmsession``."""
+    from lmm.session.schema import SUFFIX
+
+    name = Path(paths["input"]).name
+    stem = name[: -len("_input.csv")] if name.endswith("_input.csv") else Path(name).stem
+    return Path(paths["input"]).with_name(stem + SUFFIX)
+
+
+def _taken(paths: dict) -> bool:
+    return any(p.exists() for p in [*paths.values(), session_path_of(paths)])
+
+
 def free_recording_paths(base, which: tuple[str, ...]) -> dict[str, Path]:
     """:func:`recording_paths` of ``base``, or, when any of those files exists, of the first numbered
-    base none of whose files exists (``take.bvh`` -> ``take_001.bvh``, ``take_002.bvh``, ...; one
+    base none of whose files (nor its session file) exists (``take.bvh`` -> ``take_001.bvh``, ``take_002.bvh``, ...; one
     number for all files of the recording). A recording never overwrites a file."""
     paths = recording_paths(base, which)
-    if not any(p.exists() for p in paths.values()):
+    if not _taken(paths):
         return paths
     base = Path(base)
     stem = base.name[:-4] if base.name.lower().endswith(".bvh") else base.name
     number = 1
     while True:
         paths = recording_paths(base.parent / f"{stem}_{number:03d}.bvh", which)
-        if not any(p.exists() for p in paths.values()):
+        if not _taken(paths):
             return paths
         number += 1
 
@@ -47,6 +61,7 @@ class RecordingResult:
     frames: int
     seconds: float
     message: str             # one line for the studio's status bar
+    session: Path | None = None   # the session file that replays it (lmm-studio replay), when one was kept
 
 
 @dataclass
@@ -59,6 +74,7 @@ class Recording:
     input_writer: object     # lmm.data.inputs.InputCsvWriter
     start_tick: int
     frames: int = 0
+    session: Path | None = None   # its session file (app.session_log), or None when it could not be kept
 
     def writers(self) -> dict:
         """Controller name (and "input") -> its writer."""

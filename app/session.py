@@ -12,6 +12,7 @@ weights.)
 """
 from __future__ import annotations
 
+import sqlite3
 from pathlib import Path
 
 from lmm.controller import Controller, InputState
@@ -20,8 +21,10 @@ from lmm.tuning import Tuning
 
 from .history import History, Tick
 from .jobs import Jobs
-from .recording import Recording, RecordingResult, free_recording_paths
+from .recording import Recording, RecordingResult, free_recording_paths, session_path_of
 from .reference_clip import ReferenceClip
+from .session_log import SessionLog
+from .undo import TuningUndo
 
 TICK_RATE_HZ = 60.0
 
@@ -54,6 +57,9 @@ class Session:
         self.reference: ReferenceClip | None = None   # the reference BVH drawn beside the characters
         self.ragdolls = None           # an lmm.physics.ragdoll.RagdollTracker (see start_ragdolls), or None
         self.physics_status = "physics off"   # one line: why there is no ragdoll ("" when there is)
+        self.manifest = None           # the database's manifest (None: the shipped one), named in session files
+        self.log = SessionLog(self)    # since the last reset: what a recording's session file replays
+        self.undo = TuningUndo(tuning)  # undo / redo of tuning changes (app.undo)
 
     # -- the simulated characters (lmm.physics.ragdoll) -------------------------------------------
     def start_ragdolls(self) -> None:
@@ -145,12 +151,14 @@ class Session:
             self.ragdolls.reset()
         self.history.clear()
         self.tick = 0
+        self.log.reset()
 
     # -- input ---------------------------------------------------------------------------------
     def replay(self, log) -> None:
         """Replay an input log from its start; the characters restart so the replay is reproducible."""
         self.reset()
         self.input_log = log
+        self.log.input_name = log.name
         self.input_log_start_tick = 0
         self.following = None
 
@@ -203,7 +211,9 @@ class Session:
         """One tick of every controller (:func:`lmm.runner.step_controllers`), recorded and kept in the history
         (background results, such as MM's latent table, are taken first: between two ticks)."""
         self.jobs.poll()
-        _, snaps, self.step_ms = step_controllers(self.controllers, inp, self.dt)
+        self.log.before_step(inp)
+        poses, snaps, self.step_ms = step_controllers(self.controllers, inp, self.dt)
+        self.log.after_step(poses)
         tick = Tick(self.tick + 1, (self.tick + 1) * self.dt, snaps, dict(extra or {}))
         tick.extra.setdefault("input", inp)
         if self.following is not None:
@@ -240,8 +250,15 @@ class Session:
             for name in which:
                 rec.recorders[name] = BVHRecorder(paths[name], self.db, fps=1.0 / self.dt, overwrite=False)
             rec.input_writer = InputCsvWriter(paths["input"], with_camera=True, overwrite=False)
-        except BaseException:
+            # the session file that replays it: from the last reset (app.session_log)
+            rec.session = self.log.start_writing(session_path_of(paths), self.manifest)
+        except BaseException as e:
             rec.close()       # nothing was written yet: no file exists
+            if rec.session is not None:
+                self.log.close()
+                rec.session.unlink(missing_ok=True)
+            if isinstance(e, sqlite3.Error):
+                raise OSError(f"{session_path_of(paths)}: cannot write the session file: {e}") from None
             raise
         self.recording = rec
         self.recording_error = ""
@@ -259,6 +276,7 @@ class Session:
             self.recording_error = str(e)
             self.recording = None
             rec.close()
+            self.log.close(tick.snapshots and {n: sn.pose for n, sn in tick.snapshots.items()})
             self._failed_recording = rec
             return
         rec.frames += 1
@@ -273,12 +291,16 @@ class Session:
                 return RecordingResult({}, 0, 0.0, "not recording")
         self.recording, self.recording_error = None, ""
         errors = rec.close()
+        latest = self.history.latest()
+        self.log.close(None if latest is None else {n: sn.pose for n, sn in latest.snapshots.items()})
         error = error or (errors[0] if errors else "")
         written = rec.written()
         # after a write error each BVH keeps its last complete flush: report the shortest
         frames = rec.frames if not error else min(
             (r.frames_written for name, r in rec.recorders.items() if name in written), default=0)
         if not written or frames == 0:
+            if rec.session is not None:
+                rec.session.unlink(missing_ok=True)      # nothing to replay either
             if error:
                 return RecordingResult(written, 0, 0.0, f"recording failed: {error}")
             return RecordingResult({}, 0, 0.0, "nothing recorded (0 frames): no file written")
@@ -287,4 +309,7 @@ class Session:
         if error:
             return RecordingResult(written, frames, seconds, f"recording stopped by a write error: {error}; "
                                                              f"kept {seconds:.2f} s ({frames} frames) in {names}")
-        return RecordingResult(written, frames, seconds, f"recorded {seconds:.2f} s ({frames} frames) to {names}")
+        session = rec.session if rec.session is not None and rec.session.exists() else None
+        kept = "" if session is None else f"; session {session.name}" + (f" ({self.log.ended})" if self.log.ended else "")
+        return RecordingResult(written, frames, seconds, f"recorded {seconds:.2f} s ({frames} frames) to {names}{kept}",
+                               session)

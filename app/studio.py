@@ -33,7 +33,7 @@ from .actions import SessionActions
 from .command_registry import CommandRegistry
 from .dialogs import FileDialogs
 from .frame_times import FrameTimes, per_tick_ms
-from .input.keyboard import SHORTCUT_KEYS
+from .input.keyboard import SHORTCUT_KEYS, shortcut_modifiers
 from .layouts import LayoutManager
 from .panels.base import EngineFacts, PanelContext, RecordingStatus, View
 from .panels.common import window_alias, window_tag
@@ -157,8 +157,9 @@ class Studio(SessionActions):
         dpg = self.dpg
         self.keyboard = KeyboardInput()
         self.key_lookup = build_key_lookup(lambda c: getattr(dpg, c, None))
-        # shortcut key code -> command id, from the commands that declare a shortcut
-        self._shortcut_keys = {getattr(dpg, SHORTCUT_KEYS[key]): c.id for key, c in self.commands.shortcuts().items()}
+        # (key code, (ctrl, shift) a chord needs or None, command id) of the commands that declare a shortcut
+        self._shortcut_keys = [(getattr(dpg, SHORTCUT_KEYS[key]), shortcut_modifiers(key), c.id)
+                               for key, c in self.commands.shortcuts().items()]
         try:
             from .input.manager import InputManager
 
@@ -185,7 +186,8 @@ class Studio(SessionActions):
         dpg = self.dpg
         names = set(self.script.keys)
         down = [name for code, name in self.key_lookup.items() if dpg.is_key_down(code)]
-        pressed = [command for key, command in self._shortcut_keys.items() if dpg.is_key_pressed(key)]
+        held = ("ctrl" in down, "shift" in down)
+        pressed = [c for key, mods, c in self._shortcut_keys if dpg.is_key_pressed(key) and mods in (None, held)]
         # typing() asks every text item whether it is being edited: only worth it when a key is down
         if (down or pressed) and not self.typing():
             names.update(down)
@@ -254,6 +256,7 @@ class Studio(SessionActions):
         dpg.run_callbacks(queue)
         self.script.run(self.commands, self.frame_index)
         self._keys()
+        self.session.undo.end_frame()       # this frame's tuning changes are one undo step
         live = self._live_input(self.session.dt if self.fixed_step else frame_dt)
         n = self.playback.ticks_due(frame_dt)
         inputs = [self.session.input_for_next_tick(live, ahead=k) for k in range(n)]

@@ -42,6 +42,11 @@ def register_studio_commands(reg: CommandRegistry, s) -> CommandRegistry:
     add("live_input", "Live input", lambda: s.live_input())
     add("reset_characters", "Reset characters", lambda: s.reset_characters(), menu="File", section=2)
     add("quit", "Quit", lambda: s.quit(), menu="File", section=2)
+    # -- edit: tuning changes (app.undo) -------------------------------------------------------------
+    add("undo", "Undo tuning change", lambda: s.session.undo.undo(), shortcut="Ctrl+Z", menu="Edit",
+        help="undo a tuning change")
+    add("redo", "Redo tuning change", lambda: s.session.undo.redo(), shortcut="Ctrl+Shift+Z", menu="Edit",
+        help="redo a tuning change")
     # -- characters, reference, recording, ragdolls --------------------------------------------------
     add("inspect", "Inspect controller", lambda controller: s.set_inspected(controller), args=("controller",))
     add("follow", "Follow the reference", lambda on=True, overlay=None: _follow(s, on, overlay),
@@ -90,6 +95,8 @@ def register_studio_commands(reg: CommandRegistry, s) -> CommandRegistry:
     add("capture", "Capture what the panels show", lambda label: s.script.captures.append(label), args=("label",))
     add("quit_when_exists", "Quit once a file exists", lambda path: s.script.quit_when_exists(path), args=("path",))
     add("write_rects", "Write item rectangles", lambda path, items: write_rects(s.dpg, path, items), args=("path", "items"))
+    # the session log keeps the commands that change the motion (app.session_log.RECORDED_COMMANDS)
+    reg.events.connect(lambda run: s.session.log.command(run) if getattr(s, "session", None) else None)
     return reg
 
 

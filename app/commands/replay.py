@@ -20,7 +20,8 @@ from app.commands.session_common import check_outputs, open_with_database
 
 def add_arguments(p) -> None:
     p.add_argument("session", metavar="SESSION", help="a session file (run --session, or the studio's)")
-    p.add_argument("--record", metavar="OUT.bvh", help="stream one controller's animation to this BVH file")
+    p.add_argument("--record", metavar="OUT.bvh", help="stream one controller's animation to this BVH file (from "
+                   "the tick the session's recording starts at: a studio recording's)")
     p.add_argument("--controller", metavar="NAME", help="the controller --record records (default: the first)")
     p.add_argument("--metrics-json", metavar="PATH", help="write each controller's metrics and the check here")
     p.add_argument("--tuning", metavar="PRESET.json", help="branch: these tuning values from --from-tick on")
@@ -74,10 +75,12 @@ def main(args) -> int:
         recorder = BVHRecorder(args.record, db, fps=session.fps)
     metrics = {name: MotionMetrics(db) for name in names}
     start = time.perf_counter()
+    record_from = session.recording_from     # a studio session: its recording starts mid-session
     try:
         while not player.done:
+            tick = player.tick
             poses, snaps = player.step()
-            if recorder is not None:
+            if recorder is not None and tick >= record_from:
                 recorder.write(poses[recorded])
             for name, snap in snaps.items():
                 metrics[name].update(snap)

@@ -83,7 +83,14 @@ DEARPYGUI_KEYS: dict[str, tuple[str, ...]] = {
 
 # a command's shortcut key name (see app.command_registry.Command.shortcut) -> its dearpygui constant name
 SHORTCUT_KEYS: dict[str, str] = {"Space": "mvKey_Spacebar", "Home": "mvKey_Home", ",": "mvKey_Comma",
-                                 ".": "mvKey_Period", "F": "mvKey_F"}
+                                 ".": "mvKey_Period", "F": "mvKey_F", "Ctrl+Z": "mvKey_Z", "Ctrl+Shift+Z": "mvKey_Z"}
+
+
+def shortcut_modifiers(name: str) -> tuple[bool, bool] | None:
+    """``(ctrl, shift)`` a chord shortcut (``"Ctrl+Shift+Z"``) needs held, exactly; None for a plain key,
+    which acts whatever is held (Shift walks and Ctrl strafes while Space pauses)."""
+    parts = name.split("+")[:-1] if len(name) > 1 else []
+    return ("Ctrl" in parts, "Shift" in parts) if parts else None
 
 
 def normalize_key_name(name) -> str:

@@ -10,7 +10,7 @@ from app.command_registry import CommandRegistry
 from .base import PanelContext, View
 from .common import WINDOWS, TextCache, built_windows, window_tag
 
-MENUS = ("File", "Layout", "Windows", "Help")
+MENUS = ("File", "Edit", "Layout", "Windows", "Help")
 
 
 def keys_help(commands: CommandRegistry) -> str:
@@ -48,6 +48,8 @@ class MenuBar:
         with dpg.viewport_menu_bar(tag="menu_bar"):
             with dpg.menu(label="File"):
                 self._add_commands("File")
+            with dpg.menu(label="Edit"):
+                self._add_commands("Edit")
             with dpg.menu(label="Layout"):
                 for name in builtin_names():
                     dpg.add_menu_item(label=name.capitalize(), callback=self._on_layout, user_data=name,

@@ -55,6 +55,11 @@ class SessionFile:
         return int(self.meta["ticks"])
 
     @property
+    def recording_from(self) -> int:
+        """The tick the session's recording starts at (meta ``recording``; 0 when it has none)."""
+        return int(self.meta.get("recording", {}).get("from_tick", 0))
+
+    @property
     def database(self) -> dict:
         return self.meta["database"]
 
@@ -181,6 +186,11 @@ def _read_meta(path, con) -> dict:
         check_payload("reset", start.get("reset", {}), [])
     except ValueError as e:
         _fail(path, f"meta 'start': {e}")
+    recording = meta.get("recording", {"from_tick": 0})
+    if not (isinstance(recording, dict) and set(recording) == {"from_tick"}
+            and isinstance(recording["from_tick"], int) and not isinstance(recording["from_tick"], bool)
+            and 0 <= recording["from_tick"] <= MAX_TICKS):     # after ticks: cut short before the recording
+        _fail(path, f"meta 'recording': expected {{from_tick}}, a tick in [0, {MAX_TICKS}]")
     for key, kind in (("tuning", dict), ("program_version", str), ("closed", bool), ("schema_version", int)):
         if not isinstance(meta.get(key), kind):
             _fail(path, f"meta {key!r}: expected {kind.__name__}, got {type(meta.get(key)).__name__}")

@@ -67,6 +67,8 @@ META_KEYS = {
     "tuning": "the full tuning at tick 0 (lmm.tuning.Tuning.to_dict, the database's channels and tags named)",
     "ticks": "integer, ticks stored whole (rows of later ticks are ignored)",
     "closed": "true once the writer closed the file (false: the run was cut short)",
+    "recording": "optional {from_tick}: the session was kept for a recording that starts at that tick (the "
+                 "studio's: its session starts at the characters' last reset); a replay records from there",
 }
 
 TABLES = {  # name -> [(column, declared type, not null, primary key position)] as PRAGMA table_info shows

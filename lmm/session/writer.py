@@ -46,7 +46,11 @@ class SessionWriter:
     action at the tick about to be stepped, ``close()`` at the end."""
 
     def __init__(self, path, *, fps: float, db, manifest, controllers: dict, tuning, start: dict,
-                 program_version: str | None = None):
+                 program_version: str | None = None, start_tuning: dict | None = None,
+                 recording_from: int | None = None):
+        """``start_tuning``: the tuning at tick 0 when it is not ``tuning``'s present value (the studio starts
+        a session at its last reset, before the changes :meth:`write_past` adds); ``recording_from``: the
+        tick a recording of this session starts at (meta ``recording``; a replay records from there)."""
         from lmm import __version__
 
         self.path = Path(path)
@@ -61,10 +65,14 @@ class SessionWriter:
                 "program_version": program_version or __version__,
                 "created_utc": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
                 "fps": self.fps, "database": database_identity(db, manifest), "start": start,
-                "tuning": tuning.to_dict(), "ticks": 0, "closed": False}
+                "tuning": start_tuning if start_tuning is not None else tuning.to_dict(), "ticks": 0,
+                "closed": False}
+        if recording_from is not None:
+            meta["recording"] = {"from_tick": int(recording_from)}
         rows = [controller_identity(name, c) for name, c in controllers.items()]
         self._make(meta, rows)
-        self._db = sqlite3.connect(self.path, isolation_level=None)
+        # the studio calls it from its GUI thread (tuning changes) and its tick thread (ticks), never at once
+        self._db = sqlite3.connect(self.path, isolation_level=None, check_same_thread=False)
         self._db.execute("PRAGMA synchronous=NORMAL")
         self._db.execute("BEGIN")
         self._tuning = tuning
@@ -119,9 +127,20 @@ class SessionWriter:
                          (self.tick if tick is None else int(tick), kind,
                           json.dumps(payload, sort_keys=True, allow_nan=False)))
 
+    def write_past(self, inputs, events, fingerprints, ticks: int) -> None:
+        """Ticks ``0 .. ticks - 1`` stepped before this writer was made, committed at once: ``inputs``
+        ``(tick, InputState)`` changes, ``events`` ``(tick, kind, payload)``, ``fingerprints`` ``(tick,
+        controller, pose fingerprint)``; the next tick stored is ``ticks``."""
+        for tick, inp in inputs:
+            self.begin_tick(tick, inp)
+        for tick, kind, payload in events:
+            self.event(kind, payload, tick)
+        self._db.executemany("INSERT OR REPLACE INTO fingerprints VALUES (?, ?, ?)", list(fingerprints))
+        self.tick = int(ticks)
+        self._commit(self.tick)
+
     def _on_tuning_change(self, change) -> None:
-        self.event("tuning", {"field": change.field, "channel": change.channel, "old": _plain(change.old),
-                              "new": _plain(change.new)})
+        self.event("tuning", tuning_payload(change))
 
     def _fingerprint(self, tick: int, poses: dict) -> None:
         self._db.executemany("INSERT OR REPLACE INTO fingerprints VALUES (?, ?, ?)",
@@ -149,6 +168,11 @@ class SessionWriter:
         finally:
             self._db.close()
             self._db = None
+
+
+def tuning_payload(change) -> dict:
+    """A :class:`lmm.tuning.TuningChange` as a ``tuning`` event's payload."""
+    return {"field": change.field, "channel": change.channel, "old": _plain(change.old), "new": _plain(change.new)}
 
 
 def _plain(value):

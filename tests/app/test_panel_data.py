@@ -470,7 +470,7 @@ def test_session_steps_records_and_replays(dbf, tmp_path):
         s.step(InputState(left_y=1.0, camera_azimuth=0.0))
     result = s.stop_recording()
     assert isinstance(result, RecordingResult) and result.frames == 90 and result.seconds == pytest.approx(1.5)
-    assert result.message == "recorded 1.50 s (90 frames) to take.bvh, take_input.csv"
+    assert result.message == "recorded 1.50 s (90 frames) to take.bvh, take_input.csv; session take.lmmsession"
     written = result.paths
     assert written == paths
     assert s.history.newest_tick == 90 and len(s.history) == 60
