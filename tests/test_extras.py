@@ -35,7 +35,7 @@ def run_without(blocked, *args, tmp_path, pythonpath=()):
 def assert_one_line_error(r, *words):
     assert r.returncode == 2, (r.returncode, r.stderr)
     assert "Traceback" not in r.stderr, r.stderr
-    assert r.stderr.startswith("error: ") and r.stderr.count("\n") == 1, r.stderr
+    assert r.stderr.startswith("lmm-studio ") and ": error: " in r.stderr and r.stderr.count("\n") == 1, r.stderr
     for w in words:
         assert w in r.stderr, (w, r.stderr)
     assert r.stdout == ""
@@ -43,14 +43,14 @@ def assert_one_line_error(r, *words):
 
 @pytest.mark.parametrize("blocked,args,words", [
     (["torch"], ["train", "--iterations", "1"],
-     ["lmm-studio train needs torch", "not installed", "scripts/setup train",
+     ["lmm-studio train: error: needs torch", "not installed", "scripts/setup train",
       "--index-url https://download.pytorch.org/whl/cpu"]),
     (["torch"], ["train", "projector", "--out", "{tmp}/weights"], ["needs torch", "scripts/setup train"]),
     (["matplotlib"], ["eval", "--json", "{tmp}/eval/metrics.json"],
-     ["lmm-studio eval needs matplotlib", "plots", "scripts/setup train", "pip install 'matplotlib"]),
+     ["lmm-studio eval: error: needs matplotlib", "plots", "scripts/setup train", "pip install 'matplotlib"]),
     (["matplotlib"], ["eval", "--plots", "{tmp}/plots"], ["needs matplotlib", "scripts/setup train"]),
     (["onnx"], ["export-onnx", "--out", "{tmp}/onnx"],
-     ["lmm-studio export-onnx needs onnx", "scripts/setup train", "pip install 'onnx"]),
+     ["lmm-studio export-onnx: error: needs onnx", "scripts/setup train", "pip install 'onnx"]),
 ])
 def test_missing_extra_is_one_line_and_exit_2_before_the_database(tmp_path, blocked, args, words):
     args = [a.replace("{tmp}", str(tmp_path)) for a in args]

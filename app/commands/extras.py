@@ -33,7 +33,7 @@ def require(command: str, *packages: str, purpose: str = "") -> bool:
             importlib.import_module(name)
         except ImportError as e:
             why = "is not installed" if _missing(e, name) else f"failed to import ({e})"
-            print(f"error: lmm-studio {command} needs {name}{purpose}, which {why}: install it with {EXTRA_SETUP.get(name, SETUP)} "
+            print(f"lmm-studio {command}: error: needs {name}{purpose}, which {why}: install it with {EXTRA_SETUP.get(name, SETUP)} "
                   f"(or: {PIP_INSTALL.get(name, f'pip install {name}')})", file=sys.stderr)
             return False
     return True

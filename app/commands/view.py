@@ -15,7 +15,7 @@ from app.cli import number_in
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("file", help="BVH file (.bvh or .bvh.gz), any units, Y up")
+    parser.add_argument("file", help="BVH file (.bvh or .bvh.gz), any units, Y up; or glTF (.glb, .gltf) or FBX")
     parser.add_argument("--screenshot", metavar="PNG",
                         help="render one frame headless (EGL, no display needed) to PNG and exit")
     parser.add_argument("--frame", type=number_in(0, MAX_FRAME, integer=True), default=0,
@@ -56,11 +56,11 @@ def _has_display() -> bool:
 
 def _load(path: str):
     """(name, parents, joint names, positions (F,J,3), frame_time) or an error message."""
-    from lmm.data import bvh
+    from lmm.data.motion_files import load_motion
     from lmm.errors import InputError
 
     try:
-        anim = bvh.load(path)
+        anim = load_motion(path)
         positions = anim.global_positions()
     except InputError as e:    # a bad BVH file, or not a regular file
         return str(e)
@@ -127,8 +127,17 @@ def main(args: argparse.Namespace) -> int:
         return 2
     from lmm.data.outputs import check_outputs
 
-    check_outputs([("--screenshot", args.screenshot), ("--window-screenshot", args.window_screenshot)],
-                  [("FILE", args.file)])
+    from lmm.errors import InputError
+
+    try:
+        check_outputs([("--screenshot", args.screenshot), ("--window-screenshot", args.window_screenshot)],
+                      [("FILE", args.file)])
+    except InputError as e:
+        _error(str(e))
+        return 1
+    except OSError as e:   # a read-only or file-as-folder target
+        _error(f"{e.filename}: {e.strerror}")
+        return 1
     loaded = _load(args.file)
     if isinstance(loaded, str):
         _error(loaded)

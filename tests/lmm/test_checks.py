@@ -141,7 +141,7 @@ def test_check_data_cli_bad_input_is_one_line(tmp_path, capsys):
     for manifest, named in ((missing, "nowhere.bvh"), (broken, "broken.json"), (bad_take, "garbage.bvh")):
         assert main(["check-data", "--manifest", str(manifest)]) == 1
         err = capsys.readouterr().err.strip()
-        assert err.startswith("error: ") and "\n" not in err and named in err, err
+        assert err.startswith("lmm-studio check-data: error: ") and "\n" not in err and named in err, err
 
 
 def test_check_data_cli_writes_json_and_png(tmp_path, capsys):

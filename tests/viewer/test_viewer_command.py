@@ -112,7 +112,7 @@ def test_bad_files_give_one_line_errors(bad, capsys, tmp_path):
     code, err = run_in_process([bad, "--screenshot", tmp_path / "x.png"], capsys)
     assert code == 1
     lines = err.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("error: ") and bad.name in lines[0], err
+    assert len(lines) == 1 and lines[0].startswith("lmm-studio view: error: ") and bad.name in lines[0], err
     assert not (tmp_path / "x.png").exists()
 
 
@@ -140,12 +140,12 @@ def test_bad_file_subprocess_has_no_traceback(tmp_path):
     assert result.returncode == 1
     assert "Traceback" not in result.stderr
     lines = result.stderr.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("error: ") and "broken.bvh:" in lines[0]
+    assert len(lines) == 1 and lines[0].startswith("lmm-studio view: error: ") and "broken.bvh:" in lines[0]
 
 
 def test_missing_file(capsys, tmp_path):
     code, err = run_in_process([tmp_path / "nope.bvh", "--screenshot", tmp_path / "x.png"], capsys)
-    assert code == 1 and err.startswith("error: ") and "nope.bvh" in err and len(err.strip().splitlines()) == 1
+    assert code == 1 and err.startswith("lmm-studio view: error: ") and "nope.bvh" in err and len(err.strip().splitlines()) == 1
 
 
 def test_window_without_display_exits_2(capsys, monkeypatch, tmp_path):
@@ -196,7 +196,7 @@ def test_screenshot_to_an_unwritable_target_is_one_line(capsys, tmp_path, target
     out = {"file_as_folder": tmp_path / "plain" / "x.png", "a_folder": tmp_path}[target]
     code, err = run_in_process([_good_bvh(tmp_path), "--screenshot", out], capsys)
     lines = err.strip().splitlines()
-    assert code == 1 and len(lines) == 1 and lines[0].startswith("error: ") and str(out) in lines[0], err
+    assert code == 1 and len(lines) == 1 and lines[0].startswith("lmm-studio view: error: ") and str(out) in lines[0], err
     assert "Traceback" not in err
 
 

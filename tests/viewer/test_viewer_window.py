@@ -53,7 +53,7 @@ def test_window_bad_file_exits_1_without_traceback(xvfb_env, tmp_path):
     assert result.returncode == 1
     assert "Traceback" not in result.stderr
     lines = result.stderr.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("error: bad.bvh") or "bad.bvh:" in lines[0]
+    assert len(lines) == 1 and lines[0].startswith("lmm-studio view: error: bad.bvh") or "bad.bvh:" in lines[0]
 
 
 SCRIPTS = Path(__file__).resolve().parent / "scripts"
