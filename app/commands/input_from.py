@@ -37,15 +37,15 @@ def add_arguments(p) -> None:
 
 def main(args) -> int:
     from lmm import DEFAULT_MANIFEST
-    from lmm.data import bvh
     from lmm.data.manifest import load_manifest
+    from lmm.data.motion_files import load_motion
     from lmm.data.outputs import check_outputs
     from lmm.input_from_motion import derive_input, take_root_path, write_input_csv
 
     check_outputs([("--out", args.out), ("--json", args.json)],
                   [("FILE", args.file), ("--manifest", args.manifest or DEFAULT_MANIFEST)])
     manifest = load_manifest(args.manifest or DEFAULT_MANIFEST)
-    anim = bvh.load(args.file)
+    anim = load_motion(args.file)
     root = take_root_path(anim, manifest, str(args.file), args.frames)
     derived = derive_input(root, dt=1.0 / args.fps)
     write_input_csv(derived, args.out)

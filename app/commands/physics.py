@@ -16,7 +16,7 @@ from app.cli import number_in
 
 
 def add_arguments(p) -> None:
-    p.add_argument("file", help="a BVH file (.bvh or .bvh.gz)")
+    p.add_argument("file", help="a BVH file (.bvh or .bvh.gz), or a glTF (.glb, .gltf) or FBX file")
     p.add_argument("--json", metavar="OUT", help="write the per-frame arrays and the summary here as JSON")
     p.add_argument("--png", metavar="OUT", help="draw residual force, penetration and sliding here as a PNG")
     p.add_argument("--mass", type=number_in(1.0, 1000.0, unit="kg"), default=70.0, help="total body mass (default 70 kg)")
@@ -43,13 +43,13 @@ def main(args) -> int:
     from app.commands.extras import require
     if not require("physics", "mujoco"):
         return 2
-    from lmm.data import bvh
+    from lmm.data.motion_files import load_motion
     from lmm.data.outputs import check_outputs
     from lmm.physics.body import body_for_animation
     from lmm.physics.plausibility import plausibility
 
     check_outputs([("--json", args.json), ("--png", args.png)], [("FILE", args.file)])
-    anim = bvh.load(args.file)
+    anim = load_motion(args.file)
     frames = parse_frames(args.frames, anim.n_frames, args.file) if args.frames else slice(None)
     body, pos, rot, scale = body_for_animation(anim, args.unit_scale, args.mass)
     result = plausibility(body, pos, rot, anim.fps, friction=args.friction)
