@@ -24,6 +24,7 @@ from pathlib import Path
 
 from lmm.errors import InputError
 
+from . import layout_ini
 from .panels.common import WINDOWS
 
 REFERENCE_SIZE = (1600, 900)
@@ -40,6 +41,8 @@ MAX_POS_PX = 8192
 #: the smallest viewport a layout can have been saved at: the layouts scale by viewport / reference,
 #: and the studio's own minimum window is larger than this
 MIN_VIEWPORT = (320, 240)
+#: largest layout file read: ours are ~3 KB (13 windows, a few tables)
+MAX_LAYOUT_BYTES = 1 << 20
 LAYOUT_DIR = Path(__file__).resolve().parents[1] / "layouts"
 
 # name -> window key -> (x, y, width, height) at 1600x900, or None for hidden
@@ -206,6 +209,10 @@ def parse(text: str, name: str = "layout", path: Path | None = None) -> Layout:
         raise LayoutError(f"{where}: not a layout file (no [Window] sections)")
     if not layout.windows:
         raise LayoutError(f"{where}: none of the studio's windows is in this layout file")
+    try:   # every other section and key, before dearpygui (ImGui) trusts them (see app.layout_ini)
+        layout_ini.check(text)
+    except layout_ini.IniError as e:
+        raise LayoutError(f"{where}: {e}") from None
     return layout
 
 
@@ -225,11 +232,15 @@ def _pair(value: str, where, lineno, key, low, high) -> tuple[int, int]:
 
 
 def load(name_or_path: str) -> Layout:
+    from lmm.data.reading import read_limited
+
     path = resolve(name_or_path)
     try:
-        text = path.read_bytes().decode("utf-8")
+        text = read_limited(path, MAX_LAYOUT_BYTES, "layout file").decode("utf-8")
     except UnicodeDecodeError:
         raise LayoutError(f"{path}: not a layout file (not UTF-8 text)") from None
+    except InputError as e:   # a FIFO, a device, a file far larger than any layout
+        raise LayoutError(str(e)) from None
     except OSError as e:
         raise LayoutError(f"{path}: cannot read ({e.strerror})") from None
     name = name_or_path if name_or_path in BUILTIN else path.stem

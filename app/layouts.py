@@ -5,7 +5,10 @@ showing and hiding the panels' windows), switching and saving. The file format i
 A saved user layout never locks the studio in a crash loop: one that cannot be read or applied is
 reported, set aside as ``layout.ini.bad`` and replaced by the default; and a start with the user
 layout leaves a marker (``layout.ini.starting``) until its first frames are drawn, so a start that
-died with it (a crash the checks did not foresee) sets it aside on the next start.
+died with it (a crash the checks did not foresee) sets it aside on the next start. A save leaves
+``layout.ini.saving`` while dearpygui writes its state: a studio that crashed or hung (and was killed)
+inside that writer has its saved layout set aside at the next start. What is saved is checked by the
+same reader first (:mod:`app.layout_ini`): a layout no start could use is never written.
 """
 from __future__ import annotations
 
@@ -44,6 +47,11 @@ class LayoutManager:
         candidates = []
         user = layout_files.user_layout_path()
         marker = _marker(user)
+        saving = _marker(user, ".saving")
+        if saving.exists():   # the last save died inside dearpygui: what it had saved before is suspect too
+            if user.is_file():
+                self._set_aside(user, "the studio ended while saving it (a crash or a hang in the layout writer)")
+            saving.unlink(missing_ok=True)
         if requested:
             candidates.append(("--layout", requested))
         elif user.is_file():
@@ -159,19 +167,26 @@ class LayoutManager:
         path = Path(path)
         scratch = None
         self.forget_shown()     # what dearpygui shows now, not what a recent frame saw
+        saving = _marker(path, ".saving")   # left behind only if ImGui's writer crashed or hung
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
+            _touch(saving)
             scratch = Path(tempfile.mkdtemp(prefix="lmm-studio-save-")) / "layout.ini"
             dpg.save_init_file(str(scratch))
             text = layout_files.strip_extra_section(scratch.read_text(encoding="utf-8", errors="replace"))
             text += layout_files.extra_section(self.hidden(), self._viewport_size())
+            layout_files.parse(text, name=path.stem, path=path)   # what is saved is read back the same way
             write_text_atomic(path, text)
+        except LayoutError as e:   # ImGui's state holds something no start may be handed: keep the old file
+            self.report_error("Layout", f"not saved: {e}")
+            return False
         except OSError as e:
             self.report_error("Layout", f"{path}: cannot write ({e.strerror or e})")
             return False
         finally:
             if scratch is not None:
                 shutil.rmtree(scratch.parent, ignore_errors=True)
+            saving.unlink(missing_ok=True)
         return True
 
     def show_window(self, key: str, show: bool) -> None:
@@ -202,8 +217,8 @@ class LayoutManager:
                       "shown": bool(dpg.is_item_shown(window_tag(key)))} for key in built_windows(dpg)}
 
 
-def _marker(user_layout: Path) -> Path:
-    return user_layout.with_name(user_layout.name + ".starting")
+def _marker(user_layout: Path, kind: str = ".starting") -> Path:
+    return user_layout.with_name(user_layout.name + kind)
 
 
 def _touch(path: Path) -> None:

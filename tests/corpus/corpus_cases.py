@@ -168,6 +168,16 @@ FILES: dict[str, Spec] = {
     "layout/size_zero.ini": Spec("Size=0,0", "Size"),
     "layout/size_negative.ini": Spec("Size=-500,-500", "Size"),
     "layout/pos_huge.ini": Spec("Pos=1e15,1e15", "Pos"),
+    "layout/table_columns_2e9.ini": Spec("[Table] with 2e9 columns (segfault inside ImGui)", "Table"),
+    "layout/table_columns_1e8.ini": Spec("[Table] with 1e8 columns (3.3 GB, then saved a negative count)", "Table"),
+    "layout/table_columns_negative.ini": Spec("[Table][0xD4BD52E9,-7936], as the studio saved it (every later "
+                                              "start crashed or hung in ImGui's ini writer)", "Table"),
+    "layout/table_column_index_huge.ini": Spec("Column 99999 of a 13-column table", "Column"),
+    "layout/table_width_negative.ini": Spec("a column Width=-5", "Width"),
+    "layout/table_refscale_nan.ini": Spec("RefScale=nan", "RefScale"),
+    "layout/unknown_section.ini": Spec("a section the studio never writes", "section"),
+    "layout/window_unknown_key.ini": Spec("a window key the studio never writes", "Zoom"),
+    "layout/docking_size_huge.ini": Spec("a dock space of 2e9 pixels", "Size"),
     # session files (issue 33), each made from a valid 2 s session (tests/corpus/session_files.py)
     **{f"session/{name}": Spec(what, word, generated=True) for name, (what, word) in session_files.BAD.items()},
 }

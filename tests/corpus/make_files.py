@@ -195,6 +195,16 @@ LAYOUT_CASES = {
     "size_zero.ini": layout(size="0,0"),
     "size_negative.ini": layout(size="-500,-500"),
     "pos_huge.ini": layout(pos="1e15,1e15"),
+    # issue 36: what ImGui trusts natively (segfaults, 3.3 GB, hangs in its ini writer)
+    "table_columns_2e9.ini": layout("\n[Table][0xD4BD52E9,2000000000]\nRefScale=15\n"),
+    "table_columns_1e8.ini": layout("\n[Table][0xD4BD52E9,100000000]\nRefScale=15\n"),
+    "table_columns_negative.ini": layout("\n[Table][0xD4BD52E9,-7936]\nRefScale=15\n"),
+    "table_column_index_huge.ini": layout("\n[Table][0xD4BD52E9,13]\nColumn 99999  Width=14\n"),
+    "table_width_negative.ini": layout("\n[Table][0xD4BD52E9,13]\nColumn 0  Width=-5\n"),
+    "table_refscale_nan.ini": layout("\n[Table][0xD4BD52E9,13]\nRefScale=nan\n"),
+    "unknown_section.ini": layout("\n[Settings][Everything]\nFontSize=1e9\n"),
+    "window_unknown_key.ini": layout().replace("Collapsed=0", "Collapsed=0\nZoom=1e9"),
+    "docking_size_huge.ini": layout("\n[Docking][Data]\nDockSpace ID=0x1 Pos=0,0 Size=2000000000,9 Split=X\n"),
 }
 
 
