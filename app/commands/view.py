@@ -1,4 +1,5 @@
-"""``lmm-studio view FILE.bvh``: play a BVH file in a 3D window, or save one frame headless.
+"""``lmm-studio view FILE.bvh``: play a BVH file in a 3D window, or save one frame (``--screenshot``) or an mp4
+(``--video``) headless.
 
 Keys in the window: space pause, left/right step (shift: 10 frames), [ ] speed, F follow,
 R reframe, C capsules/sticks, S shadow on/off, Home restart, Esc/Q quit; mouse: left-drag orbit,
@@ -18,6 +19,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("file", help="BVH file (.bvh or .bvh.gz), any units, Y up; or glTF (.glb, .gltf) or FBX")
     parser.add_argument("--screenshot", metavar="PNG",
                         help="render one frame headless (EGL, no display needed) to PNG and exit")
+    parser.add_argument("--video", metavar="MP4",
+                        help="render the motion headless to an H.264 mp4 from --frame on (needs the video extra)")
+    parser.add_argument("--seconds", type=number_in(0.01, 3600.0, unit="s"), default=None,
+                        help="with --video: this long (default: to the end of the file)")
+    parser.add_argument("--video-fps", type=number_in(1.0, 240.0, unit="Hz"), default=None,
+                        help="with --video: frames per second (default: the file's rate; frames by time)")
     parser.add_argument("--frame", type=number_in(0, MAX_FRAME, integer=True), default=0,
                         help=f"frame to start at / to screenshot, 0..{MAX_FRAME} (default 0)")
     parser.add_argument("--width", type=int, default=1280, help="window or image width (default 1280)")
@@ -121,7 +128,7 @@ def main(args: argparse.Namespace) -> int:
     if not (16 <= args.width <= MAX_IMAGE_SIDE and 16 <= args.height <= MAX_IMAGE_SIDE):
         _error(f"--width and --height must be 16..{MAX_IMAGE_SIDE}, got {args.width}x{args.height}")
         return 2
-    if not args.screenshot and not _has_display():
+    if not (args.screenshot or args.video) and not _has_display():
         _error("no display to open a window on (DISPLAY is not set); "
                "use --screenshot PNG to render a frame headless, or run under Xvfb")
         return 2
@@ -130,8 +137,11 @@ def main(args: argparse.Namespace) -> int:
     from lmm.errors import InputError
 
     try:
-        check_outputs([("--screenshot", args.screenshot), ("--window-screenshot", args.window_screenshot)],
-                      [("FILE", args.file)])
+        check_outputs([("--screenshot", args.screenshot), ("--window-screenshot", args.window_screenshot),
+                       ("--video", args.video)], [("FILE", args.file)])
+        if args.video:
+            from app.video import require_imageio_ffmpeg
+            require_imageio_ffmpeg()          # before the loading: one line when the extra is missing
     except InputError as e:
         _error(str(e))
         return 1
@@ -150,6 +160,9 @@ def main(args: argparse.Namespace) -> int:
     args.frame %= n
     if args.screenshot:
         return _screenshot(args, parents, names, positions)
+    if args.video:
+        from app.video import write_video
+        return write_video(args, parents, positions, frame_time, _look(args, names), _error)
 
     from viewer.window import PlayerWindow, WindowError
 
