@@ -130,7 +130,9 @@ def user_config_dir() -> Path:
     if env:
         return Path(env)
     xdg = os.environ.get("XDG_CONFIG_HOME")
-    return (Path(xdg) if xdg else Path.home() / ".config") / "lmm-studio"
+    from lmm.data.cache import home_dir
+
+    return (Path(xdg) if xdg else home_dir() / ".config") / "lmm-studio"
 
 
 def user_layout_path() -> Path:
@@ -150,7 +152,10 @@ def resolve(name_or_path: str) -> Path:
             raise LayoutError(f"the built-in layout {s!r} is missing ({p}); regenerate it with "
                               f"'lmm-studio --write-layouts {LAYOUT_DIR}'")
         return p
-    p = Path(s).expanduser()
+    try:
+        p = Path(s).expanduser()
+    except RuntimeError:   # "~" with no home folder: the name as given
+        p = Path(s)
     if not p.is_file():
         known = ", ".join(BUILTIN)
         raise LayoutError(f"{s}: no such layout file (built-in layouts: {known})")

@@ -10,6 +10,8 @@ import argparse
 import os
 import sys
 
+from app.cli import number_in
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--manifest", help="database manifest (default: the embedded LAFAN1 locomotion set)")
@@ -23,16 +25,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--input", metavar="CSV|builtin:NAME",
                         help="replay an input log instead of live keyboard/gamepad input "
                              "(builtin: circle, zigzag, stop-and-go, strafe, turns, random:SEED)")
-    parser.add_argument("--frames", type=int, metavar="N", help="run N frames (one 60 Hz tick each), then exit")
+    parser.add_argument("--frames", type=number_in(1, 10**7, integer=True), metavar="N", help="run N frames (one 60 Hz tick each), then exit")
     parser.add_argument("--screenshot", metavar="PATH", help="with --frames: save the whole window as PNG at the end")
-    parser.add_argument("--width", type=int, default=1600, help="window width (default 1600)")
-    parser.add_argument("--height", type=int, default=900, help="window height (default 900)")
+    parser.add_argument("--width", type=number_in(640, 8192, integer=True), default=1600,
+                        help="window width, 640..8192 (default 1600)")
+    parser.add_argument("--height", type=number_in(400, 8192, integer=True), default=900,
+                        help="window height, 400..8192 (default 900)")
     parser.add_argument("--no-lmm", action="store_true", help="motion matching only")
     parser.add_argument("--no-physics", action="store_true",
                         help="no simulated ragdolls (they need the physics extra: pip install -e '.[physics]')")
-    parser.add_argument("--samples", type=int, default=-1,
+    parser.add_argument("--samples", type=number_in(-1, 16, integer=True), default=-1,
                         help="3D view multisampling, e.g. 0 or 4 (default: 4 on a GPU, 0 on software OpenGL)")
-    parser.add_argument("--render-scale", type=float, default=1.0, metavar="S",
+    parser.add_argument("--render-scale", type=number_in(0.25, 1.0), default=1.0, metavar="S",
                         help="render the 3D view at S times its size and stretch it (0.25-1; default 1): "
                              "cheaper on software OpenGL")
     parser.add_argument("--readback-3d", action="store_true",
@@ -72,6 +76,12 @@ def main(args: argparse.Namespace) -> int:
         print("lmm-studio: error: no display (DISPLAY is not set). Run it on a desktop, or under Xvfb: "
               "xvfb-run -a lmm-studio ...", file=sys.stderr)
         return 2
+    from app.display import display_problem
+
+    problem = display_problem()
+    if problem:   # a display that is not there: dearpygui would abort the process (exit 134)
+        print(f"lmm-studio: error: {problem}", file=sys.stderr)
+        return 1
     preset = None
     if args.tuning:
         # checked before the window and the database: a bad file is one line and exit status 2

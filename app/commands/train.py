@@ -20,6 +20,9 @@ STAGES = ("all", "decompressor", "stepper", "projector")
 MAX_ITERATIONS = 1_000_000
 MAX_BATCH = 65_536
 MAX_THREADS = 256
+#: fewest frames --frames may keep: the stepper and decompressor train on windows of 20 frames
+#: (Recipe.stepper_window) inside one range; far fewer left no window at all (numpy: "high <= 0")
+MIN_FRAMES = 256
 
 
 def add_arguments(p) -> None:
@@ -36,8 +39,8 @@ def add_arguments(p) -> None:
                    help="random seed, 0..2^32-1 (default 1234)")
     p.add_argument("--threads", type=number_in(1, MAX_THREADS, integer=True), default=2,
                    help="torch threads (default 2)")
-    p.add_argument("--frames", type=number_in(1, 2 ** 31, integer=True),
-                   help="train on the first N database frames only (quick checks)")
+    p.add_argument("--frames", type=number_in(MIN_FRAMES, 2 ** 31, integer=True),
+                   help=f"train on the first N database frames only (quick checks), at least {MIN_FRAMES}")
     p.add_argument("--log-every", type=number_in(1, MAX_ITERATIONS, integer=True), default=200,
                    help="print a loss line every N iterations")
     p.add_argument("--resume", action="store_true",

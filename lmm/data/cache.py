@@ -56,9 +56,21 @@ def cache_file_name(key: str) -> str:
     return f"db-{key[:32]}.npz"
 
 
+def home_dir() -> Path:
+    """The user's home folder; where there is none (``HOME`` unset and no passwd entry for the uid, as in
+    some containers) ``lmm-studio-home-UID`` in the system's temporary folder, so the cache and the
+    studio's config still have a place (the README names it)."""
+    try:
+        return Path.home()
+    except RuntimeError:
+        import tempfile
+
+        return Path(tempfile.gettempdir()) / f"lmm-studio-home-{os.getuid() if hasattr(os, 'getuid') else 0}"
+
+
 def default_cache_dir() -> Path:
     env = os.environ.get("LMM_STUDIO_CACHE")
     if env:
         return Path(env)
-    base = os.environ.get("XDG_CACHE_HOME") or (Path.home() / ".cache")
+    base = os.environ.get("XDG_CACHE_HOME") or (home_dir() / ".cache")
     return Path(base) / "lmm-studio"
