@@ -182,3 +182,54 @@ def test_our_readers_agree_with_blenders_import_of_real_files_within_1_mm(name, 
     pos = anim.global_positions() * MOTION_UNIT_M
     error = max(np.abs(np.array(joints[n]) - pos[:, j]).max() for j, n in enumerate(anim.names))
     assert error < 1e-3, error
+
+
+#: tests/corpus/motion/: bad glTF and FBX files (made once from tests/corpus/good/walk.bvh or by hand) -> what
+#: the one line says
+CORPUS = ROOT / "tests/corpus/motion"
+BAD_FILES = {"truncated.glb": "a truncated glb", "no_animation.glb": "has no animation",
+             "not_gltf.gltf": "not a glTF 2.0 file", "no_skin.gltf": "has no skin",
+             "garbage.fbx": "not a readable FBX file", "no_skeleton.fbx": "has no skeleton"}
+
+
+def test_the_corpus_of_bad_motion_files_is_one_line_in_every_command(tmp_path, monkeypatch, capsys):
+    from app.cli import main
+
+    monkeypatch.setenv("LMM_STUDIO_CACHE", str(tmp_path / "cache"))
+    good = json.loads((ROOT / "tests/corpus/good/manifest.json").read_text())
+    assert sorted(p.name for p in CORPUS.iterdir()) == sorted(BAD_FILES)
+    for name, says in BAD_FILES.items():
+        if name.endswith(".fbx") and not _has("ufbx"):
+            continue
+        path = CORPUS / name
+        manifest = tmp_path / f"{name}.json"
+        manifest.write_text(json.dumps(dict(good, name="motion-corpus", clips=[{"file": str(path)}])))
+        for argv in (["view", str(path), "--screenshot", str(tmp_path / "shot.png")],
+                     ["build-db", "--manifest", str(manifest)],
+                     ["check-data", "--manifest", str(manifest), "--quiet"],
+                     ["export-gltf", str(path), "--out", str(tmp_path / "out.glb")]):
+            code = main(argv)
+            err = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
+            assert code == 1 and len(err) == 1 and name in err[0] and says in err[0], (argv, code, err)
+
+
+def test_a_glb_in_a_manifest_builds_the_database_its_bvh_builds(tmp_path):
+    """glTF in, where a manifest takes a BVH: the exported walk gives the BVH's database (positions to float32's
+    precision of a 0.1 mm round trip)."""
+    from lmm.data.build import build
+    from lmm.data.gltf_write import save_glb
+    from lmm.data.manifest import load_manifest
+
+    walk = ROOT / "tests/corpus/good/walk.bvh"
+    glb = tmp_path / "walk.glb"
+    save_glb(glb, bvh.load(walk), 0.01, mesh="none")
+    good = json.loads((ROOT / "tests/corpus/good/manifest.json").read_text())
+    dbs = []
+    for f in (walk, glb):
+        m = tmp_path / f"{f.suffix[1:]}.json"
+        m.write_text(json.dumps(dict(good, name=f"db-{f.suffix[1:]}", clips=[dict(good["clips"][0], file=str(f))])))
+        dbs.append(build(load_manifest(m)))
+    a, b = dbs
+    assert a.names == b.names and a.positions.shape == b.positions.shape
+    assert np.abs(a.positions - b.positions).max() < 1e-4          # metres
+    assert (a.contacts == b.contacts).all()
