@@ -8,12 +8,19 @@ memory-maps it. An entry's name carries a hash of the database key, the database
 parameters and the source of the module that computes it, so a change to any of them computes it again
 (older entries of the same name are removed). Databases that were not loaded from a file (built in
 memory, tests) compute every time, exactly as before: a cached array is bit-identical to a computed one.
+
+An entry is never trusted: its CRC-32 is stored beside it (``.crc32``) when it is written and checked
+when it is opened, so a bit flip, a NaN written into it, a truncated or 0-byte file is computed and
+written again with a one-line note on stderr, never used (a damaged entry once gave a different
+recording with exit 0, or stopped every command, ``build-db --rebuild`` included, with ``EOFError``).
 """
 from __future__ import annotations
 
 import hashlib
 import inspect
 import json
+import sys
+import zlib
 from pathlib import Path
 from typing import Callable
 
@@ -79,26 +86,63 @@ def drop_cached_pages_of(path: Path) -> None:
         drop_cached_pages(f.fileno())
 
 
+def checksum_path(path: Path) -> Path:
+    """Where the CRC-32 of the entry ``path`` is kept."""
+    return path.with_name(path.name + ".crc32")
+
+
+def file_crc32(path) -> str:
+    """CRC-32 of a file's bytes (8 hex digits), read in 1 MB pieces (through the page cache, not mapped)."""
+    crc = 0
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            crc = zlib.crc32(chunk, crc)
+    return f"{crc:08x}"
+
+
+def damage(path: Path) -> str | None:
+    """Why the entry ``path`` cannot be trusted (None: its bytes are the ones written). An entry without
+    its checksum (written by older code, or cut off before the checksum) is not trusted either."""
+    try:
+        recorded = checksum_path(path).read_text(encoding="ascii").strip()
+    except (OSError, UnicodeDecodeError):
+        return "no checksum"
+    try:
+        if path.stat().st_size == 0:
+            return "an empty file"
+        found = file_crc32(path)
+    except OSError as e:
+        return f"unreadable ({e.strerror})"
+    return None if found == recorded else f"its CRC-32 {found} is not the {recorded[:8]} written with it"
+
+
 def cached(db, name: str, params, compute: Callable[[], np.ndarray], random_access: bool = False) -> np.ndarray:
     """``compute()``'s array for ``db``, from the cache beside its file when there (read-only memory map),
     else computed and stored. A cache that cannot be read or written is ignored (the array is computed).
     ``random_access``: the caller reads a few rows here and there (see :mod:`lmm.data.npz_mmap`)."""
     path = entry_path(db, name, params, compute)
     if path is not None and path.is_file():
-        try:
-            # mapped when the database is (a large one), else read whole: see lmm.data.npz_mmap.worth_mapping
-            return _map(path, random_access, mapped=worth_mapping(getattr(db, "source_path", None) or path))
-        except (OSError, ValueError):
-            pass  # damaged: computed and written again below
+        why = damage(path)
+        if why is None:
+            try:
+                # mapped when the database is (a large one), else read whole: see npz_mmap.worth_mapping
+                return _map(path, random_access, mapped=worth_mapping(getattr(db, "source_path", None) or path))
+            except Exception as e:  # noqa: BLE001 - whatever np.load makes of it (EOFError...): computed again
+                why = f"cannot be read ({type(e).__name__})"
+        if why != "no checksum":
+            print(f"note: {path}: damaged cached array ({why}); computing it again", file=sys.stderr)
     value = np.asarray(compute())
     if path is not None:
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
             with atomic_write(path) as f:
                 np.save(f, value, allow_pickle=False)
+            with atomic_write(checksum_path(path), "w") as f:   # after the entry: no checksum, no trust
+                f.write(file_crc32(path) + "\n")
             for old in path.parent.glob(f"{name}-*.npy"):  # entries of older code or settings
                 if old != path:
                     old.unlink(missing_ok=True)
+                    checksum_path(old).unlink(missing_ok=True)
         except OSError:
             pass
     return value
