@@ -12,20 +12,14 @@ import numpy as np
 
 from lmm.errors import InputError
 
-INSTALL_HINT = "install the video extra: pip install -e '.[video]' (scripts/setup test installs every extra)"
-
-
 class VideoError(InputError):
-    """The video extra is missing, or ffmpeg could not write the file (one line)."""
+    """ffmpeg could not write the file (one line)."""
 
 
 def require_imageio_ffmpeg():
-    """The ``imageio_ffmpeg`` module, or :class:`VideoError` with the one line that says how to get it."""
-    try:
-        import imageio_ffmpeg
-    except ImportError:
-        raise VideoError(f"writing a video needs imageio-ffmpeg, which is not installed: {INSTALL_HINT}") from None
-    return imageio_ffmpeg
+    """The ``imageio_ffmpeg`` module, or a one-line :class:`~lmm.data.motion_files.MissingExtra`."""
+    from lmm.data.motion_files import require_extra
+    return require_extra("imageio_ffmpeg", "writing a video", "video")
 
 
 def even_size(width: int, height: int) -> tuple[int, int]:

@@ -23,7 +23,7 @@ import numpy as np
 
 from lmm import kinematics, quat
 from lmm.data.bvh import Animation
-from lmm.data.motion_files import MOTION_UNIT_M, MotionFileError, depth_first, from_sampled
+from lmm.data.motion_files import MOTION_UNIT_M, MotionFileError, depth_first, from_sampled, require_extra
 
 __all__ = ["load", "MAX_SAMPLES"]
 
@@ -31,15 +31,6 @@ __all__ = ["load", "MAX_SAMPLES"]
 MAX_SAMPLES = 3_000_000
 #: a joint whose local translation moves more than this (centimetres) gets position channels
 _MOVES_CM = 1e-6
-
-
-def _ufbx(path):
-    from lmm.data.gltf_write import INSTALL_HINT
-    try:
-        import ufbx
-    except ImportError:
-        raise MotionFileError(f"reading FBX needs ufbx, which is not installed: {INSTALL_HINT}", path) from None
-    return ufbx
 
 
 def _world(node) -> tuple[np.ndarray, np.ndarray]:
@@ -52,7 +43,7 @@ def _world(node) -> tuple[np.ndarray, np.ndarray]:
 
 def load(path) -> Animation:
     """The first animation stack's skeleton motion in an FBX file (see the module doc)."""
-    ufbx = _ufbx(path)
+    ufbx = require_extra("ufbx", "reading FBX", "formats", path)
     p = os.fspath(path)
     with open(p, "rb"):                       # OSError for a missing file, as for BVH
         pass

@@ -30,7 +30,7 @@ import numpy as np
 
 from lmm import quat
 from lmm.data.bvh import Animation
-from lmm.data.motion_files import MOTION_UNIT_M, MotionFileError, depth_first, from_sampled
+from lmm.data.motion_files import MOTION_UNIT_M, MotionFileError, depth_first, from_sampled, require_extra
 
 __all__ = ["load", "DEFAULT_FPS", "MAX_SAMPLES", "MAX_FILE_BYTES"]
 
@@ -71,11 +71,7 @@ class _Reader:
         return data.decode("utf-8", errors="replace")
 
     def __init__(self, path):
-        from lmm.data.gltf_write import INSTALL_HINT
-        try:
-            import pygltflib
-        except ImportError:
-            raise _error(path, f"reading glTF needs pygltflib, which is not installed: {INSTALL_HINT}") from None
+        pygltflib = require_extra("pygltflib", "reading glTF", "formats", path)
         self.path = os.fspath(path)
         with open(self.path, "rb") as f:         # OSError for a missing file, as for BVH
             if os.fstat(f.fileno()).st_size > MAX_FILE_BYTES:

@@ -13,7 +13,7 @@ What is written (the conventions glTF requires or viewers expect):
 - optionally (``mesh="capsules"``) a body of capsules, one per bone, skinned rigidly to the bone's parent joint,
   so the motion plays in any glTF viewer (a skeleton alone draws nothing there).
 
-``pygltflib`` is the ``formats`` extra; :func:`require_pygltflib` says how to install it in one line.
+``pygltflib`` is the ``formats`` extra; without it :func:`require_pygltflib` says how to install it in one line.
 """
 from __future__ import annotations
 
@@ -22,28 +22,17 @@ import os
 import numpy as np
 
 from lmm import kinematics
-from lmm.errors import InputError
 
-__all__ = ["save_glb", "require_pygltflib", "MissingExtra", "capsule_body"]
-
-#: what the one-line message for a missing optional package says
-INSTALL_HINT = "install the formats extra: pip install -e '.[formats]' (scripts/setup test installs every extra)"
+__all__ = ["save_glb", "require_pygltflib", "capsule_body"]
 
 _FLOAT, _USHORT, _UINT = 5126, 5123, 5125
 _ARRAY_BUFFER, _ELEMENT_ARRAY_BUFFER = 34962, 34963
 
 
-class MissingExtra(InputError):
-    """An optional package this command needs is not installed (one line naming the extra)."""
-
-
 def require_pygltflib():
-    """The ``pygltflib`` module, or :class:`MissingExtra` with the one line that says how to get it."""
-    try:
-        import pygltflib
-    except ImportError:
-        raise MissingExtra(f"glTF needs pygltflib, which is not installed: {INSTALL_HINT}") from None
-    return pygltflib
+    """The ``pygltflib`` module, or a one-line :class:`~lmm.data.motion_files.MissingExtra`."""
+    from lmm.data.motion_files import require_extra
+    return require_extra("pygltflib", "writing glTF", "formats")
 
 
 class _Blob:
@@ -86,21 +75,27 @@ def _capsule(a: np.ndarray, b: np.ndarray, radius: float, around: int = 12, ring
     x /= np.linalg.norm(x)
     z = np.cross(x, y)
     phis = np.linspace(0.0, 2.0 * np.pi, around, endpoint=False)
-    # latitude rings: the lower half sphere around a, then the upper one around b
-    lats = np.concatenate([np.linspace(-np.pi / 2, 0.0, rings + 1), np.linspace(0.0, np.pi / 2, rings + 1)])
-    centres = [a] * (rings + 1) + [b] * (rings + 1)
-    verts, norms = [], []
+    # latitude rings without the poles: the lower half sphere around a, then the upper one around b; each
+    # pole is one vertex with a fan of triangles (a ring collapsed to a point would make empty triangles)
+    steps = np.linspace(-np.pi / 2, 0.0, rings + 1)[1:]
+    lats = np.concatenate([steps, -steps[::-1]])
+    centres = [a] * rings + [b] * rings
+    verts, norms = [a - radius * y], [-y]
     for lat, c in zip(lats, centres):
         for phi in phis:
             n = np.cos(lat) * (np.cos(phi) * x + np.sin(phi) * z) + np.sin(lat) * y
             norms.append(n)
             verts.append(c + radius * n)
-    tris = []
+    verts.append(b + radius * y)
+    norms.append(y)
+    top = len(verts) - 1
+    ring = lambda r, k: 1 + r * around + k % around      # noqa: E731 - vertex k of ring r
+    tris = [(0, ring(0, k), ring(0, k + 1)) for k in range(around)]
     for r in range(len(lats) - 1):
         for k in range(around):
-            i0, i1 = r * around + k, r * around + (k + 1) % around
-            j0, j1 = i0 + around, i1 + around
-            tris += [(i0, j0, i1), (i1, j0, j1)]
+            tris += [(ring(r, k), ring(r + 1, k), ring(r, k + 1)), (ring(r, k + 1), ring(r + 1, k), ring(r + 1, k + 1))]
+    last = len(lats) - 1
+    tris += [(ring(last, k), top, ring(last, k + 1)) for k in range(around)]
     return np.array(verts), np.array(norms), np.array(tris)
 
 

@@ -13,28 +13,40 @@ Conventions of what comes back (BVH's own, so a glTF clip and a LAFAN1 take sit 
 
 Every problem in a file raises a :class:`~lmm.data.bvh.BVHError` (glTF and FBX raise its subclass
 :class:`MotionFileError`), whose ``str()`` is one line naming the file; callers that already catch ``BVHError``
-need nothing new. A missing optional reader (``pygltflib``, ``ufbx``) is a ``MotionFileError`` naming the extra.
+need nothing new. A missing optional reader (``pygltflib``, ``ufbx``) is a :class:`MissingExtra` (an
+``InputError``): one line naming the file, the package and the extra that installs it.
 """
 from __future__ import annotations
 
+import importlib
 import os
 
 from lmm.data.bvh import Animation, BVHError
+from lmm.errors import InputError
 
-__all__ = ["load_motion", "MotionFileError", "MOTION_EXTENSIONS", "MOTION_UNIT_M", "is_motion_file"]
+__all__ = ["load_motion", "MotionFileError", "MOTION_UNIT_M", "MissingExtra", "require_extra"]
 
 #: metres per unit of the animations read from glTF and FBX
 MOTION_UNIT_M = 0.01
-#: file name endings :func:`load_motion` reads (lower case)
-MOTION_EXTENSIONS = (".bvh", ".bvh.gz", ".glb", ".gltf", ".fbx")
 
 
 class MotionFileError(BVHError):
     """A glTF or FBX file that cannot be read as a skeletal animation: ``str(e)`` is ``"{path}: {message}"``."""
 
 
-def is_motion_file(path) -> bool:
-    return os.fspath(path).lower().endswith(MOTION_EXTENSIONS)
+class MissingExtra(InputError):
+    """An optional package a format needs is not installed: one line naming the package and its extra."""
+
+
+def require_extra(module: str, purpose: str, extra: str, path=None):
+    """The optional ``module``, or :class:`MissingExtra` (naming ``path`` when given) saying which pyproject
+    extra installs it; ``purpose`` is what needs it (``"reading FBX"``)."""
+    try:
+        return importlib.import_module(module)
+    except ImportError:
+        where = f"{os.fspath(path)}: " if path is not None else ""
+        raise MissingExtra(f"{where}{purpose} needs {module}, which is not installed: pip install -e '.[{extra}]' "
+                           "(scripts/setup test installs every extra)") from None
 
 
 def load_motion(path) -> Animation:

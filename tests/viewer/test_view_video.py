@@ -22,9 +22,11 @@ def test_a_missing_video_extra_is_one_line(monkeypatch):
     from app import video
 
     monkeypatch.setitem(sys.modules, "imageio_ffmpeg", None)
-    with pytest.raises(video.VideoError) as e:
+    from lmm.data.motion_files import MissingExtra
+
+    with pytest.raises(MissingExtra) as e:
         video.require_imageio_ffmpeg()
-    assert "\n" not in str(e.value) and "video extra" in str(e.value)
+    assert "\n" not in str(e.value) and "'.[video]'" in str(e.value)
 
 
 def test_view_writes_an_mp4_another_decoder_reads(gl_ctx, tmp_path):

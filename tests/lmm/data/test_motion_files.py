@@ -233,3 +233,33 @@ def test_a_glb_in_a_manifest_builds_the_database_its_bvh_builds(tmp_path):
     assert a.names == b.names and a.positions.shape == b.positions.shape
     assert np.abs(a.positions - b.positions).max() < 1e-4          # metres
     assert (a.contacts == b.contacts).all()
+
+
+def test_a_missing_formats_extra_is_one_line_naming_the_extra(glb, tmp_path, monkeypatch, capsys):
+    from app.cli import main
+    from lmm.data.motion_files import MissingExtra
+
+    monkeypatch.setitem(sys.modules, "pygltflib", None)
+    monkeypatch.setitem(sys.modules, "ufbx", None)
+    for path in (glb, ASSIMP / "FBX/huesitos.fbx"):
+        with pytest.raises(MissingExtra) as e:
+            load_motion(path)
+        assert "'.[formats]'" in _one_line(e.value, path)
+    assert main(["export-gltf", str(TAKE), "--out", str(tmp_path / "x.glb")]) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "pygltflib" in err[0] and "'.[formats]'" in err[0], err
+
+
+def test_the_capsule_body_is_closed_and_faces_outward(clip):
+    """Every triangle of the skinned body has an area and winds counter-clockwise seen from outside (glTF's
+    front face), and each vertex is bound to one joint that exists."""
+    from lmm import kinematics
+    from lmm.data.gltf_write import capsule_body
+
+    rest = kinematics.forward_kinematics(np.tile([1.0, 0, 0, 0], (1, clip.n_joints, 1)),
+                                         clip.offsets[None] * 0.01, clip.parents)[1][0]
+    v, n, t, joints = capsule_body(clip.names, clip.parents, rest)
+    face = np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])
+    assert np.linalg.norm(face, axis=1).min() > 0
+    assert (np.sum(face * n[t].mean(axis=1), axis=1) > 0).all()
+    assert joints.min() >= 0 and joints.max() < clip.n_joints
