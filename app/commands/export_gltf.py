@@ -30,7 +30,7 @@ def add_arguments(p) -> None:
     p.add_argument("--controller", metavar="NAME", help="a session's character to export (default: the first)")
 
 
-def _is_session(path: str) -> bool:
+def is_session(path) -> bool:
     """A session is SQLite: its file starts with the SQLite header."""
     try:
         with open(path, "rb") as f:
@@ -39,15 +39,16 @@ def _is_session(path: str) -> bool:
         return False
 
 
-def _replayed(args, folder: str) -> str:
-    """The session replayed headless into a BVH in ``folder`` (the ``replay`` command does the work)."""
+def replay_to_bvh(session, folder: str, controller: str | None = None) -> str:
+    """The session replayed headless into a BVH in ``folder`` (the ``replay`` command does the work, and says
+    in one line why when it cannot)."""
     from app.cli import main as cli_main
     from lmm.errors import InputError
 
     out = os.path.join(folder, "replayed.bvh")
-    argv = ["replay", args.file, "--record", out] + (["--controller", args.controller] if args.controller else [])
+    argv = ["replay", os.fspath(session), "--record", out] + (["--controller", controller] if controller else [])
     if cli_main(argv) != 0 or not os.path.exists(out):
-        raise InputError(f"{args.file}: the session could not be replayed (see the line above)")
+        raise InputError(f"{session}: the session could not be replayed (see the line above)")
     return out
 
 
@@ -60,7 +61,7 @@ def main(args) -> int:
     require_pygltflib()                       # before any work: one line when the extra is missing
     check_outputs([("--out", args.out)], [("FILE", args.file)])
     with tempfile.TemporaryDirectory(prefix="lmm-export-") as folder:
-        source = _replayed(args, folder) if _is_session(args.file) else args.file
+        source = replay_to_bvh(args.file, folder, args.controller) if is_session(args.file) else args.file
         anim = load_motion(source)
     scale = args.unit_scale or guess_unit_scale(anim.names, anim.parents, anim.offsets) or 1.0
     save_glb(args.out, anim, scale, mesh=args.mesh)

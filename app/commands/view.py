@@ -61,13 +61,24 @@ def _has_display() -> bool:
     return True
 
 
+def _read(path: str):
+    """The animation in a motion file, or a session's first character replayed headless."""
+    from app.commands.export_gltf import is_session, replay_to_bvh
+    from lmm.data.motion_files import load_motion
+
+    if not is_session(path):
+        return load_motion(path)
+    import tempfile
+    with tempfile.TemporaryDirectory(prefix="lmm-view-") as folder:
+        return load_motion(replay_to_bvh(path, folder))
+
+
 def _load(path: str):
     """(name, parents, joint names, positions (F,J,3), frame_time) or an error message."""
-    from lmm.data.motion_files import load_motion
     from lmm.errors import InputError
 
     try:
-        anim = load_motion(path)
+        anim = _read(path)
         positions = anim.global_positions()
     except InputError as e:    # a bad BVH file, or not a regular file
         return str(e)

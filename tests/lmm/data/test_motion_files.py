@@ -263,3 +263,18 @@ def test_the_capsule_body_is_closed_and_faces_outward(clip):
     assert np.linalg.norm(face, axis=1).min() > 0
     assert (np.sum(face * n[t].mean(axis=1), axis=1) > 0).all()
     assert joints.min() >= 0 and joints.max() < clip.n_joints
+
+
+def test_a_session_is_replayed_and_exported(tmp_path, monkeypatch):
+    from app.cli import main
+
+    monkeypatch.setenv("LMM_STUDIO_CACHE", str(ROOT / ".cache/lmm-studio"))
+    session = tmp_path / "run.lmmsession"
+    assert main(["run", "--controller", "mm", "--input", "builtin:circle", "--seconds", "1", "--session", str(session),
+                 "--quiet"]) == 0
+    out = tmp_path / "run.glb"
+    assert main(["export-gltf", str(session), "--out", str(out), "--mesh", "none"]) == 0
+    assert main(["replay", str(session), "--record", str(tmp_path / "run.bvh")]) == 0
+    a, b = load_motion(out), bvh.load(tmp_path / "run.bvh")
+    assert (a.n_frames, a.names) == (b.n_frames, b.names) and a.fps == pytest.approx(60.0, rel=1e-6)
+    assert np.abs(a.global_positions() - b.global_positions()).max() < 1e-2       # centimetres: 0.1 mm
