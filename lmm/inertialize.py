@@ -44,6 +44,18 @@ class Offsets:
         return Offsets(self.positions.copy(), self.velocities.copy(), self.rotations.copy(),
                        self.angular_velocities.copy())
 
+    def __deepcopy__(self, memo) -> "Offsets":
+        """A copy that the next :func:`inertialize_decay` treats exactly as this one (a session checkpoint
+        restores it): fields that are views of the decay's stacked array stay views of a copy of it."""
+        stack = self._stack
+        if stack is None or not (stack[0] is self.positions and stack[1] is self.velocities
+                                 and stack[2] is self.angular_velocities and stack[3] is self.rotations):
+            return self.copy()
+        t = self.positions.base.copy()
+        out = Offsets(t[0, 0], t[1, 0], self.rotations.copy(), t[1, 1])
+        out._stack = (out.positions, out.velocities, out.angular_velocities, out.rotations, np.empty_like(stack[4]))
+        return out
+
 
 def inertialize_transition(shown_positions, shown_velocities, shown_rotations, shown_angular_velocities,
                            dst_positions, dst_velocities, dst_rotations, dst_angular_velocities) -> Offsets:

@@ -291,3 +291,30 @@ def test_parquet_without_pyarrow_is_one_line(recorded, tmp_path, capsys):
         pass
     rc, _, err = cli(capsys, "trace", recorded["mm"][0], "--out", tmp_path / "t.parquet")
     assert rc == 1 and "pyarrow" in err and err.count("\n") == 1
+
+
+@pytest.mark.parametrize("controller", ["mm", "lmm"])
+def test_seeking_from_checkpoints_gives_the_recorded_poses(recorded, controller):
+    """Ticks shown in a random order (back and forth, across resets, teleports and tuning changes) are
+    re-simulated from controller-state checkpoints to the recorded poses bit for bit."""
+    import numpy as np
+
+    from app.commands.session_common import open_with_database
+    from lmm.session.player import SessionPlayer
+    from lmm.session.schema import pose_fingerprint
+    from lmm.session.seek import SessionSeeker
+
+    session, db, features, _ = open_with_database(recorded[controller][0])
+    straight = SessionPlayer(session, db, features)
+    poses = [pose_fingerprint(straight.step()[0][controller]) for _ in range(session.ticks)]
+    seeker = SessionSeeker(session, db, features, every=60)
+    rng = np.random.default_rng(3)
+    ticks = [int(t) for t in rng.integers(0, session.ticks, 40)] + [session.ticks - 1, 0, 899, 300, 301, 150]
+    for tick in ticks:
+        got = pose_fingerprint(seeker.seek(tick)[0][controller])
+        assert got == poses[tick], tick
+        if (tick, controller) in session.fingerprints:
+            assert got == session.fingerprints[(tick, controller)]
+    assert seeker.stepped < len(ticks) * 60 + session.ticks     # never from the start again
+    assert sorted(seeker.checkpoints) == list(range(0, session.ticks + 1, 60))[: len(seeker.checkpoints)]
+    session.close()

@@ -1,0 +1,97 @@
+"""Any tick of a session, at once: a replay that keeps controller-state checkpoints as it goes.
+
+:class:`SessionSeeker` steps a session's controllers (built as :class:`lmm.session.player.SessionPlayer`
+builds them) and keeps, every ``every`` ticks it passes, a checkpoint: each controller's state
+(:class:`lmm.session.checkpoint.ControllerState`, about 60-100 KB), the tuning and the next event. Showing
+tick ``t`` restores the nearest checkpoint at or before ``t`` (unless stepping on from where it is is
+shorter) and steps to ``t``: at most ``every - 1`` ticks. The poses are the recorded ones bit for bit (a
+test compares them with the session's fingerprints). The studio's ``--open`` uses it; so can a script.
+"""
+from __future__ import annotations
+
+import bisect
+
+from lmm.runner import step_controllers
+from lmm.session.actions import apply_event
+from lmm.session.checkpoint import ControllerState
+
+
+class SessionSeeker:
+    def __init__(self, session, db, features, *, every: int | None = None, weights: dict | None = None,
+                 debug_comparison: bool = False):
+        from lmm.session.player import SessionPlayer
+
+        player = SessionPlayer(session, db, features, weights=weights, debug_comparison=debug_comparison)
+        self.session, self.controllers, self.tuning = session, player.controllers, player.tuning
+        self.dt = session.dt
+        self.every = int(every) if every else max(1, int(round(session.fps)))   # one a second
+        changes = list(session.inputs())
+        self._input_ticks = [t for t, _ in changes]
+        self._inputs = [inp for _, inp in changes]
+        self._events = session.events
+        self._next = 0                  # the next event to apply
+        self.tick = 0                   # the next tick to step
+        self.checkpoints: dict[int, tuple] = {}
+        self.stepped = 0                # ticks stepped in all (what seeking cost)
+        self._keep()
+
+    @property
+    def ticks(self) -> int:
+        return self.session.ticks
+
+    def input_at(self, tick: int):
+        """The input tick ``tick`` is stepped with."""
+        return self._inputs[bisect.bisect_right(self._input_ticks, tick) - 1]
+
+    def step(self):
+        """Step the next tick: ``(poses, snapshots)`` by controller name."""
+        tick = self.tick
+        while self._next < len(self._events) and self._events[self._next].tick <= tick:
+            apply_event(self._events[self._next], self.tuning, self.controllers)
+            self._next += 1
+        poses, snaps, _ = step_controllers(self.controllers, self.input_at(tick), self.dt)
+        self.tick += 1
+        self.stepped += 1
+        if self.tick % self.every == 0 and self.tick not in self.checkpoints:
+            self._keep()
+        return poses, snaps
+
+    def seek(self, tick: int):
+        """``(poses, snapshots)`` of tick ``tick`` (``0 <= tick < ticks``), re-simulated from the nearest
+        checkpoint."""
+        if not 0 <= tick < self.ticks:
+            raise IndexError(f"tick {tick} is outside the session's {self.ticks} ticks")
+        start = max(c for c in self.checkpoints if c <= tick)
+        if not start <= self.tick <= tick:     # behind the target or past it: from the checkpoint
+            self._restore(start)
+        out = None
+        while self.tick <= tick:
+            out = self.step()
+        return out
+
+    def fill(self, progress=None) -> None:
+        """Step through the whole session once, keeping every checkpoint (``progress(tick)`` now and then)."""
+        last = max(self.checkpoints)
+        if self.tick != last:
+            self._restore(last)
+        while self.tick < self.ticks:
+            self.step()
+            if progress is not None and self.tick % (10 * self.every) == 0:
+                progress(self.tick)
+
+    def checkpoint_bytes(self) -> int:
+        return sum(sum(s.nbytes for s in states) for _, states, _ in self.checkpoints.values())
+
+    def _keep(self) -> None:
+        states = tuple(ControllerState(c) for c in self.controllers.values())
+        self.checkpoints[self.tick] = (self.tuning.to_dict(), states, self._next)
+
+    def _restore(self, tick: int) -> None:
+        tuning, states, next_event = self.checkpoints[tick]
+        for c, state in zip(self.controllers.values(), states):
+            state.restore(c)
+        # then the tuning: the fields that differ are announced, so a controller re-derives what it keeps
+        # of them (weighted features, search indexes: kept by reference, written in place when weights change)
+        for name, value in tuning.items():
+            setattr(self.tuning, name, value)
+        self._next, self.tick = next_event, tick
