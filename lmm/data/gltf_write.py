@@ -99,13 +99,12 @@ def _capsule(a: np.ndarray, b: np.ndarray, radius: float, around: int = 12, ring
     return np.array(verts), np.array(norms), np.array(tris)
 
 
-def capsule_body(names, parents, rest: np.ndarray):
+def capsule_body(names, parents, rest: np.ndarray, height: float):
     """A capsule per bone of the rest pose ``rest`` (J, 3, metres), bound to the bone's parent joint: vertices,
-    normals, triangles and each vertex's joint. Radii from :func:`lmm.skeleton.body_radii` (a fraction of the
-    height; unnamed parts 3 %)."""
+    normals, triangles and each vertex's joint. Radii from :func:`lmm.skeleton.body_radii`, a fraction of the
+    character's ``height`` in metres (unnamed parts 3 %); the rest pose need not stand (LAFAN1's lies along x)."""
     from lmm.skeleton import body_radii
 
-    height = float(np.ptp(rest[:, 1])) or float(np.ptp(rest)) or 1.0
     radii = np.nan_to_num(body_radii(names), nan=0.03) * height
     V, N, T, joints = [], [], [], []
     count = 0
@@ -147,7 +146,9 @@ def save_glb(path, anim, unit_scale: float, mesh: str = "capsules") -> None:
                             inverseBindMatrices=blob.add(ibm, "MAT4", _FLOAT)))
     scene_nodes = list(roots)
     if mesh == "capsules":
-        body = capsule_body(anim.names, parents, rest)
+        standing = anim.global_positions()[0] * unit_scale if F > 0 else rest     # the first frame's height
+        height = float(np.ptp(standing[:, 1])) or float(np.ptp(rest)) or 1.0
+        body = capsule_body(anim.names, parents, rest, height)
         if body is not None:
             v, n, t, jo = body
             attrs = lib.Attributes(

@@ -70,6 +70,9 @@ def test_the_glb_holds_the_skeleton_skin_and_animation_as_another_reader_sees_th
     times = g.accessors[g.animations[0].samplers[0].input]
     assert times.count == clip.n_frames and times.max[0] == pytest.approx((clip.n_frames - 1) * clip.frame_time)
     assert g.meshes[0].name == "capsules" and g.nodes[-1].skin == 0
+    # capsules sized by the standing character's height, not the rest pose's (LAFAN1's lies along x: 6 cm tall)
+    box = g.accessors[g.meshes[0].primitives[0].attributes.POSITION]
+    assert min(hi - lo for lo, hi in zip(box.min, box.max)) > 0.15
     # metres: the hips' rest offset is the file's in centimetres / 100
     assert g.nodes[0].translation == pytest.approx(list(clip.offsets[0] * 0.01), abs=1e-9)
 
@@ -258,7 +261,7 @@ def test_the_capsule_body_is_closed_and_faces_outward(clip):
 
     rest = kinematics.forward_kinematics(np.tile([1.0, 0, 0, 0], (1, clip.n_joints, 1)),
                                          clip.offsets[None] * 0.01, clip.parents)[1][0]
-    v, n, t, joints = capsule_body(clip.names, clip.parents, rest)
+    v, n, t, joints = capsule_body(clip.names, clip.parents, rest, 1.7)
     face = np.cross(v[t[:, 1]] - v[t[:, 0]], v[t[:, 2]] - v[t[:, 0]])
     assert np.linalg.norm(face, axis=1).min() > 0
     assert (np.sum(face * n[t].mean(axis=1), axis=1) > 0).all()
