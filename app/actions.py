@@ -109,9 +109,9 @@ class SessionActions:
             self.errors.show("Follow reference", f"{path}: cannot follow: the database's manifest cannot be read")
             return False
         try:
-            from lmm.data import bvh
+            from lmm.data.motion_files import load_motion
 
-            take = follow_take(bvh.load(path), manifest, s.db.names, s.tuning, s.dt, path)
+            take = follow_take(load_motion(path), manifest, s.db.names, s.tuning, s.dt, path)
         except (BVHError, InputError, OSError, EOFError, ValueError) as e:
             self.errors.show("Follow reference", str(e) if str(path) in str(e) else f"{path}: {e}")
             return False

@@ -15,7 +15,7 @@ from .theme import OPAQUE
 DIALOGS = {
     # kind -> (title, extensions, default file name)
     "input": ("Replay input CSV", (".csv",), ""),
-    "reference": ("Open reference BVH", (".bvh", ".gz"), ""),
+    "reference": ("Open reference BVH", (".bvh", ".gz", ".glb", ".gltf", ".fbx"), ""),
     "preset_load": ("Load tuning preset", (".json",), ""),
     "preset_save": ("Save tuning preset", (".json",), "preset.json"),
     "weights": ("Load LMM weights", (".npz",), ""),

@@ -281,3 +281,13 @@ def test_a_session_is_replayed_and_exported(tmp_path, monkeypatch):
     a, b = load_motion(out), bvh.load(tmp_path / "run.bvh")
     assert (a.n_frames, a.names) == (b.n_frames, b.names) and a.fps == pytest.approx(60.0, rel=1e-6)
     assert np.abs(a.global_positions() - b.global_positions()).max() < 1e-2       # centimetres: 0.1 mm
+
+
+def test_the_studios_reference_clip_reads_a_glb_as_its_bvh(clip, glb, tmp_path):
+    from app.reference_clip import load_reference_clip
+
+    src = tmp_path / "clip.bvh"
+    bvh.save(src, clip)
+    a, b = load_reference_clip(src), load_reference_clip(glb)
+    assert a.names == b.names and a.positions.shape == b.positions.shape
+    assert np.abs(a.positions - b.positions).max() < 1e-4                   # metres
