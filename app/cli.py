@@ -29,7 +29,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "build-db": ("build_db", "build (or load from cache) the motion database and print its size"),
     "check-data": ("check_data", "check a manifest's takes (T-pose, climbing, sliding, outliers) and its coverage"),
     "coverage": ("coverage", "map the database's feature space, speed x turn rate and histograms (PNG, JSON)"),
-    "view": ("view", "play a BVH file in a 3D window"),
+    "view": ("view", "play a BVH, glTF or FBX file or a session in a 3D window, or render it headless (PNG, mp4)"),
     "train": ("train", "train the learned motion matching networks (needs torch)"),
     "eval": ("eval", "quality metrics of the learned motion matching networks"),
     "export-onnx": ("export_onnx", "export the decompressor, stepper and projector as ONNX"),

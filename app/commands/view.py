@@ -16,7 +16,8 @@ from app.cli import number_in
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("file", help="BVH file (.bvh or .bvh.gz), any units, Y up; or glTF (.glb, .gltf) or FBX")
+    parser.add_argument("file", help="BVH file (.bvh or .bvh.gz), any units, Y up; glTF (.glb, .gltf) or FBX; "
+                                         "or a session file (its first character, replayed headless)")
     parser.add_argument("--screenshot", metavar="PNG",
                         help="render one frame headless (EGL, no display needed) to PNG and exit")
     parser.add_argument("--video", metavar="MP4",
