@@ -10,7 +10,7 @@ How a file becomes BVH's :class:`~lmm.data.bvh.Animation`:
   joints' world transforms are evaluated at every frame and turned back into local rotations and translations
   against our parents, so what is drawn is what the file shows. World scale is left out.
 - **The motion** is the first animation stack, evaluated at the scene's frame rate
-  (``frames_per_second``) from its start to its end time.
+  (``frames_per_second``; 30 fps when it is not 1..1000) from its start to its end time.
 
 A file with no bones, no animation stack or a zero-length one is refused: one line naming the file
 (:class:`~lmm.data.motion_files.MotionFileError`).
@@ -25,7 +25,10 @@ from lmm import kinematics, quat
 from lmm.data.bvh import Animation
 from lmm.data.motion_files import MOTION_UNIT_M, MotionFileError, depth_first, from_sampled, require_extra
 
-__all__ = ["load", "MAX_SAMPLES"]
+__all__ = ["load", "MAX_SAMPLES", "MAX_FILE_BYTES"]
+
+#: largest file read (ufbx holds the whole scene in memory)
+MAX_FILE_BYTES = 512 * 2**20
 
 #: most frames x joints evaluated (the BVH reader's ``MAX_JOINT_FRAMES``)
 MAX_SAMPLES = 3_000_000
@@ -45,8 +48,9 @@ def load(path) -> Animation:
     """The first animation stack's skeleton motion in an FBX file (see the module doc)."""
     ufbx = require_extra("ufbx", "reading FBX", "formats", path)
     p = os.fspath(path)
-    with open(p, "rb"):                       # OSError for a missing file, as for BVH
-        pass
+    with open(p, "rb") as f:                  # OSError for a missing file, as for BVH
+        if os.fstat(f.fileno()).st_size > MAX_FILE_BYTES:
+            raise MotionFileError(f"the file is larger than {MAX_FILE_BYTES >> 20} MiB", p)
     try:
         scene = ufbx.load_file(p, target_axes=ufbx.axes_right_handed_y_up, target_unit_meters=MOTION_UNIT_M)
     except Exception as e:  # ufbx's own error classes: their message is the reason
@@ -63,7 +67,7 @@ def load(path) -> Animation:
     if not joints:
         raise MotionFileError("has no skeleton (no bones and no skin): only skeletal animations are read", p)
     stack = stacks[0] if stacks else None
-    if stack is None or not stack.time_end > stack.time_begin:
+    if stack is None or not (np.isfinite([stack.time_begin, stack.time_end]).all() and stack.time_end > stack.time_begin):
         raise MotionFileError("has no animation (no animation stack with a duration)", p)
     joint_parent = {}
     for j in joints:
@@ -76,7 +80,8 @@ def load(path) -> Animation:
     parents = np.array([index[joint_parent[n]] if joint_parent[n] is not None else -1 for n in order])
     names = [nodes[n].name or f"Node_{n}" for n in order]
 
-    fps = float(scene.settings.frames_per_second) or 30.0
+    fps = float(scene.settings.frames_per_second)
+    fps = fps if 1.0 <= fps <= 1000.0 else 30.0          # a rate no frame time of ours can hold: 30 fps
     F = int(round((stack.time_end - stack.time_begin) * fps)) + 1
     if F * len(order) > MAX_SAMPLES:
         raise MotionFileError(f"{F} frames x {len(order)} joints is more than {MAX_SAMPLES} joint-frames", p)
