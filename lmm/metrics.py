@@ -268,17 +268,25 @@ class MotionMetrics:
         self.forced_searches = 0
         self._search_us = DurationStats()   # bounded: a long run must not grow (no per-tick lists)
         self._step_us = DurationStats()
-        self.non_finite_ticks = 0
+        self.non_finite_ticks = 0           # ticks whose pose was unusable (pose_problem), none recorded
+        self.first_bad_tick, self.first_bad_problem = None, ""
         self._tag_names = list(db.tag_names)
         self._frame_tags = db.frame_tags if self._tag_names else None   # (N, T) bool
         self._tag_counts = np.zeros(len(self._tag_names), dtype=np.int64)
         self._tagged_ticks = 0          # ticks with a playing database frame
 
-    def update(self, snap) -> None:
+    def update(self, snap) -> bool:
+        """Add one tick; False when its pose is unusable (:func:`pose_problem`): counted in
+        ``non_finite_ticks`` (the first one's tick and reason kept), left out of every other metric, and
+        the caller records nothing for it."""
         pose = snap.pose
-        finite = bool(np.isfinite(pose.global_positions).all() and np.isfinite(pose.global_rotations).all())
-        if not finite:
+        problem = pose_problem(pose)
+        if problem is not None:
             self.non_finite_ticks += 1
+            if self.first_bad_tick is None:
+                self.first_bad_tick, self.first_bad_problem = int(snap.tick), problem
+            self.ticks += 1
+            return False
         toes = pose.global_positions[self.toe_bones].astype(np.float64)
         if self._prev_toes is not None:
             dt = snap.time_s - self._prev_time
@@ -306,6 +314,7 @@ class MotionMetrics:
         if self._frame_tags is not None and 0 <= frame < len(self._frame_tags):
             self._tag_counts += self._frame_tags[frame]
             self._tagged_ticks += 1
+        return True
 
     def result(self) -> dict:
         """Every metric as a plain JSON-able dict (NaN where nothing was measured)."""
@@ -336,6 +345,23 @@ class MotionMetrics:
             **{f"tag_share_{name}": float(n / self._tagged_ticks) if self._tagged_ticks else float("nan")
                for name, n in zip(self._tag_names, self._tag_counts.tolist())},
         }
+
+
+#: farthest a joint may be from the origin (metres): 1000 km, more than a day of running at 10 m/s. A
+#: network given absurd weights produced joints 2e9 m away (finite, so nothing noticed them) that our
+#: own BVH reader then refused in the recording.
+MAX_POSE_DISTANCE_M = 1e6
+
+
+def pose_problem(pose) -> str | None:
+    """Why a pose cannot be used (recorded, measured), or None: a NaN or infinite position or rotation
+    (a network fed weights it cannot handle), or a joint farther than :data:`MAX_POSE_DISTANCE_M`."""
+    if not (np.isfinite(pose.global_positions).all() and np.isfinite(pose.global_rotations).all()):
+        return "not finite (NaN or infinite positions or rotations)"
+    far = float(np.abs(pose.global_positions).max(initial=0.0))
+    if far > MAX_POSE_DISTANCE_M:
+        return f"a joint {far:.3g} m from the origin (more than {MAX_POSE_DISTANCE_M:g} m)"
+    return None
 
 
 def format_metrics(m: dict) -> str:

@@ -58,9 +58,9 @@ def run_headless(controller, input_source, seconds: float, dt: float = 1.0 / 60.
             before_step(i, inp)
         poses, snaps, _ = step_controllers(controllers, inp, dt)
         pose, snap = poses[controller.name], snaps[controller.name]
-        if recorder is not None:
+        usable = metrics.update(snap)      # a non-finite or runaway pose is counted, never recorded
+        if recorder is not None and usable:
             recorder.write(pose)
-        metrics.update(snap)
         if after_step is not None:
             after_step(i, poses)
         if on_step is not None:
@@ -70,5 +70,8 @@ def run_headless(controller, input_source, seconds: float, dt: float = 1.0 / 60.
             if wait > 0:
                 time.sleep(wait)
     result = metrics.result()
+    if metrics.first_bad_tick is not None:
+        result["first_non_finite_tick"] = metrics.first_bad_tick
+        result["first_non_finite_problem"] = metrics.first_bad_problem
     result["wall_s"] = time.perf_counter() - start
     return result

@@ -74,6 +74,10 @@ def problems(case: cc.Case, r: dict, targets: dict | None = None) -> list[str]:
     if r.get("stray"):
         out.append(f"wrote outside its place: {', '.join(r['stray'][:4])}")
     rc = r.get("rc")
+    if case.expect == "note":   # usable input that goes wrong at run time: exit 0 and one note line
+        if rc != 0 or len(lines) != 1 or not lines[0].startswith(case.names[0]):
+            out.append(f"expected exit 0 and one '{case.names[0]}' line: exit {rc}; stderr: {_head(stderr)}")
+        return out
     if case.expect == "accept":
         if rc != 0:
             out.append(f"a valid file was refused: exit {rc}; stderr: {_head(stderr)}")

@@ -32,10 +32,13 @@ def add_arguments(p) -> None:
 
 def is_session(path) -> bool:
     """A session is SQLite: its file starts with the SQLite header."""
+    from lmm.data.reading import open_regular
+    from lmm.errors import InputError
+
     try:
-        with open(path, "rb") as f:
+        with open_regular(path) as f:   # a FIFO is no session (and must not block here): its reader says so
             return f.read(16) == b"SQLite format 3\x00"
-    except OSError:
+    except (OSError, InputError):
         return False
 
 

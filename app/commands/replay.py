@@ -80,10 +80,9 @@ def main(args) -> int:
         while not player.done:
             tick = player.tick
             poses, snaps = player.step()
-            if recorder is not None and tick >= record_from:
+            usable = {name: metrics[name].update(snap) for name, snap in snaps.items()}
+            if recorder is not None and tick >= record_from and usable[recorded]:   # never a NaN pose
                 recorder.write(poses[recorded])
-            for name, snap in snaps.items():
-                metrics[name].update(snap)
     finally:
         if recorder is not None:
             recorder.close()

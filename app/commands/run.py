@@ -123,13 +123,22 @@ def main(args) -> int:
     try:
         session = session_run(args, raw_events, db, features, tuning, controller, seconds)
         hooks = {} if session is None else {"before_step": session.before_step, "after_step": session.after_step}
-        metrics = run_headless(controller, source, seconds, dt=1.0 / args.fps, recorder=recorder,
-                               input_writer=writer, realtime=args.realtime, on_step=note_once, **hooks)
+        import numpy as np
+
+        # a network given absurd weights overflows: numpy's warnings would be lines on every tick; the
+        # pose guard (lmm.metrics.pose_problem) reports it once below instead
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+            metrics = run_headless(controller, source, seconds, dt=1.0 / args.fps, recorder=recorder,
+                                   input_writer=writer, realtime=args.realtime, on_step=note_once, **hooks)
     finally:
         # the streams are closed even when one fails (a full disk); the first error is the one reported
         close_errors = [e for e in (_close(recorder), _close(writer), _close(session)) if e is not None]
     if close_errors:
         raise close_errors[0]
+    if metrics["non_finite_ticks"]:   # once, with the first tick: those poses were not recorded
+        print(f"note: tick {metrics['first_non_finite_tick']}: the {args.controller} pose is "
+              f"{metrics['first_non_finite_problem']}; {metrics['non_finite_ticks']} such ticks were left out of "
+              f"the metrics{' and the recording' if args.record else ''}", file=sys.stderr)
 
     # the same ground skating rule over the database's source takes, printed beside the run's
     from lmm.metrics import source_ground_skating

@@ -100,6 +100,31 @@ def _finish_piece(name: str, is_mirror: bool, rot, pos, parents, manifest: Manif
         contacts=speeds < np.float32(manifest.contact_speed_threshold_m_s), toe_speeds=speeds)
 
 
+#: shortest leg bone accepted (metres): the leg IK divides by the thigh, shin and foot lengths
+MIN_LEG_BONE_M = 1e-4
+
+
+def _check_bone_lengths(offsets, names, parents, manifest: Manifest, ci: int) -> None:
+    """Refuse a degenerate skeleton in one line: every joint at its parent's place (all OFFSETs 0), or
+    a leg bone (hip to knee, knee to ankle, ankle to toe) of zero length, which the runtime's IK divides
+    by (a legal take with every OFFSET 0 built, then ``run`` died in ik.py with ZeroDivisionError).
+    ``offsets``: the first frame's local positions in metres (position channels included)."""
+    where, name = f"clips[{ci}].file", manifest.clips[ci].file.name
+    if not np.any(np.abs(offsets[parents >= 0]) > 0.0):
+        raise ManifestError(manifest.path, where, f"{name}: every joint OFFSET is 0 (all joints at one point): "
+                                                  f"not a usable skeleton")
+    for side in ("left", "right"):
+        if f"{side}_foot" not in manifest.bones or f"{side}_toe" not in manifest.bones:
+            continue
+        foot, toe = names.index(manifest.bones[f"{side}_foot"]), names.index(manifest.bones[f"{side}_toe"])
+        knee = int(parents[foot])
+        for joint in (knee, foot, toe):
+            if joint > 0 and float(np.linalg.norm(offsets[joint])) < MIN_LEG_BONE_M:
+                raise ManifestError(manifest.path, where, f"{name}: the bone to {names[joint]!r} has length "
+                                                          f"{np.linalg.norm(offsets[joint]):.3g} m, shorter than "
+                                                          f"{MIN_LEG_BONE_M:g} m: the leg IK needs its length")
+
+
 def _build_take(manifest: Manifest, ci: int, skeleton=None, frames_before: int = 0) -> _Take:
     """Take ``ci`` of the manifest as database ranges, checked in the build's order: its file, its
     skeleton (against ``skeleton``, the first take's (names, parents), or the bone roles when None),
@@ -124,6 +149,7 @@ def _build_take(manifest: Manifest, ci: int, skeleton=None, frames_before: int =
     mirror_idx = mirror_map(names, manifest.mirror_name_pairs)
     local_rot = anim.local_rotations()
     local_pos = anim.local_positions() * manifest.unit_scale
+    _check_bone_lengths(local_pos[0], names, parents, manifest, ci)
     source_fps = 1.0 / anim.frame_time
     if abs(source_fps - round(source_fps)) < 0.01:
         source_fps = float(round(source_fps))  # "Frame Time: 0.033333" means 30 fps, not 30.0003

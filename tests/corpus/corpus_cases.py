@@ -71,6 +71,8 @@ FILES: dict[str, Spec] = {
                                  commands=("build-db", "check-data", "run")),
     "bvh/joints_20000.bvh": Spec("a chain of 20,000 nested joints (joint count / nesting limit)",
                                  commands=("reader", "build-db"), solo=True, generated=True),
+    "bvh/offsets_all_zero.bvh": Spec("every OFFSET 0 (built, then run: ZeroDivisionError in ik.py)", "OFFSET",
+                                     commands=("build-db", "run")),
     # manifests
     "manifest/name_traversal.json": Spec("name '/../../../../x' wrote the cache outside its folder", "name"),
     "manifest/name_subdir.json": Spec("name 'sub/dir/name' created folders in the cache", "name"),
@@ -328,6 +330,9 @@ def case_table() -> list[Case]:
                         (special_cases.SPECIAL_INPUTS, "a special file or a non-ASCII number as input")):
         for cid, argv, word in table:
             cases.append(Case(f"special:{cid}", "special", argv[0], cid, what, "reject", (word,)))
+    for cid, argv, word in special_cases.NOTES:
+        cases.append(Case(f"special:{cid}", "special", argv[0], cid, "weights whose networks give NaN or runaway "
+                          "poses: run on, one note naming the tick, none of them recorded", "note", (word,)))
     controls = [("bvh", "good/walk.bvh"), ("manifest", "good/manifest.json"), ("input", "good/input.csv"),
                 ("preset", "good/preset.json"), ("weights", "shipped/default.npz"), ("layout", "good/layout.ini"),
                 ("session", GOOD_SESSION)]
@@ -554,7 +559,8 @@ def build_jobs(cases: list[Case], tmp: Path, targets: dict) -> tuple[list[Job], 
         elif c.kind == "special":   # its own folder of copies, checked unchanged by the driver
             folder = tmp / "special" / _safe(c.file)
             special_cases.prepare(folder, c.file)
-            argv = dict((i, v) for i, v, _ in special_cases.COLLISIONS + special_cases.SPECIAL_INPUTS)[c.file]
+            argv = dict((i, v) for i, v, _ in special_cases.COLLISIONS + special_cases.SPECIAL_INPUTS
+                        + special_cases.NOTES)[c.file]
             call = {"call": "cli", "argv": [a.format(T=folder, good=good) for a in argv], "watch": str(folder)}
             group = f"special-{c.command}"
         elif c.kind == "control":

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
@@ -85,6 +86,8 @@ def rows_with(value: str, column: int = 2, row: int = 5) -> list[str]:
 
 
 BVH_CASES = {
+    # issue 36: a legal take whose joints all sit at one point (built, then run died in ik.py)
+    "offsets_all_zero.bvh": re.sub(r"OFFSET\s+\S+\s+\S+\s+\S+", "OFFSET 0 0 0", bvh()),
     "frame_time_1000.bvh": bvh(frame_time="1000"),
     "frame_time_1e-300.bvh": bvh(frame_time="1e-300"),
     "frame_time_nan.bvh": bvh(frame_time="nan"),

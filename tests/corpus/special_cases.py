@@ -99,6 +99,32 @@ SPECIAL_INPUTS = [
 ]
 
 
+# weights within every load limit whose networks give NaN or runaway poses: the run goes on (exit 0),
+# says so in one note naming the first tick, and records none of those poses: (id, {array: value})
+ADVERSARIAL_WEIGHTS = [
+    ("stepper-1e4", {"stepper.W": 1e4, "stepper.out_std": 1e4}),
+    ("stepper-in-std-1e-38", {"stepper.in_std": 1e-38}),
+    ("decompressor-1e4", {"decompressor.W": 1e4}),
+    ("projector-1e4", {"projector.W": 1e4}),
+]
+NOTES = [(f"run-weights-{cid}", ["run", "--controller", "lmm", "--weights", "{T}/adversarial.npz", "--input",
+                                 "builtin:circle", "--seconds", "1", "--quiet", "--record", "{T}.out/take.bvh"],
+          "note: tick") for cid, _ in ADVERSARIAL_WEIGHTS]
+
+
+def _adversarial(T: Path, case_id: str) -> None:
+    import numpy as np
+
+    change = dict(ADVERSARIAL_WEIGHTS)[case_id[len("run-weights-"):]]
+    with np.load(WEIGHTS, allow_pickle=False) as z:
+        arrays = {k: z[k] for k in z.files}
+    for key in arrays:
+        for prefix, value in change.items():
+            if key.startswith(prefix):
+                arrays[key] = np.full_like(arrays[key], value)
+    np.savez(T / "adversarial.npz", **arrays)
+
+
 def _manifest(T: Path, name: str, **change) -> None:
     m = json.loads((GOOD / "manifest.json").read_text())
     m["clips"] = [{"file": "walk.bvh"}]
@@ -122,6 +148,8 @@ def prepare(T: Path, case_id: str) -> None:
     _manifest(T, "manifest.json")
     if "weights" in case_id or "eval" in case_id:
         shutil.copyfile(WEIGHTS, T / "w.npz")
+    if case_id.startswith("run-weights-") and case_id[len("run-weights-"):] in dict(ADVERSARIAL_WEIGHTS):
+        _adversarial(T, case_id)
     if case_id.startswith("export-onnx"):
         shutil.copyfile(WEIGHTS, T / "decompressor.onnx")
     os.mkfifo(T / "fifo")
