@@ -22,6 +22,11 @@ def require_imageio_ffmpeg():
     return require_extra("imageio_ffmpeg", "writing a video", "video")
 
 
+def _first_line(e: Exception) -> str:
+    lines = str(e).splitlines()
+    return lines[0][:160] if lines else type(e).__name__
+
+
 def even_size(width: int, height: int) -> tuple[int, int]:
     """The largest even width and height not above the given ones (H.264 4:2:0 needs even sides)."""
     return width - width % 2, height - height % 2
@@ -50,7 +55,7 @@ class Mp4Writer:
             self._gen.send(np.ascontiguousarray(rgb))
         except (OSError, RuntimeError) as e:
             self._abandon()
-            raise VideoError(f"{self.path}: ffmpeg could not write the video ({str(e).splitlines()[0][:160]})") from None
+            raise VideoError(f"{self.path}: ffmpeg could not write the video ({_first_line(e)})") from None
         self.frames += 1
 
     def close(self) -> None:
@@ -59,7 +64,7 @@ class Mp4Writer:
             self._gen.close()
         except (OSError, RuntimeError) as e:
             self._abandon()
-            raise VideoError(f"{self.path}: ffmpeg could not finish the video ({str(e).splitlines()[0][:160]})") from None
+            raise VideoError(f"{self.path}: ffmpeg could not finish the video ({_first_line(e)})") from None
         os.replace(self.tmp, self.path)
 
     def _abandon(self) -> None:

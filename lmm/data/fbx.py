@@ -54,8 +54,8 @@ def load(path) -> Animation:
     try:
         scene = ufbx.load_file(p, target_axes=ufbx.axes_right_handed_y_up, target_unit_meters=MOTION_UNIT_M)
     except Exception as e:  # ufbx's own error classes: their message is the reason
-        raise MotionFileError(f"not a readable FBX file ({str(e).splitlines()[0][:120] if str(e) else type(e).__name__})",
-                              p) from None
+        reason = str(e).splitlines()[0][:120] if str(e) else type(e).__name__
+        raise MotionFileError(f"not a readable FBX file ({reason})", p) from None
     # ufbx 0.0.5's bindings crash (segfault) when a scene's node list is first read after wrappers of other
     # elements were freed: read every list once, first, and keep the wrappers alive while the scene is used
     nodes = list(scene.nodes)
@@ -67,7 +67,8 @@ def load(path) -> Animation:
     if not joints:
         raise MotionFileError("has no skeleton (no bones and no skin): only skeletal animations are read", p)
     stack = stacks[0] if stacks else None
-    if stack is None or not (np.isfinite([stack.time_begin, stack.time_end]).all() and stack.time_end > stack.time_begin):
+    times = [stack.time_begin, stack.time_end] if stack is not None else [0.0, 0.0]
+    if not (np.isfinite(times).all() and times[1] > times[0]):
         raise MotionFileError("has no animation (no animation stack with a duration)", p)
     joint_parent = {}
     for j in joints:

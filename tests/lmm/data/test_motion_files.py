@@ -154,8 +154,9 @@ def test_real_files_without_an_animated_skeleton_are_refused_in_one_line(name, s
 
 def _blender_joints(path: Path, fps: float, frames: int, tmp_path: Path) -> dict:
     out = tmp_path / "blender.json"
-    subprocess.run(["blender", "-b", "--factory-startup", "--python", str(Path(__file__).with_name("blender_joints.py")), "--",
-                    str(path), str(out), repr(fps), str(frames)], check=True, capture_output=True, timeout=120)
+    script = Path(__file__).with_name("blender_joints.py")
+    subprocess.run(["blender", "-b", "--factory-startup", "--python", str(script), "--", str(path), str(out), repr(fps),
+                    str(frames)], check=True, capture_output=True, timeout=120)
     return json.loads(out.read_text())["joints"]
 
 
