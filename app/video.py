@@ -93,11 +93,14 @@ def video_frames(n_frames: int, frame_time: float, start: int, fps: float, secon
     return np.minimum(start + np.round(np.arange(count) / fps / frame_time).astype(np.int64), n_frames - 1)
 
 
-def write_video(args, parents, positions, frame_time: float, look: dict, error) -> int:
+def write_video(args, parents, positions, frame_time: float, look: dict, error, others=(), overlay=None) -> int:
     """``lmm-studio view FILE --video OUT.mp4``: the headless renderer's frames (as ``--screenshot`` draws them,
-    the camera following the root unless ``--no-follow``) into an mp4. ``error`` prints one line."""
+    the camera following the root unless ``--no-follow``) into an mp4. ``others``: more characters of the same
+    skeleton, ``(positions, colour)``, drawn beside the first; ``overlay(frame)``: a line of text drawn on top
+    (:func:`app.session_video.draw_overlay`). ``error`` prints one line."""
     from viewer.context import ContextError, create_headless_context
     from viewer.player import AnimationView
+    from viewer.renderables import Skeleton, radii_for_height
     from viewer.renderer import Renderer
 
     width, height = even_size(args.width, args.height)
@@ -110,13 +113,23 @@ def write_video(args, parents, positions, frame_time: float, look: dict, error) 
         return 1
     view = AnimationView(ctx, parents, positions, aspect=width / height, follow=not args.no_follow, **look)
     view.reset_camera(args.frame)
+    extra = [(view.scene.add(Skeleton(ctx, view.parents, color=colour, names=look["names"], style=look["style"],
+                                      shadow=look["shadow"], body_radii=look["body_radii"],
+                                      **radii_for_height(view.props.height))), np.asarray(pos, np.float32))
+             for pos, colour in others]
     renderer = Renderer(ctx, width, height, samples=args.samples)
     image = None
     with Mp4Writer(args.video, width, height, fps) as out:
         for f in frames:
             view.set_frame(int(f))
+            for skeleton, pos in extra:
+                skeleton.update(pos[int(f)])
             image = renderer.render(view.scene, view.camera, dtype=np.uint8, out=image)
-            out.write(image[..., :3])
+            rgb = image[..., :3]
+            if overlay is not None:
+                from app.session_video import draw_overlay
+                rgb = draw_overlay(np.ascontiguousarray(rgb), overlay(int(f)))
+            out.write(rgb)
     print(f"saved {len(frames)} frames ({len(frames) / fps:.2f} s at {fps:g} fps, {width}x{height}) "
           f"from frame {args.frame} of {len(positions)} to {args.video}")
     return 0

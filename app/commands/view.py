@@ -160,6 +160,11 @@ def main(args: argparse.Namespace) -> int:
     except OSError as e:   # a read-only or file-as-folder target
         _error(f"{e.filename}: {e.strerror}")
         return 1
+    if args.video:
+        from app.commands.export_gltf import is_session
+        if is_session(args.file):             # every character, replayed in one pass, with an overlay
+            from app.session_video import write_session_video
+            return write_session_video(args, _look, _error)
     loaded = _load(args.file)
     if isinstance(loaded, str):
         _error(loaded)
