@@ -106,8 +106,12 @@ def main(argv: list[str] | None = None) -> int:
         return report_error(name, e)
     args = parser.parse_args(argv[1:])  # a bad argument: one line, exit 2
     args.command = name
+    # the studio has its own shutdown; every other command ends on SIGTERM as on Ctrl-C
+    previous_sigterm = _terminate_like_interrupt() if name != "studio" else None
     try:
         return int(module.main(args) or 0)
+    except Terminated:
+        return 128 + 15
     except KeyboardInterrupt:
         return 130
     except BrokenPipeError:  # `lmm-studio ... | head`: the reader left, which is not an error
@@ -117,6 +121,33 @@ def main(argv: list[str] | None = None) -> int:
         return report_error(name, e)
     finally:
         _release_output_locks()
+        if previous_sigterm is not None:
+            import signal
+
+            signal.signal(signal.SIGTERM, previous_sigterm)
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised where the command is so its ``finally`` blocks and context managers run (temporary
+    files and folders removed, worker pools stopped) exactly as on Ctrl-C; exit status 143."""
+
+
+def _terminate_like_interrupt():
+    """SIGTERM (``timeout``, ``kill``) unwinds the command like SIGINT. A process forked by the command
+    (a worker, a helper process) that inherits the handler just ends, silently, as SIGTERM would end it."""
+    import signal
+
+    owner = os.getpid()
+
+    def handler(signum, frame):
+        if os.getpid() != owner:
+            os._exit(128 + 15)
+        raise Terminated()
+
+    try:
+        return signal.signal(signal.SIGTERM, handler)   # the handler before, put back when the command ends
+    except ValueError:   # not the main thread (a test calling main from a thread): leave it
+        return None
 
 
 def _release_output_locks() -> None:

@@ -103,6 +103,8 @@ class _DerivedBeside:
         from lmm.data.derived import derived_dir_of
 
         def run():
+            from lmm.data.leftovers import die_with_parent
+            die_with_parent()   # never outlives a killed build-db
             db.source_path = path
             _precompute_derived(db)
 
@@ -173,6 +175,8 @@ def _start_checks(manifest_path, jobs: int):
     receive, send = ctx.Pipe(duplex=False)
 
     def run():
+        from lmm.data.leftovers import die_with_parent
+        die_with_parent()
         try:
             lines = _warning_lines(manifest_path)
         except Exception as e:  # noqa: BLE001 - a failed check is reported, never fatal to the build

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import contextlib
 import os
-import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -22,6 +21,8 @@ from lmm.data import bvh
 from lmm.data.motion_files import load_motion
 from lmm.data.cache import build_code_fingerprint, cache_file_name, default_cache_dir, manifest_key
 from lmm.data.database import Database, DatabaseError
+from lmm.data.derived import derived_dir_of
+from lmm.data.leftovers import die_with_parent, remove_stale, remove_stale_spills, spill_folder
 from lmm.skeleton import SIMULATION_BONE
 from lmm.data.manifest import Manifest, ManifestError, load_manifest
 from lmm.data.preparation import (foot_contacts, mirror_local, mirror_map, quat_central_difference, resample,
@@ -245,7 +246,7 @@ def _takes(manifest: Manifest, workers: int, spill: str | None = None):
 
     # fork where there is one: no re-import of the caller's main module (spawn's) is needed
     method = "fork" if "fork" in multiprocessing.get_all_start_methods() else "spawn"
-    with multiprocessing.get_context(method).Pool(workers) as pool:
+    with multiprocessing.get_context(method).Pool(workers, initializer=die_with_parent) as pool:
         jobs = [(manifest, ci, spill) for ci in range(len(manifest.clips))]
         for ci, take in enumerate(map(_unspill, pool.imap(_build_take_or_none, jobs))):
             if (take is None or total + take.n_frames > MAX_DATABASE_FRAMES
@@ -264,8 +265,7 @@ def build(manifest: Manifest, progress=None, workers: int = 0) -> Database:
     total_ranges = sum(len(c.ranges) if c.ranges else 1 for c in manifest.clips) * (2 if manifest.mirror else 1)
     workers = min(workers, len(manifest.clips))
     # the workers' arrays come back through files here (removed once joined into the database's arrays)
-    spill = (tempfile.TemporaryDirectory(prefix="lmm-build-", ignore_cleanup_errors=True) if workers > 1
-             else contextlib.nullcontext(None))
+    spill = spill_folder() if workers > 1 else contextlib.nullcontext(None)
     with spill as spill_dir:
         names = parents = None
         pieces: list[_Piece] = []
@@ -333,6 +333,9 @@ def load_or_build(manifest_path=None, cache_dir=None, progress=None, rebuild: bo
     manifest = load_manifest(manifest_path or DEFAULT_MANIFEST)
     key = manifest_key(manifest)
     path = Path(out_path) if out_path else Path(cache_dir or default_cache_dir()) / cache_file_name(key)
+    remove_stale(path.parent)   # half-written files and spill folders of killed processes (never of running ones)
+    remove_stale(derived_dir_of(path))
+    remove_stale_spills()
     if not rebuild and path.is_file():
         try:
             db = Database.load(path)
