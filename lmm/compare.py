@@ -8,7 +8,9 @@ alignment path:
   first (the hips), whose rotation is its global one with the facing removed: where the character
   stands and faces is the root path's business, not the pose's;
 * **position error** (cm): the mean distance of matching joints, root-relative (each pose in its hips'
-  heading frame) and in the world;
+  heading frame) and in the world; the world error of :func:`compare_files` is by default taken with B
+  moved rigidly so that the first aligned frames stand at the same ground position and facing (a run
+  started elsewhere than its source take is not far from it for that reason alone);
 * per-frame errors of A (over its aligned pairs), for plots over time.
 
 The DTW is the textbook one (steps right, down, diagonal; value = the smallest sum of frame costs over a
@@ -122,6 +124,7 @@ class Motion:
     world_cm: np.ndarray
     local_cm: np.ndarray
     fps: float
+    heading: np.ndarray | None = None   # (F, 4) the hips' facing (yaw), for aligning two motions' starts
 
 
 def _heading(q_hips: np.ndarray, forward_axis) -> np.ndarray:
@@ -154,7 +157,7 @@ def motion_from_arrays(name: str, names: list[str], local_rot, global_rot, globa
     rot, heading = error_rotations(np.asarray(local_rot, np.float64)[:, keep], g_rot, hips_forward_axis)
     rel = g_pos - g_pos[:, :1] * np.array([1.0, 0.0, 1.0])
     local = quat.inv_mul_vec(heading[:, None, :], rel)
-    return Motion(name, list(names[first:]), rot, g_pos, local, float(fps))
+    return Motion(name, list(names[first:]), rot, g_pos, local, float(fps), heading)
 
 
 def error_rotations(local_rot: np.ndarray, global_rot: np.ndarray, hips_forward_axis=(0.0, 0.0, 1.0)):
@@ -193,12 +196,25 @@ def resample_motion(x: Motion, fps: float) -> Motion:
     n = len(x.rotations)
     count = max(int(math.floor((n - 1) * fps / x.fps + 1e-9)) + 1, 1)
     idx = np.minimum(np.rint(np.arange(count) * (x.fps / fps)).astype(np.int64), n - 1)
-    return Motion(x.name, x.joints, x.rotations[idx], x.world_cm[idx], x.local_cm[idx], fps)
+    heading = None if x.heading is None else x.heading[idx]
+    return Motion(x.name, x.joints, x.rotations[idx], x.world_cm[idx], x.local_cm[idx], fps, heading)
 
 
-def compare_motions(a: Motion, b: Motion, window: int | None = None) -> dict:
+def world_aligned_at_start(a: Motion, b: Motion, ia: int = 0, ib: int = 0) -> np.ndarray:
+    """B's world positions ``(F, J, 3)`` moved rigidly (a turn about the vertical and a shift on the ground)
+    so that its frame ``ib``'s hips stand on the ground where A's frame ``ia``'s do, facing the same way."""
+    if a.heading is None or b.heading is None:
+        raise ValueError("aligning needs both motions' headings (motion_from_arrays gives them)")
+    yaw = quat.mul_inv(a.heading[ia], b.heading[ib])
+    ground = np.array([1.0, 0.0, 1.0])
+    return quat.mul_vec(yaw, b.world_cm - b.world_cm[ib, 0] * ground) + a.world_cm[ia, 0] * ground
+
+
+def compare_motions(a: Motion, b: Motion, window: int | None = None, align_start: bool = False) -> dict:
     """DTW-aligned errors of B against A (see the module doc). ``window``: the Sakoe-Chiba half-width in
-    frames (default: a tenth of the longer motion, at least 10 frames)."""
+    frames (default: a tenth of the longer motion, at least 10 frames). ``align_start``: the world error
+    with B moved so that the first aligned pair stands at the same ground position and facing
+    (:func:`world_aligned_at_start`)."""
     if a.joints != b.joints:
         only_a = [j for j in a.joints if j not in b.joints][:4]
         only_b = [j for j in b.joints if j not in a.joints][:4]
@@ -216,7 +232,8 @@ def compare_motions(a: Motion, b: Motion, window: int | None = None) -> dict:
     ia, ib = path[:, 0], path[:, 1]
     rot = geodesic(a.rotations[ia], b.rotations[ib]).mean(axis=1)
     local = np.linalg.norm(a.local_cm[ia] - b.local_cm[ib], axis=2).mean(axis=1)
-    world = np.linalg.norm(a.world_cm[ia] - b.world_cm[ib], axis=2).mean(axis=1)
+    b_world = world_aligned_at_start(a, b, ia[0], ib[0]) if align_start else b.world_cm
+    world = np.linalg.norm(a.world_cm[ia] - b_world[ib], axis=2).mean(axis=1)
     per_frame = lambda x: np.bincount(ia, weights=x, minlength=n) / np.maximum(np.bincount(ia, minlength=n), 1)  # noqa: E731
     return {
         "a": a.name, "b": b.name, "frames": [n, m], "fps": a.fps, "resampled_to_fps": resampled,
@@ -224,6 +241,7 @@ def compare_motions(a: Motion, b: Motion, window: int | None = None) -> dict:
         "dtw_value": total,
         "rotation_error_rad": float(rot.mean()),
         "position_error_cm": {"root_relative": float(local.mean()), "world": float(world.mean())},
+        "world_aligned_at_start": bool(align_start),
         "per_frame": {"rotation_error_rad": per_frame(rot).tolist(),
                       "root_relative_cm": per_frame(local).tolist(), "world_cm": per_frame(world).tolist()},
         "path": path.tolist(),
@@ -231,9 +249,10 @@ def compare_motions(a: Motion, b: Motion, window: int | None = None) -> dict:
 
 
 def compare_files(path_a, path_b, frames_a=None, frames_b=None, window: int | None = None,
-                  cm_per_unit: float = 1.0, hips_forward_axis=None) -> dict:
+                  cm_per_unit: float = 1.0, hips_forward_axis=None, align_start: bool = True) -> dict:
     """Load two BVH files and compare them (one-line errors name the files). ``hips_forward_axis``: the
-    hips' local forward axis (default: the shipped manifest's, LAFAN1's skeleton)."""
+    hips' local forward axis (default: the shipped manifest's, LAFAN1's skeleton). ``align_start``: see
+    :func:`compare_motions` (on by default here: two files rarely start at the same place)."""
     from lmm.data.motion_files import load_motion
 
     if hips_forward_axis is None:
@@ -244,4 +263,4 @@ def compare_files(path_a, path_b, frames_a=None, frames_b=None, window: int | No
     for path, frames in ((path_a, frames_a), (path_b, frames_b)):
         anim = load_motion(path)
         motions.append(motion_from_animation(anim, str(path), cm_per_unit, frames, hips_forward_axis))
-    return compare_motions(*motions, window=window)
+    return compare_motions(*motions, window=window, align_start=align_start)

@@ -39,7 +39,7 @@ def test_find_prints_a_table_and_writes_json_in_the_files_own_frames(folder, tmp
     out = tmp_path / "res" / "r.json"
     code = main(["find", str(folder / "takes" / "sub" / "b.bvh"), "--frames", "120:170", "--in",
                  str(folder / "takes" / "sub"),
-                 "--top", "3", "--json", str(out)])
+                 "--top", "3", "--json", str(out), "--include-overlap"])
     assert code == 0
     text = capsys.readouterr().out
     assert "rank" in text and "b.bvh" in text
@@ -48,6 +48,16 @@ def test_find_prints_a_table_and_writes_json_in_the_files_own_frames(folder, tmp
     assert results[0] == {"file": "b.bvh", "start_frame": 120, "end_frame": 170, "distance": 0.0}
     assert all(0 <= r["start_frame"] < r["end_frame"] <= 400 for r in results)
     assert [r["distance"] for r in results] == sorted(r["distance"] for r in results)
+
+
+def test_a_query_inside_the_searched_set_returns_no_window_overlapping_it_by_default(folder, tmp_path, capsys):
+    out = tmp_path / "r.json"
+    assert main(["find", str(folder / "takes" / "sub" / "b.bvh"), "--frames", "120:170", "--in",
+                 str(folder / "takes"), "--top", "20", "--json", str(out)]) == 0
+    assert "windows overlapping it left out" in capsys.readouterr().out
+    results = json.loads(out.read_text())["results"]
+    assert len(results) >= 3 and any(r["file"] == "sub/b.bvh" for r in results)
+    assert not [r for r in results if r["file"] == "sub/b.bvh" and r["start_frame"] < 170 and r["end_frame"] > 120]
 
 
 def test_find_in_a_folder_labels_files_relative_to_it(folder, capsys):

@@ -6,7 +6,8 @@ The query is file frames ``[A, B)`` of any BVH file whose key joints (hips, head
 matched by name. Every window of every take in ``--in`` (default: the shipped manifest) is searched (the
 index is cached, see :mod:`lmm.motion_search.index`); the best matches are re-ranked by DTW and printed
 as a table (file as given in the manifest or relative to DIR, start and end in that file's own frames,
-distance); ``--json`` writes ``{"results": [{"file", "start_frame", "end_frame", "distance"}]}``.
+distance); ``--json`` writes ``{"results": [{"file", "start_frame", "end_frame", "distance"}]}``. When QUERY
+is one of the searched files, windows overlapping its frames are left out (``--include-overlap`` keeps them).
 """
 from __future__ import annotations
 
@@ -37,6 +38,13 @@ def add_arguments(p) -> None:
                    help="how many results (default 10)")
     p.add_argument("--json", metavar="OUT", help="write the results here as JSON")
     p.add_argument("--no-rerank", action="store_true", help="keep the embedding order (no DTW re-ranking)")
+    overlap = p.add_mutually_exclusive_group()
+    overlap.add_argument("--exclude-overlap", dest="exclude_overlap", action="store_true",
+                         help="leave out windows overlapping the query's frames (the default when QUERY is one "
+                              "of the searched files: else the query itself ranks first)")
+    overlap.add_argument("--include-overlap", dest="exclude_overlap", action="store_false",
+                         help="keep windows overlapping the query's frames")
+    p.set_defaults(exclude_overlap=None)
     p.add_argument("--rebuild", action="store_true", help="ignore the cached index and build it again")
     p.add_argument("--quiet", action="store_true", help="no progress bar and no summary, only the table")
 
@@ -64,17 +72,23 @@ def main(args) -> int:
     query = None if os.path.realpath(args.query) in indexed else query_from_bvh(args.query, args.frames)
     with ProgressCallback("find: indexing", quiet=args.quiet, skip_start=True) as progress:
         index = MotionIndex.build(sources, rebuild=args.rebuild, progress=progress)
+    source = index.source_of(args.query)
     if query is None:
-        query = index.query_range(index.source_of(args.query), args.frames, args.query)
+        query = index.query_range(source, args.frames, args.query)
+    # the query's own frames (and windows overlapping them) are left out unless asked for
+    exclude = None
+    if source is not None and args.exclude_overlap is not False:
+        exclude = (source, *index.resampled_range(source, args.frames))
     t0 = time.perf_counter()
-    matches = index.search(query, top=args.top, rerank=0 if args.no_rerank else RERANK_TOP)
+    matches = index.search(query, top=args.top, rerank=0 if args.no_rerank else RERANK_TOP, exclude=exclude)
     search_ms = (time.perf_counter() - t0) * 1000.0
     if not args.quiet:
         how = "cached" if index.from_cache else "built"
         print(f"index   {len(sources)} files, {index.n_windows} windows, embedder {index.embedder.name} "
               f"({how} in {index.build_seconds:.2f} s)")
         print(f"query   {args.query} frames {args.frames[0]}:{args.frames[1]} "
-              f"({len(query)} frames at 30 fps); search {search_ms:.0f} ms")
+              f"({len(query)} frames at 30 fps); search {search_ms:.0f} ms"
+              + ("; windows overlapping it left out (--include-overlap keeps them)" if exclude else ""))
     print(format_table(matches))
     if args.json:
         from lmm.data.jsonio import write_json

@@ -293,7 +293,8 @@ class MotionIndex:
         """The index of ``sources`` (from the cache when its files, embedder and settings are unchanged;
         ``rebuild``: computed again and stored; ``use_cache`` False: neither read nor written).
         ``embedder`` None: :func:`default_embedder`, else the features baseline fitted on the index.
-        ``progress(done, total, label)`` is called per file while building."""
+        ``progress(done, total, label)`` is called while building: once at the start (``done`` 0), then
+        after each file read, each take embedded and the cache written (``total`` = 2 x files + 1)."""
         t0 = time.perf_counter()
         if not sources:
             raise SearchError("nothing to search: no files given")
@@ -316,6 +317,8 @@ class MotionIndex:
         index.cache_path = path
         if use_cache:
             index._save(path, identity)
+        if progress:
+            progress(*_build_steps(len(sources), "saved" if use_cache else "done"))
         index.build_seconds = time.perf_counter() - t0
         return index
 
@@ -323,17 +326,19 @@ class MotionIndex:
     def _compute(cls, sources, embedder, fitted_features, progress) -> "MotionIndex":
         from lmm.data.motion_files import load_motion
 
+        n_src = len(sources)
+        total = _build_steps(n_src)[1]
+        if progress:
+            progress(0, total, "reading")
         fps, counts, per_take = [], [], []
         for i, s in enumerate(sources):
-            if progress:
-                progress(i, len(sources), s.label)
             anim = load_motion(s.path)
             tf = take_frames(anim, s.label)
             fps.append(tf.file_fps)
             counts.append(tf.n_file_frames)
             per_take.append(tf.frames)
-        if progress:
-            progress(len(sources), len(sources), "")
+            if progress:
+                progress(i + 1, total, f"read {s.label}")
         lengths = np.array([len(f) for f in per_take], np.int64)
         offsets = np.concatenate([[0], np.cumsum(lengths)])
         frames = np.concatenate(per_take).astype(np.float32)
@@ -351,6 +356,8 @@ class MotionIndex:
             w = windows(f)
             for a in range(0, len(w), EMBED_CHUNK):
                 chunks.append(np.asarray(embedder.embed(w[a:a + EMBED_CHUNK]), np.float32))
+            if progress:
+                progress(n_src + t + 1, total, f"embedded {sources[t].label}")
         embeddings = np.ascontiguousarray(np.concatenate(chunks))
         return cls(list(sources), np.array(fps, np.float64), np.array(counts, np.int64), offsets, frames,
                    window_take, window_start, embeddings, scale, embedder)
@@ -414,9 +421,14 @@ class MotionIndex:
             raise SearchError(f"{where}: frames {a}:{b} are an empty range")
         if b > n:
             raise SearchError(f"{where}: frames {a}:{b} go past the end of the take ({n} frames, 0:{n})")
-        ratio = frame_ratio(self.file_fps[t])
-        i0, i1 = (math.ceil(a / ratio - 1e-9), math.ceil(b / ratio - 1e-9))
+        i0, i1 = self.resampled_range(t, (a, b))
         return _check_query(self.take(t)[i0:i1], f"{where} frames {a}:{b}")
+
+    def resampled_range(self, t: int, frames: tuple[int, int]) -> tuple[int, int]:
+        """File frames ``[a, b)`` of take ``t`` as resampled frames ``[i0, i1)`` (the ``exclude`` of
+        :meth:`search` for a query cut from this take)."""
+        ratio = frame_ratio(self.file_fps[t])
+        return math.ceil(frames[0] / ratio - 1e-9), math.ceil(frames[1] / ratio - 1e-9)
 
     def file_frame(self, t: int, resampled) -> int:
         return int(round(float(resampled) * frame_ratio(self.file_fps[t])))
@@ -513,6 +525,13 @@ class MotionIndex:
         b = min(max(self.file_frame(t, start + length), a + 1), int(self.n_file_frames[t]))
         return Match(self.sources[t].label, a, b, float(distance), t, int(start), int(length),
                      float(embedding_distance))
+
+
+def _build_steps(n_sources: int, label: str = "") -> tuple[int, int, str]:
+    """``(done, total, label)`` of a finished build: each file read, each take embedded, the cache written
+    are one step each, so a progress bar moves during every phase (the embedding is most of the time)."""
+    total = 2 * n_sources + 1
+    return total, total, label
 
 
 #: the arrays of a :class:`MotionIndex` its cache file holds

@@ -45,7 +45,7 @@ def test_a_motion_against_itself_is_zero(motion):
     r = compare_motions(motion, motion)
     assert r["rotation_error_rad"] < 1e-12           # 0 up to rounding (~1e-17)
     assert r["dtw_value"] < 1e-4                     # the alignment's cheap cost: acos of rounded dots
-    assert r["position_error_cm"] == {"root_relative": 0.0, "world": 0.0}
+    assert r["position_error_cm"] == {"root_relative": 0.0, "world": 0.0} and not r["world_aligned_at_start"]
     assert len(r["path"]) == r["frames"][0]
 
 
@@ -89,3 +89,40 @@ def test_other_skeleton_or_empty_range_is_one_line(take, motion, tmp_path):
                        text=True)
     lines = r.stderr.strip().splitlines()
     assert r.returncode == 1 and len(lines) == 1 and "other.bvh" in lines[0] and "skeletons" in lines[0], r.stderr
+
+
+def test_a_rigidly_moved_copy_is_zero_in_the_world_once_the_starts_are_aligned(take):
+    from lmm import quat
+    from lmm.compare import motion_from_arrays
+
+    path, anim = take
+    g_rot, g_pos = anim.global_transforms()
+    a, b = 1200, 1400
+    yaw = quat.from_axis_angle(np.array([0.0, 1.0, 0.0]), np.array(2.0))
+    moved_pos = quat.mul_vec(yaw, g_pos[a:b]) + np.array([300.0, 0.0, -200.0])
+    first = motion_from_arrays("A", list(anim.names), anim.local_rotations()[a:b], g_rot[a:b], g_pos[a:b], 30.0, AXIS)
+    moved = motion_from_arrays("B", list(anim.names), anim.local_rotations()[a:b], quat.mul(yaw, g_rot[a:b]),
+                               moved_pos, 30.0, AXIS)
+    aligned = compare_motions(first, moved, align_start=True)
+    assert aligned["world_aligned_at_start"] and aligned["position_error_cm"]["world"] < 1e-6
+    assert compare_motions(first, moved)["position_error_cm"]["world"] > 100.0
+
+
+def test_compare_of_a_run_against_the_take_it_was_derived_from_aligns_the_starts(take, tmp_path):
+    """input-from turns a take's root path into an input log; the run it drives starts at the origin, the
+    take 10 m away: aligned at the start the world error is the motion's, --no-align keeps the offset."""
+    import json
+
+    from app.cli import main
+
+    path, _ = take
+    log, run, out = tmp_path / "in.csv", tmp_path / "run.bvh", tmp_path / "c.json"
+    assert main(["input-from", str(path), "--frames", "1200:1500", "--out", str(log)]) == 0
+    assert main(["run", "--controller", "mm", "--input", str(log), "--record", str(run), "--quiet"]) == 0
+    assert main(["compare", str(path), str(run), "--frames-a", "1200:1500", "--json", str(out)]) == 0
+    aligned = json.loads(out.read_text())
+    assert main(["compare", str(path), str(run), "--frames-a", "1200:1500", "--no-align", "--json", str(out)]) == 0
+    unaligned = json.loads(out.read_text())
+    assert aligned["world_aligned_at_start"] and not unaligned["world_aligned_at_start"]
+    assert aligned["position_error_cm"]["world"] < 40.0 < 200.0 < unaligned["position_error_cm"]["world"]
+    assert aligned["position_error_cm"]["root_relative"] == unaligned["position_error_cm"]["root_relative"]
