@@ -250,6 +250,8 @@ def load(path) -> Animation:
     except (IndexError, TypeError):
         raise _error(path, "an animation channel names a sampler that does not exist") from None
     key_times = [r.accessor(s.input)[:, 0] for s in samplers]
+    if any(len(t) == 0 or not np.isfinite(t).all() for t in key_times):
+        raise _error(path, "an animation sampler has no keyframe times, or times that are not finite")
     start = min(float(t.min()) for t in key_times if len(t))
     stop = max(float(t.max()) for t in key_times if len(t))
     fps, times = _rate(key_times)

@@ -292,3 +292,35 @@ def test_the_studios_reference_clip_reads_a_glb_as_its_bvh(clip, glb, tmp_path):
     a, b = load_reference_clip(src), load_reference_clip(glb)
     assert a.names == b.names and a.positions.shape == b.positions.shape
     assert np.abs(a.positions - b.positions).max() < 1e-4                   # metres
+
+
+def _set_time(g, index_from_end: int, value: float) -> None:
+    import struct
+
+    blob = bytearray(g.binary_blob())
+    times = g.accessors[g.animations[0].samplers[0].input]
+    view = g.bufferViews[times.bufferView]
+    struct.pack_into("<f", blob, view.byteOffset + 4 * (times.count - index_from_end), value)
+    g.set_binary_blob(bytes(blob))
+
+
+HOSTILE = {
+    "a NaN keyframe time": (lambda g: _set_time(g, 2, float("nan")), "not finite"),
+    "a keyframe at 10^9 s": (lambda g: _set_time(g, 1, 1e9), "joint-frames"),
+    "a cycle in the joints": (lambda g: setattr(g.nodes[1], "children", (g.nodes[1].children or []) + [0]), "cycle"),
+    "an accessor that does not exist": (lambda g: setattr(g.animations[0].samplers[0], "output", 999), "accessor 999"),
+    "a skin joint that does not exist": (lambda g: g.skins[0].joints.append(999), "does not exist"),
+    "a sampler that does not exist": (lambda g: setattr(g.animations[0].channels[0], "sampler", 999), "sampler"),
+}
+
+
+@pytest.mark.parametrize("what", sorted(HOSTILE))
+def test_hostile_gltf_fields_are_one_line(what, glb, tmp_path):
+    change, says = HOSTILE[what]
+    g = pygltflib.GLTF2().load(str(glb))
+    change(g)
+    path = tmp_path / "hostile.glb"
+    g.save(str(path))
+    with pytest.raises(MotionFileError) as e:
+        load_motion(path)
+    assert says in _one_line(e.value, path)
