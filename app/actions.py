@@ -19,6 +19,13 @@ class SessionActions:
     lmm_problem: str | None = None
     last_recording = ""            # what the last finished recording wrote, or why it wrote nothing
     reference_path: str | None = None   # the reference BVH drawn beside the characters
+    reviewed = None                # the reopened session shown (app.review), or None: the live characters
+
+    def open_session_file(self, path: str) -> bool:
+        """Reopen a session: the timeline covers it whole, every panel shows the picked tick (app.review)."""
+        from .review import open_recorded_session
+
+        return open_recorded_session(self, path)
 
     def open_input(self, spec: str) -> bool:
         from lmm.data.inputs import InputError, open_input

@@ -15,6 +15,7 @@ from .theme import OPAQUE
 DIALOGS = {
     # kind -> (title, extensions, default file name)
     "input": ("Replay input CSV", (".csv",), ""),
+    "session": ("Open session", (".lmmsession",), ""),
     "reference": ("Open reference BVH", (".bvh", ".gz", ".glb", ".gltf", ".fbx"), ""),
     "preset_load": ("Load tuning preset", (".json",), ""),
     "preset_save": ("Save tuning preset", (".json",), "preset.json"),

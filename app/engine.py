@@ -36,6 +36,7 @@ class StudioOptions:
     tuning: str | None = None            # a tuning preset file to start from
     tuning_preset: dict | None = None    # its JSON object, already read (the command line checks it first)
     ui_antialiasing: str = "auto"        # "auto" (off on software GL), "on" or "off"
+    open: str | None = None              # a session file to reopen (app.review)
 
 
 def load_session(opts: StudioOptions, report_error: Callable[[str, str], None]) -> tuple[Session, str | None]:

@@ -85,6 +85,8 @@ class Studio(SessionActions):
         self.worker = TickWorker(self.session)
         if self.opts.input:
             self.open_input(self.opts.input)
+        if self.opts.open:
+            self.open_session_file(self.opts.open)
 
     def panel_context(self) -> PanelContext:
         s = self.session
@@ -140,7 +142,8 @@ class Studio(SessionActions):
         self.dialogs = FileDialogs(dpg, {
             "input": self.open_input, "reference": self.open_reference, "preset_load": self.load_preset,
             "preset_save": self.save_preset, "weights": self.load_weights, "layout_load": self.switch_layout,
-            "layout_save": self.layouts.save, "record": self.panels["recording"].set_path},
+            "layout_save": self.layouts.save, "record": self.panels["recording"].set_path,
+            "session": self.open_session_file},
             report_error=self.errors.show)
         self.dialogs.build()
         self._text_items = [i for i in dpg.get_all_items()

@@ -13,6 +13,7 @@ from .scripting import write_rects
 
 #: file dialogs with a command each: (kind of app.dialogs.DIALOGS, label, menu, menu section)
 DIALOG_COMMANDS = (("input", "Replay input CSV...", "File", 0), ("reference", "Open reference BVH...", "File", 0),
+                   ("session", "Open session...", "File", 0),
                    ("preset_load", "Load tuning preset...", "File", 1),
                    ("preset_save", "Save tuning preset...", "File", 1),
                    ("weights", "Load LMM weights...", "File", 1), ("record", "Record to...", "", 0),
@@ -39,6 +40,7 @@ def register_studio_commands(reg: CommandRegistry, s) -> CommandRegistry:
     add("open", "Open a file (as its dialog would)", lambda kind, path: s.dialogs.handle(kind, path),
         args=("kind", "path"))
     add("open_input", "Replay input", lambda spec: s.open_input(spec), args=("spec",))
+    add("open_session", "Reopen a session", lambda path: s.open_session_file(path), args=("path",))
     add("live_input", "Live input", lambda: s.live_input())
     add("reset_characters", "Reset characters", lambda: s.reset_characters(), menu="File", section=2)
     add("quit", "Quit", lambda: s.quit(), menu="File", section=2)

@@ -25,6 +25,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--input", metavar="CSV|builtin:NAME",
                         help="replay an input log instead of live keyboard/gamepad input "
                              "(builtin: circle, zigzag, stop-and-go, strafe, turns, random:SEED)")
+    parser.add_argument("--open", metavar="SESSION",
+                        help="reopen a session file (a recording's take.lmmsession, run --session): the timeline "
+                             "covers it whole and every panel shows the picked tick")
     parser.add_argument("--frames", type=number_in(1, 10**7, integer=True), metavar="N", help="run N frames (one 60 Hz tick each), then exit")
     parser.add_argument("--screenshot", metavar="PATH", help="with --frames: save the whole window as PNG at the end")
     parser.add_argument("--width", type=number_in(640, 8192, integer=True), default=1600,
@@ -93,6 +96,22 @@ def main(args: argparse.Namespace) -> int:
         except TuningError as e:
             print(f"lmm-studio: error: {e}", file=sys.stderr)
             return 2
+    if args.open:
+        # the session names its database and networks: the studio opens those (one line when it cannot)
+        from lmm.errors import InputError
+        from lmm.session.reader import open_session
+
+        try:
+            f = open_session(args.open)
+        except InputError as e:
+            print(f"lmm-studio: error: {e}", file=sys.stderr)
+            return 1
+        args.manifest = args.manifest or f.database["manifest"] or None
+        kinds = {kind: weights for kind, weights, _ in f.controllers.values()}
+        args.weights = args.weights or kinds.get("lmm") or None
+        args.no_lmm = args.no_lmm or "lmm" not in kinds
+        args.input = None
+        f.close()
     from app.studio import Studio, StudioOptions
 
     opts = StudioOptions(manifest=args.manifest, weights=args.weights, layout=args.layout, input=args.input,
@@ -101,5 +120,6 @@ def main(args: argparse.Namespace) -> int:
                          fixed_step=args.fixed_step, gamepads=not args.no_gamepads,
                          save_layout=not args.no_save_layout, write_layouts=args.write_layouts,
                          samples=args.samples, render_scale=args.render_scale, readback_3d=args.readback_3d,
-                         tuning=args.tuning, tuning_preset=preset, ui_antialiasing=args.ui_antialiasing)
+                         tuning=args.tuning, tuning_preset=preset, ui_antialiasing=args.ui_antialiasing,
+                         open=args.open)
     return Studio(opts).run()

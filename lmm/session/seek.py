@@ -61,13 +61,18 @@ class SessionSeeker:
         checkpoint."""
         if not 0 <= tick < self.ticks:
             raise IndexError(f"tick {tick} is outside the session's {self.ticks} ticks")
-        start = max(c for c in self.checkpoints if c <= tick)
-        if not start <= self.tick <= tick:     # behind the target or past it: from the checkpoint
-            self._restore(start)
+        self.go_before(tick)
         out = None
         while self.tick <= tick:
             out = self.step()
         return out
+
+    def go_before(self, tick: int) -> None:
+        """Make the next tick stepped the nearest one at or before ``tick`` that is cheap to reach: where
+        the seeker is, when that is between the nearest checkpoint and ``tick``, else that checkpoint."""
+        start = max(c for c in self.checkpoints if c <= tick)
+        if not start <= self.tick <= tick:
+            self._restore(start)
 
     def fill(self, progress=None) -> None:
         """Step through the whole session once, keeping every checkpoint (``progress(tick)`` now and then)."""

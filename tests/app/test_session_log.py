@@ -3,6 +3,7 @@ tuning changes before and during it and a reset inside it, replays (``lmm-studio
 studio's own BVH byte for byte, from the session's own start (the last reset)."""
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from app.cli import main as cli_main
@@ -83,3 +84,42 @@ def test_an_empty_recording_leaves_no_session_and_new_weights_end_one(dbf, tmp_p
     result = s.stop_recording()
     assert "ends at tick 10: the controllers changed" in result.message
     assert open_session(result.session).ticks == 10
+
+
+def test_a_reopened_session_shows_any_tick_and_goes_live_again(dbf, tmp_path):
+    """app/review.py without a window: the history covers the whole session, a picked tick is the recorded
+    one (its fingerprint, or the live history's pose), Play moves on a tick a frame, live gives the live
+    characters back."""
+    from types import SimpleNamespace
+
+    from app.playback import Playback
+    from app.review import open_recorded_session
+    from lmm.session.schema import pose_fingerprint
+
+    s = _session(dbf)
+    s.start_recording(tmp_path / "take.bvh", ("mm",))
+    _drive(s, 60, 1.0)
+    s.tuning.set("feature_weights", 0.5, "hip_velocity")
+    _drive(s, 130, -0.5)
+    path = s.stop_recording().session
+    shown = {t: s.history.get(t).snapshots["mm"].pose for t in range(s.tick - 30, s.tick + 1)}
+    live = s.controllers["mm"]
+    errors = SimpleNamespace(show=lambda *a: pytest.fail(str(a)), inform=lambda *a: None)
+    studio = SimpleNamespace(session=s, playback=Playback(s.history, s.dt), errors=errors, reviewed=None)
+    assert open_recorded_session(studio, path)
+    h, p = s.history, studio.playback
+    assert (h.oldest_tick, h.newest_tick, p.mode) == (1, 190, "SESSION") and s.controllers["mm"] is not live
+    f = open_session(path)
+    for tick in (170, 60, 185, 119, 1, 178):
+        p.scrub_to(tick)
+        pose = p.displayed_tick().snapshots["mm"].pose
+        if (tick - 1, "mm") in f.fingerprints:
+            assert pose_fingerprint(pose) == f.fingerprints[(tick - 1, "mm")]
+        if tick in shown:
+            assert pose_fingerprint(pose) == pose_fingerprint(shown[tick])
+    speeds = h.window("mm", "speed", 178, 5)              # the plots: the ticks stepped on the way
+    assert speeds.shape == (5,) and not np.isnan(speeds).any()
+    p.resume()
+    assert p.ticks_due(1 / 60) == 0 and p.displayed_tick().tick == 179
+    p.go_live()
+    assert s.controllers["mm"] is live and s.history is not h and p.live and studio.reviewed is None

@@ -88,3 +88,28 @@ def test_five_slider_moves_undone_and_redone_exactly(studio_session):
         assert got == value and got != (before[field] if channel is None else before[field][channel]), field
     assert same(undone, before) and same(redone, moved)
     assert not same(before, moved)
+
+
+def test_the_session_reopens_with_every_tick_on_the_timeline(studio_session, xvfb_display, studio_cache):
+    """lmm-studio --open take.lmmsession: the timeline covers all 160 ticks, and a tick picked before and one
+    after the reset show the characters where the first run had them (its roots, every controller)."""
+    d, tmp = studio_session["dump"], studio_session["dir"]
+    script = [{"frame": 5, "do": "scrub", "tick": 60}, {"frame": 8, "do": "capture", "label": "early"},
+              {"frame": 10, "do": "scrub", "tick": 131}, {"frame": 13, "do": "capture", "label": "late"}]
+    (tmp / "open.json").write_text(json.dumps({"actions": script}))
+    env = dict(os.environ, DISPLAY=xvfb_display, LMM_STUDIO_CONFIG=str(tmp / "config2"),
+               LMM_STUDIO_CACHE=str(studio_cache), PYTHONPATH=str(ROOT), LP_NUM_THREADS="0")
+    proc = subprocess.run([sys.executable, "-m", "app.cli", "--open", str(tmp / "take.lmmsession"), "--frames", "16",
+                           "--script", str(tmp / "open.json"), "--dump-state", str(tmp / "open_dump.json"),
+                           "--no-gamepads"], cwd=tmp, env=env, capture_output=True, text=True, timeout=240)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    opened = json.loads((tmp / "open_dump.json").read_text())
+    assert opened["tick_count"] == 0 and not opened["errors"], opened["errors"]      # nothing simulated live
+    first = {t["frame_submitted"]: t["roots"] for t in d["ticks"]}     # one tick a frame: step i at frame i
+    for label, tick in (("early", 60), ("late", 131)):
+        got = opened["labels"][label]
+        assert got["displayed_tick"] == tick
+        assert got["snapshot_roots"] == first[tick - 1], label
+        timeline = got["panels"]["timeline"]
+        assert (timeline["oldest"], timeline["newest"], timeline["tick"]) == (1, 160, tick), timeline
+    assert "PAUSED   |   tick 131" in opened["labels"]["late"]["panels"]["menu"]["status"]

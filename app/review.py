@@ -1,0 +1,120 @@
+"""Reopening a session in the studio (``lmm-studio --open SESSION``, File > Open session...).
+
+The session's controllers are rebuilt and stepped by a :class:`lmm.session.seek.SessionSeeker`; the
+studio shows them instead of its live ones, paused, with the timeline covering the whole session.
+:class:`SessionHistory` stands in for the rewind history the panels read: asking for any tick
+re-simulates it from the nearest controller-state checkpoint (one a second, kept as the seeker passes),
+and the ticks stepped on the way fill the history's plots, so every panel shows the picked tick. Going
+live again (Home, Play) leaves the session and resets the live characters.
+"""
+from __future__ import annotations
+
+from .history import History, Tick
+
+
+class SessionHistory:
+    """Every tick of a session as the panels read a history (numbers ``1 .. ticks``, the live history's
+    numbering: tick ``n`` is the pose after ``n`` steps). Plots read the ring of the ``capacity`` ticks
+    stepped up to the last one shown (NaN elsewhere); everything else is asked of that ring too."""
+
+    def __init__(self, seeker, capacity: int):
+        self.seeker = seeker
+        self.last = seeker.ticks
+        self.ring = History(capacity)
+
+    def __getattr__(self, name):             # window, times, has_series, capacity, count ...
+        return getattr(self.ring, name)
+
+    @property
+    def newest_tick(self) -> int:
+        return self.last if self.last > 0 else -1
+
+    @property
+    def oldest_tick(self) -> int:
+        return 1 if self.last > 0 else -1
+
+    def __len__(self) -> int:
+        return self.last
+
+    def contains(self, tick: int) -> bool:
+        return 1 <= tick <= self.last
+
+    def clamp(self, tick: int) -> int:
+        return int(min(max(tick, 1), self.last)) if self.last > 0 else -1
+
+    def latest(self) -> Tick | None:
+        return self.get(self.last)
+
+    def get(self, tick: int) -> Tick | None:
+        """Tick ``tick``, re-simulated from the nearest checkpoint unless the ring holds it."""
+        if not self.contains(tick):
+            return None
+        if not self.ring.contains(tick):
+            self._simulate_to(tick)
+        return self.ring.get(tick)
+
+    def ticks_between(self, first: int, last: int) -> list[Tick]:
+        return self.ring.ticks_between(first, last)
+
+    def _simulate_to(self, tick: int) -> None:
+        sk = self.seeker
+        target = tick - 1                              # the step that makes tick ``tick``
+        sk.go_before(target)
+        if sk.tick < self.ring.newest_tick:            # going back: the ring starts again
+            self.ring.clear()
+        while sk.tick <= target:
+            i = sk.tick
+            _, snaps = sk.step()
+            self.ring.append(Tick(i + 1, (i + 1) * sk.dt, snaps, {"input": sk.input_at(i)}))
+
+
+def open_recorded_session(studio, path) -> bool:
+    """Show the session at ``path`` in ``studio`` (see the module doc). A file that cannot be read, from
+    another database or networks, or with other controllers than a running studio draws is refused in one
+    line in the error dialog."""
+    from lmm.errors import InputError
+    from lmm.session.reader import check_identity, open_session
+    from lmm.session.seek import SessionSeeker
+
+    s = studio.session
+    try:
+        f = open_session(path)
+        warnings = check_identity(f, s.db)
+        seeker = SessionSeeker(f, s.db, s.features)
+    except (InputError, OSError, ValueError) as e:
+        studio.errors.show("Session", str(e) if str(path) in str(e) else f"{path}: {e}")
+        return False
+    if getattr(studio, "panels", None) and set(seeker.controllers) != set(s.controllers):
+        f.close()
+        studio.errors.show("Session", f"{path}: its controllers ({', '.join(seeker.controllers)}) are not the "
+                                      f"studio's ({', '.join(s.controllers)}): open it with lmm-studio --open {path}")
+        return False
+    for line in warnings:
+        studio.errors.inform("Session", line)
+    live_controllers, live_history = dict(s.controllers), s.history
+    if studio.reviewed is not None:                  # another session was open: the live parts are its
+        studio.playback.on_leave()
+        live_controllers, live_history = dict(s.controllers), s.history
+    studio.reviewed = f
+    s.controllers.clear()
+    s.controllers.update(seeker.controllers)         # what the panels ask the controllers is the session's
+    s.history = SessionHistory(seeker, live_history.capacity)
+    studio.playback.review(s.history)
+
+    def leave() -> None:
+        """Back to the live characters (reset: the live history was left behind)."""
+        shown = set(s.controllers)
+        s.controllers.clear()
+        s.controllers.update(live_controllers)
+        s.history = studio.playback.history = live_history
+        studio.reviewed = None
+        studio.playback.on_leave = None
+        f.close()
+        s.reset()
+        viewport = getattr(studio, "viewport", None)
+        for name in live_controllers:
+            if name not in shown and viewport is not None:
+                viewport.add_controller(name)
+
+    studio.playback.on_leave = leave
+    return True
