@@ -104,7 +104,7 @@ def sources_from_folder(path) -> list[Source]:
         raise SearchError(f"{path}: not a folder")
     files = sorted(p for p in root.rglob("*") if p.suffix.lower() in (".bvh", ".glb", ".gltf", ".fbx") and p.is_file())
     if not files:
-        raise SearchError(f"{path}: the folder holds no .bvh (or .glb, .gltf, .fbx) files")
+        raise SearchError(f"{path}: the folder holds no .bvh files (nor .glb, .gltf or .fbx)")
     return [Source(p.relative_to(root).as_posix(), p) for p in files]
 
 
