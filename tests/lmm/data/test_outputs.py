@@ -3,6 +3,8 @@ special file; two processes never write one path; only regular files are read, n
 from __future__ import annotations
 
 import os
+import shlex
+import shutil
 import stat
 import subprocess
 import sys
@@ -99,3 +101,84 @@ def test_numbers_are_ascii():
             ascii_float(text)
         with pytest.raises(ValueError):
             ascii_int(text)
+
+
+def test_two_runs_recording_one_file_one_refuses_the_other_completes(tmp_path):
+    """Two ``run --record same.bvh`` at once (issue 36: both exited 0 and A's recording was B's): the
+    second is refused at once naming the first's process; the first's recording holds all its frames."""
+    from lmm.data import bvh
+
+    out = tmp_path / "same.bvh"
+    env = {**os.environ, "LMM_STUDIO_CACHE": os.environ.get("LMM_STUDIO_CACHE", str(tmp_path / "cache"))}
+    cmd = [sys.executable, "-m", "app.cli", "run", "--input", "builtin:circle", "--quiet", "--record", str(out)]
+    first = subprocess.Popen(cmd + ["--seconds", "4", "--realtime"], cwd=ROOT, env=env, stderr=subprocess.PIPE,
+                             text=True)
+    try:
+        import time
+        deadline = time.monotonic() + 60
+        while not out.exists() and time.monotonic() < deadline and first.poll() is None:
+            time.sleep(0.05)   # the first run has its lock once its recording appears
+        second = subprocess.run(cmd + ["--seconds", "1"], cwd=ROOT, env=env, capture_output=True, text=True,
+                                timeout=120)
+    finally:
+        first.wait(timeout=120)
+    assert first.returncode == 0, first.stderr.read()
+    assert second.returncode == 1 and second.stderr.count("\n") == 1, second.stderr
+    assert f"process {first.pid}" in second.stderr and "same.bvh" in second.stderr, second.stderr
+    assert bvh.load(out).n_frames == 240
+
+
+DEVICE_OUTPUTS = [   # every output option of the file-writing commands, given a device node ({D})
+    ["run", "--input", "builtin:circle", "--seconds", "1", "--quiet", "--record", "{D}"],
+    ["run", "--input", "builtin:circle", "--seconds", "1", "--quiet", "--record", "{T}/r.bvh", "--record-input", "{D}"],
+    ["run", "--input", "builtin:circle", "--seconds", "1", "--quiet", "--metrics-json", "{D}"],
+    ["run", "--input", "builtin:circle", "--seconds", "1", "--quiet", "--session", "{D}"],
+    ["build-db", "--manifest", "{good}/manifest.json", "--quiet", "--no-checks", "--out", "{D}"],
+    ["check-data", "--manifest", "{good}/manifest.json", "--quiet", "--json", "{D}"],
+    ["check-data", "--manifest", "{good}/manifest.json", "--quiet", "--png", "{D}"],
+    ["coverage", "--manifest", "{good}/manifest.json", "--json", "{D}"],
+    ["view", "{good}/walk.bvh", "--screenshot", "{D}"],
+    ["compare", "{good}/walk.bvh", "{good}/walk.bvh", "--json", "{D}"],
+    ["input-from", "{good}/walk.bvh", "--manifest", "{good}/manifest.json", "--out", "{D}"],
+    ["physics", "{good}/walk.bvh", "--json", "{D}"],
+]
+
+
+@pytest.mark.skipif(not hasattr(os, "geteuid") or os.geteuid() != 0, reason="making a device node needs root")
+@pytest.mark.parametrize("argv", DEVICE_OUTPUTS, ids=lambda a: f"{a[0]}-{a[-2]}")
+def test_a_device_given_as_an_output_stays_a_device(tmp_path, argv, capsys):
+    """As root, ``/dev/null`` given as an output was replaced by a regular file (the atomic rename went
+    over it). A character device made here (1, 3: what /dev/null is) must be refused and stay a device."""
+    from app.cli import main
+
+    dev = tmp_path / "null"
+    try:
+        os.mknod(dev, 0o666 | stat.S_IFCHR, os.makedev(1, 3))
+    except (OSError, AttributeError) as e:
+        pytest.skip(f"cannot make a device node here ({e})")
+    good = ROOT / "tests" / "corpus" / "good"
+    rc = main([a.format(D=dev, T=tmp_path, good=good) for a in argv])
+    err = capsys.readouterr().err
+    assert rc == 1 and "character device" in err and str(dev) in err and err.count("\n") == 1, err
+    assert stat.S_ISCHR(os.lstat(dev).st_mode)
+
+
+@pytest.mark.skipif(not hasattr(os, "geteuid") or os.geteuid() != 0 or not shutil.which("unshare"),
+                    reason="needs root and unshare")
+def test_dev_null_as_every_output_stays_a_character_device_in_a_private_mount_namespace(tmp_path):
+    """The issue's own check: in a private mount namespace (a private /dev holding a fresh null device),
+    ``/dev/null`` given as every output path of every command above is refused and stays a device."""
+    good = ROOT / "tests" / "corpus" / "good"
+    script = ["mount -t tmpfs tmpfs /dev", "mknod -m 666 /dev/null c 1 3"]
+    for argv in DEVICE_OUTPUTS:
+        args = " ".join(shlex.quote(a.format(D="/dev/null", T=tmp_path, good=good)) for a in argv)
+        script.append(f"{shlex.quote(sys.executable)} -m app.cli {args} 2>>{tmp_path}/err; echo $? >>{tmp_path}/rc")
+    script.append(f"stat -c %F /dev/null >{tmp_path}/kind")
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    r = subprocess.run(["unshare", "-m", "sh", "-c", "; ".join(script)], cwd=ROOT, env=env, capture_output=True,
+                       text=True, timeout=300)
+    if r.returncode != 0 and not (tmp_path / "kind").exists():
+        pytest.skip(f"no private mount namespace here: {r.stderr.strip()[:200]}")
+    assert (tmp_path / "rc").read_text().split() == ["1"] * len(DEVICE_OUTPUTS), (tmp_path / "err").read_text()
+    assert (tmp_path / "err").read_text().count("character device") == len(DEVICE_OUTPUTS)
+    assert (tmp_path / "kind").read_text().strip() == "character special file"
