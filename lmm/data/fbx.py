@@ -24,6 +24,7 @@ import numpy as np
 from lmm import kinematics, quat
 from lmm.data.bvh import Animation
 from lmm.data.motion_files import MOTION_UNIT_M, MotionFileError, depth_first, from_sampled, require_extra
+from lmm.data.reading import open_regular
 
 __all__ = ["load", "MAX_SAMPLES", "MAX_FILE_BYTES"]
 
@@ -48,7 +49,7 @@ def load(path) -> Animation:
     """The first animation stack's skeleton motion in an FBX file (see the module doc)."""
     ufbx = require_extra("ufbx", "reading FBX", "formats", path)
     p = os.fspath(path)
-    with open(p, "rb") as f:                  # OSError for a missing file, as for BVH
+    with open_regular(p, "FBX file") as f:    # a regular file only; OSError for a missing one, as for BVH
         if os.fstat(f.fileno()).st_size > MAX_FILE_BYTES:
             raise MotionFileError(f"the file is larger than {MAX_FILE_BYTES >> 20} MiB", p)
     try:

@@ -31,6 +31,8 @@ import numpy as np
 from lmm import quat
 from lmm.data.bvh import Animation
 from lmm.data.motion_files import MOTION_UNIT_M, MotionFileError, depth_first, from_sampled, require_extra
+from lmm.data.reading import open_regular, read_limited
+from lmm.errors import InputError
 
 __all__ = ["load", "DEFAULT_FPS", "MAX_SAMPLES", "MAX_FILE_BYTES"]
 
@@ -73,10 +75,11 @@ class _Reader:
     def __init__(self, path):
         pygltflib = require_extra("pygltflib", "reading glTF", "formats", path)
         self.path = os.fspath(path)
-        with open(self.path, "rb") as f:         # OSError for a missing file, as for BVH
+        # a regular file only (a FIFO or device is one line, and never blocks); OSError for a missing one
+        with open_regular(self.path, "glTF file") as f:
             if os.fstat(f.fileno()).st_size > MAX_FILE_BYTES:
                 raise _error(path, f"the file is larger than {MAX_FILE_BYTES >> 20} MiB")
-            data = f.read()
+            data = f.read(MAX_FILE_BYTES + 1)
         text = self._json_text(data)
         try:
             meta = json.loads(text)
@@ -106,10 +109,11 @@ class _Reader:
             else:
                 side = os.path.join(os.path.dirname(self.path), b.uri)
                 try:
-                    with open(side, "rb") as f:
-                        data = f.read()
+                    data = read_limited(side, MAX_FILE_BYTES, "glTF buffer")
                 except OSError as e:
                     raise _error(self.path, f"buffer {b.uri!r}: {e.strerror}") from None
+                except InputError as e:
+                    raise _error(self.path, f"buffer {b.uri!r}: {e}") from None
             if data is None or len(data) < b.byteLength:
                 raise _error(self.path, f"buffer {i} has {0 if data is None else len(data)} bytes, "
                                         f"{b.byteLength} declared (a truncated file?)")

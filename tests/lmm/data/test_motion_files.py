@@ -17,6 +17,7 @@ import pytest
 
 from lmm.data import bvh
 from lmm.data.motion_files import MOTION_UNIT_M, MotionFileError, load_motion
+from lmm.errors import InputError
 
 pygltflib = pytest.importorskip("pygltflib")
 
@@ -324,3 +325,16 @@ def test_hostile_gltf_fields_are_one_line(what, glb, tmp_path):
     with pytest.raises(MotionFileError) as e:
         load_motion(path)
     assert says in _one_line(e.value, path)
+
+
+@pytest.mark.parametrize("name", ["fifo.glb", "fifo.gltf", "fifo.fbx"])
+def test_a_fifo_named_like_a_motion_file_is_one_line_and_never_blocks(name, tmp_path):
+    import os
+
+    if name.endswith(".fbx") and not _has("ufbx"):
+        pytest.skip("ufbx (the formats extra) is not installed")
+    path = tmp_path / name
+    os.mkfifo(path)
+    with pytest.raises(InputError) as e:
+        load_motion(path)
+    assert "FIFO" in _one_line(e.value, path)
