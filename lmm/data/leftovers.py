@@ -38,24 +38,34 @@ def pid_alive(pid: int) -> bool:
     return True
 
 
+def _dead_makers(folder, pattern: re.Pattern, want_dir: bool):
+    """Entries of ``folder`` (not below it) named by ``pattern`` (group 1: the maker's process id), of
+    this user, a folder or a plain file as ``want_dir`` says, whose maker is gone."""
+    try:
+        entries = list(os.scandir(folder))
+    except OSError:
+        return
+    uid = os.getuid() if hasattr(os, "getuid") else None
+    for entry in entries:
+        m = pattern.match(entry.name)
+        if m is None or pid_alive(int(m.group(1))):
+            continue
+        try:
+            kind_ok = entry.is_dir(follow_symlinks=False) if want_dir else entry.is_file(follow_symlinks=False)
+            if kind_ok and (uid is None or entry.stat(follow_symlinks=False).st_uid == uid):
+                yield Path(entry.path)
+        except OSError:
+            continue
+
+
 def remove_stale(folder) -> list[Path]:
     """Remove, in ``folder`` (not below it), the temporary files whose maker is gone; the paths removed.
     Files of running processes, and anything not named like our temporaries, are left alone."""
     removed = []
-    try:
-        entries = list(os.scandir(folder))
-    except OSError:
-        return removed
-    uid = os.getuid() if hasattr(os, "getuid") else None
-    for entry in entries:
-        m = _TEMP_FILE.match(entry.name)
-        if m is None or pid_alive(int(m.group(1))):
-            continue
+    for path in _dead_makers(folder, _TEMP_FILE, want_dir=False):
         try:
-            if not entry.is_file(follow_symlinks=False) or (uid is not None and entry.stat().st_uid != uid):
-                continue
-            os.unlink(entry.path)
-            removed.append(Path(entry.path))
+            path.unlink()
+            removed.append(path)
         except OSError:
             pass
     return removed
@@ -63,24 +73,9 @@ def remove_stale(folder) -> list[Path]:
 
 def remove_stale_spills(folder=None) -> list[Path]:
     """Remove the build spill folders (``lmm-build-PID-*``) of processes that are gone."""
-    folder = Path(folder or tempfile.gettempdir())
-    removed = []
-    uid = os.getuid() if hasattr(os, "getuid") else None
-    try:
-        entries = list(os.scandir(folder))
-    except OSError:
-        return removed
-    for entry in entries:
-        m = _SPILL.match(entry.name)
-        if m is None or pid_alive(int(m.group(1))):
-            continue
-        try:
-            if not entry.is_dir(follow_symlinks=False) or (uid is not None and entry.stat().st_uid != uid):
-                continue
-        except OSError:
-            continue
-        shutil.rmtree(entry.path, ignore_errors=True)
-        removed.append(Path(entry.path))
+    removed = list(_dead_makers(Path(folder or tempfile.gettempdir()), _SPILL, want_dir=True))
+    for path in removed:
+        shutil.rmtree(path, ignore_errors=True)
     return removed
 
 
