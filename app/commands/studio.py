@@ -112,7 +112,10 @@ def main(args: argparse.Namespace) -> int:
         args.no_lmm = args.no_lmm or "lmm" not in kinds
         args.input = None
         f.close()
+    from app import watchdog
     from app.studio import Studio, StudioOptions
+
+    watchdog.arm()   # SIGTERM ends the studio even when it is stuck in native code (10 s to shut down)
 
     opts = StudioOptions(manifest=args.manifest, weights=args.weights, layout=args.layout, input=args.input,
                          frames=args.frames, screenshot=args.screenshot, width=args.width, height=args.height,
