@@ -57,7 +57,7 @@ def replay_to_bvh(session, folder: str, controller: str | None = None) -> str:
 
 def main(args) -> int:
     from lmm.data.gltf_write import require_pygltflib, save_glb
-    from lmm.data.motion_files import load_motion
+    from lmm.data.motion_files import MOTION_UNIT_M, load_motion
     from lmm.data.outputs import check_outputs
     from lmm.skeleton import guess_unit_scale
 
@@ -66,7 +66,8 @@ def main(args) -> int:
     with tempfile.TemporaryDirectory(prefix="lmm-export-") as folder:
         source = replay_to_bvh(args.file, folder, args.controller) if is_session(args.file) else args.file
         anim = load_motion(source)
-    scale = args.unit_scale or guess_unit_scale(anim.names, anim.parents, anim.offsets) or 1.0
+    known = MOTION_UNIT_M if str(source).lower().endswith((".glb", ".gltf", ".fbx")) else None   # read in cm
+    scale = args.unit_scale or known or guess_unit_scale(anim.names, anim.parents, anim.offsets) or 1.0
     save_glb(args.out, anim, scale, mesh=args.mesh)
     print(f"{args.file}: {anim.n_joints} joints, {anim.n_frames} frames at {anim.fps:g} fps "
           f"({scale:g} m per file unit) -> {args.out}")
