@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -352,8 +353,8 @@ def load_or_build(manifest_path=None, cache_dir=None, progress=None, rebuild: bo
                     except OSError:
                         pass
                 return db, LoadInfo(path, True, time.perf_counter() - t0)
-        except DatabaseError:
-            pass  # stale or damaged cache: rebuild below
+        except DatabaseError as e:   # damaged, hand-made or of another format: never trusted, built again
+            print(f"note: {one_line_of(e)}; building the database again", file=sys.stderr)
     db = build(manifest, progress=progress, workers=workers)
     if before_save is not None:
         before_save(db, path)
@@ -368,6 +369,10 @@ def load_or_build(manifest_path=None, cache_dir=None, progress=None, rebuild: bo
                             not_saved=f"cannot write the cache {path}: {e.strerror or type(e).__name__}")
     db.source_path = path  # its derived arrays are cached beside the file (lmm.data.derived)
     return db, LoadInfo(path, False, time.perf_counter() - t0)
+
+
+def one_line_of(e: Exception) -> str:
+    return " ".join(str(e).split())[:300]
 
 
 def manifest_inputs(manifest_path=None) -> list[tuple[str, Path]]:

@@ -188,19 +188,65 @@ class Database:
             if not isinstance(meta, dict) or meta.get("format_version") != DB_FORMAT_VERSION:
                 version = meta.get("format_version") if isinstance(meta, dict) else None
                 z.fail(f"database format {version}, expected {DB_FORMAT_VERSION}")
-            db = cls(
-                names=[str(s) for s in meta["names"]], parents=z["parents"].astype(np.int64),
-                positions=z["positions"], rotations=z["rotations"], velocities=z["velocities"],
-                angular_velocities=z["angular_velocities"], contacts=z["contacts"], toe_speeds=z["toe_speeds"],
-                range_starts=z["range_starts"].astype(np.int64), range_stops=z["range_stops"].astype(np.int64),
-                range_names=[str(s) for s in meta["range_names"]], range_mirrored=z["range_mirrored"],
-                fps=float(meta["fps"]), bone_roles={str(r): str(b) for r, b in meta["bone_roles"].items()},
-                mirror_map=z["mirror_map"].astype(np.int64), key=str(meta["key"]), name=str(meta["name"]),
-                build_fingerprint=str(meta["build_fingerprint"]),
-                range_tags=[tuple(t) for t in meta["range_tags"]], tag_names=[str(t) for t in meta["tag_names"]],
-                frame_tags=np.asarray(z["frame_tags"], dtype=bool), feature_schema=list(meta["feature_schema"]))
+            try:
+                db = cls._from_archive(z, meta)
+            except DatabaseError:
+                raise
+            except (KeyError, TypeError, ValueError, AttributeError, IndexError) as e:
+                z.fail(f"inconsistent database ({type(e).__name__}: {str(e)[:200]})")
+            problem = inconsistency(db)
+            if problem:
+                z.fail(f"inconsistent database: {problem}")
         db.source_path = path
         return db
+
+    @classmethod
+    def _from_archive(cls, z, meta) -> "Database":
+        return cls(
+            names=[str(s) for s in meta["names"]], parents=z["parents"].astype(np.int64),
+            positions=z["positions"], rotations=z["rotations"], velocities=z["velocities"],
+            angular_velocities=z["angular_velocities"], contacts=z["contacts"], toe_speeds=z["toe_speeds"],
+            range_starts=z["range_starts"].astype(np.int64), range_stops=z["range_stops"].astype(np.int64),
+            range_names=[str(s) for s in meta["range_names"]], range_mirrored=z["range_mirrored"],
+            fps=float(meta["fps"]), bone_roles={str(r): str(b) for r, b in meta["bone_roles"].items()},
+            mirror_map=z["mirror_map"].astype(np.int64), key=str(meta["key"]), name=str(meta["name"]),
+            build_fingerprint=str(meta["build_fingerprint"]),
+            range_tags=[tuple(t) for t in meta["range_tags"]], tag_names=[str(t) for t in meta["tag_names"]],
+            frame_tags=np.asarray(z["frame_tags"], dtype=bool), feature_schema=list(meta["feature_schema"]))
+
+
+def inconsistency(db: Database) -> str | None:
+    """What makes a loaded database unusable (shapes that disagree, ranges outside the frames, a parent
+    after its child, bone roles naming no bone...), or None. Checked on every load, so a damaged or
+    hand-made cache is rebuilt rather than failing later inside the runtime (12 such caches gave exit 70).
+    Only shapes and the small arrays are read: the per-frame arrays stay unread memory maps."""
+    n, j = db.positions.shape[:2] if db.positions.ndim == 3 else (-1, -1)
+    shapes = {"positions": (db.positions, (n, j, 3)), "rotations": (db.rotations, (n, j, 4)),
+              "velocities": (db.velocities, (n, j, 3)), "angular_velocities": (db.angular_velocities, (n, j, 3)),
+              "contacts": (db.contacts, (n, 2)), "toe_speeds": (db.toe_speeds, (n, 2)), "parents": (db.parents, (j,)),
+              "mirror_map": (db.mirror_map, (j,)), "frame_tags": (db.frame_tags, (n, len(db.tag_names)))}
+    for name, (array, shape) in shapes.items():
+        if array is None or tuple(array.shape) != shape:
+            return f"{name} has shape {None if array is None else tuple(array.shape)}, expected {shape}"
+    if n < 1 or j < 2 or len(db.names) != j:
+        return f"{len(db.names)} bone names for {j} bones and {n} frames"
+    if db.parents[0] != -1 or any(not 0 <= p < k for k, p in enumerate(db.parents.tolist()) if k > 0):
+        return "a bone's parent is not an earlier bone"
+    if db.mirror_map.min() < 0 or db.mirror_map.max() >= j:
+        return "mirror_map names a bone that does not exist"
+    r = len(db.range_starts)
+    if r < 1 or len(db.range_stops) != r or len(db.range_names) != r or len(db.range_mirrored) != r \
+            or (db.range_tags and len(db.range_tags) != r):
+        return f"{r} ranges, but the range arrays disagree on their number"
+    starts, stops = np.asarray(db.range_starts), np.asarray(db.range_stops)
+    if starts.min() < 0 or stops.max() > n or (stops <= starts).any():
+        return f"a range outside frames 0..{n} (or empty)"
+    if not (np.isfinite(db.fps) and 1.0 <= db.fps <= 1000.0):
+        return f"fps {db.fps}"
+    missing = sorted(b for b in db.bone_roles.values() if b not in db.names)
+    if missing:
+        return f"bone roles name {missing[0]!r}, which is not a bone"
+    return None
 
 
 #: The per-frame arrays :meth:`Database.load` memory-maps (everything else is small and read).
