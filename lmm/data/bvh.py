@@ -706,6 +706,8 @@ def _gunzip(f, path: str | None) -> bytes:
                        path, line) from None
     if len(data) > MAX_TEXT_BYTES:
         raise _too_big(path, "the gzip data inflates to")
+    if data[:2] == _GZIP_MAGIC:   # said plainly, not as "binary data (NUL byte)"
+        raise BVHError("a gzip file inside a gzip file: expected one level of gzip around a text BVH file", path)
     return data
 
 

@@ -71,6 +71,7 @@ FILES: dict[str, Spec] = {
                                  commands=("build-db", "check-data", "run")),
     "bvh/joints_20000.bvh": Spec("a chain of 20,000 nested joints (joint count / nesting limit)",
                                  commands=("reader", "build-db"), solo=True, generated=True),
+    "bvh/gzip_in_gzip.bvh.gz": Spec("a gzip inside a gzip (reported as 'binary data (NUL byte)')", "gzip"),
     "bvh/offsets_all_zero.bvh": Spec("every OFFSET 0 (built, then run: ZeroDivisionError in ik.py)", "OFFSET",
                                      commands=("build-db", "run")),
     # manifests
