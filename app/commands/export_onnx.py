@@ -20,6 +20,8 @@ def main(args) -> int:
     weights = Path(args.weights) if args.weights else DEFAULT_WEIGHTS
     # a read-only or file --out, or one whose files include the weights: one line, exit 1
     check_outputs([("--out", Path(args.out) / f"{name}.onnx") for name in RUNTIME_NETWORKS], [("--weights", weights)])
+    from lmm.data.leftovers import remove_stale
+    remove_stale(args.out)   # what a killed export left half-written there
     nets = LMMNetworks.load(weights)  # WeightsError: file + field
     for path in export_networks(nets, args.out):
         print(path)
