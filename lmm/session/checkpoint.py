@@ -11,8 +11,10 @@ bit (tested against the fingerprints). It is taken attribute by attribute, not w
 * the tuning, database, features, networks and anything of :data:`SHARED_BYTES` or more are kept by
   reference with their attributes as they were: what changes in them is rebound, not written in place (new
   feature weights make a new normalised array and the search index rebuilds on it; a search result is
-  replaced). Only the references are kept, so a checkpoint of the default database's MM or LMM controller
-  is 60-100 KB (``bench/session_seek.py``).
+  replaced), and so are the arrays these hold (an object that refers to one, such as MM's lazily ranked
+  candidates, is small: it is kept by reference, not copied with a 6 MB feature array). Only references
+  are kept, so a checkpoint of the default database's MM or LMM controller is 40-70 KB
+  (``bench/session_seek.py``); objects and slots are walked alike.
 """
 from __future__ import annotations
 
@@ -28,7 +30,6 @@ _CALLS = (types.FunctionType, types.MethodType, types.BuiltinFunctionType, funct
 SHARED_BYTES = 64 * 1024
 #: attributes a checkpoint does not keep: MM's last full search result (6 MB on the default database),
 #: replaced at every search and read by no later step; kept by reference it would pin one per checkpoint
-#: (11.6 GB of peak memory over a 30-minute session instead of a few hundred MB)
 NOT_KEPT = frozenset({"last_search"})
 
 
@@ -44,14 +45,24 @@ def _nbytes(value, seen: set, limit: int) -> int:
         items = value.values()
     elif isinstance(value, (list, tuple)):
         items = value
-    elif hasattr(value, "__dict__") and not isinstance(value, _CALLS):
-        items = vars(value).values()
+    elif not isinstance(value, (_CALLS, str, bytes, int, float, bool, type(None))):
+        items = _fields(value)
     total = 0
     for v in items:
         total += _nbytes(v, seen, limit)
         if total >= limit:
             break
     return total
+
+
+def _fields(value):
+    """An object's attribute values: its ``__dict__`` and its ``__slots__``."""
+    if hasattr(value, "__dict__"):
+        yield from vars(value).values()
+    for cls in type(value).__mro__:
+        for name in getattr(cls, "__slots__", ()):
+            if hasattr(value, name):
+                yield getattr(value, name)
 
 
 def _base(a: np.ndarray) -> np.ndarray:
@@ -74,8 +85,8 @@ def _arrays(value, skip: set, out: dict) -> None:
         items = value
     elif isinstance(value, functools.partial):
         items = (*value.args, *value.keywords.values())
-    elif hasattr(value, "__dict__") and not isinstance(value, _CALLS):
-        items = vars(value).values()
+    elif not isinstance(value, (_CALLS, str, bytes, int, float, bool, type(None))):
+        items = _fields(value)
     else:
         return
     for v in items:
@@ -100,25 +111,40 @@ def _copy_keeping_views(value, memo: dict, bases: dict):
     return copy.deepcopy(value, memo)
 
 
+def _keep_arrays_of(obj, keep: dict) -> None:
+    """Keep the arrays ``obj`` holds by reference too (e.g. the features' normalised array, which a ranked
+    candidate list refers to as well)."""
+    if isinstance(obj, np.ndarray):
+        return
+    for value in _fields(obj):
+        if isinstance(value, np.ndarray):
+            keep.setdefault(id(value), value)
+
+
 class ControllerState:
     """What ``controller`` holds that stepping changes, taken now (:meth:`restore` puts it back)."""
 
     def __init__(self, controller):
-        keep = {id(o): o for o in (controller.tuning, controller.db, controller.features)}
+        # the controller itself too: what refers back to it (MM's lazily ranked candidates) keeps referring to it
+        keep = {id(o): o for o in (controller, controller.tuning, controller.db, controller.features)}
+        _keep_arrays_of(controller.db, keep)
+        _keep_arrays_of(controller.features, keep)
         for value in vars(controller).values():
-            if id(value) not in keep and _nbytes(value, set(), SHARED_BYTES) >= SHARED_BYTES:
+            # (the bytes of what is kept already are not counted: an object that only refers to them is small)
+            if id(value) not in keep and _nbytes(value, set(keep), SHARED_BYTES) >= SHARED_BYTES:
                 keep[id(value)] = value
+                _keep_arrays_of(value, keep)
         self._shared = keep                 # a deep copy's memo: these are not copied
         attributes = {n: v for n, v in vars(controller).items() if n not in NOT_KEPT}
         own = {n: v for n, v in attributes.items() if id(v) not in keep and not isinstance(v, _CALLS)}
-        self.shared = {n: v for n, v in attributes.items() if id(v) in keep}
+        self.shared = {n: v for n, v in attributes.items() if id(v) in keep and v is not controller}
         # their attributes as they are now (references): what changes in them is rebound, not written in
         # place (new feature weights make a new normalised array; a search index rebuilds on it)
         self.shared_attributes = {n: dict(vars(v)) for n, v in self.shared.items()
                                   if hasattr(v, "__dict__") and v is not controller.tuning}
         self.values = _copy_keeping_views(own, dict(keep), {})
         found: dict = {}
-        _arrays(self.values, set(), found)
+        _arrays(self.values, set(keep), found)
         self.nbytes = sum(b.nbytes for b in {id(_base(a)): _base(a) for a in found.values()}.values())
 
     def restore(self, controller) -> None:
