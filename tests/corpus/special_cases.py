@@ -96,6 +96,14 @@ SPECIAL_INPUTS = [
     ("compare-fifo", ["compare", "{T}/fifo", "{good}/walk.bvh"], "fifo"),
     ("input-from-fifo", ["input-from", "{T}/fifo", "--out", "{T}/o.csv"], "fifo"),
     ("physics-fifo", ["physics", "{T}/fifo"], "fifo"),
+    ("run-manifest-dev-zero", _RUN + ["--manifest", "/dev/zero"], "/dev/zero"),
+    ("run-events-dev-urandom", _RUN + ["--events", "/dev/urandom"], "/dev/urandom"),
+    ("eval-weights-fifo", ["eval", "--weights", "{T}/fifo", "--seconds", "1", "--queries", "64"], "fifo"),
+    ("export-onnx-weights-fifo", ["export-onnx", "--weights", "{T}/fifo", "--out", "{T}.out"], "fifo"),
+    ("replay-session-fifo", ["replay", "{T}/fifo", "--quiet"], "fifo"),
+    ("input-from-manifest-fifo", ["input-from", "{good}/walk.bvh", "--manifest", "{T}/fifo", "--out", "{T}.out/o.csv"],
+     "fifo"),
+    ("find-in-fifo", ["find", "{good}/walk.bvh", "--frames", "0:30", "--in", "{T}/fifo", "--quiet"], "fifo"),
     ("find-query-fifo", ["find", "{T}/fifo", "--frames", "0:30", "--in", "{good}/manifest.json", "--quiet"], "fifo"),
 ]
 
