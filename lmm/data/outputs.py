@@ -127,7 +127,7 @@ def lock_output(path, option: str = "") -> None:
     if folder is None:
         return
     target = str(resolved(path))
-    lock_file = str(folder / (hashlib.sha256(target.encode("utf-8", "surrogateescape")).hexdigest()[:32] + ".lock"))
+    lock_file = _lock_file(folder, target)
     if lock_file in _held:
         return
     while True:
@@ -152,6 +152,25 @@ def lock_output(path, option: str = "") -> None:
     os.ftruncate(fd, 0)
     os.pwrite(fd, f"{os.getpid()} {target}\n".encode("utf-8", "surrogateescape"), 0)
     _held[lock_file] = fd
+
+
+def _lock_file(folder: Path, target: str) -> str:
+    return str(folder / (hashlib.sha256(target.encode("utf-8", "surrogateescape")).hexdigest()[:32] + ".lock"))
+
+
+def release_output(path) -> None:
+    """Remove and unlock this process's lock on ``path`` (a stream that was closed), if it holds one."""
+    folder = _lock_folder()
+    if folder is None or not _held:
+        return
+    lock_file = _lock_file(folder, str(resolved(path)))
+    fd = _held.pop(lock_file, None)
+    if fd is not None:
+        try:
+            os.unlink(lock_file)
+        except OSError:
+            pass
+        os.close(fd)
 
 
 def release_locks() -> None:

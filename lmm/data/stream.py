@@ -73,6 +73,8 @@ class StreamFile:
         self._size = 0            # bytes of the last complete chunk (the file's valid length)
         self._closed = False
         self._check_target()
+        from lmm.data.outputs import lock_output
+        lock_output(self.path, unit)   # a second process streaming to this path is refused, naming the first
 
     def _check_target(self) -> None:
         path = self.path
@@ -176,6 +178,9 @@ class StreamFile:
 
     def close(self) -> None:
         """Close the file (nothing is written here; a stream with no record leaves no file)."""
+        if not self._closed:
+            from lmm.data.outputs import release_output
+            release_output(self.path)
         self._closed = True
         if self._fd is not None:
             try:

@@ -182,3 +182,24 @@ def test_dev_null_as_every_output_stays_a_character_device_in_a_private_mount_na
     assert (tmp_path / "rc").read_text().split() == ["1"] * len(DEVICE_OUTPUTS), (tmp_path / "err").read_text()
     assert (tmp_path / "err").read_text().count("character device") == len(DEVICE_OUTPUTS)
     assert (tmp_path / "kind").read_text().strip() == "character special file"
+
+
+def test_a_stream_holds_its_path_until_closed(tmp_path):
+    """Every streamed recording (run's, the studio's, input logs) locks its path while open."""
+    from lmm.data.stream import StreamFile
+
+    out = tmp_path / "take.bvh"
+    holder = subprocess.Popen([sys.executable, "-c", (
+        "import time; from lmm.data.stream import StreamFile; "
+        f"s = StreamFile({str(out)!r}, b'h'); print('open', flush=True); time.sleep(30)")],
+        cwd=ROOT, stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "open"
+        with pytest.raises(OutputError, match=f"process {holder.pid}"):
+            StreamFile(out, b"h")
+    finally:
+        holder.kill()
+        holder.wait()
+    first = StreamFile(out, b"h")
+    first.close()
+    StreamFile(out, b"h").close()   # released by close: taken again at once
