@@ -122,6 +122,9 @@ FILES: dict[str, Spec] = {
     "input/not_utf8.csv": Spec("bytes 0xff 0xfe in a row"),
     "input/nul_bytes.csv": Spec("a NUL byte in a row"),
     "input/duplicate_column.csv": Spec("left_x twice in the header", "left_x"),
+    "input/cr_only_1.1m_rows.csv": Spec("1.1 M rows ended by CR alone (got past the \\n-counting line limit: "
+                                        "14 s, 1.77 GB)", "lines", solo=True, generated=True),
+    "input/u2028_1.1m_rows.csv": Spec("1.1 M rows ended by U+2028 (1.57 GB)", "lines", solo=True, generated=True),
     # tuning presets
     "preset/not_utf8.json": Spec("not UTF-8 (UnicodeDecodeError)"),
     "preset/nested_100000.json": Spec("nested 100,000 deep (RecursionError)", generated=True),
@@ -426,6 +429,12 @@ def generate(gen: Path, only: set | None = None) -> None:
         (gen / "manifest/nested_100000.json").write_text('{"clips": ' + "[" * 100000 + "]" * 100000 + "}")
     if want("preset/nested_100000.json"):
         (gen / "preset/nested_100000.json").write_text('{"tag_bias": ' + "[" * 100000 + "]" * 100000 + "}")
+    for rel, sep in (("input/cr_only_1.1m_rows.csv", "\r"), ("input/u2028_1.1m_rows.csv", "\u2028")):
+        if want(rel):
+            (gen / "input").mkdir(parents=True, exist_ok=True)
+            with open(gen / rel, "w", encoding="utf-8", newline="") as f:
+                f.write("time,left_x,left_y,right_x,right_y,walk,strafe" + sep)
+                f.write(("0,0,0,0,0,0,0" + sep) * 1_100_000)
     if want("preset/big_64mib.json"):
         with open(gen / "preset/big_64mib.json", "wb") as f:
             f.write(b"{")
