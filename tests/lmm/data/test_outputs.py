@@ -8,6 +8,7 @@ import shutil
 import stat
 import subprocess
 import sys
+from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
@@ -62,19 +63,24 @@ def test_atomic_write_never_renames_over_a_special_file(tmp_path):
     assert [p.name for p in tmp_path.iterdir()] == ["fifo"]   # no temporary file left
 
 
+@contextmanager
+def holder(take: str):
+    """A process that runs ``take`` (Python taking a lock) and then waits; yields its pid once it holds it."""
+    p = subprocess.Popen([sys.executable, "-c", f"import time\n{take}\nprint('held', flush=True)\ntime.sleep(30)"],
+                         cwd=ROOT, stdout=subprocess.PIPE, text=True)
+    try:
+        assert p.stdout.readline().strip() == "held"
+        yield p.pid
+    finally:
+        p.kill()
+        p.wait()
+
+
 def test_a_second_writer_of_one_path_is_refused_naming_the_holder(tmp_path):
     out = tmp_path / "same.bvh"
-    holder = subprocess.Popen([sys.executable, "-c", (
-        "import sys, time; from lmm.data.outputs import check_outputs; "
-        f"check_outputs([('--record', {str(out)!r})], []); print('locked', flush=True); time.sleep(30)")],
-        cwd=ROOT, stdout=subprocess.PIPE, text=True)
-    try:
-        assert holder.stdout.readline().strip() == "locked"
-        with pytest.raises(OutputError, match=rf"being written by another lmm-studio \(process {holder.pid}\)"):
+    with holder(f"from lmm.data.outputs import check_outputs; check_outputs([('--record', {str(out)!r})], [])") as pid:
+        with pytest.raises(OutputError, match=rf"being written by another lmm-studio \(process {pid}\)"):
             check_outputs([("--record", out)], [])
-    finally:
-        holder.kill()
-        holder.wait()
     check_outputs([("--record", out)], [])   # the holder is gone: the lock is free again
 
 
@@ -189,17 +195,7 @@ def test_a_stream_holds_its_path_until_closed(tmp_path):
     from lmm.data.stream import StreamFile
 
     out = tmp_path / "take.bvh"
-    holder = subprocess.Popen([sys.executable, "-c", (
-        "import time; from lmm.data.stream import StreamFile; "
-        f"s = StreamFile({str(out)!r}, b'h'); print('open', flush=True); time.sleep(30)")],
-        cwd=ROOT, stdout=subprocess.PIPE, text=True)
-    try:
-        assert holder.stdout.readline().strip() == "open"
-        with pytest.raises(OutputError, match=f"process {holder.pid}"):
+    with holder(f"from lmm.data.stream import StreamFile; s = StreamFile({str(out)!r}, b'h')") as pid:
+        with pytest.raises(OutputError, match=f"process {pid}"):
             StreamFile(out, b"h")
-    finally:
-        holder.kill()
-        holder.wait()
-    first = StreamFile(out, b"h")
-    first.close()
-    StreamFile(out, b"h").close()   # released by close: taken again at once
+    StreamFile(out, b"h").close()   # the holder is gone: the path is free
