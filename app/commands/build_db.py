@@ -83,6 +83,11 @@ def main(args) -> int:
     print(f"bytes     {db.pose_bytes()} ({db.pose_bytes() / 2**20:.1f} MiB pose data)")
     if checks is not None:
         _print_warnings(checks)
+    from lmm.data_fit import fit_warnings
+    from lmm.tuning import Tuning
+
+    for line in fit_warnings(db, Tuning()):   # speeds the default tuning asks for, bone roles that look wrong
+        print(f"warning: {line}", file=sys.stderr)
     return 0
 
 

@@ -101,6 +101,10 @@ def main(args) -> int:
     # headless: nothing shows the learned controller's debug nearest-neighbour comparison (the motion
     # does not depend on it), so it is not computed
     controller = make_controller(args.controller, db, features, tuning, args.weights, debug_comparison=False)
+    if not args.quiet:
+        from lmm.data_fit import fit_warnings
+        for line in fit_warnings(db, tuning):   # speeds beyond the data, bone roles that look wrong
+            print(f"warning: {line}", file=sys.stderr)
 
     recorder = writer = None
     if record_input is not None:
