@@ -169,3 +169,59 @@ def test_train_command(tmp_path, capsys):
     rc = main(["train", "stepper", "--out", str(tmp_path), "--iterations", "2", "--frames", "2000", "--quiet"])
     assert rc == 1  # no decompressor trained in this folder yet: a clear error
     assert "compressor.npz" in capsys.readouterr().err
+
+
+def test_auto_threads_is_one_on_two_cores_or_a_busy_machine_else_the_free_cores_less_one():
+    from lmm.offline.training_loop import auto_threads
+
+    assert [auto_threads(c, 0.0) for c in (1, 2, 3, 4, 16)] == [1, 1, 2, 3, 15]
+    assert auto_threads(2, 0.0) == auto_threads(2, 9.0) == 1
+    assert auto_threads(8, 6.5) == 1 and auto_threads(16, 4.0) == 11
+    assert auto_threads() >= 1
+
+
+def test_a_signal_inside_interrupts_held_waits_until_the_files_are_written():
+    import os
+    import signal
+
+    from lmm.offline.training_loop import interrupts_held
+
+    written = []
+    with pytest.raises(KeyboardInterrupt):
+        with interrupts_held():
+            os.kill(os.getpid(), signal.SIGINT)
+            written.append("compressor")
+            written.append("runtime")
+    assert written == ["compressor", "runtime"]
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+@pytest.mark.parametrize("sig,code", [("SIGINT", 130), ("SIGTERM", 143)])
+def test_train_stopped_by_a_signal_says_where_in_one_line_and_leaves_no_partial_file(tmp_path, sig, code):
+    import os
+    import signal
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    out = tmp_path / "weights"
+    p = subprocess.Popen([sys.executable, "-m", "app.cli", "train", "decompressor", "--iterations", "5000",
+                          "--log-every", "1", "--frames", "2000", "--threads", "1", "--out", str(out)],
+                         stderr=subprocess.PIPE, stdout=subprocess.PIPE, text=True, cwd=root,
+                         env=dict(os.environ, PYTHONPATH=str(root)))
+    lines = []
+    try:
+        for line in p.stderr:   # send the signal after the first iterations
+            lines.append(line)
+            if line.startswith("[decompressor] it 3 "):
+                p.send_signal(getattr(signal, sig))
+                break
+        rest, _ = p.communicate(timeout=120)[::-1]
+    finally:
+        p.kill()
+    assert p.returncode == code, "".join(lines) + rest
+    last = rest.strip().splitlines()[-1]
+    assert last.startswith("training stopped in decompressor at iteration ") and "of 5000" in last, rest
+    assert int(last.split("iteration ")[1].split()[0]) >= 3 and "no weights were written" in last
+    assert not list(out.glob("*.npz")) and not [f for f in os.listdir(out) if f.endswith(".tmp")]

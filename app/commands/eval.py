@@ -1,4 +1,7 @@
-"""``lmm-studio eval``: quality metrics of the learned motion matching networks (numpy, no torch)."""
+"""``lmm-studio eval``: quality metrics of the learned motion matching networks (numpy, no torch).
+
+The terminal gets a line per group of metrics; the whole set goes to ``--json OUT`` (``-``: standard
+output, no plots by default)."""
 from __future__ import annotations
 
 import json
@@ -16,7 +19,7 @@ MAX_QUERIES = 100_000
 def add_arguments(p) -> None:
     p.add_argument("--weights", help="runtime weights (default: the shipped lmm/data/weights/default.npz)")
     p.add_argument("--compressor", help="compressor weights (default: compressor.npz beside --weights)")
-    p.add_argument("--json", dest="json_path", help="write the metrics here as JSON")
+    p.add_argument("--json", dest="json_path", metavar="OUT", help="write the metrics here as JSON; - prints them")
     p.add_argument("--plots", help="folder for the PNG plots (default: beside --json, else no plots)")
     p.add_argument("--input", default="builtin:random:1", help="input for the MM vs LMM comparison")
     p.add_argument("--seconds", type=number_in(1.0, MAX_INPUT_SECONDS, unit="s"), default=60.0,
@@ -32,11 +35,16 @@ def add_arguments(p) -> None:
                                   "(default: $LMM_LAFAN1_DIR or ../shared/data/lafan1 beside the repository)")
 
 
+def _json_file(args):
+    """The file ``--json`` names (None for none or ``-``, standard output)."""
+    return None if args.json_path in (None, "-") else args.json_path
+
+
 def main(args) -> int:
     if args.reconstruction:
         return reconstruction(args)
     from app.commands.extras import require
-    if (args.json_path or args.plots) and not require("eval", "matplotlib", purpose=" for its plots"):
+    if (_json_file(args) or args.plots) and not require("eval", "matplotlib", purpose=" for its plots"):
         return 2
     from lmm.data.build import load_or_build, manifest_inputs
     from lmm.data.inputs import open_input
@@ -50,8 +58,8 @@ def main(args) -> int:
     # everything the user named is checked before the database load and the minutes of evaluation
     weights = Path(args.weights) if args.weights else DEFAULT_WEIGHTS
     comp = Path(args.compressor) if args.compressor else weights.with_name("compressor.npz")
-    plots_dir = args.plots or (str(Path(args.json_path).parent) if args.json_path else None)
-    check_outputs([("--json", args.json_path)] + [("--plots", Path(plots_dir) / name) for name in TRAINING_PLOTS
+    plots_dir = args.plots or (str(Path(_json_file(args)).parent) if _json_file(args) else None)
+    check_outputs([("--json", _json_file(args))] + [("--plots", Path(plots_dir) / name) for name in TRAINING_PLOTS
                                                   if plots_dir],
                   [("--weights", weights), ("--compressor", comp), ("--input", _input_file(args.input)),
                    *manifest_inputs(args.manifest)])
@@ -70,9 +78,13 @@ def main(args) -> int:
         metrics["plots"] = plot_training(plots_dir, read_loss_csv(loss_csv) if loss_csv.exists() else None, artifacts)
     from lmm.data.jsonio import json_safe, write_json
 
-    if args.json_path:
+    if args.json_path == "-":
+        print(json.dumps(json_safe(metrics), indent=2))
+    elif args.json_path:
         write_json(args.json_path, metrics)
-    print(json.dumps(json_safe(metrics), indent=2))
+        print(f"metrics written to {args.json_path}", file=sys.stderr)
+    if plots_dir:
+        print(f"plots in {plots_dir}", file=sys.stderr)
     return 0
 
 
@@ -100,7 +112,7 @@ def reconstruction(args) -> int:
     from lmm.reporting import plot_rotation_errors
     from lmm.tuning import Tuning
 
-    plots_dir = args.plots or (str(Path(args.json_path).parent) if args.json_path else None)
+    plots_dir = args.plots or (str(Path(_json_file(args)).parent) if _json_file(args) else None)
     if plots_dir and not require("eval", "matplotlib", purpose=" for its plots"):
         return 2
     takes, missing = load_heldout(args.heldout or HELDOUT_FILE, args.data)
@@ -109,7 +121,7 @@ def reconstruction(args) -> int:
     if not takes:
         print("lmm-studio eval: error: no held-out take found (see --data)", file=sys.stderr)
         return 1
-    check_outputs([("--json", args.json_path), ("--plots", Path(plots_dir) / "reconstruction.png" if plots_dir else None)],
+    check_outputs([("--json", _json_file(args)), ("--plots", Path(plots_dir) / "reconstruction.png" if plots_dir else None)],
                   [("--heldout", args.heldout), *manifest_inputs(args.manifest)])
     manifest = load_manifest(args.manifest or DEFAULT_MANIFEST)
     db, _ = load_or_build(args.manifest)
@@ -125,7 +137,10 @@ def reconstruction(args) -> int:
     names = list(controllers)
     summary = summarize(results, names)
     print(format_table(results, summary, names))
-    if args.json_path:
+    if args.json_path == "-":
+        from lmm.data.jsonio import json_safe
+        print(json.dumps(json_safe({"takes": results, "summary": summary}), indent=2))
+    elif args.json_path:
         from lmm.data.jsonio import write_json
         write_json(args.json_path, {"takes": results, "summary": summary})
     if plots_dir:

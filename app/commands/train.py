@@ -3,6 +3,8 @@
 Writes ``default.npz`` (decompressor, stepper, projector), ``compressor.npz`` and
 ``training_log.csv`` into ``--out``. The default recipe is the fast one measured to train the whole
 pipeline on the shipped database in under 45 minutes on 2 CPU cores (see lmm/data/weights/README.md).
+Prints a few summary lines; ``--json OUT`` (``-``: standard output) writes the whole summary. Ctrl+C or
+SIGTERM ends it with one line saying where it stopped; weights files are replaced whole or not at all.
 """
 from __future__ import annotations
 
@@ -25,6 +27,13 @@ MAX_THREADS = 256
 MIN_FRAMES = 256
 
 
+def thread_count(text: str) -> int:
+    """``auto`` (0: :func:`lmm.offline.training_loop.auto_threads` decides) or 1..MAX_THREADS."""
+    if text.strip().lower() == "auto":
+        return 0
+    return number_in(1, MAX_THREADS, integer=True)(text)
+
+
 def add_arguments(p) -> None:
     p.add_argument("stage", nargs="?", default="all", choices=STAGES,
                    help="what to train (default: all; decompressor trains the compressor with it)")
@@ -37,8 +46,12 @@ def add_arguments(p) -> None:
     p.add_argument("--manifest", help="dataset manifest (default: the shipped LAFAN1 locomotion set)")
     p.add_argument("--seed", type=number_in(0, 2 ** 32 - 1, integer=True), default=1234,
                    help="random seed, 0..2^32-1 (default 1234)")
-    p.add_argument("--threads", type=number_in(1, MAX_THREADS, integer=True), default=2,
-                   help="torch threads (default 2)")
+    p.add_argument("--threads", type=thread_count, default=0, metavar="auto|N",
+                   help=f"torch threads, auto or 1..{MAX_THREADS} (default auto: 1 on 2 cores or fewer, else the "
+                        "cores the load average leaves free less one; on a shared 2-core machine 2 threads "
+                        "took 3-7x as long as 1, see the README)")
+    p.add_argument("--json", dest="json_path", metavar="OUT",
+                   help="write the summary (losses, times, paths) here as JSON; - prints it")
     p.add_argument("--frames", type=number_in(MIN_FRAMES, 2 ** 31, integer=True),
                    help=f"train on the first N database frames only (quick checks), at least {MIN_FRAMES}")
     p.add_argument("--log-every", type=number_in(1, MAX_ITERATIONS, integer=True), default=200,
@@ -70,11 +83,15 @@ def main(args) -> int:
     from lmm.offline.training import COMPRESSOR_FILE, LOG_FILE, RUNTIME_FILE
 
     # a read-only or file --out, or one holding the manifest or a take, fails now, not after training
-    check_outputs([("--out", Path(args.out) / name) for name in (RUNTIME_FILE, COMPRESSOR_FILE, LOG_FILE)],
-                  manifest_inputs(args.manifest))
+    json_out = None if args.json_path in (None, "-") else args.json_path
+    check_outputs([("--out", Path(args.out) / name) for name in (RUNTIME_FILE, COMPRESSOR_FILE, LOG_FILE)]
+                  + [("--json", json_out)], manifest_inputs(args.manifest))
     db, _ = load_or_build(args.manifest)
     features = build_features(db)
-    recipe = Recipe(seed=args.seed, threads=args.threads, log_every=args.log_every)
+    from lmm.offline.training_loop import auto_threads
+
+    threads = args.threads or auto_threads()
+    recipe = Recipe(seed=args.seed, threads=threads, log_every=args.log_every)
     stages = NETWORKS if args.stage == "all" else (args.stage,)
     for name in stages:
         s = recipe.stage(name)
@@ -89,15 +106,34 @@ def main(args) -> int:
     try:
         if par.is_main:
             where = f"{par.device}" + (f" x {par.world} processes (DDP)" if par.distributed else "")
+            how = "auto" if not args.threads else "--threads"
             print(f"training {', '.join(stages)} on {db.name} ({db.n_frames} frames, key {db.key[:16]}) on "
-                  f"{where} -> {args.out}", file=sys.stderr)
+                  f"{where}, {threads} thread{'s' if threads > 1 else ''} ({how}) -> {args.out}", file=sys.stderr)
         t0 = time.perf_counter()
         summary = train_pipeline(db, features, stages, recipe, args.out, frames=frames, quiet=args.quiet,
                                  resume=args.resume, par=par)  # WeightsError / OSError: one line from app/cli.py
         summary["command_wall_s"] = round(time.perf_counter() - t0, 1)
         summary["device"], summary["processes"] = str(par.device), par.world
+        summary["threads"] = threads
         if par.is_main:
-            print(json.dumps(summary, indent=2))
+            print(summary_lines(summary))
+            if args.json_path == "-":
+                print(json.dumps(summary, indent=2))
+            elif args.json_path:
+                from lmm.data.jsonio import write_json
+                write_json(args.json_path, summary)
     finally:
         teardown(par)
     return 0
+
+
+def summary_lines(summary: dict) -> str:
+    """A few lines: per stage its loss from first to last logged iteration and its time, then the files."""
+    lines = []
+    for name, last in summary["final_loss"].items():
+        lines.append(f"{name:<12} loss {summary['first_loss'][name]:.4f} -> {last:.4f} in "
+                     f"{summary['wall_s'].get(name, summary['wall_s'].get(name + '_resumed', 0.0)):.1f} s")
+    paths = summary["paths"]
+    lines.append(f"wrote {paths['runtime']}, {paths['compressor']}, {paths['log']} "
+                 f"({summary['command_wall_s']:.1f} s, {summary['threads']} thread{'s' if summary['threads'] > 1 else ''})")
+    return "\n".join(lines)

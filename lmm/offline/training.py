@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -31,7 +32,7 @@ from lmm.offline.networks import MLPSpec, NormalizedMLP
 from lmm.offline.projector_training import train_projector
 from lmm.offline.stepper_training import train_stepper
 from lmm.offline.training_data import prepare
-from lmm.offline.training_loop import Recipe, StageSettings
+from lmm.offline.training_loop import LossLog, Recipe, StageSettings, auto_threads, interrupts_held
 
 __all__ = ["COMPRESSOR_FILE", "LOG_FILE", "NETWORKS", "RUNTIME_FILE", "Recipe", "StageSettings", "train_pipeline"]
 
@@ -83,12 +84,39 @@ def train_pipeline(db, features: Features, stages=NETWORKS, recipe: Recipe | Non
     the files already in ``out_dir``. ``resume``: stepper/projector start from the ones in ``out_dir``
     (a further schedule on top of a finished run) instead of from scratch. ``par``: the device and, under
     torchrun, the processes taking part (see :mod:`lmm.offline.distributed`; only rank 0 writes files).
-    Returns a summary."""
+    Returns a summary. Interrupted (Ctrl+C, SIGTERM), it writes one line saying where it stopped and
+    which files ``out_dir`` holds, and re-raises; weights files are only ever replaced whole, together."""
     par = par or Parallel(torch.device("cpu"))
     recipe = recipe or Recipe()
+    if not recipe.threads:
+        recipe = replace(recipe, threads=auto_threads())
     stream = stream if stream is not None else sys.stderr
     torch.set_num_threads(recipe.threads)
-    out_dir = Path(out_dir)
+    saved: list[str] = []
+    LossLog.latest = None
+    try:
+        return _train(db, features, stages, recipe, Path(out_dir), frames, quiet, stream, resume, par, saved)
+    except KeyboardInterrupt:
+        if par.is_main:
+            stream.write(interrupted_line(LossLog.latest, saved, out_dir) + "\n")
+            stream.flush()
+        raise
+
+
+def interrupted_line(log: LossLog | None, saved: list[str], out_dir) -> str:
+    """One line: the stage and iteration an interrupted training stopped at, and what ``out_dir`` holds."""
+    if log is None:
+        where = "before the first iteration"
+    elif log.progress.count >= log.progress.total:
+        where = f"after {log.network}'s {log.progress.total} iterations"
+    else:
+        log.close()   # ends the progress bar's line
+        where = f"in {log.network} at iteration {log.progress.count} of {log.progress.total}"
+    held = f"the weights there were saved at '{saved[-1]}'" if saved else "no weights were written by this run"
+    return f"training stopped {where}; {held} ({out_dir})"
+
+
+def _train(db, features, stages, recipe, out_dir, frames, quiet, stream, resume, par, saved) -> dict:
     out_dir.mkdir(parents=True, exist_ok=True)
     runtime_path, comp_path, csv_path = out_dir / RUNTIME_FILE, out_dir / COMPRESSOR_FILE, out_dir / LOG_FILE
     t_all = time.perf_counter()
@@ -125,14 +153,16 @@ def train_pipeline(db, features: Features, stages=NETWORKS, recipe: Recipe | Non
             return
         runtime = {n: nets[n] for n in NETWORKS if n in nets}
         extra = {"wall_s": wall, "note": note}
-        if "compressor" in nets:
-            _save_networks(comp_path, {"compressor": nets["compressor"]}, meta, extra)
+        with interrupts_held():   # the compressor and the runtime weights belong together: both or neither
+            if "compressor" in nets:
+                _save_networks(comp_path, {"compressor": nets["compressor"]}, meta, extra)
+                if runtime:
+                    z = compute_latents(nets["compressor"], data).numpy()
+                    extra["latent_mean"] = [float(v) for v in z.mean(0)]
+                    extra["latent_std"] = [float(v) for v in z.std(0)]
             if runtime:
-                z = compute_latents(nets["compressor"], data).numpy()
-                extra["latent_mean"] = [float(v) for v in z.mean(0)]
-                extra["latent_std"] = [float(v) for v in z.std(0)]
-        if runtime:
-            _save_networks(runtime_path, runtime, meta, extra)
+                _save_networks(runtime_path, runtime, meta, extra)
+            saved.append(note)
 
     if "decompressor" in stages:
         s = recipe.decompressor

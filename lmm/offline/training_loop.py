@@ -1,13 +1,18 @@
 """What the three training stages' loops share: the recipe (each stage's schedule), the optimiser with
-its warm-up and cosine decay, one optimisation step, the seeding, and the loss log (console lines and
-the CSV of every stage's terms).
+its warm-up and cosine decay, one optimisation step, the seeding, the loss log (console lines and
+the CSV of every stage's terms), the thread count a machine should train with, and holding Ctrl+C and
+SIGTERM while a set of files is written.
 """
 from __future__ import annotations
 
 import csv
 import math
+import os
+import signal
 import sys
+import threading
 import time
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -38,7 +43,7 @@ class Recipe:
     projector_neighbours: int = 16  # database neighbours per frame in the cell term (see train_projector)
     projector_margin: float = 0.1   # how far inside its nearest neighbour's cell a projection should land
     seed: int = 1234
-    threads: int = 2
+    threads: int = 0               # torch threads; 0: auto_threads() on the machine that trains
     latent: int = 32
     hidden: int = 512
     log_every: int = 200
@@ -63,8 +68,53 @@ def make_optimizer(params, s: StageSettings):
     return opt, torch.optim.lr_scheduler.LambdaLR(opt, factor)
 
 
+def auto_threads(cores: int | None = None, load: float | None = None) -> int:
+    """The torch thread count for this machine: 1 where there are 2 cores or fewer, else the cores the
+    last minute's load average leaves free, less one (for the system), at least 1.
+
+    Measured on a 2-core machine shared with other work (load 3-6): 30 decompressor iterations took
+    7.2-8.7 s with 1 thread and 23-60 s with 2 (README, "Training threads"); torch's threads spin waiting for
+    each other when a core is taken by someone else, so more threads than free cores is far slower."""
+    if cores is None:
+        try:
+            cores = len(os.sched_getaffinity(0))
+        except (AttributeError, OSError):
+            cores = os.cpu_count() or 1
+    if load is None:
+        try:
+            load = os.getloadavg()[0]
+        except (AttributeError, OSError):
+            load = 0.0
+    if cores <= 2:
+        return 1
+    return max(1, min(cores - 1, int(cores - load) - 1))
+
+
+@contextmanager
+def interrupts_held():
+    """Ctrl+C (SIGINT) and SIGTERM wait until the block ends, then act as they would have: the files
+    written inside (the compressor and the runtime weights, which belong together) are all written or
+    none. Only the main thread receives signals; elsewhere the block runs as is."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    caught: list[int] = []
+    hold = lambda signum, frame: caught.append(signum)  # noqa: E731
+    previous = {sig: signal.signal(sig, hold) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+    if caught:
+        signal.raise_signal(caught[0])   # now handled by the handler that was there before
+
+
 class LossLog:
-    """Collects per-iteration losses, prints a line every ``log_every`` iterations and writes a CSV."""
+    """Collects per-iteration losses, prints a line every ``log_every`` iterations and writes a CSV.
+    ``LossLog.latest`` is the last one started (where an interrupted training stopped)."""
+
+    latest: "LossLog | None" = None
 
     def __init__(self, network: str, total: int, log_every: int, csv_path=None, stream=None, quiet=False):
         self.network = network
@@ -77,6 +127,7 @@ class LossLog:
         self.csv_path = Path(csv_path) if csv_path else None
         self.start = time.perf_counter()
         self.progress = Progress(total, label=network, stream=self.stream, enabled=not quiet)
+        LossLog.latest = self
 
     def add(self, iteration: int, lr: float, terms: dict[str, float]) -> None:
         for k, v in terms.items():
@@ -96,7 +147,8 @@ class LossLog:
                                   f"{row['elapsed_s']:.0f}s | {terms_txt}\n")
                 self.stream.flush()
             if self.csv_path:
-                self._write_csv()
+                with interrupts_held():
+                    self._write_csv()
 
     def _write_csv(self) -> None:
         keys: list[str] = []

@@ -47,7 +47,8 @@ def test_ddp_smoke_two_cpu_processes(tmp_path):
            "OMP_NUM_THREADS": "1"}
     cmd = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node", "2",
            "-m", "app.cli", "train", "all", "--device", "cpu", "--manifest", str(_tiny_manifest(tmp_path)),
-           "--iterations", "3", "--batch", "16", "--threads", "1", "--out", str(out), "--quiet"]
+           "--iterations", "3", "--batch", "16", "--threads", "1", "--out", str(out), "--quiet",
+           "--json", "-"]
     done = subprocess.run(cmd, env=env, cwd=tmp_path, capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr[-3000:]
     assert "x 2 processes (DDP)" in done.stderr
