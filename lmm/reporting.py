@@ -213,8 +213,8 @@ def _draw_heatmap(d, hm: Heatmap, box, font, title: str = "") -> None:
 
 def _draw_histograms(d, cov: Coverage, box, font) -> None:
     x0, y0, x1, y1 = box
-    d.text((x0 + 8, y0), "per-channel histograms of the database's raw feature values (one line per dimension)",
-           fill=TEXT, font=font)
+    d.text((x0 + 8, y0), "per-channel histograms of the database's raw feature values (one line per dimension; "
+                         "x: the value, from the lowest to the highest, y: frames per bin)", fill=TEXT, font=font)
     hists = cov.histograms
     ncols = 4
     nrows = max((len(hists) + ncols - 1) // ncols, 1)
@@ -285,7 +285,7 @@ RESIDUAL_LIMIT_BW = 0.3
 def draw_plausibility_png(result, path, title: str = "") -> Path:
     """A motion's plausibility (:class:`lmm.physics.plausibility.Plausibility`) in one PNG: root residual
     force over the frames (with the 0.3 body-weight line), penetration per foot and sliding per foot with
-    its contacts shaded."""
+    its contacts shaded; each row's x axis is time in seconds, its y axis the quantity its label names."""
     from PIL import Image, ImageDraw
 
     width, row_height, margin = PLAUSIBILITY_WIDTH, PLAUSIBILITY_ROW_HEIGHT, PLAUSIBILITY_MARGIN
@@ -321,6 +321,12 @@ def draw_plausibility_png(result, path, title: str = "") -> Path:
         draw.text((x0, y0 - 16), label, fill=TEXT)
         draw.text((6, y0), f"{peak:.3g}", fill=GRID)
         draw.text((6, y1 - 12), "0", fill=GRID)
+        seconds = (n - 1) / result.fps if result.fps else 0.0
+        for k in range(5):   # the x axis: time ticks under each row, the last one with its unit
+            x = x0 + (x1 - x0) * k / 4
+            text = f"{seconds * k / 4:.3g}" + (" s (time)" if k == 4 else "")
+            draw.line((x, y1, x, y1 + 4), fill=GRID)
+            draw.text((x - (0 if k == 0 else 6 * len(text) if k == 4 else 12), y1 + 5), text, fill=TEXT)
     return write_png(path, img)
 
 
@@ -375,6 +381,7 @@ def plot_training(out_dir, losses: dict | None, artifacts: dict) -> list[str]:
                     ax.semilogy(d["iteration"], v, lw=0.8, alpha=0.7, label=k)
             ax.set_title(name)
             ax.set_xlabel("iteration")
+            ax.set_ylabel("loss (log scale)")
             ax.legend(fontsize=5, ncol=2)
         save(fig, "training_losses.png")
     if artifacts.get("latents") is not None:
@@ -384,6 +391,7 @@ def plot_training(out_dir, losses: dict | None, artifacts: dict) -> list[str]:
         for k in range(min(lat.shape[1], 8)):
             ax.plot(t, lat[:, k], lw=0.8, label=f"z{k}")
         ax.set_xlabel("time (s)")
+        ax.set_ylabel("latent value")
         ax.set_title("LMM latent (first 8 dims)")
         ax.legend(fontsize=6, ncol=4)
         save(fig, "latent_traces.png")
@@ -394,6 +402,7 @@ def plot_training(out_dir, losses: dict | None, artifacts: dict) -> list[str]:
         ax.bar(range(len(names)), vals)
         ax.set_xticks(range(len(names)))
         ax.set_xticklabels(names, rotation=70, fontsize=7)
+        ax.set_xlabel("joint")
         ax.set_ylabel("mean error (cm)")
         ax.set_title("decompressor: character-space joint position error")
         save(fig, "per_joint_error.png")
