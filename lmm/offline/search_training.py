@@ -52,7 +52,7 @@ class SearchRecipe:
     encoder_fcs: list = field(default_factory=lambda: [128, 64])
     classifier_hidden: int = 512
     seed: int = 1
-    threads: int = 2
+    threads: int = 0               # torch threads; 0: training_loop.auto_threads() (see train --threads)
 
 
 class TorchConvNet(nn.Module):
@@ -209,6 +209,11 @@ def train(takes: list[data.Take], kind: str, recipe: SearchRecipe | None = None,
     """Train the ``encoder`` or the ``classifier`` on the training part of ``takes``; the network and a
     record of the run (recipe, split, loss curve, wall time)."""
     r = recipe or SearchRecipe()
+    if not r.threads:
+        from dataclasses import replace
+
+        from lmm.offline.training_loop import auto_threads
+        r = replace(r, threads=auto_threads())
     torch.set_num_threads(r.threads)
     torch.manual_seed(r.seed)
     rng = np.random.default_rng(r.seed)
@@ -268,7 +273,7 @@ def main(argv=None) -> int:
     p.add_argument("--data", help=f"folder of BVH takes (default: {data.DEFAULT_DATA_DIR})")
     p.add_argument("--out", default=str(enc.DEFAULT_WEIGHTS.parent), help="folder for the .npz files")
     p.add_argument("--steps", type=int, default=SearchRecipe.steps)
-    p.add_argument("--threads", type=int, default=SearchRecipe.threads)
+    p.add_argument("--threads", type=int, default=SearchRecipe.threads, help="torch threads (default 0: auto)")
     p.add_argument("--only", choices=["encoder", "classifier"])
     p.add_argument("--temporal", type=float, default=SearchRecipe.temporal)
     p.add_argument("--supervised", type=float, default=SearchRecipe.supervised)
