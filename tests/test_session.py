@@ -318,3 +318,74 @@ def test_seeking_from_checkpoints_gives_the_recorded_poses(recorded, controller)
     assert seeker.stepped < len(ticks) * 60 + session.ticks     # never from the start again
     assert sorted(seeker.checkpoints) == list(range(0, session.ticks + 1, 60))[: len(seeker.checkpoints)]
     session.close()
+
+
+def test_why_not_a_frame_adds_up_to_the_searchs_own_costs(recorded):
+    """explain_frame on the controller just before a searching tick: the ranked candidates' totals and
+    channel costs are the search's own, the continuing pose has no transition cost, and a frame next to the
+    playing one is excluded by the window rule."""
+    import numpy as np
+
+    from app.commands.session_common import open_with_database
+    from lmm.session.seek import SessionSeeker
+    from lmm.session.why_not import explain_frame
+
+    session, db, features, _ = open_with_database(recorded["mm"][0])
+    seeker = SessionSeeker(session, db, features, every=60)
+    checked = 0
+    for tick in range(101, 700, 37):
+        _, snaps = seeker.seek(tick)
+        snap = snaps["mm"]
+        if not snap.searched:
+            continue
+        seeker.seek(tick - 1)                        # the controller as the search found it
+        mm, cands = seeker.controllers["mm"], snap.candidates
+        for i, frame in enumerate(cands.frames.tolist()):
+            why = explain_frame(mm, snap.query, frame)
+            assert why["excluded"] == "", why
+            assert why["total"] == pytest.approx(float(cands.costs[i]), rel=1e-5, abs=1e-6), (tick, frame)
+            assert [why["channels"][n] for n in cands.channel_names] == pytest.approx(
+                cands.channel_costs[i].tolist(), rel=1e-5, abs=1e-6)
+            assert why["continuing"] == (frame == mm.frame) and (why["transition_cost"] == 0.0) == why["continuing"]
+        near = explain_frame(mm, snap.query, mm.frame + 1)
+        assert "exclude_current_window_frames" in near["excluded"] and np.isnan(near["total"])
+        checked += 1
+    assert checked >= 3
+    assert "outside" in explain_frame(seeker.controllers["mm"], snap.query, db.n_frames)["excluded"]
+    session.close()
+
+
+def test_what_if_reranks_a_tick_as_a_fresh_search_with_that_tuning(recorded):
+    """what_if with a scratch tuning (tag bias, transition cost, exclusion window) on the controller as a
+    search found it gives the candidates that stepping that tick again with the scratch tuning gives."""
+    from app.commands.session_common import open_with_database
+    from lmm.session.seek import SessionSeeker
+    from lmm.session.why_not import what_if
+
+    session, db, features, _ = open_with_database(recorded["mm"][0])
+    seeker = SessionSeeker(session, db, features, every=60)
+    compared = changed = 0
+    for tick in range(101, 700, 41):
+        _, snaps = seeker.seek(tick)
+        if not snaps["mm"].searched:
+            continue
+        query = snaps["mm"].query
+        seeker.seek(tick - 1)
+        mm = seeker.controllers["mm"]
+        scratch = seeker.tuning.copy()
+        scratch.set("transition_cost", 0.0)
+        scratch.set("exclude_current_window_frames", 5)
+        scratch.set("tag_bias", scratch.tag_bias["walk"] + 0.5, "walk")
+        got = what_if(mm, query, scratch)
+        assert mm.tuning is seeker.tuning
+        changed += got.frames.tolist() != snaps["mm"].candidates.frames.tolist()
+        for name, value in scratch.to_dict().items():          # the same tick stepped with the scratch tuning
+            setattr(seeker.tuning, name, value)
+        _, fresh = seeker.step()
+        cands = fresh["mm"].candidates
+        assert fresh["mm"].searched and got.frames.tolist() == cands.frames.tolist(), tick
+        assert got.costs.tolist() == cands.costs.tolist()
+        seeker.go_before(0)                                     # back to a checkpoint: the recorded tuning
+        compared += 1
+    assert compared >= 3 and changed >= 1                  # the scratch tuning did re-rank
+    session.close()
