@@ -70,11 +70,14 @@ def main(args) -> int:
         record_input = Path(args.record_input) if args.record_input else out.with_name(out.stem + ".input.csv")
     elif args.record_input:
         record_input = Path(args.record_input)
-    check_outputs([("--record", args.record), ("--record-input", record_input),
-                   ("--metrics-json", args.metrics_json), ("--session", args.session)],
-                  [("--input", None if str(args.input).startswith("builtin:") else args.input),
-                   ("--tuning", args.tuning), ("--events", args.events), ("--weights", args.weights),
-                   ("--manifest", args.manifest)])
+    outputs = [("--record", args.record), ("--record-input", record_input), ("--metrics-json", args.metrics_json),
+               ("--session", args.session)]
+    inputs = [("--input", None if str(args.input).startswith("builtin:") else args.input),
+              ("--tuning", args.tuning), ("--events", args.events), ("--weights", args.weights)]
+    if any(path for _, path in outputs):   # the manifest and its takes too (read only when there are outputs)
+        from lmm.data.build import manifest_inputs
+        inputs += manifest_inputs(args.manifest)
+    check_outputs(outputs, inputs)
     source = open_input(args.input, args.seconds)
     preset = Tuning.read_preset(args.tuning) if args.tuning else None
     tuning = Tuning.from_preset(preset, args.tuning) if preset is not None else Tuning()
