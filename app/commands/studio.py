@@ -74,6 +74,22 @@ def main(args: argparse.Namespace) -> int:
     if args.width < 640 or args.height < 400:
         print("lmm-studio: error: the window must be at least 640x400", file=sys.stderr)
         return 2
+    if args.open:
+        # the session names its database and networks: the studio opens those (one line when it cannot)
+        from lmm.errors import InputError
+        from lmm.session.reader import open_session
+
+        try:
+            f = open_session(args.open)
+        except InputError as e:
+            print(f"lmm-studio: error: {e}", file=sys.stderr)
+            return 1
+        args.manifest = args.manifest or f.database["manifest"] or None
+        kinds = {kind: weights for kind, weights, _ in f.controllers.values()}
+        args.weights = args.weights or kinds.get("lmm") or None
+        args.no_lmm = args.no_lmm or "lmm" not in kinds
+        args.input = None
+        f.close()
     if not _has_display():
         # dearpygui aborts the whole process without a display: say so instead
         print("lmm-studio: error: no display (DISPLAY is not set). Run it on a desktop, or under Xvfb: "
@@ -96,22 +112,6 @@ def main(args: argparse.Namespace) -> int:
         except TuningError as e:
             print(f"lmm-studio: error: {e}", file=sys.stderr)
             return 2
-    if args.open:
-        # the session names its database and networks: the studio opens those (one line when it cannot)
-        from lmm.errors import InputError
-        from lmm.session.reader import open_session
-
-        try:
-            f = open_session(args.open)
-        except InputError as e:
-            print(f"lmm-studio: error: {e}", file=sys.stderr)
-            return 1
-        args.manifest = args.manifest or f.database["manifest"] or None
-        kinds = {kind: weights for kind, weights, _ in f.controllers.values()}
-        args.weights = args.weights or kinds.get("lmm") or None
-        args.no_lmm = args.no_lmm or "lmm" not in kinds
-        args.input = None
-        f.close()
     from app import watchdog
     from app.studio import Studio, StudioOptions
 

@@ -123,3 +123,13 @@ def test_a_reopened_session_shows_any_tick_and_goes_live_again(dbf, tmp_path):
     assert p.ticks_due(1 / 60) == 0 and p.displayed_tick().tick == 179
     p.go_live()
     assert s.controllers["mm"] is live and s.history is not h and p.live and studio.reviewed is None
+
+
+def test_open_of_a_bad_session_is_one_line(tmp_path, capsys):
+    """lmm-studio --open is checked before any window (no display needed): one line, exit 1."""
+    bad = tmp_path / "bad.lmmsession"
+    bad.write_bytes(b"SQLite format 3\0" + b"\0" * 50)
+    for path in (bad, tmp_path / "missing.lmmsession"):
+        assert cli_main(["--open", str(path)]) == 1
+        err = capsys.readouterr().err.strip()
+        assert err.startswith("lmm-studio: error: ") and str(path) in err and "\n" not in err, err
