@@ -69,7 +69,7 @@ class Screenshots:
         a hidden temporary file beside the target, renamed over it once complete (:meth:`finish`),
         so a full disk or a crash never leaves half a PNG under the target's name; a target that
         cannot be written is reported by :meth:`finish`."""
-        from viewer.png import check_writable
+        from lmm.data.atomic import check_writable
 
         out = Path(path)
         try:

@@ -13,10 +13,10 @@ Layers of ``lmm``, lowest first; a module may import its own layer and the layer
   sessions (record, replay, trace, A/B) and the pictures;
 * ``offline``: training, evaluation and export (torch).
 
-``viewer`` stands alone (numpy, moderngl and its own modules; pillow for screenshots); ``app`` sits on top
+``viewer`` stands alone (numpy, moderngl, glfw and its own modules; it writes no files); ``app`` sits on top
 and may import everything. Third-party packages where they belong: torch only in ``lmm.offline``,
 dearpygui only in ``app``, moderngl and glfw only in ``viewer`` and ``app``, pillow and matplotlib only in
-``lmm.reporting``, ``viewer.png`` and ``app``.
+``lmm.reporting`` and ``app``.
 """
 from __future__ import annotations
 
@@ -51,11 +51,11 @@ PLACES = {
     "dearpygui": ("app",),
     "moderngl": ("viewer", "app"),
     "glfw": ("viewer", "app"),
-    "PIL": ("lmm.reporting", "viewer.png", "app"),
+    "PIL": ("lmm.reporting", "app"),
     "matplotlib": ("lmm.reporting", "app"),
 }
 #: what the viewer may import besides itself and the standard library
-VIEWER_THIRD_PARTY = ("numpy", "moderngl", "glfw", "PIL")
+VIEWER_THIRD_PARTY = ("numpy", "moderngl", "glfw")
 
 
 def _within(module: str, prefix: str) -> bool:

@@ -141,9 +141,10 @@ class PlayerWindow:
         glfw.set_window_title(self.window, f"{self.title} | frame {pb.frame}/{pb.n_frames - 1} | {state} | "
                                            f"{follow} | {self._fps:.0f} fps")
 
-    def run(self, max_frames: int | None = None, screenshot_path: str | None = None) -> int:
-        """Play until the window closes (or ``max_frames`` frames were shown, then optionally save
-        the window's framebuffer to ``screenshot_path``)."""
+    def run(self, max_frames: int | None = None, screenshot_path: str | None = None, save_image=None) -> int:
+        """Play until the window closes (or ``max_frames`` frames were shown, then optionally hand the
+        window's framebuffer, an ``(H, W, 3)`` uint8 array, to ``save_image(screenshot_path, image)``: the
+        caller's PNG writer, since the viewer writes no files)."""
         last = time.perf_counter()
         shown = 0
         try:
@@ -157,9 +158,8 @@ class PlayerWindow:
                 self.draw()
                 shown += 1
                 if max_frames is not None and shown >= max_frames:
-                    if screenshot_path:
-                        from .png import save_png
-                        save_png(screenshot_path, self.screenshot())
+                    if screenshot_path and save_image is not None:
+                        save_image(screenshot_path, self.screenshot())
                     break
                 glfw.swap_buffers(self.window)
                 self._update_title(now)

@@ -108,7 +108,8 @@ def _screenshot(args, parents, names, positions) -> int:
     from viewer.player import AnimationView
     from viewer.renderer import Renderer
 
-    from viewer.png import check_writable, save_png
+    from lmm.data.atomic import check_writable
+    from lmm.reporting import write_png
 
     try:
         check_writable(args.screenshot)      # before the rendering: a read-only target fails at once
@@ -128,7 +129,7 @@ def _screenshot(args, parents, names, positions) -> int:
     image = renderer.render(view.scene, view.camera, dtype=np.uint8)
     out = Path(args.screenshot)
     try:
-        save_png(out, image[..., :3])
+        write_png(out, image[..., :3])
     except OSError as e:
         _error(f"{e.filename}: {e.strerror}")
         return 1
@@ -193,14 +194,15 @@ def main(args: argparse.Namespace) -> int:
     window.view.follow = not args.no_follow
     window.playback.paused = args.paused
     if args.window_screenshot:
-        from viewer.png import check_writable
+        from lmm.data.atomic import check_writable
         try:
             check_writable(args.window_screenshot)
         except OSError as e:
             _error(f"{e.filename}: {e.strerror}")
             return 1
     try:
-        return window.run(max_frames=args.frames, screenshot_path=args.window_screenshot)
+        from lmm.reporting import write_png
+        return window.run(max_frames=args.frames, screenshot_path=args.window_screenshot, save_image=write_png)
     except OSError as e:      # the screenshot could not be written after all (e.g. a full disk)
         _error(f"{e.filename}: {e.strerror}")
         return 1

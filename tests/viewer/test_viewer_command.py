@@ -203,7 +203,7 @@ def test_screenshot_to_an_unwritable_target_is_one_line(capsys, tmp_path, target
 def test_screenshot_to_a_read_only_or_full_disk_leaves_no_file(capsys, tmp_path, monkeypatch):
     import errno
 
-    import viewer.png as png
+    import lmm.data.atomic as png      # the one atomic writer under lmm.reporting.write_png
 
     out = tmp_path / "shot.png"
     real_open = png.os.open
