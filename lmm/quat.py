@@ -473,7 +473,7 @@ def frame_blocks(n: int, block: int = FRAME_BLOCK) -> list[slice]:
     """Slices of ``range(n)``, ``block`` frames each. Maths that is per frame runs block by block on long
     takes: each numpy temporary is then tens of KB that stay in cache, instead of a new array of tens of
     MB per operation (fresh pages to fault in, memory traffic). No operation mixes frames, so the result
-    is the same bit for bit (tests/test_database.py)."""
+    is the same bit for bit (tests/lmm/data/test_database.py)."""
     return [slice(i, min(i + block, n)) for i in range(0, n, block)]
 
 

@@ -8,7 +8,7 @@ from lmm.controller import InputState
 from lmm.data.inputs import (BUILTIN_SCENARIOS, InputCsvWriter, InputError, InputLog, builtin, builtin_names,
                         load_input_csv, open_input, save_input_csv)
 
-CORPUS = Path(__file__).parent / "input_corpus"
+CORPUS = Path(__file__).resolve().parents[2] / "input_corpus"
 
 # file -> (line, column) the error must name
 BROKEN = {

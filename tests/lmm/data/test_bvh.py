@@ -19,7 +19,7 @@ from hypothesis import strategies as st
 from lmm import kinematics, quat
 from lmm.data import bvh
 
-HERE = Path(__file__).resolve().parent
+HERE = Path(__file__).resolve().parents[2]
 CORPUS = HERE / "bvh_corpus"
 SHIPPED = sorted((HERE.parent / "lmm" / "data" / "lafan1").glob("*.bvh.gz"))
 ORIGINALS = Path("/work/shared/data/lafan1")

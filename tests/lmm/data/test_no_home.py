@@ -9,7 +9,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[3]
 
 # the uid's passwd entry removed (what a container's unnamed uid sees), then the command line
 NO_PASSWD = ("import pwd, sys\n"

@@ -18,7 +18,7 @@ from lmm.mm import MotionMatchingController
 from lmm.data.recording import BVHRecorder
 from lmm.runner import run_headless
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[3]
 
 
 def _record(db, features, path, seconds=4.0, source="zigzag", **kw):
