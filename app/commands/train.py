@@ -9,6 +9,7 @@ SIGTERM ends it with one line saying where it stopped; weights files are replace
 from __future__ import annotations
 
 import json
+import os
 import sys
 import time
 
@@ -84,8 +85,10 @@ def main(args) -> int:
 
     # a read-only or file --out, or one holding the manifest or a take, fails now, not after training
     json_out = None if args.json_path in (None, "-") else args.json_path
+    # under torchrun only rank 0 writes the files, so only it holds their locks (the others check the paths)
+    writer = os.environ.get("RANK", "0") == "0"
     check_outputs([("--out", Path(args.out) / name) for name in (RUNTIME_FILE, COMPRESSOR_FILE, LOG_FILE)]
-                  + [("--json", json_out)], manifest_inputs(args.manifest))
+                  + [("--json", json_out)], manifest_inputs(args.manifest), lock=writer)
     db, _ = load_or_build(args.manifest)
     features = build_features(db)
     from lmm.offline.training_loop import auto_threads
