@@ -9,8 +9,8 @@ import pytest
 
 from lmm.data import bvh
 
-ROOT = Path(__file__).resolve().parents[1]
-CORPUS = Path(__file__).parent / "input_corpus"
+ROOT = Path(__file__).resolve().parents[3]
+CORPUS = Path(__file__).resolve().parents[2] / "input_corpus"
 
 
 def cli(*args, timeout=300):

@@ -10,7 +10,7 @@ import pytest
 from app.cli import main
 from lmm.data import bvh
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[3]
 
 
 @pytest.fixture(scope="module")

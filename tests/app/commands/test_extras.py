@@ -13,7 +13,7 @@ import pytest
 
 from app.commands.extras import require
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[3]
 
 RUN_WITHOUT = ("import sys\n"
                "for name in sys.argv[1].split(','):\n"

@@ -11,7 +11,7 @@ import pytest
 from app import cli
 from lmm.errors import InputError
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[3]
 
 
 @pytest.fixture

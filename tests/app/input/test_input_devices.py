@@ -22,7 +22,7 @@ from app.input.keyboard import ACTION_KEYS, DEARPYGUI_KEYS
 from app.input.state import radial_deadzone
 from lmm.controller import InputState
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[3]
 DT = 1.0 / 60.0
 
 
