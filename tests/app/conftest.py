@@ -104,3 +104,11 @@ def run_studio(xvfb_display, studio_cache, tmp_path):
         return StudioRun(proc.returncode, proc.stdout, proc.stderr, data, config, tmp_path)
 
     return run
+
+
+@pytest.fixture(scope="module")
+def dbf(db):
+    """The default database (the session's) with features of its own per module (tests change weights)."""
+    from lmm.features import build_features
+
+    return db, build_features(db)

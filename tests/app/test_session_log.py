@@ -13,7 +13,6 @@ from lmm.factory import make_controllers
 from lmm.session.reader import open_session
 from lmm.tuning import Tuning
 
-from test_panel_data import dbf  # noqa: F401  (the database fixture, shared)
 
 
 def _session(dbf):

@@ -2,7 +2,7 @@
 
 ``make_good(path)`` records a 2 s session with ``lmm-studio run --session`` (a subprocess, so it works from
 the corpus generator); ``make_bad(good, folder)`` writes every case of :data:`BAD` into ``folder``. The same
-files serve the corpus (tests/corpus/corpus_cases.py, ``replay`` on each) and tests/test_session.py.
+files serve the corpus (tests/corpus/corpus_cases.py, ``replay`` on each) and tests/lmm/session/test_session.py.
 """
 from __future__ import annotations
 

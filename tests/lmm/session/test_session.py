@@ -21,7 +21,7 @@ import pytest
 
 from app.cli import main as cli_main
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[3]
 sys.path.insert(0, str(ROOT / "tests" / "corpus"))
 import session_files  # noqa: E402
 
