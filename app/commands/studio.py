@@ -16,18 +16,16 @@ from app.cli import number_in
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--manifest", help="database manifest (default: the embedded LAFAN1 locomotion set)")
     parser.add_argument("--weights", help="LMM network weights (.npz; default: the shipped networks)")
-    parser.add_argument("--layout", metavar="NAME|PATH",
-                        help="window layout: default, compare, tuning or an .ini file "
-                             "(default: your last layout, else 'default')")
-    parser.add_argument("--tuning", metavar="PRESET.json",
-                        help="start from this tuning preset (partial presets keep the defaults; the Tuning "
-                             "panel's Reset buttons go back to the defaults)")
-    parser.add_argument("--input", metavar="CSV|builtin:NAME",
-                        help="replay an input log instead of live keyboard/gamepad input "
-                             "(builtin: circle, zigzag, stop-and-go, strafe, turns, random:SEED)")
-    parser.add_argument("--open", metavar="SESSION",
-                        help="reopen a session file (a recording's take.lmmsession, run --session): the timeline "
-                             "covers it whole and every panel shows the picked tick")
+    for flag, metavar, text in (
+            ("--layout", "NAME|PATH", "window layout: default, compare, tuning or an .ini file (default: your "
+                                      "last layout, else 'default')"),
+            ("--tuning", "PRESET.json", "start from this tuning preset (partial presets keep the defaults; the "
+                                        "Tuning panel's Reset buttons go back to the defaults)"),
+            ("--input", "CSV|builtin:NAME", "replay an input log instead of live keyboard/gamepad input (builtin: "
+                                            "circle, zigzag, stop-and-go, strafe, turns, random:SEED)"),
+            ("--open", "SESSION", "reopen a session file (a recording's take.lmmsession, run --session): the "
+                                  "timeline covers it whole and every panel shows the picked tick")):
+        parser.add_argument(flag, metavar=metavar, help=text)
     parser.add_argument("--frames", type=number_in(1, 10**7, integer=True), metavar="N", help="run N frames (one 60 Hz tick each), then exit")
     parser.add_argument("--screenshot", metavar="PATH", help="with --frames: save the whole window as PNG at the end")
     parser.add_argument("--width", type=number_in(640, 8192, integer=True), default=1600,

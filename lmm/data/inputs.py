@@ -23,6 +23,7 @@ import numpy as np
 from lmm import errors
 from lmm.data.atomic import write_text_atomic
 from lmm.data.reading import NotRegularFileError, ascii_float, ascii_int, open_regular
+from lmm.data.stream import BufferedStreamWriter, StreamFile
 
 COLUMNS = ("time", "left_x", "left_y", "right_x", "right_y", "walk", "strafe")
 OPTIONAL_COLUMNS = ("camera_azimuth",)
@@ -265,7 +266,7 @@ def save_input_csv(path, log: InputLog) -> None:
     write_text_atomic(path, "".join(parts))
 
 
-class InputCsvWriter:
+class InputCsvWriter(BufferedStreamWriter):
     """Streams input rows to a CSV log while running; writes a row only when the input changes.
 
     Crash-safe like the BVH recorder (:class:`lmm.data.stream.StreamFile`): rows are appended whole
@@ -277,7 +278,6 @@ class InputCsvWriter:
                  overwrite: bool = True):
         import time as _time
 
-        from lmm.data.stream import StreamFile
         self.path = Path(path)
         self.with_camera = with_camera
         self.flush_interval_s = flush_interval_s
@@ -289,40 +289,15 @@ class InputCsvWriter:
         self._last_flush = self._clock()
         self.rows = 0
 
-    @property
-    def exists(self) -> bool:
-        """Whether the file was created (it is, with the first flushed rows)."""
-        return self._stream.exists
-
     def write(self, t: float, state: InputState) -> None:
         if self._last is None or state != self._last:
             self._pending.append(format_row(t, state, self.with_camera))
             self._last = state.copy()
             self.rows += 1
-        if self._clock() - self._last_flush >= self.flush_interval_s:
-            self.flush()
+        self._flush_if_due()
 
-    def flush(self) -> None:
-        if self._stream.closed:
-            return
-        if self._pending:
-            rows, self._pending = self._pending, []
-            self._stream.append("".join(rows).encode("utf-8"), len(rows))
-        self._last_flush = self._clock()
-
-    def close(self) -> None:
-        if self._stream.closed:
-            return
-        try:
-            self.flush()
-        finally:
-            self._stream.close()
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self.close()
+    def _encode(self, pending: list) -> bytes:
+        return "".join(pending).encode("utf-8")
 
 
 # ---------------------------------------------------------------------------------------------

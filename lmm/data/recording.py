@@ -27,7 +27,7 @@ import numpy as np
 
 from lmm import quat
 from lmm.data import bvh
-from lmm.data.stream import StreamFile, repair_count
+from lmm.data.stream import BufferedStreamWriter, StreamFile, repair_count
 
 ROOT_CHANNELS = ("Xposition", "Yposition", "Zposition", "Zrotation", "Yrotation", "Xrotation")
 JOINT_CHANNELS = ("Zrotation", "Yrotation", "Xrotation")
@@ -62,7 +62,7 @@ def _count_field(n: int) -> bytes:
     return bvh.frames_field(n).encode("ascii")
 
 
-class BVHRecorder:
+class BVHRecorder(BufferedStreamWriter):
     """Stream poses to ``path`` as BVH (see the module doc). Use as a context manager or call close().
 
     ``overwrite=False`` refuses an existing file at the start (the studio's recordings). Raises
@@ -90,11 +90,6 @@ class BVHRecorder:
         """Frames in the file on disk (0 while no file exists)."""
         return self._stream.records
 
-    @property
-    def exists(self) -> bool:
-        """Whether the file was created (it is, with the first flushed frames)."""
-        return self._stream.exists
-
     def write(self, pose) -> None:
         """Append one pose (:class:`lmm.controller.Pose`); flushes when the interval has passed."""
         self.write_row(pose_to_motion_row(pose.local_rotations, pose.global_positions, pose.global_rotations,
@@ -105,35 +100,11 @@ class BVHRecorder:
             raise ValueError(f"{self.path}: the recorder is closed")
         self._pending.append(np.asarray(row, dtype=np.float64))
         self.frames += 1
-        if self._clock() - self._last_flush >= self.flush_interval_s:
-            self.flush()
+        self._flush_if_due()
 
-    def flush(self) -> None:
-        """Append the pending frames, rewrite the frame count, fsync: a valid BVH on disk. Raises
-        :class:`lmm.data.stream.StreamWriteError` (the file keeps its earlier frames) on a failed write."""
-        if self._stream.closed:
-            return
-        if self._pending:
-            rows = np.stack(self._pending)
-            self._pending.clear()
-            self._stream.append(bvh.format_frames(rows, self.precision).encode("utf-8"), len(rows))
-        self._last_flush = self._clock()
-
-    def close(self) -> None:
-        """Flush and close; with no frame ever written there is no file. Closing twice, or after a
-        failed write, does nothing."""
-        if self._stream.closed:
-            return
-        try:
-            self.flush()
-        finally:
-            self._stream.close()
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self.close()
+    def _encode(self, pending: list) -> bytes:
+        """The pending frames as BVH motion lines (the stream rewrites the frame count and fsyncs)."""
+        return bvh.format_frames(np.stack(pending), self.precision).encode("utf-8")
 
     def __del__(self):
         try:

@@ -189,6 +189,51 @@ class StreamFile:
                 self._fd = None
 
 
+class BufferedStreamWriter:
+    """Records kept in memory and appended to a :class:`StreamFile` at least every ``flush_interval_s``
+    seconds of ``_clock``: what the BVH recorder and the input log writer share. A subclass sets
+    ``_stream``, ``_pending`` (a list), ``_clock``, ``_last_flush`` and ``flush_interval_s``, and encodes
+    a batch of pending records with :meth:`_encode`."""
+
+    def _encode(self, pending: list) -> bytes:
+        raise NotImplementedError
+
+    @property
+    def exists(self) -> bool:
+        """Whether the file was created (it is, with the first flushed records)."""
+        return self._stream.exists
+
+    def _flush_if_due(self) -> None:
+        if self._clock() - self._last_flush >= self.flush_interval_s:
+            self.flush()
+
+    def flush(self) -> None:
+        """Append the pending records whole and fsync. Raises :class:`StreamWriteError` (the file keeps
+        its earlier records) on a failed write."""
+        if self._stream.closed:
+            return
+        if self._pending:
+            pending, self._pending = self._pending, []
+            self._stream.append(self._encode(pending), len(pending))
+        self._last_flush = self._clock()
+
+    def close(self) -> None:
+        """Flush and close; with no record ever written there is no file. Closing twice, or after a
+        failed write, does nothing."""
+        if self._stream.closed:
+            return
+        try:
+            self.flush()
+        finally:
+            self._stream.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
 def lines_within_pages(data: bytes, offset: int, page: int = PAGE) -> bytes:
     """``data`` (whole lines) as written at file ``offset`` with no line crossing a ``page`` boundary: a line
     that would is preceded by spaces up to the boundary (lines longer than a page are left as they are)."""

@@ -133,11 +133,15 @@ def _has(module: str) -> bool:
     return True
 
 
+def _skip_fbx_without_ufbx(name: str) -> None:
+    if name.lower().endswith(".fbx") and not _has("ufbx"):
+        pytest.skip("ufbx (the formats extra) is not installed")
+
+
 @needs_assimp
 @pytest.mark.parametrize("name,joints,frames,fps", READ)
 def test_real_animated_skeletons_read(name, joints, frames, fps):
-    if name.lower().endswith(".fbx") and not _has("ufbx"):
-        pytest.skip("ufbx (the formats extra) is not installed")
+    _skip_fbx_without_ufbx(name)
     anim = load_motion(ASSIMP / name)
     assert (anim.n_joints, anim.n_frames, anim.fps) == (joints, frames, pytest.approx(fps))
     assert np.isfinite(anim.global_positions()).all() and np.ptp(anim.motion, axis=0).max() > 0     # it moves
@@ -146,8 +150,7 @@ def test_real_animated_skeletons_read(name, joints, frames, fps):
 @needs_assimp
 @pytest.mark.parametrize("name,says", REFUSED)
 def test_real_files_without_an_animated_skeleton_are_refused_in_one_line(name, says):
-    if name.lower().endswith(".fbx") and not _has("ufbx"):
-        pytest.skip("ufbx (the formats extra) is not installed")
+    _skip_fbx_without_ufbx(name)
     with pytest.raises(MotionFileError) as e:
         load_motion(ASSIMP / name)
     assert says in _one_line(e.value, ASSIMP / name)
@@ -180,8 +183,7 @@ def test_blender_imports_our_glb_with_the_joints_where_the_bvh_has_them(clip, tm
 @needs_assimp
 @pytest.mark.parametrize("name", [n for n, *_ in READ])
 def test_our_readers_agree_with_blenders_import_of_real_files_within_1_mm(name, tmp_path):
-    if name.lower().endswith(".fbx") and not _has("ufbx"):
-        pytest.skip("ufbx (the formats extra) is not installed")
+    _skip_fbx_without_ufbx(name)
     anim = load_motion(ASSIMP / name)
     joints = _blender_joints(ASSIMP / name, anim.fps, anim.n_frames, tmp_path)
     pos = anim.global_positions() * MOTION_UNIT_M
@@ -346,8 +348,7 @@ def test_real_files_survive_our_glb_round_trip(name, tmp_path):
     """FBX or glTF in, glTF out, glTF in: the same joints at the same frames (within 0.1 mm)."""
     from lmm.data.gltf_write import save_glb
 
-    if name.lower().endswith(".fbx") and not _has("ufbx"):
-        pytest.skip("ufbx (the formats extra) is not installed")
+    _skip_fbx_without_ufbx(name)
     anim = load_motion(ASSIMP / name)
     out = tmp_path / "again.glb"
     save_glb(out, anim, MOTION_UNIT_M)
