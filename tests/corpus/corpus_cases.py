@@ -37,6 +37,7 @@ KIND_COMMANDS = {
     "weights": ("run", "eval", "export-onnx"),
     "layout": ("loader",),
     "session": ("replay",),
+    "motion": ("view", "build-db", "check-data"),     # glTF and FBX files (in a manifest for the last two)
 }
 
 
@@ -75,6 +76,13 @@ FILES: dict[str, Spec] = {
     "bvh/offsets_all_zero.bvh": Spec("every OFFSET 0 (built, then run: ZeroDivisionError in ik.py)", "OFFSET",
                                      commands=("build-db", "run")),
     # manifests
+    # glTF and FBX (issue 37)
+    "motion/truncated.glb": Spec("a glb cut short", "truncated"),
+    "motion/no_animation.glb": Spec("a glb with a skin and no animation", "no animation"),
+    "motion/not_gltf.gltf": Spec("JSON that is not glTF", "not a glTF 2.0 file"),
+    "motion/no_skin.gltf": Spec("a glTF without a skin", "no skin"),
+    "motion/garbage.fbx": Spec("bytes that are not FBX", "not a readable FBX file"),
+    "motion/no_skeleton.fbx": Spec("an FBX mesh without bones", "no skeleton"),
     "manifest/name_traversal.json": Spec("name '/../../../../x' wrote the cache outside its folder", "name"),
     "manifest/name_subdir.json": Spec("name 'sub/dir/name' created folders in the cache", "name"),
     "manifest/name_300_chars.json": Spec("a 300-character name", "name"),
@@ -264,7 +272,7 @@ def _argv(kind: str, command: str, path: str, tmp: Path, cid: str) -> dict:
         return {"call": "reader", "path": path}
     if command == "loader":
         return {"call": "layout", "path": path}
-    if kind == "bvh" and command != "view":
+    if kind in ("bvh", "motion") and command != "view":
         manifest = tmp / "wrapped" / (Path(path).name + ".corpus-bvh.json")
         manifest.parent.mkdir(parents=True, exist_ok=True)
         m = json.loads((CORPUS / "good" / "manifest.json").read_text())
@@ -280,7 +288,7 @@ def _argv(kind: str, command: str, path: str, tmp: Path, cid: str) -> dict:
     }
     if command == "view":
         argv = ["view", path, "--screenshot", str(out / f"{_safe(cid)}.png")]
-    elif kind in ("bvh", "manifest"):
+    elif kind in ("bvh", "manifest", "motion"):
         argv = manifest_cmds[command]
     elif kind == "input":
         argv = ["run", "--input", path, "--quiet"]  # no --seconds: the log's own length
