@@ -88,17 +88,6 @@ def main(args: argparse.Namespace) -> int:
         args.no_lmm = args.no_lmm or "lmm" not in kinds
         args.input = None
         f.close()
-    if not _has_display():
-        # dearpygui aborts the whole process without a display: say so instead
-        print("lmm-studio: error: no display (DISPLAY is not set). Run it on a desktop, or under Xvfb: "
-              "xvfb-run -a lmm-studio ...", file=sys.stderr)
-        return 2
-    from app.display import display_problem
-
-    problem = display_problem()
-    if problem:   # a display that is not there: dearpygui would abort the process (exit 134)
-        print(f"lmm-studio: error: {problem}", file=sys.stderr)
-        return 1
     preset = None
     if args.tuning:
         # checked before the window and the database: a bad file is one line and exit status 2
@@ -110,6 +99,17 @@ def main(args: argparse.Namespace) -> int:
         except TuningError as e:
             print(f"lmm-studio: error: {e}", file=sys.stderr)
             return 2
+    if not _has_display():
+        # dearpygui aborts the whole process without a display: say so instead
+        print("lmm-studio: error: no display (DISPLAY is not set). Run it on a desktop, or under Xvfb: "
+              "xvfb-run -a lmm-studio ...", file=sys.stderr)
+        return 2
+    from app.display import display_problem
+
+    problem = display_problem()
+    if problem:   # a display that is not there: dearpygui would abort the process (exit 134)
+        print(f"lmm-studio: error: {problem}", file=sys.stderr)
+        return 1
     from app import watchdog
     from app.studio import Studio, StudioOptions
 
