@@ -10,6 +10,7 @@ from __future__ import annotations
 from .command_registry import ANY_ARGS, CommandRegistry
 from .panels.common import window_tag
 from .scripting import write_rects
+from .why_not_probe import ProbeUnavailable, TickProbe, explanation_lines
 
 #: file dialogs with a command each: (kind of app.dialogs.DIALOGS, label, menu, menu section)
 DIALOG_COMMANDS = (("input", "Replay input CSV...", "File", 0), ("reference", "Open reference BVH...", "File", 0),
@@ -86,6 +87,11 @@ def register_studio_commands(reg: CommandRegistry, s) -> CommandRegistry:
         s.panels["candidates"].set_sort(key, bool(descending)), args=("key", "descending"))
     add("click_candidate", "Preview a candidate row", lambda row: s.panels["candidates"].click_row(int(row)),
         args=("row",))
+    probe = TickProbe(s)
+    add("why_not", "Why not this frame", lambda database_frame: _why_not(s, probe, int(database_frame)),
+        args=("database_frame",))
+    add("what_if", "What if (scratch tuning)", lambda field=None, value=None, channel=None, clear=False:
+        _what_if(s, probe, field, value, channel, bool(clear)), args=("field", "value", "channel", "clear"))
     add("database", "Database panel", lambda **a: s.panels["database"].run_command(a), args=ANY_ARGS)
     add("coverage", "Coverage panel", lambda mode=None, channel=None: _coverage(s.panels["coverage"], mode, channel),
         args=("mode", "channel"))
@@ -114,3 +120,34 @@ def _coverage(panel, mode, channel) -> None:
         panel.set_mode(mode)
     if channel is not None:
         panel.set_channel(channel)
+
+
+def _why_not(s, probe, frame: int) -> dict | None:
+    """Explain ``frame`` at the shown tick in the Search Candidates panel (a reason it cannot: one line)."""
+    try:
+        why = probe.why_not(frame)
+    except ProbeUnavailable as e:
+        s.panels["candidates"].show_why_not(frame, [str(e)])
+        return None
+    s.panels["candidates"].show_why_not(frame, explanation_lines(why, s.session.features.names))
+    return why
+
+
+def _what_if(s, probe, field, value, channel, clear: bool) -> dict | None:
+    """Edit the scratch tuning (or clear it) and show the shown tick's search re-ranked under it."""
+    from lmm.errors import InputError
+
+    panel = s.panels["candidates"]
+    if clear:
+        probe.clear()
+        panel.show_what_if(None)
+        return None
+    try:
+        if field is not None:
+            probe.edit(field, value, channel)
+        result = probe.what_if()
+    except (ProbeUnavailable, InputError) as e:
+        s.errors.show("What if", str(e))
+        return None
+    panel.show_what_if(result)
+    return result

@@ -66,7 +66,7 @@ def column_fractions(rows: list[dict], key: str, digits: int = 3) -> list[float]
 class CandidatesPanel(Panel):
     """Ranked candidates of the inspected controller's last search."""
     key = "candidates"
-    commands = ("preview_database_frame",)
+    commands = ("preview_database_frame", "why_not", "what_if")
     reads = ("inspected", "snap")
 
     def __init__(self, ctx):
@@ -77,6 +77,10 @@ class CandidatesPanel(Panel):
         self._highlighted: dict = {}     # (row, column) -> the colour dearpygui has for the cell (None: none)
         self.rows: list[dict] = []
         self.columns: list[str] = []
+        self.why_frame: int | None = None     # the frame asked about (refreshed when the shown tick changes)
+        self.why_text = ""
+        self.what_if: dict | None = None      # the re-ranked search shown instead of the tick's ({tick, result, ..})
+        self._asked_tick = -1
 
     def build(self, window_kwargs: dict) -> None:
         dpg = self.dpg
@@ -86,6 +90,11 @@ class CandidatesPanel(Panel):
         labels = ["#", "frame", "clip", "tags", "t (s)", "total", "bias"] + [short_channel_name(n) for n in names]
         with self.window(window_kwargs):
             dpg.add_text("", tag="cand_status")
+            with dpg.group(horizontal=True):
+                dpg.add_input_int(label="why not frame", tag="cand_why_frame", width=90, on_enter=True,
+                                  callback=lambda s, v: self.ctx.actions.why_not(int(v)))
+                dpg.add_button(label="clear what if", callback=lambda: self.ctx.actions.what_if(clear=True))
+            dpg.add_text("", tag="cand_why", wrap=0)
             with dpg.table(tag="cand_table", header_row=True, sortable=True, callback=self._on_sort,
                            borders_innerV=True, borders_outerH=True, borders_outerV=True, resizable=True,
                            policy=dpg.mvTable_SizingFixedFit, scrollY=True, scrollX=True, freeze_rows=1,
@@ -136,7 +145,7 @@ class CandidatesPanel(Panel):
         snap = view.snap()
         if snap is None:
             return None
-        cands = snap.candidates
+        cands = self._candidates(view, snap)
         rows = sort_rows(candidate_rows(cands, self.ctx.engine.db), self.sort_key, self.descending)
         fractions = {k: column_fractions(rows, k) for k in self.columns if k == "total" or k.startswith("ch")}
         return {"candidates": cands, "rows": rows, "fractions": fractions}
@@ -144,7 +153,13 @@ class CandidatesPanel(Panel):
     def update(self, view: View, prepared: dict | None = None) -> None:
         dpg = self.dpg
         snap = view.snap()
-        cands = None if snap is None else snap.candidates
+        if view.tick_number != self._asked_tick:        # the asked frame and the what if follow the shown tick
+            self._asked_tick = view.tick_number
+            if self.why_frame is not None:
+                self.ctx.actions.why_not(self.why_frame)
+            if self.what_if is not None:
+                self.ctx.actions.what_if()
+        cands = None if snap is None else self._candidates(view, snap)
         key = (id(cands), self.sort_key, self.descending, view.inspected)
         if snap is None:
             self.text.set("cand_status", "no search yet")
@@ -157,6 +172,10 @@ class CandidatesPanel(Panel):
                   + (f" [{tags}]" if tags else "") + f", cost {fmt_num(snap.best_cost)}")
         if snap.search_note:
             status += f"\n{snap.search_note}"
+        if cands is not snap.candidates:
+            edits = ", ".join(f"{f}{'.' + c if c else ''}={v}" for f, v, c in self.what_if["changes"])
+            status += f"\nWHAT IF (scratch tuning: {edits or 'no edits'}): this tick's search re-ranked, rows marked w"
+        self.text.set("cand_why", self.why_text)
         self.text.set("cand_status", status)
         if key == self._shown_for:
             return
@@ -186,6 +205,7 @@ class CandidatesPanel(Panel):
                 else:
                     txt = str(row[k])
                 if k == "rank":
+                    txt = ("w" if cands is not snap.candidates else "") + txt
                     if self.text.get(f"cand_{r}_{k}") != txt:
                         self.text.values[f"cand_{r}_{k}"] = txt
                         dpg.configure_item(f"cand_{r}_{k}", label=txt)
@@ -194,6 +214,23 @@ class CandidatesPanel(Panel):
                 if k in fractions:
                     self._highlight(r, c, cost_color(fractions[k][r]))
             self._highlight(r, 1, (60, 110, 200, 170) if row["frame"] == snap.matched_frame else None)
+
+    def _candidates(self, view: View, snap):
+        """The what-if re-ranking when one is kept for the shown tick and controller, else the tick's own."""
+        w = self.what_if
+        if w is not None and w["tick"] == view.tick_number and w["controller"] == view.inspected:
+            return w["result"]
+        return snap.candidates
+
+    def show_why_not(self, frame: int | None, lines: list[str]) -> None:
+        """What the why-not command found for ``frame`` (None: nothing asked)."""
+        self.why_frame, self.why_text = frame, "\n".join(lines)
+        self.text.set("cand_why", self.why_text)
+
+    def show_what_if(self, what_if: dict | None) -> None:
+        """The what-if re-ranking to show in the table (None: the tick's own search again)."""
+        self.what_if = what_if
+        self._shown_for = None
 
     def _highlight(self, row: int, column: int, color) -> None:
         """Colour one cell of the table (None: none), telling dearpygui only of a change (a call costs
@@ -208,5 +245,8 @@ class CandidatesPanel(Panel):
             self.dpg.highlight_table_cell("cand_table", row, column, color)
 
     def state(self) -> dict:
-        return {"sort": self.sort_key, "descending": self.descending,
+        return {"sort": self.sort_key, "descending": self.descending, "why_not": self.why_text,
+                "status": self.text.get("cand_status"),
+                "what_if": None if self.what_if is None else {"tick": self.what_if["tick"],
+                                                              "changes": self.what_if["changes"]},
                 "rows": [{k: v for k, v in r.items()} for r in self.rows]}

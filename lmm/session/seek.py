@@ -10,6 +10,7 @@ test compares them with the session's fingerprints). The studio's ``--open`` use
 from __future__ import annotations
 
 import bisect
+from contextlib import contextmanager
 
 from lmm.runner import step_controllers
 from lmm.session.actions import apply_event
@@ -74,6 +75,23 @@ class SessionSeeker:
         if not start <= self.tick <= tick:
             self._restore(start)
 
+    @contextmanager
+    def before(self, tick: int):
+        """For the body of a ``with``: the controllers as they were just before stepping tick ``tick`` (what
+        its search saw: :mod:`lmm.session.why_not` asks them), with the tuning then; the seeker is put back
+        where it was afterwards, so a reader of its ticks (the studio's review) never notices."""
+        if not 0 <= tick < self.ticks:
+            raise IndexError(f"tick {tick} is outside the session's {self.ticks} ticks")
+        here = (self.tuning.to_dict(), tuple(ControllerState(c) for c in self.controllers.values()), self._next,
+                self.tick)
+        try:
+            self.go_before(tick)
+            while self.tick < tick:
+                self.step()
+            yield self.controllers
+        finally:
+            self._put(*here)
+
     def fill(self, progress=None) -> None:
         """Step through the whole session once, keeping every checkpoint (``progress(tick)`` now and then)."""
         last = max(self.checkpoints)
@@ -92,7 +110,9 @@ class SessionSeeker:
         self.checkpoints[self.tick] = (self.tuning.to_dict(), states, self._next)
 
     def _restore(self, tick: int) -> None:
-        tuning, states, next_event = self.checkpoints[tick]
+        self._put(*self.checkpoints[tick], tick)
+
+    def _put(self, tuning: dict, states: tuple, next_event: int, tick: int) -> None:
         for c, state in zip(self.controllers.values(), states):
             state.restore(c)
         # then the tuning: the fields that differ are announced, so a controller re-derives what it keeps

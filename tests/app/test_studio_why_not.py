@@ -1,0 +1,90 @@
+"""Why not and what if in the studio (issue 33 item 4), in one studio run under Xvfb: a headless ``run
+--session`` reopened with ``--open``; at a searching tick the Search Candidates panel explains an excluded
+and a ranked frame as :func:`lmm.session.why_not.explain_frame` does, and shows the tick's search re-ranked
+under a scratch tuning as :func:`lmm.session.why_not.what_if` does, marked *what if*."""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+
+import pytest
+
+from studio_testutil import ROOT
+
+pytestmark = pytest.mark.gui
+
+
+def _expected(session_path):
+    """A searching history tick of the session, its explanations of an excluded and a ranked frame, and its
+    what-if frames under ``transition_cost = 0``: computed headless."""
+    from app.commands.session_common import open_with_database
+    from app.why_not_probe import chosen_frame, explanation_lines
+    from lmm.session.seek import SessionSeeker
+    from lmm.session.why_not import explain_frame, what_if
+
+    session, db, features, _ = open_with_database(session_path)
+    seeker = SessionSeeker(session, db, features)
+    for step in range(150, 290):
+        snap = seeker.seek(step)[1]["mm"]
+        ranked = [f for f in snap.candidates.frames.tolist() if f != snap.matched_frame] if snap.searched else []
+        if ranked:
+            break
+    with seeker.before(step) as controllers:
+        mm = controllers["mm"]
+        near = int(mm.frame) + 1
+        whys = {}
+        for frame in (near, ranked[-1]):
+            whys[frame] = {"tick": step + 1, "controller": "mm", "note": "",
+                           "asked": explain_frame(mm, snap.query, frame),
+                           "chosen": explain_frame(mm, snap.query, chosen_frame(snap)),
+                           "continuing": explain_frame(mm, snap.query, int(mm.frame))}
+        scratch = seeker.tuning.copy()
+        scratch.set("feature_weights", 4.0, "hip_velocity")
+        rerank = what_if(mm, snap.query, scratch).frames.tolist()
+    assert rerank != snap.candidates.frames.tolist()           # the scratch weight does re-rank
+    lines = {f: "\n".join(explanation_lines(w, features.names)) for f, w in whys.items()}
+    session.close()
+    return step + 1, near, ranked[-1], whys, lines, rerank
+
+
+def test_why_not_and_what_if_in_a_reopened_session(xvfb_display, studio_cache, tmp_path):
+    from app.cli import main as cli_main
+
+    session = tmp_path / "s.lmmsession"
+    assert cli_main(["run", "--controller", "mm", "--input", "builtin:random:1", "--seconds", "5",
+                     "--session", str(session), "--quiet"]) == 0
+    tick, excluded, ranked, whys, lines, rerank = _expected(session)
+    assert "exclude_current_window_frames" in whys[excluded]["asked"]["excluded"]
+    assert whys[ranked]["asked"]["excluded"] == "" and whys[ranked]["asked"]["total"] > 0
+    script = [{"frame": 4, "do": "scrub", "tick": tick},
+              {"frame": 6, "do": "why_not", "database_frame": excluded}, {"frame": 8, "do": "capture", "label": "excluded"},
+              {"frame": 10, "do": "why_not", "database_frame": ranked}, {"frame": 12, "do": "capture", "label": "ranked"},
+              {"frame": 14, "do": "what_if", "field": "feature_weights", "channel": "hip_velocity", "value": 4.0},
+              {"frame": 16, "do": "capture", "label": "what_if"},
+              {"frame": 18, "do": "what_if", "clear": True}, {"frame": 20, "do": "capture", "label": "cleared"}]
+    # run directly, not through run_studio: its prepared-vs-GUI check fails for any reopened session
+    # (viewport and timeline from frame 1, before any action here), which is not this test's subject
+    (tmp_path / "script.json").write_text(json.dumps({"actions": script}))
+    env = dict(os.environ, DISPLAY=xvfb_display, LMM_STUDIO_CONFIG=str(tmp_path / "config"),
+               LMM_STUDIO_CACHE=str(studio_cache), PYTHONPATH=str(ROOT), LP_NUM_THREADS="0")
+    proc = subprocess.run([sys.executable, "-m", "app.cli", "--open", str(session), "--frames", "22",
+                           "--script", str(tmp_path / "script.json"), "--dump-state", str(tmp_path / "dump.json"),
+                           "--no-gamepads"], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=240)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    data = json.loads((tmp_path / "dump.json").read_text())
+    assert not data["errors"], data["errors"]
+    labels = data["labels"]
+    for label, frame in (("excluded", excluded), ("ranked", ranked)):
+        cands = labels[label]["panels"]["candidates"]
+        assert labels[label]["displayed_tick"] == tick
+        assert cands["why_not"] == lines[frame], label
+    assert "excluded: within" in labels["excluded"]["panels"]["candidates"]["why_not"]
+    assert f"total {whys[ranked]['asked']['total']:.3f}" in labels["ranked"]["panels"]["candidates"]["why_not"]
+    shown = labels["what_if"]["panels"]["candidates"]
+    assert shown["what_if"]["tick"] == tick
+    assert [r["frame"] for r in shown["rows"]] == rerank          # sorted by total: the re-ranked order
+    assert "WHAT IF (scratch tuning: feature_weights.hip_velocity=4.0)" in shown["status"]
+    assert "WHAT IF" not in labels["cleared"]["panels"]["candidates"]["status"]
+    assert labels["cleared"]["panels"]["candidates"]["what_if"] is None
