@@ -67,7 +67,7 @@ class CandidatesPanel(Panel):
     """Ranked candidates of the inspected controller's last search."""
     key = "candidates"
     commands = ("preview_database_frame", "why_not", "what_if")
-    reads = ("inspected", "snap")
+    reads = ("inspected", "snap", "tick_number")
 
     def __init__(self, ctx):
         super().__init__(ctx)
