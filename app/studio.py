@@ -144,7 +144,7 @@ class Studio(SessionActions):
             "preset_save": self.save_preset, "weights": self.load_weights, "layout_load": self.switch_layout,
             "layout_save": self.layouts.save, "record": self.panels["recording"].set_path,
             "session": self.open_session_file},
-            report_error=self.errors.show)
+            report_error=self.errors.show, confirm=self.errors.ask)
         self.dialogs.build()
         self._text_items = [i for i in dpg.get_all_items()
                             if dpg.get_item_type(i).rsplit("::", 1)[-1] in TEXT_ENTRY_TYPES]
@@ -180,10 +180,9 @@ class Studio(SessionActions):
 
     # -- the frame -----------------------------------------------------------------------------
     def typing(self) -> bool:
-        """A text field (or a slider in text mode) is being edited, or a dialog is open: keys are text."""
-        dpg = self.dpg
-        return (any(dpg.is_item_active(i) for i in self._text_items) or self.dialogs.visible
-                or self.errors.visible)
+        """A text field (or a slider in text mode) is being edited, or a file dialog is open: keys are
+        text. A message shown (app.panels.errors) takes no keys."""
+        return any(self.dpg.is_item_active(i) for i in self._text_items) or self.dialogs.visible
 
     def _keys(self) -> None:
         dpg = self.dpg
@@ -257,6 +256,7 @@ class Studio(SessionActions):
         if queue or self.frame_index % 10 == 0:
             self.layouts.forget_shown()     # a callback may show or hide a window; the x button is seen here
         dpg.run_callbacks(queue)
+        self.errors.keep_shown()
         self.script.run(self.commands, self.frame_index)
         self._keys()
         self.session.undo.end_frame()       # this frame's tuning changes are one undo step

@@ -97,7 +97,8 @@ class ViewportPanel(Panel):
     # -- items ------------------------------------------------------------------------------
     def build(self, parent_window_kwargs: dict) -> None:
         dpg = self.dpg
-        with self.window(parent_window_kwargs, no_scrollbar=True):
+        # the wheel over the view zooms the camera: it never scrolls the window (the toolbar stays in view)
+        with self.window(parent_window_kwargs, no_scrollbar=True, no_scroll_with_mouse=True):
             with dpg.group(horizontal=True):
                 dpg.add_text("Inspect:")
                 dpg.add_radio_button([SHORT[n] for n in COLORS], tag="vp_inspect", horizontal=True,

@@ -1,0 +1,94 @@
+"""Issue 35's studio items, driven with real keys and mouse (xdotool) on the real studio under Xvfb:
+a failed file load by an absolute path typed in the file dialog is on screen at once and leaves the keys
+working; the wheel over the 3D view zooms without scrolling its toolbar away."""
+import json
+import shutil
+import time
+
+import pytest
+
+from studio_testutil import RealKeyStudio
+
+pytestmark = pytest.mark.gui
+
+W, H = 1280, 800
+DIALOG_W, DIALOG_H = 700, 420            # app.dialogs: every file dialog's size, centred in the window
+ERROR_TITLE = (255, 140, 120)            # app.panels.errors: the error title's colour
+
+
+def _grab(display):
+    from PIL import ImageGrab
+
+    return ImageGrab.grab(xdisplay=display).convert("RGB")
+
+
+def _window_origin(s):
+    geo = s.xdo("getwindowgeometry", "--shell", s.win).stdout
+    vals = dict(line.split("=", 1) for line in geo.split() if "=" in line)
+    return int(vals["X"]), int(vals["Y"])
+
+
+def _has_colour(img, colour, box) -> int:
+    crop = img.crop(box)
+    return sum(1 for p in crop.getdata() if max(abs(p[i] - colour[i]) for i in range(3)) <= 30)
+
+
+def test_failed_load_by_absolute_path_is_shown_and_keys_work_and_wheel_zooms(xvfb_display, studio_cache,
+                                                                               tmp_path):
+    if shutil.which("xdotool") is None:
+        pytest.skip("xdotool is not installed")
+    pytest.importorskip("PIL.ImageGrab")
+    missing = "/nowhere_h/take_mm.bvh"    # short: dearpygui takes about one typed character a frame
+    rects = tmp_path / "rects.json"
+    actions = [{"frame": 15, "do": "write_rects", "path": str(rects), "items": ["vp_drawlist", "vp_inspect"]},
+               {"frame": 16, "do": "dialog_reference"}]
+    args = ["--layout", "default", "--width", str(W), "--height", str(H)]
+    with RealKeyStudio(tmp_path, xvfb_display, studio_cache, actions, args) as s:
+        xdo, win = s.xdo, s.win
+        view = s.rect(rects, "vp_drawlist", settle_s=1.5)
+        toolbar = s.rect(rects, "vp_inspect", settle_s=0)
+        xdo("windowfocus", "--sync", win)
+        # the dialog's File Name field and OK button (ImGuiFileDialog's layout at this size)
+        dx, dy = (W - DIALOG_W) // 2, (H - DIALOG_H) // 2
+        xdo("mousemove", "--window", win, str(dx + 300), str(dy + 379))
+        xdo("click", "1")
+        time.sleep(0.5)
+        xdo("type", "--delay", "150", missing)
+        time.sleep(2.0)
+        xdo("mousemove", "--window", win, str(dx + 19), str(dy + 403))
+        xdo("click", "1")
+        time.sleep(1.0)
+        ox, oy = _window_origin(s)
+        shot = _grab(xvfb_display)
+        shot.save(tmp_path / "error_shown.png")
+        # the error dialog (centred, 560 x 190) is drawn: its red title text is on screen
+        box = (ox + W // 2 - 280, oy + H // 2 - 95, ox + W // 2 + 280, oy + H // 2 + 95)
+        assert _has_colour(shot, ERROR_TITLE, box) > 10, f"no error dialog on screen ({tmp_path / 'error_shown.png'})"
+        # W moves the character with the message still shown
+        t_w = time.time()
+        xdo("keydown", "w")
+        time.sleep(1.5)
+        xdo("keyup", "w")
+        time.sleep(0.3)
+        # the wheel over the 3D view (away from the dialog) zooms; the toolbar stays where it was
+        xdo("mousemove", "--window", win, str(int(view[0] + 40)), str(int(view[1] + 30)))
+        before = _grab(xvfb_display).crop((ox + int(toolbar[0]), oy + int(toolbar[1]),
+                                           ox + int(toolbar[2]), oy + int(toolbar[3])))
+        for _ in range(6):
+            xdo("click", "5")
+            time.sleep(0.15)
+        time.sleep(1.0)
+        after = _grab(xvfb_display).crop((ox + int(toolbar[0]), oy + int(toolbar[1]),
+                                          ox + int(toolbar[2]), oy + int(toolbar[3])))
+        after.save(tmp_path / "toolbar_after_wheel.png")
+    assert s.returncode == 0, s.stderr[-3000:]
+    d = s.dump()
+    # the path typed is the one read (no current folder in front of it), reported once
+    errors = [e for e in d["errors"] if e["title"] == "Reference BVH"]
+    assert len(errors) == 1 and f"'{missing}'" in errors[0]["message"], d["errors"]
+    assert str(tmp_path) not in errors[0]["message"]
+    assert errors[0]["time"] < t_w
+    assert d["final"]["dialog"]["shown"]       # still shown: W did not need it dismissed
+    assert any(t["input"]["left_y"] for t in d["ticks"]), "W did not move the character after the error"
+    assert list(before.getdata()) == list(after.getdata()), "the wheel scrolled the 3D view's toolbar"
+    assert abs(d["final"]["viewport"]["camera"]["distance"] - 4.6) > 0.1, d["final"]["viewport"]["camera"]
