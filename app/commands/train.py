@@ -89,6 +89,9 @@ def main(args) -> int:
     writer = os.environ.get("RANK", "0") == "0"
     check_outputs([("--out", Path(args.out) / name) for name in (RUNTIME_FILE, COMPRESSOR_FILE, LOG_FILE)]
                   + [("--json", json_out)], manifest_inputs(args.manifest), lock=writer)
+    if writer:   # what a killed training left half-written there (its locks are ours now: no live writer)
+        from lmm.data.leftovers import remove_stale
+        remove_stale(args.out)
     db, _ = load_or_build(args.manifest)
     features = build_features(db)
     from lmm.offline.training_loop import auto_threads

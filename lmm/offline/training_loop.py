@@ -6,6 +6,7 @@ SIGTERM while a set of files is written.
 from __future__ import annotations
 
 import csv
+import io
 import math
 import os
 import signal
@@ -160,14 +161,15 @@ class LossLog:
                 existing = [r for r in csv.DictReader(f) if r.get("network") != self.network]
             for r in existing:
                 keys += [k for k in r if k not in keys]
-        self.csv_path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = self.csv_path.with_name(self.csv_path.name + ".tmp")
-        with open(tmp, "w", newline="") as f:
-            w = csv.DictWriter(f, fieldnames=keys)
-            w.writeheader()
-            for r in existing + self.rows:
-                w.writerow(r)
-        tmp.replace(self.csv_path)
+        from lmm.data.atomic import write_bytes_atomic
+
+        text = io.StringIO(newline="")
+        w = csv.DictWriter(text, fieldnames=keys)
+        w.writeheader()
+        for r in existing + self.rows:
+            w.writerow(r)
+        # a temporary named after this process, which the next train removes if a kill left it
+        write_bytes_atomic(self.csv_path, text.getvalue().encode("utf-8"))
 
     def close(self) -> None:
         self.progress.close()
