@@ -8,6 +8,7 @@ connection (the projector) adds ``MatMul(x, [I 0])`` to ``y``. No torch needed.
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
 import numpy as np
@@ -61,19 +62,25 @@ def mlp_to_onnx(mlp, name: str, metadata: dict | None = None):
 
 
 def export_networks(nets, out_dir) -> list[Path]:
-    """Write decompressor.onnx, stepper.onnx and projector.onnx for an :class:`lmm.learned.LMMNetworks`,
-    each atomically (a full disk or a kill never leaves a truncated model; ``OSError`` names the file)."""
-    from lmm.data.atomic import check_writable, write_bytes_atomic
+    """Write decompressor.onnx, stepper.onnx and projector.onnx for an :class:`lmm.learned.LMMNetworks`
+    as one set: each model goes to a temporary beside its name, and only when all three are on disk are
+    they renamed over the old files, so a full disk or a write error never leaves a mix of an old and a
+    new export (the temporaries are removed, the old set stays; ``OSError`` names the file)."""
+    from contextlib import ExitStack
+
+    from lmm.data.atomic import atomic_write, check_writable
 
     out_dir = Path(out_dir)
     check_writable(out_dir / "decompressor.onnx")  # before building any model
     meta = {k: nets.metadata.get(k) for k in ("database_key", "feature_layout", "feature_mean",
                                               "feature_inv_scale", "latent", "bone_names", "pose_vector_size")}
     meta["dt_s"] = 1.0 / 60.0
-    paths = []
-    for name in ("decompressor", "stepper", "projector"):
-        model = mlp_to_onnx(getattr(nets, name), name, meta)
-        path = out_dir / f"{name}.onnx"
-        write_bytes_atomic(path, model.SerializeToString())  # what onnx.save writes, without external data
-        paths.append(path)
-    return paths
+    models = {out_dir / f"{name}.onnx": mlp_to_onnx(getattr(nets, name), name, meta).SerializeToString()
+              for name in ("decompressor", "stepper", "projector")}   # what onnx.save writes, no external data
+    with ExitStack() as renames:   # leaving it renames every temporary, or (on an error) removes them all
+        for path, data in models.items():
+            f = renames.enter_context(atomic_write(path, "wb"))
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())   # a full disk fails here, before any file is renamed
+    return list(models)
