@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from .command_registry import ANY_ARGS, CommandRegistry
 from .panels.common import window_tag
+from .branch_view import BranchView
 from .scripting import write_rects
 from .why_not_probe import ProbeUnavailable, TickProbe, explanation_lines
 
@@ -92,6 +93,11 @@ def register_studio_commands(reg: CommandRegistry, s) -> CommandRegistry:
         args=("database_frame",))
     add("what_if", "What if (scratch tuning)", lambda field=None, value=None, channel=None, clear=False:
         _what_if(s, probe, field, value, channel, bool(clear)), args=("field", "value", "channel", "clear"))
+    branch = BranchView(s, probe)
+    add("branch_here", "Branch here (A/B)", lambda scratch=False: _branch(s, branch, bool(scratch)), menu="Edit",
+        section=1, args=("scratch",))
+    add("branch_clear", "Close the branch", lambda: branch.clear(), menu="Edit", section=1)
+    add("branch_difference", "A vs B at the shown tick", lambda: branch.difference())
     add("database", "Database panel", lambda **a: s.panels["database"].run_command(a), args=ANY_ARGS)
     add("coverage", "Coverage panel", lambda mode=None, channel=None: _coverage(s.panels["coverage"], mode, channel),
         args=("mode", "channel"))
@@ -151,3 +157,12 @@ def _what_if(s, probe, field, value, channel, clear: bool) -> dict | None:
         return None
     panel.show_what_if(result)
     return result
+
+
+def _branch(s, branch, scratch: bool) -> dict | None:
+    """Branch here (a reason it cannot, e.g. live: one line in the error dialog)."""
+    try:
+        return branch.branch_here(scratch)
+    except ProbeUnavailable as e:
+        s.errors.show("Branch here", str(e))
+        return None

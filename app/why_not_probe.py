@@ -22,7 +22,7 @@ class TickProbe:
         self.studio = studio
         self.changes: list[tuple[str, object, str | None]] = []   # the scratch tuning's edits, in order
 
-    def _shown(self):
+    def shown_any(self):
         """``(seeker, step, name, snap)``: the reopened session's seeker, the step that made the shown tick
         (history tick ``n`` is the pose after ``n`` steps), the inspected controller and its snapshot."""
         s = self.studio
@@ -34,11 +34,14 @@ class TickProbe:
         tick = s.playback.displayed_tick()
         if tick is None:
             raise ProbeUnavailable("no tick is shown")
-        name = s.inspected
-        controller = seeker.controllers.get(name)
-        if controller is None or not hasattr(controller, "tag_groups"):
+        return seeker, int(tick.tick) - 1, s.inspected, tick.snapshots[s.inspected]
+
+    def _shown(self):
+        """:meth:`shown_any` of a controller with a ranked search (motion matching)."""
+        seeker, step, name, snap = self.shown_any()
+        if not hasattr(seeker.controllers.get(name), "tag_groups"):
             raise ProbeUnavailable(f"{name} has no ranked search to ask (inspect the motion matching controller)")
-        return seeker, int(tick.tick) - 1, name, tick.snapshots[name]
+        return seeker, step, name, snap
 
     def why_not(self, frame: int) -> dict:
         """``{tick, controller, note, asked, chosen, continuing}``: the explanations

@@ -66,7 +66,7 @@ def column_fractions(rows: list[dict], key: str, digits: int = 3) -> list[float]
 class CandidatesPanel(Panel):
     """Ranked candidates of the inspected controller's last search."""
     key = "candidates"
-    commands = ("preview_database_frame", "why_not", "what_if")
+    commands = ("preview_database_frame", "why_not", "what_if", "branch_here")
     reads = ("inspected", "snap", "tick_number")
 
     def __init__(self, ctx):
@@ -76,6 +76,7 @@ class CandidatesPanel(Panel):
         self._shown_for = None
         self._highlighted: dict = {}     # (row, column) -> the colour dearpygui has for the cell (None: none)
         self.rows: list[dict] = []
+        self._rows_on_screen: list[dict] = []     # the rows of the picture a click was made on (see _on_click)
         self.columns: list[str] = []
         self.why_frame: int | None = None     # the frame asked about (refreshed when the shown tick changes)
         self.why_text = ""
@@ -94,6 +95,7 @@ class CandidatesPanel(Panel):
                 dpg.add_input_int(label="why not frame", tag="cand_why_frame", width=90, on_enter=True,
                                   callback=lambda s, v: self.ctx.actions.why_not(int(v)))
                 dpg.add_button(label="clear what if", callback=lambda: self.ctx.actions.what_if(clear=True))
+                dpg.add_button(label="branch here (what if)", callback=lambda: self.ctx.actions.branch_here(scratch=True))
             dpg.add_text("", tag="cand_why", wrap=0)
             with dpg.table(tag="cand_table", header_row=True, sortable=True, callback=self._on_sort,
                            borders_innerV=True, borders_outerH=True, borders_outerV=True, resizable=True,
@@ -123,8 +125,12 @@ class CandidatesPanel(Panel):
         self._shown_for = None  # redraw
 
     def _on_click(self, sender, value, r):
+        """A click runs two updates after the picture it was made on was set up (dearpygui takes it in
+        the next frame's drawing, its callback in the frame after), and the table re-sorts at every
+        search: the frame previewed is that of the row the user saw, not what row ``r`` holds now."""
         self.dpg.set_value(sender, False)      # a click previews; the row does not stay selected
-        self.click_row(r)
+        if 0 <= r < len(self._rows_on_screen):
+            self.ctx.actions.preview_database_frame(int(self._rows_on_screen[r]["frame"]))
 
     def click_row(self, r: int) -> None:
         """Preview the database frame of the shown row ``r`` (0 = top)."""
@@ -152,6 +158,7 @@ class CandidatesPanel(Panel):
 
     def update(self, view: View, prepared: dict | None = None) -> None:
         dpg = self.dpg
+        self._rows_on_screen = self.rows      # drawn by the last frame, on screen until this one is
         snap = view.snap()
         if view.tick_number != self._asked_tick:        # the asked frame and the what if follow the shown tick
             self._asked_tick = view.tick_number

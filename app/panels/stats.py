@@ -1,6 +1,7 @@
 """Stats: frames per second, the time each part of a frame takes (controllers with their search and
 network parts, the 3D render and its copy into dearpygui's texture, panel updates, dearpygui's own
-frame), and the memory motion matching and learned motion matching keep."""
+frame), and the memory motion matching and learned motion matching keep; with a branch of a reopened
+session (Edit > Branch here: :mod:`app.branch_view`), A against B at the shown tick."""
 from __future__ import annotations
 
 import functools
@@ -34,10 +35,24 @@ def _axis(start: int, stop: int) -> np.ndarray:
     return x
 
 
+def branch_text(row: dict | None) -> str:
+    """The branch row (pure, for tests): ``app.branch_view.BranchView.difference``'s dict, or None."""
+    if row is None:
+        return ""
+    if row["tick"] < row["from_tick"]:
+        return f"branch B from tick {row['from_tick']}: before it, B is A"
+    flags = ["jump" if t else "-" for t in row["transitioned"]]
+    return (f"A vs B (from tick {row['from_tick']}), tick {row['tick']}: pose difference mean "
+            f"{row['mean_difference_m']:.3f} m, max {row['max_difference_m']:.3f} m; cost A {row['cost'][0]:.3f}"
+            f" B {row['cost'][1]:.3f}; frame A {row['frames'][0]} B {row['frames'][1]}; transition A {flags[0]}"
+            f" B {flags[1]}")
+
+
 class StatsPanel(Panel):
     key = "stats"
-    commands = ()
+    commands = ("branch_difference",)
     reads = ("frame", "frame_times", "history", "render_info", "snap", "tick")
+    branch_text = ""
     _last_text_frame = -100
     _last_limit_frame = -100
 
@@ -45,6 +60,7 @@ class StatsPanel(Panel):
         dpg = self.dpg
         with self.window(window_kwargs):
             dpg.add_text("", tag="stats_fps", color=(140, 230, 140))
+            dpg.add_text("", tag="stats_branch", color=(240, 180, 90), wrap=0)
             dpg.add_text("", tag="stats_memory")
             with dpg.table(header_row=False, borders_innerV=True, policy=dpg.mvTable_SizingStretchProp,
                            tag="stats_table"):
@@ -74,6 +90,8 @@ class StatsPanel(Panel):
 
     def update(self, view: View) -> None:
         dpg = self.dpg
+        self.branch_text = branch_text(self.ctx.actions.branch_difference())   # A vs B at the shown tick
+        self.text.set("stats_branch", self.branch_text)
         ft = view.frame_times
         if ft is None:
             return
@@ -128,3 +146,6 @@ class StatsPanel(Panel):
                 self._last_limit_frame = view.frame
                 top = ft.percentile(95) * 1.3 if len(y) > 5 else 50.0
                 self.text.axis_limits("stats_y", 0.0, max(top, 20.0))
+
+    def state(self) -> dict:
+        return {**self.last, "branch": self.branch_text}

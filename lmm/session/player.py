@@ -46,6 +46,23 @@ class SessionRecorder:
             self.writer.close(self.last_poses)
 
 
+def apply_due_events(events, next_event: int, tick: int, tuning, controllers, branch=None,
+                     from_tick: int = 0) -> int:
+    """Apply the recorded events due before stepping ``tick`` from ``events[next_event]`` on; returns the
+    next event's index. A branch (a tuning preset dict) is set at ``from_tick`` on top of the tuning then,
+    and the recorded tuning changes from then on are left out (its actions are kept)."""
+    branched = branch is not None and tick >= from_tick
+    if branch is not None and tick == from_tick:
+        from lmm.tuning import Tuning
+        tuning.assign(Tuning.from_dict(branch, base=tuning))
+    while next_event < len(events) and events[next_event].tick <= tick:
+        event = events[next_event]
+        next_event += 1
+        if not (branched and event.kind == "tuning"):
+            apply_event(event, tuning, controllers)
+    return next_event
+
+
 class SessionPlayer:
     """Steps a session's controllers tick by tick (:meth:`step`), checking each recorded fingerprint.
 
@@ -88,15 +105,8 @@ class SessionPlayer:
     def step(self):
         """Step the next tick: ``(poses, snapshots)`` keyed by controller name."""
         tick = self.tick
-        branched = self.branch is not None and tick >= self.from_tick
-        if self.branch is not None and tick == self.from_tick:
-            from lmm.tuning import Tuning
-            self.tuning.assign(Tuning.from_dict(self.branch, base=self.tuning))
-        while self._next < len(self._events) and self._events[self._next].tick <= tick:
-            event = self._events[self._next]
-            self._next += 1
-            if not (branched and event.kind == "tuning"):
-                apply_event(event, self.tuning, self.controllers)
+        self._next = apply_due_events(self._events, self._next, tick, self.tuning, self.controllers,
+                                      self.branch, self.from_tick)
         while self._pending is not None and self._pending[0] <= tick:
             self.input = self._pending[1]
             self._pending = next(self._inputs, None)

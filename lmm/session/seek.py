@@ -13,18 +13,19 @@ import bisect
 from contextlib import contextmanager
 
 from lmm.runner import step_controllers
-from lmm.session.actions import apply_event
 from lmm.session.checkpoint import ControllerState
+from lmm.session.player import apply_due_events
 
 
 class SessionSeeker:
     def __init__(self, session, db, features, *, every: int | None = None, weights: dict | None = None,
-                 debug_comparison: bool = False):
+                 debug_comparison: bool = False, branch: dict | None = None, from_tick: int = 0):
         from lmm.session.player import SessionPlayer
 
         player = SessionPlayer(session, db, features, weights=weights, debug_comparison=debug_comparison)
         self.session, self.controllers, self.tuning = session, player.controllers, player.tuning
         self.dt = session.dt
+        self.branch, self.from_tick = branch, int(from_tick)     # arm B of ``ab`` (SessionPlayer's meaning)
         self.every = int(every) if every else max(1, int(round(session.fps)))   # one a second
         changes = list(session.inputs())
         self._input_ticks = [t for t, _ in changes]
@@ -47,9 +48,8 @@ class SessionSeeker:
     def step(self):
         """Step the next tick: ``(poses, snapshots)`` by controller name."""
         tick = self.tick
-        while self._next < len(self._events) and self._events[self._next].tick <= tick:
-            apply_event(self._events[self._next], self.tuning, self.controllers)
-            self._next += 1
+        self._next = apply_due_events(self._events, self._next, tick, self.tuning, self.controllers,
+                                      self.branch, self.from_tick)
         poses, snaps, _ = step_controllers(self.controllers, self.input_at(tick), self.dt)
         self.tick += 1
         self.stepped += 1

@@ -9,11 +9,14 @@ import os
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 from studio_testutil import ROOT
 
 pytestmark = pytest.mark.gui
+
+LATER = 60          # B is compared with A this many ticks after the branch
 
 
 def _expected(session_path):
@@ -21,6 +24,7 @@ def _expected(session_path):
     what-if frames under ``transition_cost = 0``: computed headless."""
     from app.commands.session_common import open_with_database
     from app.why_not_probe import chosen_frame, explanation_lines
+    from lmm.session.player import SessionPlayer
     from lmm.session.seek import SessionSeeker
     from lmm.session.why_not import explain_frame, what_if
 
@@ -43,10 +47,16 @@ def _expected(session_path):
         scratch = seeker.tuning.copy()
         scratch.set("feature_weights", 4.0, "hip_velocity")
         rerank = what_if(mm, snap.query, scratch).frames.tolist()
+        branch = scratch.to_dict()
     assert rerank != snap.candidates.frames.tolist()           # the scratch weight does re-rank
     lines = {f: "\n".join(explanation_lines(w, features.names)) for f, w in whys.items()}
+    # Branch here with that scratch tuning: ab's arm B against arm A, LATER ticks on
+    arms = [SessionPlayer(session, db, features), SessionPlayer(session, db, features, branch=branch, from_tick=step)]
+    for _ in range(step + 1 + LATER):                          # history tick n: the pose after n steps
+        poses = [arm.step()[0]["mm"].global_positions.astype(np.float64) for arm in arms]
+    difference = np.linalg.norm(poses[0] - poses[1], axis=-1)
     session.close()
-    return step + 1, near, ranked[-1], whys, lines, rerank
+    return step + 1, near, ranked[-1], whys, lines, rerank, difference
 
 
 def test_why_not_and_what_if_in_a_reopened_session(xvfb_display, studio_cache, tmp_path):
@@ -55,7 +65,7 @@ def test_why_not_and_what_if_in_a_reopened_session(xvfb_display, studio_cache, t
     session = tmp_path / "s.lmmsession"
     assert cli_main(["run", "--controller", "mm", "--input", "builtin:random:1", "--seconds", "5",
                      "--session", str(session), "--quiet"]) == 0
-    tick, excluded, ranked, whys, lines, rerank = _expected(session)
+    tick, excluded, ranked, whys, lines, rerank, difference = _expected(session)
     assert "exclude_current_window_frames" in whys[excluded]["asked"]["excluded"]
     assert whys[ranked]["asked"]["excluded"] == "" and whys[ranked]["asked"]["total"] > 0
     script = [{"frame": 4, "do": "scrub", "tick": tick},
@@ -63,13 +73,16 @@ def test_why_not_and_what_if_in_a_reopened_session(xvfb_display, studio_cache, t
               {"frame": 10, "do": "why_not", "database_frame": ranked}, {"frame": 12, "do": "capture", "label": "ranked"},
               {"frame": 14, "do": "what_if", "field": "feature_weights", "channel": "hip_velocity", "value": 4.0},
               {"frame": 16, "do": "capture", "label": "what_if"},
-              {"frame": 18, "do": "what_if", "clear": True}, {"frame": 20, "do": "capture", "label": "cleared"}]
+              {"frame": 17, "do": "branch_here", "scratch": True},
+              {"frame": 18, "do": "what_if", "clear": True}, {"frame": 20, "do": "capture", "label": "cleared"},
+              {"frame": 22, "do": "scrub", "tick": tick + LATER}, {"frame": 25, "do": "capture", "label": "branch"},
+              {"frame": 27, "do": "scrub", "tick": tick - 20}, {"frame": 30, "do": "capture", "label": "before"}]
     # run directly, not through run_studio: its prepared-vs-GUI check fails for any reopened session
     # (viewport and timeline from frame 1, before any action here), which is not this test's subject
     (tmp_path / "script.json").write_text(json.dumps({"actions": script}))
     env = dict(os.environ, DISPLAY=xvfb_display, LMM_STUDIO_CONFIG=str(tmp_path / "config"),
                LMM_STUDIO_CACHE=str(studio_cache), PYTHONPATH=str(ROOT), LP_NUM_THREADS="0")
-    proc = subprocess.run([sys.executable, "-m", "app.cli", "--open", str(session), "--frames", "22",
+    proc = subprocess.run([sys.executable, "-m", "app.cli", "--open", str(session), "--frames", "32",
                            "--script", str(tmp_path / "script.json"), "--dump-state", str(tmp_path / "dump.json"),
                            "--no-gamepads"], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=240)
     assert proc.returncode == 0, proc.stderr[-3000:]
@@ -88,3 +101,11 @@ def test_why_not_and_what_if_in_a_reopened_session(xvfb_display, studio_cache, t
     assert "WHAT IF (scratch tuning: feature_weights.hip_velocity=4.0)" in shown["status"]
     assert "WHAT IF" not in labels["cleared"]["panels"]["candidates"]["status"]
     assert labels["cleared"]["panels"]["candidates"]["what_if"] is None
+    # Branch here with the scratch tuning: B beside A (a ghost) and the difference row ab's arms give
+    row = labels["branch"]["panels"]["stats"]["branch"]
+    assert row.startswith(f"A vs B (from tick {tick}), tick {tick + LATER}: pose difference mean "
+                          f"{difference.mean():.3f} m, max {difference.max():.3f} m"), row
+    assert difference.max() > 0
+    ghosts = [g["label"] for g in labels["branch"]["panels"]["viewport"]["previews"]]
+    assert f"B (from tick {tick})" in ghosts, ghosts
+    assert labels["before"]["panels"]["stats"]["branch"] == f"branch B from tick {tick}: before it, B is A"
