@@ -194,6 +194,7 @@ class SessionActions:
     def switch_layout(self, name_or_path: str) -> bool:
         ok = self.layouts.switch(name_or_path, self.frame_index)
         self.menu.sync_window_checks()
+        self._hidden = tuple(self.layouts.hidden())     # at once: the ghosts of hidden windows go with them
         return ok
 
     def orbit_camera(self, d_azimuth: float) -> None:

@@ -44,6 +44,7 @@ from .state_dump import FrameObserver, StateDump, final_state, panel_state
 from .studio_commands import register_studio_commands
 from .engine import StudioOptions, load_session
 from .prepared import Preparer
+from .realtime import RealTimeRatio
 from .tick_worker import TickWorker
 from .theme import OPAQUE, WINDOW_BG, Theme
 
@@ -64,6 +65,7 @@ class Studio(SessionActions):
         self.theme = Theme(dpg)
         self.layouts = LayoutManager(dpg, self.errors.show, (options.width, options.height))
         self.frame_times = FrameTimes()
+        self.realtime = RealTimeRatio()      # simulated over wall time: the menu bar says when behind
         self.frame_index = 0
         self.ui_antialiasing = True      # dearpygui's anti-aliased lines and fills (see _apply_ui_antialiasing)
         self.running = True
@@ -75,8 +77,7 @@ class Studio(SessionActions):
         self.input = None
         self._last_time = None
         self.screenshots = Screenshots(dpg)
-        self._text_items: list = []
-        self._hidden: tuple[str, ...] = ()
+        self._text_items, self._hidden = [], ()     # items that take text; windows hidden (names)
 
     # -- start-up ------------------------------------------------------------------------------
     def load_engine(self) -> None:
@@ -133,6 +134,7 @@ class Studio(SessionActions):
             self.panels[cls.key] = cls(ctx)
         self.preparer = Preparer(self.panels)
         self.menu.build()
+        self.menu.behind = lambda: self.realtime.note(self.fixed_step)
         for key, panel in self.panels.items():
             panel.build(self.layouts.window_kwargs(key))
             if not dpg.does_alias_exist(window_alias(key)):
@@ -262,6 +264,7 @@ class Studio(SessionActions):
         self.session.undo.end_frame()       # this frame's tuning changes are one undo step
         live = self._live_input(self.session.dt if self.fixed_step else frame_dt)
         n = self.playback.ticks_due(frame_dt)
+        self.realtime.add(frame_dt, n * self.session.dt, self.playback.live and not self.playback.paused)
         inputs = [self.session.input_for_next_tick(live, ahead=k) for k in range(n)]
         self.observer.ticks_due(self.session, n)
         t1 = time.perf_counter()
@@ -381,10 +384,8 @@ class Studio(SessionActions):
         self.layouts.close()
 
     def _apply_ui_antialiasing(self) -> None:
-        """dearpygui's anti-aliased lines and fills, as ``--ui-antialiasing`` says: with "auto", off where
-        the GL renderer rasterises on the CPU (their fringes made dearpygui's frame about 11 % longer
-        there, 1.5 fps of 21 at 1600x900) and on otherwise (on a GPU they cost next to nothing). Known
-        once the 3D view has the GL context; without one, left on. The Stats panel says when they are off."""
+        """dearpygui's anti-aliased lines and fills (``--ui-antialiasing``): "auto" turns them off where GL
+        rasterises on the CPU (11 % of dearpygui's frame there), on otherwise; the Stats panel says so."""
         choice = self.opts.ui_antialiasing
         on = choice == "on" or (choice == "auto" and not self.viewport.software_gl())
         self.dpg.configure_app(anti_aliased_lines=on, anti_aliased_lines_use_tex=on, anti_aliased_fill=on)

@@ -42,6 +42,7 @@ class MenuBar:
         self.dpg = ctx.dpg
         self.text = TextCache(ctx.dpg)
         self._fps = None        # (frame, fps) last worked out
+        self.behind = lambda: ""    # the "behind real time" note (the studio sets it: app.realtime)
 
     def build(self) -> None:
         dpg = self.dpg
@@ -63,6 +64,10 @@ class MenuBar:
             with dpg.menu(label="Help"):
                 self._add_commands("Help")
             dpg.add_spacer(width=30)
+            dpg.add_text("", tag="menu_behind", color=(255, 170, 90))
+            with dpg.tooltip("menu_behind"):
+                dpg.add_text("Simulated time over wall time of the last 3 s: the machine cannot step the\n"
+                             "characters as fast as the clock runs (or a script steps one tick a frame)")
             dpg.add_text("", tag="menu_status", color=(170, 200, 170))
 
     def _add_commands(self, menu: str) -> None:
@@ -113,6 +118,7 @@ class MenuBar:
         if note:
             parts.append(note)
         self.text.set("menu_status", "   |   ".join(parts))
+        self.text.set("menu_behind", self.behind())
 
     def state(self) -> dict:
-        return {"status": self.text.get("menu_status", "")}
+        return {"status": self.text.get("menu_status", ""), "behind": self.text.get("menu_behind", "")}

@@ -114,7 +114,7 @@ class TuningPanel(Panel):
         with self.window(window_kwargs):
             with dpg.group(horizontal=True):
                 dpg.add_button(label="Load preset...", callback=lambda: act.dialog_preset_load())
-                dpg.add_button(label="Save preset...", callback=lambda: act.dialog_preset_save())
+                dpg.add_button(label="Save preset...", tag="tun_save_preset", callback=lambda: act.dialog_preset_save())
                 dpg.add_button(label="Reset all", callback=self.reset_all)
             dpg.add_text("acts on the next frame of both characters", color=(150, 150, 160))
             current_group = None

@@ -108,13 +108,15 @@ class Previews:
             self.requests.pop(owner, None)
         self.version += 1
 
-    def poses(self) -> list:
-        return [p for owner in sorted(self.requests) for p in self.requests[owner]]
+    def poses(self, hidden=()) -> list:
+        """The ghosts to draw: those of the owners whose window is not in ``hidden`` (a layout that
+        hides the Database window takes its candidate ghost away; showing it again brings it back)."""
+        return [p for owner in sorted(self.requests) if owner not in hidden for p in self.requests[owner]]
 
     def update(self, view, batch: MarkerBatch, style: str, shadow: bool, roots: list) -> list[dict]:
         """Place the ghosts at the displayed tick; returns what was drawn (see :meth:`PreviewDrawings.update`),
         the first ghost's root added to ``roots`` (which the camera keeps in view) when there are any."""
-        poses = self.poses()
+        poses = self.poses(view.hidden_windows)
         snap = view.snap() if poses else None
         if not poses:
             anchor_pos = anchor_rot = None     # nothing to place (the drawings hide what they showed)

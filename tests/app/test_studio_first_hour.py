@@ -40,7 +40,8 @@ def test_failed_load_by_absolute_path_is_shown_and_keys_work_and_wheel_zooms(xvf
     pytest.importorskip("PIL.ImageGrab")
     missing = "/nowhere_h/take_mm.bvh"    # short: dearpygui takes about one typed character a frame
     rects = tmp_path / "rects.json"
-    actions = [{"frame": 15, "do": "write_rects", "path": str(rects), "items": ["vp_drawlist", "vp_inspect"]},
+    actions = [{"frame": 15, "do": "write_rects", "path": str(rects), "items": ["vp_drawlist", "vp_inspect",
+                                                                              "tun_save_preset"]},
                {"frame": 16, "do": "dialog_reference"}]
     args = ["--layout", "default", "--width", str(W), "--height", str(H)]
     with RealKeyStudio(tmp_path, xvfb_display, studio_cache, actions, args) as s:
@@ -81,6 +82,23 @@ def test_failed_load_by_absolute_path_is_shown_and_keys_work_and_wheel_zooms(xvf
         after = _grab(xvfb_display).crop((ox + int(toolbar[0]), oy + int(toolbar[1]),
                                           ox + int(toolbar[2]), oy + int(toolbar[3])))
         after.save(tmp_path / "toolbar_after_wheel.png")
+        # OK on the error; Save preset... and OK on its default name, twice: the second asks first
+        xdo("mousemove", "--window", win, str(W // 2 - 280 + 45), str(H // 2 - 95 + 94))
+        xdo("click", "1")
+        time.sleep(0.5)
+        save = s.rect(rects, "tun_save_preset", settle_s=0)
+        preset = tmp_path / "cfg" / "presets" / "tuning.json"
+        for attempt in range(2):
+            xdo("mousemove", "--window", win, str(int(save[0] + 20)), str(int(save[1] + 8)))
+            xdo("click", "1")
+            time.sleep(1.0)
+            xdo("mousemove", "--window", win, str(dx + 19), str(dy + 403))
+            xdo("click", "1")
+            time.sleep(1.0)
+            if attempt == 0:
+                assert preset.is_file(), "the preset was not saved as presets/tuning.json"
+                preset.write_text("{}")
+        _grab(xvfb_display).save(tmp_path / "replace_question.png")
     assert s.returncode == 0, s.stderr[-3000:]
     d = s.dump()
     # the path typed is the one read (no current folder in front of it), reported once
@@ -88,7 +106,13 @@ def test_failed_load_by_absolute_path_is_shown_and_keys_work_and_wheel_zooms(xvf
     assert len(errors) == 1 and f"'{missing}'" in errors[0]["message"], d["errors"]
     assert str(tmp_path) not in errors[0]["message"]
     assert errors[0]["time"] < t_w
-    assert d["final"]["dialog"]["shown"]       # still shown: W did not need it dismissed
+    assert errors[0]["time"] < t_w            # W moved with the error shown (it was dismissed later)
+    # the second save asks before replacing; unanswered, the file is as it was
+    assert d["final"]["dialog"] == {"title": "Save tuning preset", "shown": True}, d["final"]["dialog"]
+    assert preset.read_text() == "{}"
+    assert not (tmp_path / "presetjson.json").exists() and not (tmp_path / "preset.json").exists()
+    # a script steps one tick a frame, far slower than real time here: the menu bar says so
+    assert d["final"]["menu"]["behind"].startswith("behind real time: 0."), d["final"]["menu"]
     assert any(t["input"]["left_y"] for t in d["ticks"]), "W did not move the character after the error"
     assert list(before.getdata()) == list(after.getdata()), "the wheel scrolled the 3D view's toolbar"
     assert abs(d["final"]["viewport"]["camera"]["distance"] - 4.6) > 0.1, d["final"]["viewport"]["camera"]
