@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from lmm import search_native
 from lmm.search_ranking import SearchResult, continuing_cost, frame_costs, least_frames, make_result, rank, rank_groups
 
 SMALL_BLOCK = 8   # frames per small box
@@ -134,6 +135,7 @@ class SearchIndex:
         self._ones1 = np.ones(len(dims), dtype=np.float32)
         self._ones = np.ones(d, dtype=np.float32)
         self._mask_key = None
+        self._native = None       # the compiled filter over these arrays (False: none), made on first use
         return True
 
     # the arrays :meth:`update` builds (the per-mask cache of :meth:`_valid` is not part of the structure)
@@ -322,7 +324,9 @@ class SearchIndex:
             valid[lo_w:hi_w] = False
             frame_bias[lo_w:hi_w] = np.inf
         try:
-            frames, costs, keys, cont, in_group, evaluated, seeds = self._group_search(
+            found = self._native_group_search(q, frame_bias, all_bias, small_min, large_min, candidates, spread,
+                                              current, tc, k)
+            frames, costs, keys, cont, in_group, evaluated, seeds = found or self._group_search(
                 q, frame_bias, all_bias, small_min, large_min, valid, candidates, spread, current, tc, k, hint)
         finally:
             if current >= 0:
@@ -413,3 +417,29 @@ class SearchIndex:
         keys = costs + tc
         keys += frame_bias[frames]    # inf for frames that are not candidates (the window's included)
         return frames, costs, keys, cont, in_group, evaluated + frames.size, (seeds, c[:seeds.size])
+
+    def _native_group_search(self, q, frame_bias, all_bias, small_min, large_min, candidates, spread, current, tc,
+                             k):
+        """:meth:`_group_search`'s result from the compiled filter (:mod:`lmm.search_native`): the frames that
+        may reach the answer, costed here by the brute force's row reduction; None when the filter is off
+        or cannot say (then numpy searches). No seeds: the filter finds its own first bound."""
+        if self._native is None:
+            self._native = search_native.group_filter(self) or False
+        if not self._native:
+            return None
+        in_group = current >= 0 and bool(candidates[current])
+        cont, cont_key = float("nan"), np.inf
+        if in_group:
+            d = self.X[current:current + 1] - q
+            cont = float(np.einsum("ij,ij->i", d, d)[0])
+            cont_key = float(np.float32(cont) + all_bias[current])   # its total: no transition cost
+        frames = self._native(q, frame_bias, small_min, large_min, tc, spread, cont_key, k)
+        if frames is None:
+            return None
+        frames.sort()                                # ascending, as ranking reads them (ties: the lower frame)
+        rows = self.X[frames]
+        rows -= q
+        costs = np.einsum("ij,ij->i", rows, rows)   # the brute force's reduction: the same value per row
+        keys = costs + tc
+        keys += frame_bias[frames]
+        return frames, costs, keys, cont, in_group, frames.size, (frames[:0], costs[:0])

@@ -219,13 +219,20 @@ def test_a_playing_frame_tied_with_a_better_candidate_by_rounding_keeps_its_grou
     assert _same(one, brute)
 
 
+def numpy_index(X):
+    """A :class:`SearchIndex` that searches with numpy only (no compiled filter)."""
+    index = SearchIndex(X)
+    index._native = False
+    return index
+
+
 def test_a_top_1_group_search_that_no_block_survives_keeps_playing(features, db):
     """With a transition cost so large that the playing frame beats every other frame's bound, no block
     survives the cut: the top-1 search (the controller's tick search) keeps the playing frame, as the brute
     force does, and its near frames are the hint's seeds (the hinted frame and its neighbours), the only
-    frames evaluated."""
+    frames evaluated. (The numpy index's seeds: the compiled filter finds its own first bound.)"""
     X = features.normalized
-    index = SearchIndex(X)
+    index = numpy_index(X)
     mask = candidate_mask(db.n_frames, db.range_starts, db.range_stops, 10)
     groups = [(0.0, mask & (db.frame_tags[:, 0] == 0)), (1.0, mask & (db.frame_tags[:, 0] != 0))]
     current = int(np.flatnonzero(mask)[len(np.flatnonzero(mask)) // 2])
@@ -251,7 +258,7 @@ def test_the_near_frames_of_a_top_1_search_make_the_next_hint(features, db):
     assert sorted(least_frames(frames, keys, 20)) == [10, 12, 13, 15]
     rng = np.random.default_rng(5)
     X = features.normalized
-    index = SearchIndex(X)
+    index = numpy_index(X)      # the numpy index's seeds (the compiled filter needs no hint)
     mask = candidate_mask(db.n_frames, db.range_starts, db.range_stops, 10)
     groups = [(0.0, mask & (db.frame_tags[:, 0] == 0)), (1.0, mask & (db.frame_tags[:, 0] != 0))]
     window, hint, current, carried = 20, None, int(rng.integers(db.n_frames)), 0

@@ -1,0 +1,110 @@
+#!/usr/bin/env python
+"""The runtime search call's latency, with and without the compiled filter (lmm/native/search.c), and its
+agreement with the brute force.
+
+The motion matching controller runs the built-in scenarios (round robin, as ``lmm-studio bench`` does) on
+a database until --queries searches were made, with the numpy search (so each logged hint is the one the
+numpy index is given at run time; the compiled filter reads none). Each query is then searched as the
+controller searches it at a tick (its tag groups in one pass, the playing frame and its window, top 1 with
+the near frames) by the numpy index and by the compiled filter, in alternating chunks of 1,000 queries, on
+two indexes of the same features; the first --brute queries also by the brute force. Prints p50/p90/p99
+per path (us) and the agreements (same frames, totals and biases); --json OUT writes them.
+
+    python bench/search_tail.py [--db FILE.npz] [--queries 10000] [--brute 10000] [--json out.json]
+
+Without --db: the default database (the shipped locomotion set). The full LAFAN1 set:
+``LAFAN1_DIR=/path/to/lafan1 lmm-studio build-db --manifest lmm/data/manifests/lafan1_full.json --out full.npz``.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+import numpy as np  # noqa: E402
+
+from app.commands.bench_runs import brute_force_args, collect_queries  # noqa: E402
+from lmm import search_native  # noqa: E402
+from lmm.data.build import load_or_build  # noqa: E402
+from lmm.data.database import Database  # noqa: E402
+from lmm.features import build_features  # noqa: E402
+from lmm.search import SearchIndex, biased_search, brute_force_search  # noqa: E402
+
+
+def percentiles(seconds) -> dict:
+    us = np.asarray(seconds) * 1e6
+    return {f"p{p}_us": float(np.percentile(us, p)) for p in (50, 90, 99)} | {"max_us": float(us.max())}
+
+
+def same(a, b) -> bool:
+    return np.array_equal(a.frames, b.frames) and np.array_equal(a.costs, b.costs) and np.array_equal(a.bias, b.bias)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--db", help="database .npz (default: the default database)")
+    ap.add_argument("--queries", type=int, default=10000)
+    ap.add_argument("--brute", type=int, default=None, help="queries checked by brute force (default: all)")
+    ap.add_argument("--json", help="write the figures here")
+    a = ap.parse_args(argv)
+    db = Database.load(a.db) if a.db else load_or_build()[0]
+    features = build_features(db)
+    if search_native.library() is None:
+        print(f"no compiled search: {search_native.note() or 'switched off'}", file=sys.stderr)
+        return 1
+    # the queries, made with the numpy search (the runtime hints of the numpy index)
+    orig = SearchIndex.update
+
+    def numpy_only(self, features_norm):
+        rebuilt = orig(self, features_norm)
+        self._native = False
+        return rebuilt
+
+    SearchIndex.update = numpy_only
+    t0 = time.perf_counter()
+    runs = collect_queries(db, features, a.queries)
+    SearchIndex.update = orig
+    queries = runs.queries
+    print(f"{len(queries)} queries on {db.n_frames} frames in {time.perf_counter() - t0:.0f} s", file=sys.stderr)
+    c0 = queries[0][3]
+    args = dict(brute_force_args(c0), top_k=1)
+    near = int(c0.tuning.top_k)
+    groups = c0.tag_groups()
+    X = c0.features.normalized
+    numpy_index, compiled = SearchIndex(X), SearchIndex(X)
+    numpy_index._native = False
+    times = {"numpy": [], "compiled": []}
+    results = {"numpy": [], "compiled": []}
+    for start in range(0, len(queries), 1000):
+        for name, index in (("numpy", numpy_index), ("compiled", compiled)):
+            for query, frame, hint, _ in queries[start:start + 1000]:
+                t = time.perf_counter()
+                r = index.group_search(query, groups, current=frame, hint=hint, near=near, **args)
+                times[name].append(time.perf_counter() - t)
+                results[name].append(r)
+    assert compiled._native, "the compiled filter ran"
+    n_brute = len(queries) if a.brute is None else min(a.brute, len(queries))
+    brute_same = []
+    for (query, frame, _, _), fast in zip(queries[:n_brute], results["compiled"]):
+        ref = biased_search(lambda **kw: brute_force_search(X, query, **kw), groups[0][1], None, group_masks=groups,
+                            current=frame, **args)
+        brute_same.append(same(fast, ref))
+    out = {"frames": int(db.n_frames), "queries": len(queries),
+           "numpy": percentiles(times["numpy"]), "compiled": percentiles(times["compiled"]),
+           "agreement_compiled_numpy": float(np.mean([same(x, y) for x, y in zip(results["compiled"],
+                                                                                 results["numpy"])])),
+           "brute_force_checked": n_brute,
+           "agreement_compiled_brute_force": float(np.mean(brute_same)) if brute_same else float("nan")}
+    print(json.dumps(out, indent=1))
+    if a.json:
+        Path(a.json).write_text(json.dumps(out, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

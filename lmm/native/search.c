@@ -1,0 +1,174 @@
+/* The compiled filter of lmm.search_index.SearchIndex.group_search (see lmm/search_native.py).
+ *
+ * It walks the index's two levels of bounding boxes with a threshold that tightens as real frames are
+ * costed, and returns every candidate frame whose approximate total (cost + transition cost + bias) is within
+ * a relative 1e-4 of the approximate k-th best total: a superset of the frames that can be in the exact
+ * answer, which numpy then costs and ranks exactly as the brute force does. Its own float sums may round
+ * differently from numpy's (another order); the margin is far wider than that rounding, so only speed
+ * depends on this file, never an answer.
+ *
+ * One build runs at native speed on any x86-64: GCC's target_clones picks the widest instruction set at load.
+ */
+#include <math.h>
+#include <stdint.h>
+
+#if defined(__GNUC__) && !defined(__clang__) && (defined(__x86_64__) || defined(__i386__))
+#define CLONES __attribute__((target_clones("default", "avx2", "arch=x86-64-v4")))
+#else
+#define CLONES
+#endif
+
+#define SLACK 0.9999f  /* a box bound shrunk by 1e-4 stays below every cost in the box, rounding included */
+#define MAX_K 64
+
+typedef struct {
+    float best[MAX_K]; /* the k least totals seen, ascending (INFINITY: none yet) */
+    int k;
+    float scale;       /* |transition cost| + the largest |bias|: the margin's floor */
+    float thr;         /* best[k-1] widened by the margin */
+} kbest;
+
+static void kbest_set_thr(kbest *b) {
+    float t = b->best[b->k - 1];
+    b->thr = isinf(t) ? INFINITY : t + 1e-4f * (fabsf(t) + b->scale);
+}
+
+static void kbest_push(kbest *b, float v) {
+    int i = b->k - 1;
+    if (!(v < b->best[i])) return;
+    while (i > 0 && b->best[i - 1] > v) { b->best[i] = b->best[i - 1]; i--; }
+    b->best[i] = v;
+    kbest_set_thr(b);
+}
+
+/* squared distance from q to the box [lo, hi] over n dims */
+static inline float box_bound(const float *lo, const float *hi, const float *q, int n) {
+    float acc[8] = {0, 0, 0, 0, 0, 0, 0, 0};
+    int d = 0;
+    for (; d + 8 <= n; d += 8)
+        for (int j = 0; j < 8; j++) {
+            float c = q[d + j] < lo[d + j] ? lo[d + j] : (q[d + j] > hi[d + j] ? hi[d + j] : q[d + j]);
+            float g = q[d + j] - c;
+            acc[j] += g * g;
+        }
+    float s = 0.0f;
+    for (; d < n; d++) {
+        float c = q[d] < lo[d] ? lo[d] : (q[d] > hi[d] ? hi[d] : q[d]);
+        float g = q[d] - c;
+        s += g * g;
+    }
+    return s + ((acc[0] + acc[1]) + (acc[2] + acc[3])) + ((acc[4] + acc[5]) + (acc[6] + acc[7]));
+}
+
+/* squared distance of a row to q over n dims */
+static inline float row_cost(const float *x, const float *q, int n) {
+    float acc[8] = {0, 0, 0, 0, 0, 0, 0, 0};
+    int d = 0;
+    for (; d + 8 <= n; d += 8)
+        for (int j = 0; j < 8; j++) {
+            float g = x[d + j] - q[d + j];
+            acc[j] += g * g;
+        }
+    float s = 0.0f;
+    for (; d < n; d++) {
+        float g = x[d] - q[d];
+        s += g * g;
+    }
+    return s + ((acc[0] + acc[1]) + (acc[2] + acc[3])) + ((acc[4] + acc[5]) + (acc[6] + acc[7]));
+}
+
+typedef struct {
+    const float *rows, *l2_lo, *l2_hi, *bias, *small_min, *q;
+    int dims, per, sb;
+    float tc;
+    int64_t *out;
+    float *out_key;
+    int n_out, max_out;
+} scan;
+
+/* keep only the collected frames within the threshold; 0 when the buffer is still full */
+static int compact(scan *s, const kbest *b) {
+    int j = 0;
+    for (int i = 0; i < s->n_out; i++)
+        if (s->out_key[i] <= b->thr) { s->out[j] = s->out[i]; s->out_key[j] = s->out_key[i]; j++; }
+    s->n_out = j;
+    return j < s->max_out;
+}
+
+/* the small blocks of one large block, then their frames; 0 on overflow */
+static int visit_large(scan *s, kbest *b, int64_t large) {
+    const int d = s->dims, per = s->per, sb = s->sb;
+    const float *lo = s->l2_lo + large * per * d, *hi = s->l2_hi + large * per * d;
+    for (int j = 0; j < per; j++) {
+        int64_t small = large * per + j;
+        float bound = box_bound(lo + j * d, hi + j * d, s->q, d) * SLACK + s->tc + s->small_min[small];
+        if (!(bound <= b->thr)) continue;
+        for (int r = 0; r < sb; r++) {
+            int64_t f = small * sb + r;
+            float fb = s->bias[f];
+            if (isinf(fb)) continue;
+            float key = (row_cost(s->rows + f * d, s->q, d) + s->tc) + fb;
+            if (!(key <= b->thr)) continue;
+            kbest_push(b, key);
+            if (s->n_out == s->max_out && !compact(s, b)) return 0;
+            s->out[s->n_out] = f;
+            s->out_key[s->n_out] = key;
+            s->n_out++;
+        }
+    }
+    return 1;
+}
+
+/* Frames (ascending within each visit, unordered overall) that may be in the top k; returns their count,
+ * or -1 when more than max_out are within the margin (the caller falls back to numpy).
+ *
+ * rows (n_pad, dims) the features padded to whole large blocks; l1_lo/l1_hi (d1, n_large) the large boxes
+ * over d1 dims; l2_lo/l2_hi (n_large, per * dims) the small boxes; bias (n_pad) each frame's bias, INFINITY
+ * for frames that are not candidates; small_min/large_min the least bias per block; seeds the frames whose
+ * totals give a first threshold (hint neighbours, in range); cont_key the playing frame's total (INFINITY
+ * when it does not compete); lb scratch (n_large).
+ */
+CLONES
+int lmm_group_filter(const float *rows, const float *l1_lo, const float *l1_hi, const int64_t *l1_dims, int d1,
+                     const float *l2_lo, const float *l2_hi, int64_t n_large, int per, int sb, int dims,
+                     const float *bias, const float *small_min, const float *large_min, const float *q,
+                     float tc, float spread, const int64_t *seeds, int n_seeds, float cont_key, int k,
+                     float *lb, int64_t *out, float *out_key, int max_out) {
+    if (k < 1 || k > MAX_K) return -1;
+    kbest b;
+    b.k = k;
+    b.scale = fabsf(tc) + spread;
+    for (int i = 0; i < k; i++) b.best[i] = INFINITY;
+    kbest_set_thr(&b);
+    kbest_push(&b, cont_key);
+    for (int i = 0; i < n_seeds; i++) {
+        int64_t f = seeds[i];
+        if (isinf(bias[f])) continue;
+        kbest_push(&b, (row_cost(rows + f * dims, q, dims) + tc) + bias[f]);
+    }
+    /* 1. the coarse bound of every large block, dimension by dimension (long loops along the blocks) */
+    for (int64_t i = 0; i < n_large; i++) lb[i] = 0.0f;
+    for (int j = 0; j < d1; j++) {
+        const float qj = q[l1_dims[j]];
+        const float *lo = l1_lo + j * n_large, *hi = l1_hi + j * n_large;
+        for (int64_t i = 0; i < n_large; i++) {
+            float c = qj < lo[i] ? lo[i] : (qj > hi[i] ? hi[i] : qj);
+            float g = qj - c;
+            lb[i] += g * g;
+        }
+    }
+    int64_t first = 0;
+    float least = INFINITY;
+    for (int64_t i = 0; i < n_large; i++) {
+        lb[i] = lb[i] * SLACK + tc + large_min[i];
+        if (lb[i] < least) { least = lb[i]; first = i; }
+    }
+    scan s = {rows, l2_lo, l2_hi, bias, small_min, q, dims, per, sb, tc, out, out_key, 0, max_out};
+    if (isinf(least)) return 0;
+    /* 2. the most promising block first (a tight threshold early), then every block that may hold a frame */
+    if (!visit_large(&s, &b, first)) return -1;
+    for (int64_t i = 0; i < n_large; i++)
+        if (i != first && lb[i] <= b.thr && !visit_large(&s, &b, i)) return -1;
+    compact(&s, &b);
+    return s.n_out;
+}

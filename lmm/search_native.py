@@ -1,0 +1,148 @@
+"""The compiled filter of the runtime search (``lmm/native/search.c``), built on first use and loaded with
+ctypes; numpy stays the reference and the fallback.
+
+:meth:`lmm.search_index.SearchIndex.group_search` asks it for every candidate frame whose total may be in the
+top K (it walks the index's boxes in C with a threshold that tightens as frames are costed, and keeps a
+relative 1e-4 margin, far more than its own float rounding), then costs those few frames with numpy's row
+reduction and ranks them as the brute force does: the answer is the brute force's, bit for bit, whether
+or not the compiled filter runs. It only changes how long a search takes (its tail above all: the numpy
+index's worst searches on half a million frames take milliseconds).
+
+The source is compiled with ``$CC`` (default ``cc``) ``-O3 -shared -fPIC`` into the cache folder
+(:func:`lmm.data.cache.default_cache_dir`, ``native/``), named from a hash of the source and the compiler,
+so a changed source or compiler builds anew and later processes load the built library. GCC's
+``target_clones`` in the source makes one build run at native speed on any x86-64. Without a compiler, or
+when the build fails, one note goes to stderr (once per process) and numpy runs. ``LMM_STUDIO_NATIVE=0``
+turns the compiled filter off.
+"""
+from __future__ import annotations
+
+import ctypes
+import hashlib
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+SOURCE = Path(__file__).with_name("native") / "search.c"
+ENV_SWITCH = "LMM_STUDIO_NATIVE"
+MAX_K = 64          # the largest top K the C filter ranks (the source's MAX_K); above it numpy runs
+_OUT = 4096         # frames the filter may return before it gives up (many exact ties): numpy runs then
+
+_state: dict = {}   # "lib": the loaded library or None, "note": why not ("" when loaded or switched off)
+
+
+def _compiler_id(cc: str) -> str:
+    try:
+        return subprocess.run([cc, "--version"], capture_output=True, text=True, timeout=30).stdout
+    except (OSError, subprocess.SubprocessError):
+        return ""
+
+
+def _build() -> tuple[ctypes.CDLL | None, str]:
+    """(library, "") or (None, why not)."""
+    cc = os.environ.get("CC") or "cc"
+    path = shutil.which(cc)
+    if path is None:
+        return None, f"no C compiler ({cc!r} not found)"
+    source = SOURCE.read_bytes()
+    key = hashlib.sha256(source + path.encode() + _compiler_id(path).encode()).hexdigest()[:20]
+    from lmm.data.cache import default_cache_dir
+
+    folder = default_cache_dir() / "native"
+    lib = folder / f"search-{key}.so"
+    if not lib.is_file():
+        try:
+            folder.mkdir(parents=True, exist_ok=True)
+            fd, tmp = tempfile.mkstemp(suffix=".so", dir=folder)
+            os.close(fd)
+            run = subprocess.run([path, "-O3", "-shared", "-fPIC", "-o", tmp, str(SOURCE), "-lm"],
+                                 capture_output=True, text=True, timeout=120)
+            if run.returncode != 0:
+                os.unlink(tmp)
+                last = (run.stderr.strip().splitlines() or ["no message"])[-1]
+                return None, f"building {SOURCE.name} with {cc} failed: {last}"
+            os.replace(tmp, lib)     # atomic: another process loads a whole library or builds its own
+        except (OSError, subprocess.SubprocessError) as exc:
+            return None, f"building {SOURCE.name} with {cc} failed: {exc}"
+    try:
+        dll = ctypes.CDLL(str(lib))
+    except OSError as exc:
+        return None, f"loading {lib.name} failed: {exc}"
+    fn = dll.lmm_group_filter
+    P, I, F = ctypes.c_void_p, ctypes.c_int, ctypes.c_float
+    fn.argtypes = [P, P, P, P, I, P, P, ctypes.c_int64, I, I, I, P, P, P, P, F, F, P, I, F, I, P, P, P, I]
+    fn.restype = I
+    return dll, ""
+
+
+def library() -> ctypes.CDLL | None:
+    """The compiled filter, built and loaded on the first call; None when switched off or unavailable (the
+    first such call prints the one note)."""
+    if "lib" not in _state:
+        if os.environ.get(ENV_SWITCH, "1").strip() in ("0", "false", "off", "no"):
+            _state["lib"], _state["note"] = None, ""
+        else:
+            _state["lib"], _state["note"] = _build()
+            if _state["note"]:
+                print(f"note: compiled search unavailable ({_state['note']}); using the numpy search",
+                      file=sys.stderr)
+    return _state["lib"]
+
+
+def reset() -> None:
+    """Forget the loaded library (tests: the next :func:`library` call reads the switch and builds again)."""
+    _state.clear()
+
+
+def note() -> str:
+    """Why the compiled filter is not running ("" when it is, or when it was switched off)."""
+    library()
+    return _state["note"]
+
+
+def _ptr(a: np.ndarray) -> int:
+    return a.__array_interface__["data"][0]
+
+
+class GroupFilter:
+    """The compiled filter bound to one :class:`lmm.search_index.SearchIndex`'s arrays (rebuild it after
+    :meth:`~lmm.search_index.SearchIndex.update`)."""
+
+    def __init__(self, index, fn):
+        self.fn, self.index = fn, index
+        self._keep = (np.ascontiguousarray(index.rows, dtype=np.float32), index.l1_lo, index.l1_hi,
+                      np.ascontiguousarray(index.l1_dims, dtype=np.int64), index.l2_lo, index.l2_hi)
+        for a in self._keep[1:]:
+            assert a.flags.c_contiguous
+        self._static = [_ptr(a) for a in self._keep[:4]] + [len(index.l1_dims)] + \
+            [_ptr(a) for a in self._keep[4:]] + [index.n_large, index.per_large, index.small_block, index.n_dims]
+        self._lb = np.empty(index.n_large, dtype=np.float32)
+        self._out = np.empty(_OUT, dtype=np.int64)
+        self._out_key = np.empty(_OUT, dtype=np.float32)
+        self._tail = (_ptr(self._lb), _ptr(self._out), _ptr(self._out_key), _OUT)
+
+    def nbytes(self) -> int:
+        """Bytes of its own buffers (the index's arrays it reads are the index's)."""
+        return int(self._lb.nbytes + self._out.nbytes + self._out_key.nbytes)
+
+    def __call__(self, q: np.ndarray, frame_bias: np.ndarray, small_min: np.ndarray, large_min: np.ndarray,
+                 tc: np.float32, spread: float, cont_key: float, k: int) -> np.ndarray | None:
+        """The frames (unordered, a new array) whose totals may be in the top ``k``, ``cont_key`` being the
+        playing frame's total (inf when it does not compete); None when the filter cannot say (numpy runs)."""
+        if k > MAX_K:
+            return None
+        q = np.ascontiguousarray(q, dtype=np.float32)
+        n = self.fn(*self._static, _ptr(frame_bias), _ptr(small_min), _ptr(large_min), _ptr(q), float(tc),
+                    float(spread), None, 0, float(cont_key), int(k), *self._tail)
+        return None if n < 0 else self._out[:n].copy()
+
+
+def group_filter(index) -> GroupFilter | None:
+    """The compiled filter for ``index``, or None when the compiled path is off or missing."""
+    dll = library()
+    return None if dll is None else GroupFilter(index, dll.lmm_group_filter)

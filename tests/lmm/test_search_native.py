@@ -1,0 +1,124 @@
+"""The compiled search filter (lmm/native/search.c through :mod:`lmm.search_native`): the runtime search
+through it gives the brute force's answer bit for bit (frames, totals, biases, per-channel costs) on the
+default data with tag biases, exclusion windows, playing frames and ties; without a compiler, one note and
+the numpy search, with the same answers; ``LMM_STUDIO_NATIVE=0`` turns it off without a note."""
+import numpy as np
+import pytest
+
+from lmm import search_native
+from lmm.search import SearchIndex, biased_search, brute_force_search, candidate_mask
+
+
+@pytest.fixture
+def fresh_native():
+    """The loader's state forgotten before and after (the next search builds or loads anew)."""
+    search_native.reset()
+    yield
+    search_native.reset()
+
+
+def _same(a, b) -> bool:
+    both_nan = a.continuing_cost != a.continuing_cost and b.continuing_cost != b.continuing_cost
+    return (np.array_equal(a.frames, b.frames) and np.array_equal(a.costs, b.costs)
+            and np.array_equal(a.bias, b.bias) and np.array_equal(a.channel_costs, b.channel_costs)
+            and (a.continuing_cost == b.continuing_cost or both_nan))
+
+
+def _compiled_index(X):
+    index = SearchIndex(X)
+    if search_native.library() is None:
+        pytest.skip(f"no compiled search here: {search_native.note()}")
+    return index
+
+
+def _runtime_queries(db, features, index, n, seed):
+    """``n`` runtime-like group searches (tag groups with positive and negative biases, a playing frame and
+    its window, top 1 with near frames or a ranked top K) with the brute force's answer to each."""
+    rng = np.random.default_rng(seed)
+    X = features.normalized
+    mask = candidate_mask(db.n_frames, db.range_starts, db.range_stops, 10)
+    tags = db.frame_tags
+    groups_by_kind = [
+        [(0.0, mask)],
+        [(0.0, mask & (tags[:, 0] == 0)), (0.5, mask & (tags[:, 0] != 0))],
+        [(-0.3, mask & (tags[:, 0] != 0)), (0.0, mask & (tags[:, 0] == 0) & (np.arange(db.n_frames) % 3 > 0))],
+    ]
+    for i in range(n):
+        groups = groups_by_kind[i % 3]
+        current = -1 if i % 5 == 0 else int(rng.integers(db.n_frames))
+        near = X[min(max(current, 0) + int(rng.integers(0, 30)), db.n_frames - 1)]
+        q = (near + rng.normal(0, [0.02, 0.2, 1.0][i % 3], X.shape[1])).astype(np.float32)
+        k = 1 if i % 2 else int(rng.integers(2, 9))
+        args = dict(current=current, transition_cost=float(rng.choice([0.0, 0.02, 0.5])),
+                    exclude_window=int(rng.integers(0, 40)), top_k=k, slices=features.slices)
+        fast = index.group_search(q, groups, near=8 if k == 1 else 0, **args)
+        brute = biased_search(lambda **kw: brute_force_search(X, q, **kw), groups[0][1], None,
+                              group_masks=groups, **args)
+        yield i, fast, brute
+
+
+def test_the_compiled_search_equals_the_brute_force_on_the_default_data(db, features, fresh_native):
+    index = _compiled_index(features.normalized)
+    for i, fast, brute in _runtime_queries(db, features, index, 300, 0):
+        assert _same(fast, brute), i
+    assert index._native, "the compiled filter ran"
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_the_compiled_search_with_ties_duplicates_and_huge_biases(seed, fresh_native):
+    """Integer features (many equal costs, identical rows) and biases at which float32 totals of different
+    costs round to one value: the compiled filter keeps every frame that may tie, numpy ranks them."""
+    rng = np.random.default_rng(seed)
+    n = 900
+    X = rng.integers(0, 3, size=(n, 5)).astype(np.float32)
+    index = _compiled_index(X)
+    mask = candidate_mask(n, [0, 400], [400, n], 5)
+    label = rng.integers(0, 2, n)
+    for i in range(60):
+        big = float(2 ** 24) if i % 2 else 0.0
+        groups = [(big, mask & (label == 0)), (big + 2.0 * (i % 3), mask & (label == 1))]
+        q = rng.integers(0, 3, 5).astype(np.float32) + np.float32(0.5 * (i % 2))
+        args = dict(current=[-1, int(rng.integers(n)), 398][i % 3], transition_cost=[0.0, 0.5, 1.0][i % 3],
+                    exclude_window=int(rng.integers(0, 6)), top_k=1 + i % 10)
+        fast = index.group_search(q, groups, **args)
+        brute = biased_search(lambda **kw: brute_force_search(X, q, **kw), mask, None, group_masks=groups, **args)
+        assert _same(fast, brute), (seed, i)
+
+
+def test_without_a_compiler_one_note_and_the_same_answers(db, features, fresh_native, monkeypatch, tmp_path, capfd):
+    X = features.normalized
+    compiled = [(f, b) for _, f, b in _runtime_queries(db, features, _compiled_index(X), 40, 3)]
+    search_native.reset()
+    monkeypatch.setenv("LMM_STUDIO_CACHE", str(tmp_path))            # no library built there
+    for cc, why in (("lmm-no-such-compiler", "no C compiler"), ("false", "failed")):
+        search_native.reset()
+        monkeypatch.setenv("CC", cc)
+        capfd.readouterr()
+        for index in (SearchIndex(X), SearchIndex(X)):   # two indexes, one note
+            fallback = [f for _, f, _ in _runtime_queries(db, features, index, 40, 3)]
+            assert index._native is False
+        err = capfd.readouterr().err
+        assert err.count("note: compiled search unavailable") == 1 and why in err, err
+        assert why in search_native.note()
+        for (fast, brute), slow in zip(compiled, fallback):
+            assert _same(slow, brute) and _same(fast, slow)
+    assert not list(tmp_path.glob("native/*.so"))
+
+
+def test_the_switch_turns_the_compiled_search_off_without_a_note(features, fresh_native, monkeypatch, capfd):
+    monkeypatch.setenv(search_native.ENV_SWITCH, "0")
+    index = SearchIndex(features.normalized)
+    index.group_search(features.normalized[5], [(0.0, np.ones(len(features.normalized), bool))])
+    assert index._native is False and search_native.note() == ""
+    assert "note:" not in capfd.readouterr().err
+
+
+def test_a_top_k_beyond_the_filter_runs_numpy(db, features, fresh_native):
+    """The C filter ranks at most ``MAX_K`` frames; a larger top K is the numpy index's, exactly."""
+    X = features.normalized
+    index = _compiled_index(X)
+    mask = candidate_mask(db.n_frames, db.range_starts, db.range_stops, 10)
+    args = dict(current=100, transition_cost=0.02, exclude_window=20, top_k=search_native.MAX_K + 6)
+    q = X[400] + np.float32(0.1)
+    fast = index.group_search(q, [(0.0, mask)], **args)
+    assert _same(fast, brute_force_search(X, q, mask, **args)) and fast.frames.size == args["top_k"]
