@@ -17,6 +17,8 @@ class SessionHistory:
     numbering: tick ``n`` is the pose after ``n`` steps). Plots read the ring of the ``capacity`` ticks
     stepped up to the last one shown (NaN elsewhere); everything else is asked of that ring too."""
 
+    is_session = True                        # what the status line says (SESSION, not PAUSED)
+
     def __init__(self, seeker, capacity: int):
         self.seeker = seeker
         self.last = seeker.ticks

@@ -114,6 +114,8 @@ class View:
 
     @property
     def mode(self) -> str:
+        if getattr(self.history, "is_session", False):      # a reopened session (app.review.SessionHistory)
+            return "SESSION"
         return "LIVE" if self.live else ("PAUSED" if self.paused else "REWIND")
 
     @property

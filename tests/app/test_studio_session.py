@@ -112,4 +112,4 @@ def test_the_session_reopens_with_every_tick_on_the_timeline(studio_session, xvf
         assert got["snapshot_roots"] == first[tick - 1], label
         timeline = got["panels"]["timeline"]
         assert (timeline["oldest"], timeline["newest"], timeline["tick"]) == (1, 160, tick), timeline
-    assert "PAUSED   |   tick 131" in opened["labels"]["late"]["panels"]["menu"]["status"]
+    assert "SESSION   |   tick 131" in opened["labels"]["late"]["panels"]["menu"]["status"]

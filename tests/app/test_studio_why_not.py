@@ -101,6 +101,7 @@ def test_why_not_and_what_if_in_a_reopened_session(xvfb_display, studio_cache, t
     assert "WHAT IF (scratch tuning: feature_weights.hip_velocity=4.0)" in shown["status"]
     assert "WHAT IF" not in labels["cleared"]["panels"]["candidates"]["status"]
     assert labels["cleared"]["panels"]["candidates"]["what_if"] is None
+    assert f"SESSION   |   tick {tick}" in labels["ranked"]["panels"]["menu"]["status"]
     # Branch here with the scratch tuning: B beside A (a ghost) and the difference row ab's arms give
     row = labels["branch"]["panels"]["stats"]["branch"]
     assert row.startswith(f"A vs B (from tick {tick}), tick {tick + LATER}: pose difference mean "
