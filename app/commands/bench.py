@@ -23,7 +23,10 @@ Sections (later issues add theirs to ``SECTIONS``):
             ``..._without_exclusion_us`` the same call without the playing frame; ``plain_query_us`` the
             plainest query (one mask, top-1, no playing frame, the hint), with the runtime call's ratios
             to both (issue 16's target: within 1.2x of the plain query); ``ranked_call_us``: the ranked
-            top-K call the debugger's read of a tick's candidates makes.
+            top-K call the debugger's read of a tick's candidates makes. ``runtime_call_p50_us``,
+            ``..._p90_us``, ``..._p99_us``: the runtime call's percentiles (with the compiled filter of
+            :mod:`lmm.search_native` when ``runtime_call_compiled``), ``runtime_call_numpy_p*_us`` the
+            same call through the numpy index alone (the fallback).
 ``frame``   ``mm_us``: median time of one motion matching controller step over the same runs;
             ``lmm_us``: median time of one learned controller step (shipped networks, debug
             comparison off) over the same inputs, stepped right after each 10 s chunk of motion

@@ -36,13 +36,20 @@ def bench_search(db, features, n_queries: int = 2400, collected=None) -> dict:
     # the runtime call as the controller makes it at a tick (tag groups in one pass, the playing frame, its
     # exclusion window, the best frame only with the near frames kept as the next hint, the hint) against
     # plain queries on the same index: the same call without the playing frame and its window, and the
-    # plainest query (one mask, top-1, no playing frame); and the ranked top K the debugger reads
+    # plainest query (one mask, top-1, no playing frame); and the ranked top K the debugger reads; the
+    # runtime call also through the numpy index alone (no compiled filter: the fallback's figures)
     groups = c0.tag_groups()
     top1 = dict(args, top_k=1)
-    t_run, t_free, t_plain, t_ranked = [], [], [], []
+    numpy_index = SearchIndex(X)
+    numpy_index._native = False
+    t_run, t_free, t_plain, t_ranked, t_numpy = [], [], [], [], []
     for query, frame, hint, _ in queries:
         t0 = time.perf_counter()
         index.group_search(query, groups, current=frame, hint=hint, near=args["top_k"], **top1)
+        t_run.append(time.perf_counter() - t0)
+        t0 = time.perf_counter()
+        numpy_index.group_search(query, groups, current=frame, hint=hint, near=args["top_k"], **top1)
+        t_numpy.append(time.perf_counter() - t0)
         t1 = time.perf_counter()
         index.group_search(query, groups, current=-1, hint=hint, near=args["top_k"], **top1)
         t2 = time.perf_counter()
@@ -50,7 +57,6 @@ def bench_search(db, features, n_queries: int = 2400, collected=None) -> dict:
         t3 = time.perf_counter()
         index.group_search(query, groups, current=frame, hint=hint, **args)
         t4 = time.perf_counter()
-        t_run.append(t1 - t0)
         t_free.append(t2 - t1)
         t_plain.append(t3 - t2)
         t_ranked.append(t4 - t3)
@@ -78,10 +84,21 @@ def bench_search(db, features, n_queries: int = 2400, collected=None) -> dict:
         "runtime_call_over_without_exclusion": run_us / free_us if free_us > 0 else float("nan"),
         "runtime_call_over_plain_query": run_us / plain_us if plain_us > 0 else float("nan"),
         "ranked_call_us": ranked_us,
+        # the runtime call's tail, with the compiled filter when it runs (lmm.search_native) and with numpy alone
+        "runtime_call_compiled": bool(index._native),
+        **_percentiles_us("runtime_call", t_run),
+        **_percentiles_us("runtime_call_numpy", t_numpy),
         # context for the brute-force figure: the cost pass alone, as the reference computes it
         # (einsum) and as the textbook numpy expression np.sum((X - q) ** 2, axis=1) does
         **_cost_pass_us(X, [q for q, *_ in queries[:300]]),
     }
+
+
+def _percentiles_us(name: str, seconds) -> dict:
+    """``NAME_p50_us``, ``NAME_p90_us`` and ``NAME_p99_us`` of the times."""
+    import numpy as np
+
+    return {f"{name}_p{p}_us": float(np.percentile(seconds, p) * 1e6) for p in (50, 90, 99)}
 
 
 def _cost_pass_us(X, queries) -> dict:

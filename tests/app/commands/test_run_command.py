@@ -81,6 +81,10 @@ def test_bench_json_sections(tmp_path):
     assert s["frames"] > 50000 and s["queries"] == 120
     assert s["agreement"] == 1.0 and s["topk_agreement"] == 1.0
     assert s["bruteforce_us"] > s["accelerated_us"] > 0
+    # the runtime call's tail, with the compiled filter (a compiler is here) and through numpy alone
+    assert s["runtime_call_compiled"] is True
+    for name in ("runtime_call", "runtime_call_numpy"):
+        assert 0 < s[f"{name}_p50_us"] <= s[f"{name}_p90_us"] <= s[f"{name}_p99_us"]
     assert res["frame"]["mm_us"] > 0
     # the learned controller stepped the same inputs as motion matching, interleaved with it
     assert res["frame"]["lmm_us"] > 0 and res["frame"]["lmm_steps"] == res["frame"]["mm_steps"]
