@@ -130,6 +130,7 @@ def _coverage(panel, mode, channel) -> None:
 
 def _why_not(s, probe, frame: int) -> dict | None:
     """Explain ``frame`` at the shown tick in the Search Candidates panel (a reason it cannot: one line)."""
+    s.layouts.show_window("candidates", True)
     try:
         why = probe.why_not(frame)
     except ProbeUnavailable as e:

@@ -51,7 +51,7 @@ def range_rows(ranges: list[RangeInfo]) -> list[dict]:
 
 class DatabasePanel(Panel):
     key = "database"
-    commands = ("show_error", "set_preview")
+    commands = ("show_error", "set_preview", "why_not")
     reads = ("frame", "inspected", "snap", "tick_number")
 
     def __init__(self, ctx):
@@ -111,7 +111,9 @@ class DatabasePanel(Panel):
                 dpg.add_input_int(tag="db_to", width=70, step=0, callback=self._on_selection_field)
                 dpg.add_button(label="In", tag="db_in", callback=lambda: self.mark("in"))
                 dpg.add_button(label="Out", tag="db_out", callback=lambda: self.mark("out"))
-            dpg.add_button(label="Copy manifest range", tag="db_copy", callback=lambda: self.copy_range())
+            with dpg.group(horizontal=True):
+                dpg.add_button(label="Copy manifest range", tag="db_copy", callback=lambda: self.copy_range())
+                dpg.add_button(label="Why not this frame?", tag="db_why_not", callback=lambda: self.why_not())
             with dpg.tooltip("db_copy"):
                 dpg.add_text("Copies {\"range\": [from, to], \"tags\": [...]} in the file's own frames (to is\n"
                              "exclusive), ready to paste into the file's 'ranges' of a manifest.\n"
@@ -147,7 +149,7 @@ class DatabasePanel(Panel):
 
     def run_command(self, a: dict) -> None:
         """The ``database`` command: ``op`` ``select`` (range), ``frame`` (db_frame), ``play``, ``pause``,
-        ``scrub`` (source_frame), ``selection`` (start, stop), ``mark`` (end: in/out) or ``copy``."""
+        ``scrub`` (source_frame), ``selection`` (start, stop), ``mark`` (end: in/out), ``copy`` or ``why_not``."""
         op = a["op"]
         if op == "select":
             self.select_range(int(a["range"]))
@@ -163,8 +165,16 @@ class DatabasePanel(Panel):
             self.mark(a["end"])
         elif op == "copy":
             self.copy_range()
+        elif op == "why_not":
+            self.why_not()
         else:
             raise ValueError(f"unknown database op {op!r}")
+
+    def why_not(self) -> None:
+        """Ask why the shown tick's search did not choose the previewed frame (the Search Candidates panel
+        answers: app.why_not_probe)."""
+        if self.frame >= 0:
+            self.ctx.actions.why_not(int(self.frame))
 
     def select_range(self, index: int) -> bool:
         """Preview database range ``index`` from its first frame; its whole span becomes the selection."""

@@ -70,7 +70,8 @@ def test_why_not_and_what_if_in_a_reopened_session(xvfb_display, studio_cache, t
     assert whys[ranked]["asked"]["excluded"] == "" and whys[ranked]["asked"]["total"] > 0
     script = [{"frame": 4, "do": "scrub", "tick": tick},
               {"frame": 6, "do": "why_not", "database_frame": excluded}, {"frame": 8, "do": "capture", "label": "excluded"},
-              {"frame": 10, "do": "why_not", "database_frame": ranked}, {"frame": 12, "do": "capture", "label": "ranked"},
+              {"frame": 9, "do": "database", "op": "frame", "db_frame": ranked},      # the Database panel's button
+              {"frame": 10, "do": "database", "op": "why_not"}, {"frame": 12, "do": "capture", "label": "ranked"},
               {"frame": 14, "do": "what_if", "field": "feature_weights", "channel": "hip_velocity", "value": 4.0},
               {"frame": 16, "do": "capture", "label": "what_if"},
               {"frame": 17, "do": "branch_here", "scratch": True},
