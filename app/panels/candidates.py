@@ -63,6 +63,19 @@ def column_fractions(rows: list[dict], key: str, digits: int = 3) -> list[float]
     return [float((v - lo) / (hi - lo)) if np.isfinite(v) else 1.0 for v in shown]
 
 
+def what_if_fields(channel_names, tuning) -> list[str]:
+    """The scratch tuning's editable entries: the search's weights and biases (``field.entry`` for a per-name
+    field)."""
+    return (["transition_cost", "exclude_current_window_frames"] + [f"feature_weights.{n}" for n in channel_names]
+            + [f"tag_bias.{t}" for t in tuning.tag_bias])
+
+
+def split_field(entry: str) -> tuple[str, str | None]:
+    """``feature_weights.hip_velocity`` -> (``feature_weights``, ``hip_velocity``); a plain field: (it, None)."""
+    field, _, channel = entry.partition(".")
+    return field, channel or None
+
+
 class CandidatesPanel(Panel):
     """Ranked candidates of the inspected controller's last search."""
     key = "candidates"
@@ -91,12 +104,7 @@ class CandidatesPanel(Panel):
         labels = ["#", "frame", "clip", "tags", "t (s)", "total", "bias"] + [short_channel_name(n) for n in names]
         with self.window(window_kwargs):
             dpg.add_text("", tag="cand_status")
-            with dpg.group(horizontal=True):
-                dpg.add_input_int(label="why not frame", tag="cand_why_frame", width=90, on_enter=True,
-                                  callback=lambda s, v: self.ctx.actions.why_not(int(v)))
-                dpg.add_button(label="clear what if", callback=lambda: self.ctx.actions.what_if(clear=True))
-                dpg.add_button(label="branch here (what if)", callback=lambda: self.ctx.actions.branch_here(scratch=True))
-            dpg.add_text("", tag="cand_why", wrap=0)
+            self._build_questions()
             with dpg.table(tag="cand_table", header_row=True, sortable=True, callback=self._on_sort,
                            borders_innerV=True, borders_outerH=True, borders_outerV=True, resizable=True,
                            policy=dpg.mvTable_SizingFixedFit, scrollY=True, scrollX=True, freeze_rows=1,
@@ -114,6 +122,27 @@ class CandidatesPanel(Panel):
                                                    callback=self._on_click, user_data=r)
                             else:
                                 dpg.add_text("", tag=f"cand_{r}_{key}")
+
+    def _build_questions(self) -> None:
+        """Why not a typed frame; what if: one scratch weight, tag bias or cost at a time; branch here."""
+        dpg, actions = self.dpg, self.ctx.actions
+        with dpg.group(horizontal=True):
+            dpg.add_input_int(label="why not frame", tag="cand_why_frame", width=90, on_enter=True,
+                              callback=lambda s, v: actions.why_not(int(v)))
+            dpg.add_button(label="branch here (what if)", callback=lambda: actions.branch_here(scratch=True))
+        with dpg.group(horizontal=True):
+            dpg.add_combo(what_if_fields(self.ctx.engine.channel_names, self.ctx.tuning), tag="cand_wi_field",
+                          default_value="transition_cost", width=200)
+            dpg.add_input_float(tag="cand_wi_value", width=80, step=0, format="%.3f")
+            dpg.add_button(label="what if", callback=lambda: self.ask_what_if(dpg.get_value("cand_wi_field"),
+                                                                               dpg.get_value("cand_wi_value")))
+            dpg.add_button(label="clear what if", callback=lambda: actions.what_if(clear=True))
+        dpg.add_text("", tag="cand_why", wrap=0)
+
+    def ask_what_if(self, entry: str, value) -> None:
+        """One more scratch edit (``entry`` of :func:`what_if_fields`) and the tick's search re-ranked."""
+        field, channel = split_field(entry)
+        self.ctx.actions.what_if(field=field, value=value, channel=channel)
 
     def _on_sort(self, sender, sort_specs):
         if not sort_specs:

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 from app.panels.common import cost_color
-from app.panels.candidates import candidate_rows, column_fractions, sort_rows
+from app.panels.candidates import candidate_rows, column_fractions, sort_rows, split_field, what_if_fields
 from app.panels.search import frame_label, rolling_agreement
 from lmm.controller import Candidates
 
@@ -79,3 +79,20 @@ def test_equal_costs_get_equal_colours():
     f = column_fractions(spread, "total")
     assert f == [0.0, 0.5, 0.5, 1.0] and cost_color(f[1]) == cost_color(f[2])
     assert column_fractions(_rows([1.0, float("nan")]), "ch0") == [0.0, 1.0]
+
+
+def test_what_if_entries_name_tuning_fields_and_entries():
+    """Every entry the what-if combo offers is a field (and entry) the scratch tuning can be set by."""
+    from lmm.tuning import Tuning
+
+    tuning = Tuning()
+    entries = what_if_fields(list(tuning.feature_weights), tuning)
+    assert "feature_weights.hip_velocity" in entries and "transition_cost" in entries
+    assert split_field("feature_weights.hip_velocity") == ("feature_weights", "hip_velocity")
+    assert split_field("transition_cost") == ("transition_cost", None)
+    for entry in entries:
+        field, channel = split_field(entry)
+        scratch = tuning.copy()
+        scratch.set(field, 0.5 if field != "exclude_current_window_frames" else 7, channel)
+        got = getattr(scratch, field) if channel is None else getattr(scratch, field)[channel]
+        assert got == (0.5 if field != "exclude_current_window_frames" else 7), entry
