@@ -210,4 +210,5 @@ class SessionActions:
         panel = self.panels.get("database")
         if panel is not None:
             self.layouts.show_window("database", True)
+            self._hidden = tuple(self.layouts.hidden())     # its ghost is drawn from this frame on
             panel.show_frame(int(frame))

@@ -20,6 +20,24 @@ def scrub_target(history, current: int, delta: int) -> int:
     return history.clamp(int(current) + int(delta))
 
 
+#: the speed axis shows at least 0..this (standing still is a flat line at 0, not noise blown up to
+#: fill the plot: "2.5e-45 m/s"), and grows in steps of it so the axis does not jitter
+SPEED_AXIS_STEP_M_S = 1.0
+
+
+def speed_axis_top(top_speed: float) -> float:
+    """The speed axis' upper limit for curves reaching ``top_speed`` (m/s): the next whole step above
+    it, with a little room, at least one step."""
+    steps = np.ceil(max(float(top_speed), 0.0) * 1.05 / SPEED_AXIS_STEP_M_S)
+    return float(max(steps, 1.0) * SPEED_AXIS_STEP_M_S)
+
+
+def _peak(values) -> float:
+    finite = np.asarray(values, np.float64)
+    finite = finite[np.isfinite(finite)]
+    return float(finite.max()) if finite.size else 0.0
+
+
 class TimelinePanel(Panel):
     key = "timeline"
     commands = ("toggle_pause", "step", "live", "scrub")
@@ -52,7 +70,7 @@ class TimelinePanel(Panel):
             with dpg.plot(tag="tl_plot", height=-1, width=-1, no_menus=True, no_mouse_pos=True, no_title=True,
                           no_box_select=True):
                 dpg.add_plot_axis(dpg.mvXAxis, tag="tl_x", label="seconds (0 = newest)")
-                with dpg.plot_axis(dpg.mvYAxis, tag="tl_y", label="m/s", auto_fit=True):
+                with dpg.plot_axis(dpg.mvYAxis, tag="tl_y", label="m/s"):
                     z = [0.0]
                     dpg.add_line_series(z, z, tag="tl_desired", label="desired speed")
                     for name in COLORS:
@@ -79,8 +97,10 @@ class TimelinePanel(Panel):
         first = max(0, n - (newest - oldest + 1))
         speeds = {name: list(decimate(t[first:], h.window(name, "speed", newest, n)[first:], 400))
                   for name in COLORS if name in names}
-        desired = list(decimate(t[first:], h.window(names[0], "desired_speed", newest, n)[first:], 400))
-        return {"speeds": speeds, "desired": desired, "t0": float(t[0])}
+        wanted = h.window(names[0], "desired_speed", newest, n)[first:]
+        desired = list(decimate(t[first:], wanted, 400))
+        top = max([_peak(wanted)] + [_peak(h.window(name, "speed", newest, n)[first:]) for name in speeds])
+        return {"speeds": speeds, "desired": desired, "t0": float(t[0]), "y_max": speed_axis_top(top)}
 
     def update(self, view: View, prepared: dict | None = None) -> None:
         dpg = self.dpg
@@ -113,6 +133,7 @@ class TimelinePanel(Panel):
                 dpg.set_value(f"tl_speed_{name}", curve)
         dpg.set_value("tl_desired", p["desired"])
         self.text.axis_limits("tl_x", p["t0"], 0.0)
+        self.text.axis_limits("tl_y", -0.05 * p["y_max"], p["y_max"])
         self.text.configure("tl_play", label="Play" if view.paused else "Pause")
         held = (newest - oldest + 1) * dt
         mode = view.mode

@@ -24,6 +24,9 @@ GROUP_TITLES = {
 
 OPEN_BY_DEFAULT = ("simulation", "speeds", "features", "search")
 CHECKS_PER_ROW = 3
+#: labels too long for the panel's label column (the tooltip says the rest)
+SHORT_LABELS = {"exclude current window frames": "exclude window", "exclude range end frames": "exclude range end"}
+CHAR_PX = 7          # the width of one character of dearpygui's default font (ProggyClean, 13 px)
 
 
 def field_kind(f: dataclasses.Field) -> str:
@@ -41,7 +44,8 @@ def pretty_label(name: str) -> str:
     for prefix in ("simulation_", "adjustment_", "clamp_", "ik_", "inertialization_"):
         if words.startswith(prefix) and words != prefix.rstrip("_"):
             words = words[len(prefix):]
-    return words.replace("_", " ")
+    words = words.replace("_", " ")
+    return SHORT_LABELS.get(words, words)
 
 
 #: Per-name fields keyed by the database's tags, and the line shown above their widgets.
@@ -111,6 +115,15 @@ class TuningPanel(Panel):
     def build(self, window_kwargs: dict) -> None:
         dpg = self.dpg
         act = self.ctx.actions
+        # the sliders leave room for their longest label (were cut: "exclude current windov"); their
+        # handle is thin and see-through, so it never hides the value it sits on ("0.2|7|0 s")
+        self._label_px = max(150, CHAR_PX * max((len(s["label"]) for s in self.specs), default=0) + 12)
+        with dpg.theme(tag="tun_slider_theme"):
+            for kind in (dpg.mvSliderFloat, dpg.mvSliderInt):
+                with dpg.theme_component(kind):
+                    dpg.add_theme_style(dpg.mvStyleVar_GrabMinSize, 4)
+                    dpg.add_theme_color(dpg.mvThemeCol_SliderGrab, (110, 150, 220, 110))
+                    dpg.add_theme_color(dpg.mvThemeCol_SliderGrabActive, (150, 185, 250, 160))
         with self.window(window_kwargs):
             with dpg.group(horizontal=True):
                 dpg.add_button(label="Load preset...", callback=lambda: act.dialog_preset_load())
@@ -151,10 +164,13 @@ class TuningPanel(Panel):
             dpg.add_checkbox(default_value=bool(value), **common)
         elif spec["kind"] == "int":
             dpg.add_slider_int(default_value=int(value), min_value=int(spec["min"]), max_value=int(spec["max"]),
-                               format=spec["format"], width=-150, **common)
+                               format=spec["format"], width=-self._label_px, **common)
+            dpg.bind_item_theme(tag, "tun_slider_theme")
         else:
             dpg.add_slider_float(default_value=float(value), min_value=float(spec["min"]),
-                                 max_value=float(spec["max"]), format=spec["format"], width=-150, **common)
+                                 max_value=float(spec["max"]), format=spec["format"], width=-self._label_px,
+                                 **common)
+            dpg.bind_item_theme(tag, "tun_slider_theme")
         if spec["doc"]:
             with dpg.tooltip(tag):
                 dpg.add_text(spec["doc"], wrap=360)

@@ -20,8 +20,8 @@ from lmm.skeleton import body_radii
 
 from .base import Panel, PanelContext, View
 from .common import COLORS, RAGDOLL_COLOR, SHORT
-from .viewport_camera import CameraControl
-from .viewport_figures import RagdollFigure, ReferenceFigure
+from .viewport_camera import CameraControl, drawn_root
+from .viewport_figures import RAGDOLL_HELP, RagdollFigure, ReferenceFigure, ragdoll_shown
 from .viewport_labels import Labels
 from .viewport_markers import MarkerBatch, Markers
 from .viewport_previews import PreviewDrawings, Previews
@@ -60,6 +60,7 @@ class ViewportPanel(Panel):
         self.size = (0, 0)
         self._follow = True                # the camera follows the characters (before init_gl: see follow)
         self.show = {k: v for k, _, v in self.TOGGLES}
+        self.show["ragdoll"] = False       # the physics ragdoll's figure: see ragdoll_shown
         self.drawn: dict = {}
         self.render_ms = 0.0
         self._render_due = False      # update() placed a new scene that render() has not drawn yet
@@ -107,6 +108,9 @@ class ViewportPanel(Panel):
                                  callback=lambda s, a: setattr(self.characters, "side_by_side", bool(a)))
                 dpg.add_checkbox(label="Follow", tag="vp_follow", default_value=self.follow,
                                  callback=lambda s, a: setattr(self, "follow", bool(a)))
+                dpg.add_checkbox(label="Ragdoll", tag="vp_show_ragdoll", default_value=self.show["ragdoll"],
+                                 callback=self._on_toggle, user_data="ragdoll")
+                dpg.add_text(RAGDOLL_HELP, parent=dpg.add_tooltip("vp_show_ragdoll"))
                 with dpg.tooltip("vp_side"):
                     dpg.add_text("Draw the LMM character 1.6 m to the right of the MM one\n"
                                  "(both simulate from the same start; off: overlaid)")
@@ -267,7 +271,8 @@ class ViewportPanel(Panel):
 
     def prepare_key(self, view: View) -> tuple:
         return (tuple(self.characters.drawings), tuple(sorted(self.show.items())), self.characters.side_by_side,
-                tuple(sorted(view.ragdoll.items())), self.ragdoll is not None, self.reference.shown)
+                tuple(sorted(view.ragdoll.items())), self.ragdoll is not None, self.reference.shown,
+                ragdoll_shown(self.show, view))
 
     def prepare(self, view: View) -> dict:
         """Each shown character's skeleton, ghost and markers at the view's tick (see
@@ -285,7 +290,8 @@ class ViewportPanel(Panel):
         out[_HEADS] = heads
         # every character's markers joined in drawing order: what update adds when it uses them all
         out[_ALL_MARKERS] = self._all_markers(p.markers for p in out.values() if isinstance(p, CharacterParts))
-        ragdoll = self.ragdoll.prepare(view, self.reference.shown) if self.ragdoll is not None else None
+        ragdoll = (self.ragdoll.prepare(view, self.reference.shown)
+                   if self.ragdoll is not None and ragdoll_shown(self.show, view) else None)
         if ragdoll is not None:
             out[_RAGDOLL] = ragdoll
         return out
@@ -306,10 +312,10 @@ class ViewportPanel(Panel):
         self.batch.extend(prepared[_ALL_MARKERS] if all_prepared else self._all_markers(markers or []))
         self.reference.update(view, self.offset_of, self.drawn, roots)
         self.ragdoll.update(view, self.reference.shown, self.drawn, roots,
-                            None if prepared is None else prepared.get(_RAGDOLL))
+                            None if prepared is None else prepared.get(_RAGDOLL), ragdoll_shown(self.show, view))
         self.drawn["previews"] = self.previews.update(view, self.batch, self._style(), self.show["shadow"], roots)
         self.batch.flush()
-        self.cam.aim(view.camera_azimuth, roots, view.live)
+        self.cam.aim(view.camera_azimuth, roots, view.live, drawn_root(self.drawn, view.inspected))
         ragdoll = self.drawn.get("ragdoll")
         self.drawn["labels"] = self.labels.update(
             view, self.characters, None if prepared is None else prepared.get(_HEADS),

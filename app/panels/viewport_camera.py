@@ -8,6 +8,8 @@ target are the camera's own.
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 #: a mouse button's name -> dearpygui's constant's name
@@ -17,6 +19,31 @@ _BUTTONS = {"left": "mvMouseButton_Left", "right": "mvMouseButton_Right", "middl
 def yaw_deg_from_azimuth(azimuth: float) -> float:
     """The orbit camera's yaw for an input-layer azimuth (radians; 0 looks along +Z)."""
     return float(np.degrees(azimuth - np.pi)) % 360.0
+
+
+def focus_radius(distance: float, fov_y_deg: float) -> float:
+    """How far (m, on the ground) the followed point may be from the inspected character: a third of
+    the half-height the view shows at the target's distance (the character stays in the middle third)."""
+    return float(distance) * math.tan(math.radians(fov_y_deg) / 2.0) / 3.0
+
+
+def drawn_root(drawn: dict, name: str):
+    """Where character ``name``'s root is drawn (its side-by-side shift added), or None."""
+    root = drawn["roots"].get(name)
+    if root is None:
+        return None
+    off = drawn["offsets"].get(name, (0.0, 0.0, 0.0))
+    return [root[i] + off[i] for i in range(3)]
+
+
+def pull_towards(point: list, focus: list, radius: float) -> list:
+    """``point`` moved horizontally (x, z) to within ``radius`` of ``focus``."""
+    dx, dz = point[0] - focus[0], point[2] - focus[2]
+    d = math.hypot(dx, dz)
+    if d <= radius:
+        return point
+    k = radius / d
+    return [focus[0] + dx * k, point[1], focus[2] + dz * k]
 
 
 class CameraControl:
@@ -72,13 +99,19 @@ class CameraControl:
             self.viewer.apply_scroll(self.camera, self.wheel)
             self.wheel = 0.0
 
-    def aim(self, azimuth: float, roots: list, live: bool) -> None:
+    def aim(self, azimuth: float, roots: list, live: bool, focus=None) -> None:
         """The camera's yaw from the input layer's ``azimuth``; when following, its target moves towards
-        the mean of ``roots`` (what should stay in view), at once when not live (a picked tick)."""
+        the mean of ``roots`` (what should stay in view), at once when not live (a picked tick). With
+        ``focus`` (the inspected character's root, as drawn) the target stays within
+        :func:`focus_radius` of it, so zoomed in during a sideways run, where the figures drift apart,
+        the inspected one stays near the middle and the others may leave the picture."""
         self.camera.yaw_deg = yaw_deg_from_azimuth(azimuth)
         if roots and self.follow:
             n = len(roots)     # their mean, in plain floats (numpy's mean of a few rows costs 10-20 us)
             centre = [sum(float(r[i]) for r in roots) / n for i in range(3)]
+            if focus is not None:
+                centre = pull_towards(centre, [float(x) for x in focus],
+                                      focus_radius(self.camera.distance, self.camera.fov_y_deg))
             self.camera.follow(centre, blend=0.12 if live else 1.0)
 
     def key(self) -> tuple:

@@ -72,6 +72,18 @@ class ReferenceFigure:
             roots.append(np.asarray(positions[0], np.float64) + off)
 
 
+RAGDOLL_HELP = ("Draw the physics ragdoll: a simulated body (mujoco) that follows the inspected\n"
+                "controller's pose with joint motors. Where it crouches or falls while the character\n"
+                "runs upright, the pose asks more than its motors give: it is not the character.\n"
+                "Off by default; drawn while the Physics window is open.")
+
+
+def ragdoll_shown(show: dict, view) -> bool:
+    """The ragdoll's figure is drawn when the 3D view's Ragdoll box is on or the Physics window (whose
+    plots it explains) is shown; otherwise it is left out of the picture and the camera's framing."""
+    return bool(show.get("ragdoll")) or "physics" not in view.hidden_windows
+
+
 class RagdollFigure:
     """One controller's ragdoll, a third character beside the two."""
 
@@ -107,12 +119,13 @@ class RagdollFigure:
         ox, oy, oz = off.tolist()
         return hx + ox, hy + oy + 0.25, hz + oz
 
-    def update(self, view, reference_shown: bool, drawn: dict, roots: list, prepared=None) -> None:
+    def update(self, view, reference_shown: bool, drawn: dict, roots: list, prepared=None, shown=True) -> None:
+        """Draw the ragdoll of the view's tick (``shown`` False: the 3D view's Ragdoll box is off)."""
         sk = self.skeleton
-        if prepared is not None:
+        if prepared is not None and shown:
             name, positions, off, pose = prepared
         else:
-            placed = self.pose(view, reference_shown)
+            placed = self.pose(view, reference_shown) if shown else None
             if placed is None:
                 sk.visible = False
                 drawn["ragdoll"] = None

@@ -84,7 +84,8 @@ class Labels:
             wanted.append((name, tag, text, characters.label_anchor(name, snap) if head is None else head))
         if ragdoll is not None:
             controller, head = ragdoll
-            wanted.append(("ragdoll", "vp_label_ragdoll", f"ragdoll ({SHORT.get(controller, controller)})", head))
+            text = f"ragdoll: physics copy of {SHORT.get(controller, controller)}"
+            wanted.append(("ragdoll", "vp_label_ragdoll", text, head))
         else:
             self.hide("vp_label_ragdoll")
         placed = self.place(wanted, previews, camera, size)
