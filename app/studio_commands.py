@@ -93,6 +93,7 @@ def register_studio_commands(reg: CommandRegistry, s) -> CommandRegistry:
         args=("database_frame",))
     add("what_if", "What if (scratch tuning)", lambda field=None, value=None, channel=None, clear=False:
         _what_if(s, probe, field, value, channel, bool(clear)), args=("field", "value", "channel", "clear"))
+    add("continuing_pose", "The continuing pose's cost at the shown search", lambda: probe.continuing())
     branch = BranchView(s, probe)
     add("branch_here", "Branch here (A/B)", lambda scratch=False: _branch(s, branch, bool(scratch)), menu="Edit",
         section=1, args=("scratch",))

@@ -61,6 +61,21 @@ class TickProbe:
                                                 "would give (the frames shown are the last search's)")
         return out
 
+    def continuing(self) -> dict | None:
+        """The continuing pose at the shown tick's search (:func:`lmm.session.why_not.explain_frame` of the
+        frame that was playing), or None where it cannot be asked (live, LMM, no search this tick)."""
+        from lmm.session.why_not import explain_frame
+
+        try:
+            seeker, step, name, snap = self._shown()
+        except ProbeUnavailable:
+            return None
+        if not snap.searched:
+            return None
+        with seeker.before(step) as controllers:
+            c = controllers[name]
+            return explain_frame(c, snap.query, int(c.frame))
+
     def scratch(self, base):
         """The scratch tuning: a copy of ``base`` (the session's at the shown tick) with the edits applied."""
         tuning = base.copy()

@@ -79,8 +79,8 @@ def split_field(entry: str) -> tuple[str, str | None]:
 class CandidatesPanel(Panel):
     """Ranked candidates of the inspected controller's last search."""
     key = "candidates"
-    commands = ("preview_database_frame", "why_not", "what_if", "branch_here")
-    reads = ("inspected", "snap", "tick_number")
+    commands = ("preview_database_frame", "why_not", "what_if", "branch_here", "continuing_pose")
+    reads = ("inspected", "paused", "snap", "tick_number")
 
     def __init__(self, ctx):
         super().__init__(ctx)
@@ -93,6 +93,7 @@ class CandidatesPanel(Panel):
         self.columns: list[str] = []
         self.why_frame: int | None = None     # the frame asked about (refreshed when the shown tick changes)
         self.why_text = ""
+        self.continuing: dict | None = None   # the continuing pose's explanation at the shown search (or None)
         self.what_if: dict | None = None      # the re-ranked search shown instead of the tick's ({tick, result, ..})
         self._asked_tick = -1
 
@@ -191,6 +192,8 @@ class CandidatesPanel(Panel):
         snap = view.snap()
         if view.tick_number != self._asked_tick:        # the asked frame and the what if follow the shown tick
             self._asked_tick = view.tick_number
+            # the continuing pose's row: asked of a reopened session, paused (stepping to it costs a few ms)
+            self.continuing = self.ctx.actions.continuing_pose() if view.paused else None
             if self.why_frame is not None:
                 self.ctx.actions.why_not(self.why_frame)
             if self.what_if is not None:
@@ -211,6 +214,11 @@ class CandidatesPanel(Panel):
         if cands is not snap.candidates:
             edits = ", ".join(f"{f}{'.' + c if c else ''}={v}" for f, v, c in self.what_if["changes"])
             status += f"\nWHAT IF (scratch tuning: {edits or 'no edits'}): this tick's search re-ranked, rows marked w"
+        c = self.continuing
+        if c is not None and not c["excluded"] and cands is not None and len(cands.frames):
+            kept = "kept" if c["frame"] == int(cands.frames[0]) else "beaten"
+            status += (f"\ncontinuing pose {c['frame']}: total {c['total']:.3f} = features {c['feature_cost']:.3f}"
+                       f" + bias {c['bias']:.3f} (no transition cost); {kept}")
         self.text.set("cand_why", self.why_text)
         self.text.set("cand_status", status)
         if key == self._shown_for:

@@ -94,6 +94,9 @@ def test_why_not_and_what_if_in_a_reopened_session(xvfb_display, studio_cache, t
         cands = labels[label]["panels"]["candidates"]
         assert labels[label]["displayed_tick"] == tick
         assert cands["why_not"] == lines[frame], label
+    cont = whys[ranked]["continuing"]                          # the continuing pose's own row
+    assert (f"continuing pose {cont['frame']}: total {cont['total']:.3f} = features {cont['feature_cost']:.3f}"
+            in labels["ranked"]["panels"]["candidates"]["status"])
     assert "excluded: within" in labels["excluded"]["panels"]["candidates"]["why_not"]
     assert f"total {whys[ranked]['asked']['total']:.3f}" in labels["ranked"]["panels"]["candidates"]["why_not"]
     shown = labels["what_if"]["panels"]["candidates"]
