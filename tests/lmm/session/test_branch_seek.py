@@ -64,3 +64,27 @@ def test_before_puts_the_seeker_back(session_path):
     fresh = SessionSeeker(session, db, features, every=60)
     assert np.array_equal(stepped, fresh.seek(151)[0]["mm"].global_positions)
     session.close()
+
+
+def test_a_what_if_inside_before_leaves_the_session_as_it_was(session_path):
+    """What the studio's what-if does (new feature weights on the controller before a search, then put
+    back) changes nothing later: the tick's own candidates, read after it, and the poses seeked after it
+    are those of a seeker never asked."""
+    from app.commands.session_common import open_with_database
+    from lmm.session.seek import SessionSeeker
+    from lmm.session.why_not import what_if
+
+    session, db, features, _ = open_with_database(session_path)
+    seeker, fresh = SessionSeeker(session, db, features), SessionSeeker(session, db, features)
+    step = next(t for t in range(150, 300) if seeker.seek(t)[1]["mm"].searched)
+    snap = seeker.seek(step)[1]["mm"]
+    with seeker.before(step) as controllers:
+        scratch = seeker.tuning.copy()
+        scratch.set("feature_weights", 4.0, "hip_velocity")
+        reranked = what_if(controllers["mm"], snap.query, scratch)
+    assert snap.candidates.frames.tolist() == fresh.seek(step)[1]["mm"].candidates.frames.tolist()
+    assert reranked.frames.tolist() != snap.candidates.frames.tolist()
+    for tick in (step + 5, step + 70, 40):
+        assert np.array_equal(seeker.seek(tick)[0]["mm"].global_positions,
+                              fresh.seek(tick)[0]["mm"].global_positions), tick
+    session.close()
