@@ -69,6 +69,7 @@ def load_session(opts: StudioOptions, report_error: Callable[[str, str], None]) 
     if not opts.lmm:
         lmm_problem = "LMM is off (--no-lmm)"
     session = Session(db, features, tuning, controllers)
+    session.report = report_error   # what the ticks find (an unusable pose), once, on the GUI thread
     session.manifest = opts.manifest
     session.start_latent_table(opts.weights)
     if opts.physics:

@@ -51,6 +51,10 @@ class Session:
         self.recording_error = ""           # one line: why the recording stopped by itself ("" = it did not)
         self._failed_recording: Recording | None = None
         self.step_ms: dict[str, float] = {}
+        self.pose_error = ""           # one line: the first tick since the reset whose pose was unusable
+        self._good_poses: dict = {}    # controller name -> its last usable Pose (drawn in place of one that is not)
+        self.report = None             # report(title, line), on the GUI thread: the studio's errors (app.engine)
+        self._unreported: list[tuple[str, str]] = []
         self._latent_status = ""       # see latent_table_status
         self._latent_job = None        # the latent table being computed (a Job), or None
         self.jobs = Jobs()             # the session's background work, delivered at a tick boundary
@@ -152,6 +156,7 @@ class Session:
         self.history.clear()
         self.tick = 0
         self.log.reset()
+        self.pose_error, self._good_poses = "", {}
 
     # -- input ---------------------------------------------------------------------------------
     def replay(self, log) -> None:
@@ -214,6 +219,7 @@ class Session:
         self.log.before_step(inp)
         poses, snaps, self.step_ms = step_controllers(self.controllers, inp, self.dt)
         self.log.after_step(poses)
+        self._guard_poses(self.tick + 1, snaps)
         tick = Tick(self.tick + 1, (self.tick + 1) * self.dt, snaps, dict(extra or {}))
         tick.extra.setdefault("input", inp)
         if self.following is not None:
@@ -228,6 +234,30 @@ class Session:
         self.history.append(tick)
         self.tick += 1
         return tick
+
+    def _guard_poses(self, tick: int, snaps: dict) -> None:
+        """A pose no one can use (:func:`lmm.metrics.pose_problem`: NaN, infinite, or a joint 1000 km away: an
+        LMM given weights it cannot handle) is never drawn or recorded: the controller's last usable pose (the
+        database's first frame before there is one) stands in. The first such tick since the reset is reported
+        once, with the tick (``pose_error``, and ``report`` at the next :meth:`deliver_reports`)."""
+        from lmm.metrics import pose_problem
+
+        for name, snap in snaps.items():
+            problem = pose_problem(snap.pose)
+            if problem is None:
+                self._good_poses[name] = snap.pose
+                continue
+            snap.pose = self._good_poses.get(name) or first_frame_pose(self.db)
+            if not self.pose_error:
+                self.pose_error = (f"tick {tick}: the {name} pose is {problem}; its last usable pose is drawn and "
+                                   f"recorded instead")
+                self._unreported.append(("Pose guard", self.pose_error))
+
+    def deliver_reports(self) -> None:
+        """Hand what the ticks found to ``report``: on the GUI thread, between ticks (:class:`app.tick_worker.TickWorker`)."""
+        notes, self._unreported = self._unreported, []
+        for title, line in notes if self.report is not None else ():
+            self.report(title, line)
 
     # -- recording -----------------------------------------------------------------------------
     def start_recording(self, base, which=("mm", "lmm")) -> dict[str, Path]:
@@ -313,3 +343,16 @@ class Session:
         kept = "" if session is None else f"; session {session.name}" + (f" ({self.log.ended})" if self.log.ended else "")
         return RecordingResult(written, frames, seconds, f"recorded {seconds:.2f} s ({frames} frames) to {names}{kept}",
                                session)
+
+
+def first_frame_pose(db):
+    """The database's first frame as a :class:`lmm.controller.Pose` (at its recorded place)."""
+    import numpy as np
+
+    from lmm.controller import Pose
+    from lmm.kinematics import forward_kinematics
+
+    rot, pos = np.asarray(db.rotations[0], np.float32), np.asarray(db.positions[0], np.float32)
+    g_rot, g_pos = forward_kinematics(rot, pos, db.parents)
+    return Pose(local_positions=pos, local_rotations=rot, global_positions=g_pos.astype(np.float32),
+                global_rotations=g_rot.astype(np.float32), contacts=np.zeros(2, bool))

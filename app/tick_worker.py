@@ -55,6 +55,7 @@ class TickWorker:
             err, self._error = self._error, None
             raise err
         out, self._results = self._results, []
+        self.session.deliver_reports()   # e.g. an unusable pose, reported once (app.session), on this thread
         return out
 
     def take_prepared(self):
