@@ -23,6 +23,7 @@ class SessionHistory:
         self.seeker = seeker
         self.last = seeker.ticks
         self.ring = History(capacity)
+        self._tuning: dict | None = None
 
     def __getattr__(self, name):             # window, times, has_series, capacity, count ...
         return getattr(self.ring, name)
@@ -67,7 +68,11 @@ class SessionHistory:
         while sk.tick <= target:
             i = sk.tick
             _, snaps = sk.step()
-            self.ring.append(Tick(i + 1, (i + 1) * sk.dt, snaps, {"input": sk.input_at(i)}))
+            tuning = sk.tuning.to_dict()                 # the tick's tuning (the Tuning panel shows it) ...
+            if tuning == self._tuning:                   # ... one dict while it does not change
+                tuning = self._tuning
+            self._tuning = tuning
+            self.ring.append(Tick(i + 1, (i + 1) * sk.dt, snaps, {"input": sk.input_at(i), "tuning": tuning}))
 
 
 def open_recorded_session(studio, path) -> bool:

@@ -9,7 +9,7 @@ import dataclasses
 
 from lmm.tuning import Tuning, TuningError
 
-from .base import Panel
+from .base import Panel, View
 from .common import short_channel_name
 
 GROUP_TITLES = {
@@ -100,7 +100,8 @@ def widget_tag(spec: dict) -> str:
 class TuningPanel(Panel):
     key = "tuning"
     commands = ("dialog_preset_load", "dialog_preset_save", "show_error")
-    reads = ()
+    reads = ("tick",)
+    _showing = None          # the reopened session's tuning shown at the picked tick (None: the studio's own)
 
     def __init__(self, ctx):
         super().__init__(ctx)
@@ -129,7 +130,7 @@ class TuningPanel(Panel):
                 dpg.add_button(label="Load preset...", callback=lambda: act.dialog_preset_load())
                 dpg.add_button(label="Save preset...", tag="tun_save_preset", callback=lambda: act.dialog_preset_save())
                 dpg.add_button(label="Reset all", callback=self.reset_all)
-            dpg.add_text("acts on the next frame of both characters", color=(150, 150, 160))
+            dpg.add_text("acts on the next frame of both characters", tag="tun_note", color=(150, 150, 160))
             current_group = None
             header = row = None
             in_row = 0
@@ -175,8 +176,22 @@ class TuningPanel(Panel):
             with dpg.tooltip(tag):
                 dpg.add_text(spec["doc"], wrap=360)
 
+    def update(self, view: View) -> None:
+        """In a reopened session the sliders show the session's tuning at the picked tick, read-only (a
+        what-if edits a scratch copy: Search Candidates); back live, the studio's own again."""
+        shown = view.tick.extra.get("tuning") if view.tick is not None else None
+        if shown is self._showing:
+            return
+        self._showing = shown
+        self.text.set("tun_note", "acts on the next frame of both characters" if shown is None else
+                      "the session's tuning at the picked tick (read-only; what if: Search Candidates)")
+        for spec in self.specs:
+            self.text.configure(widget_tag(spec), enabled=shown is None)
+            self._show(spec)
+
     def _value(self, spec: dict):
-        v = getattr(self.tuning, spec["field"])
+        shown = self._showing
+        v = shown[spec["field"]] if shown is not None else getattr(self.tuning, spec["field"])
         if spec["channel"] is not None:
             return v.get(spec["channel"], Tuning.neutral_entry(spec["field"]))
         return v
@@ -219,4 +234,5 @@ class TuningPanel(Panel):
         self.tuning.assign(t)   # the database's own tags and channels keep their widgets' entries
 
     def state(self) -> dict:
-        return {"changes": self.changes, "widgets": len(self.specs)}
+        return {"changes": self.changes, "widgets": len(self.specs), "note": self.text.get("tun_note"),
+                "values": {widget_tag(spec): self.dpg.get_value(widget_tag(spec)) for spec in self.specs}}

@@ -63,8 +63,11 @@ def test_why_not_and_what_if_in_a_reopened_session(xvfb_display, studio_cache, t
     from app.cli import main as cli_main
 
     session = tmp_path / "s.lmmsession"
+    events = tmp_path / "events.json"           # one slider move before the asked tick: the Tuning panel shows it
+    events.write_text(json.dumps({"events": [{"tick": 100, "kind": "tuning",
+                                              "payload": {"field": "transition_cost", "new": 0.25}}]}))
     assert cli_main(["run", "--controller", "mm", "--input", "builtin:random:1", "--seconds", "5",
-                     "--session", str(session), "--quiet"]) == 0
+                     "--events", str(events), "--session", str(session), "--quiet"]) == 0
     tick, excluded, ranked, whys, lines, rerank, difference = _expected(session)
     assert "exclude_current_window_frames" in whys[excluded]["asked"]["excluded"]
     assert whys[ranked]["asked"]["excluded"] == "" and whys[ranked]["asked"]["total"] > 0
@@ -77,13 +80,14 @@ def test_why_not_and_what_if_in_a_reopened_session(xvfb_display, studio_cache, t
               {"frame": 17, "do": "branch_here", "scratch": True},
               {"frame": 18, "do": "what_if", "clear": True}, {"frame": 20, "do": "capture", "label": "cleared"},
               {"frame": 22, "do": "scrub", "tick": tick + LATER}, {"frame": 25, "do": "capture", "label": "branch"},
-              {"frame": 27, "do": "scrub", "tick": tick - 20}, {"frame": 30, "do": "capture", "label": "before"}]
+              {"frame": 27, "do": "scrub", "tick": tick - 20}, {"frame": 30, "do": "capture", "label": "before"},
+              {"frame": 32, "do": "scrub", "tick": 50}, {"frame": 35, "do": "capture", "label": "early"}]
     # run directly, not through run_studio: its prepared-vs-GUI check fails for any reopened session
     # (viewport and timeline from frame 1, before any action here), which is not this test's subject
     (tmp_path / "script.json").write_text(json.dumps({"actions": script}))
     env = dict(os.environ, DISPLAY=xvfb_display, LMM_STUDIO_CONFIG=str(tmp_path / "config"),
                LMM_STUDIO_CACHE=str(studio_cache), PYTHONPATH=str(ROOT), LP_NUM_THREADS="0")
-    proc = subprocess.run([sys.executable, "-m", "app.cli", "--open", str(session), "--frames", "32",
+    proc = subprocess.run([sys.executable, "-m", "app.cli", "--open", str(session), "--frames", "37",
                            "--script", str(tmp_path / "script.json"), "--dump-state", str(tmp_path / "dump.json"),
                            "--no-gamepads"], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=240)
     assert proc.returncode == 0, proc.stderr[-3000:]
@@ -94,6 +98,10 @@ def test_why_not_and_what_if_in_a_reopened_session(xvfb_display, studio_cache, t
         cands = labels[label]["panels"]["candidates"]
         assert labels[label]["displayed_tick"] == tick
         assert cands["why_not"] == lines[frame], label
+    tuning = {label: labels[label]["panels"]["tuning"] for label in ("ranked", "early")}
+    assert tuning["ranked"]["values"]["tun_transition_cost"] == pytest.approx(0.25)
+    assert tuning["early"]["values"]["tun_transition_cost"] != pytest.approx(0.25)       # before the move
+    assert tuning["ranked"]["note"].startswith("the session's tuning at the picked tick (read-only")
     cont = whys[ranked]["continuing"]                          # the continuing pose's own row
     assert (f"continuing pose {cont['frame']}: total {cont['total']:.3f} = features {cont['feature_cost']:.3f}"
             in labels["ranked"]["panels"]["candidates"]["status"])
