@@ -152,7 +152,7 @@ def test_nnls_matches_brute_force():
 
 
 def test_missing_mujoco_is_one_line(tmp_path, files):
-    from tests.test_extras import assert_one_line_error, run_without
+    from tests.app.commands.test_extras import assert_one_line_error, run_without
 
     r, _ = run_without(["mujoco"], "physics", str(files["walk"]), tmp_path=tmp_path)
     assert_one_line_error(r, "mujoco", "pip install -e '.[physics]'")
