@@ -24,6 +24,9 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+from lmm.data.leftovers import processes_using_tmpdir  # noqa: E402
+
 MANIFEST = ROOT / "lmm" / "data" / "manifests" / "lafan1_full.json"
 
 
@@ -48,20 +51,6 @@ def debris(tmp: Path, cache: Path) -> list[str]:
     found += [f"cache/{p.relative_to(cache)}" for p in cache.rglob("*")
               if p.name.endswith((".tmp", ".probe", ".partial", ".saving"))] if cache.exists() else []
     return found
-
-
-def processes_of(tmp: Path) -> list[int]:
-    """Processes whose environment names this run's private TMPDIR (a build and its workers)."""
-    marker = f"TMPDIR={tmp}".encode()
-    pids = []
-    for entry in Path("/proc").iterdir():
-        if entry.name.isdigit() and int(entry.name) != os.getpid():
-            try:
-                if marker in (entry / "environ").read_bytes().split(b"\0"):
-                    pids.append(int(entry.name))
-            except OSError:
-                pass
-    return pids
 
 
 def build(cmd, env, timeout=1800) -> tuple[int, str, float]:
@@ -101,9 +90,9 @@ def main(argv=None) -> int:
         p.send_signal(sig)
         _, kill_err = p.communicate(timeout=300)
         deadline = time.monotonic() + 30
-        while processes_of(tmp) and time.monotonic() < deadline:
+        while processes_using_tmpdir(tmp) and time.monotonic() < deadline:
             time.sleep(0.1)
-        survivors = processes_of(tmp)
+        survivors = processes_using_tmpdir(tmp)
         left_after_kill = debris(tmp, cache)
         rc2, err2, wall2 = build(cmd, env)
         left = debris(tmp, cache)

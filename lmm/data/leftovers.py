@@ -98,3 +98,19 @@ def die_with_parent() -> None:
         libc.prctl(1, signal.SIGKILL, 0, 0, 0)   # PR_SET_PDEATHSIG = 1
     except (OSError, AttributeError):
         pass   # not Linux: the pool's own pipes end the worker when the parent closes them
+
+
+def processes_using_tmpdir(tmp) -> list[int]:
+    """Processes (but this one) whose environment names ``TMPDIR=tmp``: what is still running of a build
+    started with a private temporary folder (Linux ``/proc``; empty elsewhere). For tests and benchmarks
+    that check that no worker outlives its build."""
+    marker = f"TMPDIR={tmp}".encode()
+    pids = []
+    for entry in Path("/proc").glob("[0-9]*"):
+        if int(entry.name) != os.getpid():
+            try:
+                if marker in (entry / "environ").read_bytes().split(b"\0"):
+                    pids.append(int(entry.name))
+            except OSError:
+                pass
+    return pids

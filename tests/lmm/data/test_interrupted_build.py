@@ -12,6 +12,8 @@ import sys
 import time
 from pathlib import Path
 
+from lmm.data.leftovers import processes_using_tmpdir
+
 ROOT = Path(__file__).resolve().parents[3]
 
 
@@ -19,20 +21,6 @@ def _debris(tmp: Path, cache: Path) -> list[str]:
     found = [p.name for p in tmp.glob("lmm-build-*")]
     found += [str(p.relative_to(cache)) for p in cache.rglob("*") if p.name.endswith((".tmp", ".probe", ".partial"))]
     return found
-
-
-def _ours(tmp: Path) -> list[int]:
-    """Processes whose environment names our private TMPDIR (the build and any worker it made)."""
-    marker = f"TMPDIR={tmp}".encode()
-    pids = []
-    for entry in Path("/proc").iterdir():
-        if entry.name.isdigit() and int(entry.name) != os.getpid():
-            try:
-                if marker in (entry / "environ").read_bytes().split(b"\0"):
-                    pids.append(int(entry.name))
-            except OSError:
-                pass
-    return pids
 
 
 def test_killed_builds_leave_nothing_and_the_next_build_succeeds(tmp_path):
@@ -51,9 +39,9 @@ def test_killed_builds_leave_nothing_and_the_next_build_succeeds(tmp_path):
             assert p.returncode in (0, 143), (p.returncode, err)
             assert _debris(tmp, cache) == [], _debris(tmp, cache)
         deadline = time.monotonic() + 10
-        while _ours(tmp) and time.monotonic() < deadline:
+        while processes_using_tmpdir(tmp) and time.monotonic() < deadline:
             time.sleep(0.1)
-        assert _ours(tmp) == [], "a worker outlived its build"
+        assert processes_using_tmpdir(tmp) == [], "a worker outlived its build"
     r = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=300)
     assert r.returncode == 0 and "Traceback" not in r.stderr, r.stderr
     assert _debris(tmp, cache) == []
