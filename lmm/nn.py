@@ -152,11 +152,12 @@ class MLP:
         return self.weights[-1].shape[1]
 
     def nbytes(self) -> int:
-        """The parameters and normalisation vectors, plus the batch-1 plan's folded copy once it is built."""
-        arrays = [*self.weights, *self.biases, self.in_mean, self.in_inv_std, self.out_mean, self.out_std]
-        if self._plan is not None:
-            arrays += [m for m, *_ in self._plan[2]] + [self._plan[3]]
-        return int(sum(a.nbytes for a in arrays))
+        """The parameters and normalisation vectors, plus the batch-1 plan's folded copy once it is built
+        (its hidden-to-hidden layers are the parameters themselves: counted once)."""
+        arrays = [self.in_mean, self.in_inv_std, self.out_mean, self.out_std]
+        plan = [] if self._plan is None else [m for m, *_ in self._plan[2]] + [self._plan[3]]
+        arrays += [a for a in (*self.weights, *self.biases) if not any(a.base is m for m in plan)]
+        return int(sum(a.nbytes for a in arrays + plan))
 
     def parameter_count(self) -> int:
         return int(sum(w.size + b.size for w, b in zip(self.weights, self.biases)))
@@ -192,6 +193,12 @@ class MLP:
             ws[-1] = ws[-1] * std[None, :]
             bs[-1] = bs[-1] * std + self.out_mean.astype(np.float64)
             mats = [np.ascontiguousarray(np.vstack([w, b[None, :]]), dtype=np.float32) for w, b in zip(ws, bs)]
+            # a hidden-to-hidden layer is not refolded: its matrix holds the very weights and bias (float32 ->
+            # float64 -> float32 is exact), which from now on are views of it, kept once (issue 38: memory)
+            for i in range(1, len(mats) - 1):
+                w, b = mats[i][:-1], mats[i][-1]
+                if np.array_equal(w, self.weights[i]) and np.array_equal(b, self.biases[i]):
+                    self.weights[i], self.biases[i] = w, b
             x1 = np.ones(self.n_in + 1, np.float32)           # [x, 1]
             hidden = []
             for m in mats[:-1]:

@@ -151,8 +151,10 @@ def memory_figures(db, features, controllers: dict) -> dict:
            "memory.mm_pose_bytes": parts["pose data (Y)"], "memory.mm_search_bytes": parts["search index"],
            "memory.lmm_bytes": None}
     if "lmm" in controllers:
-        lmm_total = int(sum(controllers["lmm"].memory_bytes().values()))
+        lmm_parts = controllers["lmm"].memory_bytes()
+        lmm_total = int(sum(lmm_parts.values()))
         out["memory.lmm_bytes"] = lmm_total
+        out.update({f"memory.lmm_{name}_bytes": int(v) for name, v in lmm_parts.items()})   # what each keeps
         out["memory.lmm_over_mm"] = float(lmm_total / max(mm_total, 1))
     return out
 
@@ -239,6 +241,7 @@ def bench_frame_with_lmm(db, features, n_queries: int = 2400, collected=None) ->
 
 def bench_memory(db, features, n_queries: int = 2400, collected=None) -> dict:
     """``memory``: ``mm_bytes`` (features + pose database + search structure at run time) and
-    ``lmm_bytes`` (decompressor + stepper + projector), as in the paper's Table 3."""
+    ``lmm_bytes`` (decompressor + stepper + projector, each as ``lmm_NAME_bytes``), as in the paper's
+    Table 3."""
     fig = _memory(db, features)
     return {k.split(".", 1)[1]: v for k, v in fig.items() if k.startswith("memory.")}

@@ -440,3 +440,23 @@ def test_tick_decoding_is_the_whole_vectors_decoding_bit_for_bit():
             a, b = getattr(got, name), getattr(want, name)
             assert a.dtype == b.dtype and a.shape == b.shape and a.tobytes() == b.tobytes(), name
         assert calls == [1] and got.frame == -1
+
+
+@pytest.mark.parametrize("name", ["stepper", "projector"])
+def test_the_folded_plan_keeps_the_hidden_layers_once(name):
+    """Only the first and last layers are refolded: once the batch-1 plan is built, the hidden-to-hidden
+    layers' weights and biases are views of its matrices (the same values: float32 -> float64 -> float32 is
+    exact), counted once by ``nbytes``; the batched evaluation gives the same bits before and after."""
+    arrays = dict(np.load(DEFAULT_WEIGHTS))
+    mlp = MLP.from_arrays(arrays, name, "relu", skip=name == "projector")
+    x = np.random.default_rng(3).standard_normal((64, mlp.n_in)).astype(np.float32)
+    before, size = mlp(x), mlp.nbytes()
+    mlp(x[0])                                        # builds the plan
+    mats = [m for m, *_ in mlp._plan[2]] + [mlp._plan[3]]
+    for i in range(1, len(mats) - 1):
+        assert mlp.weights[i].base is mats[i] and mlp.biases[i].base is mats[i]
+        assert np.array_equal(mlp.weights[i], arrays[f"{name}.W{i}"]) and np.array_equal(mlp.biases[i], arrays[f"{name}.b{i}"])
+    folded = sum(m.nbytes for m in mats)
+    shared = sum(mats[i].nbytes for i in range(1, len(mats) - 1))
+    assert mlp.nbytes() == size + folded - shared and shared > 0
+    assert same_bits(mlp(x), before)

@@ -86,6 +86,10 @@ def test_bench_json_sections(tmp_path):
     for name in ("runtime_call", "runtime_call_numpy"):
         assert 0 < s[f"{name}_p50_us"] <= s[f"{name}_p90_us"] <= s[f"{name}_p99_us"]
     assert res["frame"]["mm_us"] > 0
+    # the learned controller's memory, network by network, under a tenth of motion matching's (the paper's 0.10)
+    m = res["memory"]
+    assert m["lmm_bytes"] == sum(m[f"lmm_{n}_bytes"] for n in ("decompressor", "stepper", "projector"))
+    assert m["lmm_over_mm"] <= 0.10
     # the learned controller stepped the same inputs as motion matching, interleaved with it
     assert res["frame"]["lmm_us"] > 0 and res["frame"]["lmm_steps"] == res["frame"]["mm_steps"]
     assert res["frame"]["lmm_over_bruteforce"] == pytest.approx(res["frame"]["lmm_us"] / s["bruteforce_us"])
