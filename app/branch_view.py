@@ -54,8 +54,9 @@ class BranchView:
         if self.seeker is None:
             return None
         s = self.studio
-        shown = s.playback.displayed_tick() if s.playback.reviewing else None
-        if shown is None:
+        same = s.playback.reviewing and getattr(s, "reviewed", None) is self.seeker.session
+        shown = s.playback.displayed_tick() if same else None
+        if shown is None:                                  # live again, or another session opened
             self.clear()
             return None
         name = s.inspected
