@@ -173,15 +173,24 @@ def test_a_filter_that_matches_nothing_is_reported_in_the_snapshot():
         assert snap.search_note == ""
 
 
+def numpy_index(X):
+    """A :class:`SearchIndex` that searches with numpy only (no compiled filter)."""
+    index = SearchIndex(X)
+    index._native = False
+    return index
+
+
+@pytest.mark.parametrize("compiled", [True, False])
 @pytest.mark.parametrize("seed", range(4))
-def test_the_one_pass_group_search_with_ties_everywhere(seed):
+def test_the_one_pass_group_search_with_ties_everywhere(seed, compiled):
     """Integer features (many equal costs) and a bias so large that float32 totals of different costs round to
     the same value: the one-pass group search still ranks, cuts each group at K and merges exactly as one
-    brute-force search per group does, the playing frame included, in or out of the candidates."""
+    brute-force search per group does, the playing frame included, in or out of the candidates; with the
+    compiled filter (lmm.search_native: it keeps every frame that may tie, numpy ranks them) and without."""
     rng = np.random.default_rng(seed)
     n = 700
     X = rng.integers(0, 3, size=(n, 3)).astype(np.float32)
-    index = SearchIndex(X)
+    index = SearchIndex(X) if compiled else numpy_index(X)
     mask = candidate_mask(n, [0, 300], [300, n], 5)
     label = rng.integers(0, 3, n)
     # float32 steps are 2 at 2**24 and 4 at 2**25: totals a few apart round to one value, across groups too
@@ -217,13 +226,6 @@ def test_a_playing_frame_tied_with_a_better_candidate_by_rounding_keeps_its_grou
     brute = biased_search(lambda **kw: brute_force_search(X, q, **kw), mask, None, group_masks=groups, **args)
     assert list(brute.frames) == [10] and brute.costs[0] == np.float32(2 ** 24)
     assert _same(one, brute)
-
-
-def numpy_index(X):
-    """A :class:`SearchIndex` that searches with numpy only (no compiled filter)."""
-    index = SearchIndex(X)
-    index._native = False
-    return index
 
 
 def test_a_top_1_group_search_that_no_block_survives_keeps_playing(features, db):
