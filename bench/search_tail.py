@@ -98,6 +98,7 @@ def main(argv=None) -> int:
                 least[name].append(min(calls))
                 results[name].append(r)
     assert compiled._native, "the compiled filter ran"
+    print(json.dumps({name: percentiles(t) for name, t in times.items()}), file=sys.stderr, flush=True)
     n_brute = len(queries) if a.brute is None else min(a.brute, len(queries))
     brute_same = []
     for (query, frame, _, _), fast in zip(queries[:n_brute], results["compiled"]):
