@@ -7,7 +7,7 @@ Runs in a private ``$TMPDIR`` and ``LMM_STUDIO_CACHE``, with the tree this scrip
 ``git archive HEAD | tar -x -C DIR``, where others edit the working tree: a half-edited module is an
 internal error no kill caused). One timed good build first (its wall time bounds the
 random moments); then ``--kills`` times: ``build-db --rebuild`` of lafan1_full.json, SIGKILL or SIGTERM
-(alternating) at a uniformly random moment of that span, wait for every process of the build to end, note
+(alternating) at a uniformly random moment of the last good build's span (a build that ended first: rc 0), wait for every process of the build to end, note
 what is left, then a full build that must exit 0 and leave nothing. Prints one line per kill and a JSON summary.
 """
 from __future__ import annotations
@@ -84,7 +84,7 @@ def main(argv=None) -> int:
     rows, failures = [], 0
     for i in range(args.kills):
         sig = (signal.SIGKILL, signal.SIGTERM)[i % 2]
-        delay = rng.uniform(0.0, span)
+        delay = rng.uniform(0.0, span)   # span: the last good build's wall time (the machine's load changes)
         p = subprocess.Popen(cmd, cwd=ROOT, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
         time.sleep(delay)
         p.send_signal(sig)
@@ -95,6 +95,7 @@ def main(argv=None) -> int:
         survivors = processes_using_tmpdir(tmp)
         left_after_kill = debris(tmp, cache)
         rc2, err2, wall2 = build(cmd, env)
+        span = wall2 if rc2 == 0 else span
         left = debris(tmp, cache)
         crashes = crash_reports(tmp)
         row = {"kill": i + 1, "signal": sig.name, "at_s": round(delay, 2), "rc": p.returncode,
