@@ -11,11 +11,10 @@ bottom as the data flow::
 Both controllers step on a worker thread while dearpygui draws (it releases the GIL), so the
 controllers' time overlaps the drawing; a tick handed over in frame N is shown in frame N+1, and a
 slider moved in frame N acts on that tick. Every panel and the 3D view show the same displayed tick
-(:mod:`app.playback`). The simulation lives in :class:`app.session.Session`; the look in
-:mod:`app.theme`; layouts in :mod:`app.layouts`; file dialogs in :mod:`app.dialogs`; everything a
-user can do is a command of :mod:`app.studio_commands` (menus, shortcuts, scripts and panels run them
-by id), those on the simulation done in :mod:`app.actions`; test scripts in :mod:`app.scripting`
-and the frame loop's observer (the test dump) in :mod:`app.state_dump`.
+(:mod:`app.playback`). The simulation is :class:`app.session.Session`; the look :mod:`app.theme`;
+layouts :mod:`app.layouts` (fitted to the window by :mod:`app.window_fit`); file dialogs :mod:`app.dialogs`;
+every user action a command of :mod:`app.studio_commands` (those on the simulation in :mod:`app.actions`);
+test scripts :mod:`app.scripting`, the frame loop's observer (the test dump) :mod:`app.state_dump`.
 """
 from __future__ import annotations
 
@@ -115,6 +114,7 @@ class Studio(SessionActions):
         from .panels.catalog import dock_panels
         from .panels.menu import MenuBar
         from .panels.viewport import ViewportPanel
+        from .window_fit import WindowFit
 
         ini = self.layouts.choose(self.opts.layout)
         dpg.create_context()
@@ -133,6 +133,7 @@ class Studio(SessionActions):
         for cls in dock_panels():
             self.panels[cls.key] = cls(ctx)
         self.preparer = Preparer(self.panels)
+        self.window_fit = WindowFit(dpg)
         self.menu.build()
         self.menu.behind = lambda: self.realtime.note(self.fixed_step)
         for key, panel in self.panels.items():
@@ -182,8 +183,7 @@ class Studio(SessionActions):
 
     # -- the frame -----------------------------------------------------------------------------
     def typing(self) -> bool:
-        """A text field (or a slider in text mode) is being edited, or a file dialog is open: keys are
-        text. A message shown (app.panels.errors) takes no keys."""
+        """Keys are text: a text field (or a slider in text mode) is edited or a file dialog is open."""
         return any(self.dpg.is_item_active(i) for i in self._text_items) or self.dialogs.visible
 
     def _keys(self) -> None:
@@ -284,6 +284,7 @@ class Studio(SessionActions):
         if self.frame_index % 10 == 0:
             self.theme.backgrounds()
             self.menu.sync_window_checks()   # a window closed with its own x button
+            self.window_fit.check()          # the window was resized: the panels follow
             self._hidden = tuple(self.layouts.hidden())
         t3 = time.perf_counter()
         self.viewport.render()          # the 3D view, once the panels are done (see there)
@@ -299,11 +300,10 @@ class Studio(SessionActions):
         replaced = None
         dpg.render_dearpygui_frame()
         t4 = time.perf_counter()
-        vp = self.viewport
         # the observer's own work (a test and benchmark instrument) is not the studio's
         parts = {"input": (t1 - t0 - self.observer.spent_s()) * 1e3, "viewport": (t2 - t1) * 1e3,
-                 "render": vp.render_ms, "readback": vp.readback_ms, "panels": (t3 - t2) * 1e3,
-                 "ui": (t4 - t_read) * 1e3}
+                 "render": self.viewport.render_ms, "readback": self.viewport.readback_ms,
+                 "panels": (t3 - t2) * 1e3, "ui": (t4 - t_read) * 1e3}
         parts.update(step_ms)   # per-tick controller time of the ticks finished for this frame (in parallel)
         self.observer.frame_timed((t4 - t0) * 1e3, parts)
         self.frame_times.add((t4 - t0) * 1e3, parts)

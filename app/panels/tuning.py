@@ -25,7 +25,8 @@ GROUP_TITLES = {
 OPEN_BY_DEFAULT = ("simulation", "speeds", "features", "search")
 CHECKS_PER_ROW = 3
 #: labels too long for the panel's label column (the tooltip says the rest)
-SHORT_LABELS = {"exclude current window frames": "exclude window", "exclude range end frames": "exclude range end"}
+SHORT_LABELS = {"exclude current window frames": "exclude window", "exclude range end frames": "exclude range end",
+                "forced search threshold": "forced search rate"}
 CHAR_PX = 7          # the width of one character of dearpygui's default font (ProggyClean, 13 px)
 
 
@@ -118,7 +119,7 @@ class TuningPanel(Panel):
         act = self.ctx.actions
         # the sliders leave room for their longest label (were cut: "exclude current windov"); their
         # handle is thin and see-through, so it never hides the value it sits on ("0.2|7|0 s")
-        self._label_px = max(150, CHAR_PX * max((len(s["label"]) for s in self.specs), default=0) + 12)
+        self._label_px = max(150, CHAR_PX * max((len(s["label"]) for s in self.specs), default=0) + 10)
         with dpg.theme(tag="tun_slider_theme"):
             for kind in (dpg.mvSliderFloat, dpg.mvSliderInt):
                 with dpg.theme_component(kind):

@@ -99,6 +99,10 @@ def test_failed_load_by_absolute_path_is_shown_and_keys_work_and_wheel_zooms(xvf
                 assert preset.is_file(), "the preset was not saved as presets/tuning.json"
                 preset.write_text("{}")
         _grab(xvfb_display).save(tmp_path / "replace_question.png")
+        # the window made larger: the panels follow it
+        xdo("windowsize", win, str(W + 240), str(H + 100))
+        time.sleep(2.5)
+        _grab(xvfb_display).save(tmp_path / "resized.png")
     assert s.returncode == 0, s.stderr[-3000:]
     d = s.dump()
     # the path typed is the one read (no current folder in front of it), reported once
@@ -111,6 +115,9 @@ def test_failed_load_by_absolute_path_is_shown_and_keys_work_and_wheel_zooms(xvf
     assert d["final"]["dialog"] == {"title": "Save tuning preset", "shown": True}, d["final"]["dialog"]
     assert preset.read_text() == "{}"
     assert not (tmp_path / "presetjson.json").exists() and not (tmp_path / "preset.json").exists()
+    shown = [w for w in d["final"]["windows"].values() if w["shown"]]
+    assert abs(max(w["pos"][0] + w["size"][0] for w in shown) - (W + 240)) <= 3, shown
+    assert abs(max(w["pos"][1] + w["size"][1] for w in shown) - (H + 100)) <= 3, shown
     # a script steps one tick a frame, far slower than real time here: the menu bar says so
     assert d["final"]["menu"]["behind"].startswith("behind real time: 0."), d["final"]["menu"]
     assert any(t["input"]["left_y"] for t in d["ticks"]), "W did not move the character after the error"
