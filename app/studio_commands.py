@@ -131,13 +131,15 @@ def _coverage(panel, mode, channel) -> None:
 
 def _why_not(s, probe, frame: int) -> dict | None:
     """Explain ``frame`` at the shown tick in the Search Candidates panel (a reason it cannot: one line)."""
-    s.layouts.show_window("candidates", True)
+    panel = s.panels["candidates"]
+    if frame != panel.why_frame:                    # a new question (not the shown tick's refresh): show the answer
+        s.layouts.show_window("candidates", True)
     try:
         why = probe.why_not(frame)
     except ProbeUnavailable as e:
-        s.panels["candidates"].show_why_not(frame, [str(e)])
+        panel.show_why_not(frame, [str(e)])
         return None
-    s.panels["candidates"].show_why_not(frame, explanation_lines(why, s.session.features.names))
+    panel.show_why_not(frame, explanation_lines(why, s.session.features.names))
     return why
 
 

@@ -45,8 +45,8 @@ class TickProbe:
 
     def why_not(self, frame: int) -> dict:
         """``{tick, controller, note, asked, chosen, continuing}``: the explanations
-        (:func:`lmm.session.why_not.explain_frame`) of ``frame``, of the frame the shown tick's search chose and of the
-        pose that was playing (the continuing pose, no transition cost) against the tick's query."""
+        (:func:`lmm.session.why_not.explain_frame`) of ``frame``, of the frame the shown tick's search chose
+        and of the pose that was playing (the continuing pose, no transition cost) against the tick's query."""
         from lmm.session.why_not import explain_frame
 
         seeker, step, name, snap = self._shown()

@@ -80,7 +80,7 @@ class CandidatesPanel(Panel):
     """Ranked candidates of the inspected controller's last search."""
     key = "candidates"
     commands = ("preview_database_frame", "why_not", "what_if", "branch_here", "continuing_pose")
-    reads = ("inspected", "paused", "snap", "tick_number")
+    reads = ("inspected", "mode", "paused", "snap", "tick_number")
 
     def __init__(self, ctx):
         super().__init__(ctx)
@@ -94,6 +94,7 @@ class CandidatesPanel(Panel):
         self.why_frame: int | None = None     # the frame asked about (refreshed when the shown tick changes)
         self.why_text = ""
         self.continuing: dict | None = None   # the continuing pose's explanation at the shown search (or None)
+        self._reviewing = False               # a reopened session was shown at the last tick change
         self.what_if: dict | None = None      # the re-ranked search shown instead of the tick's ({tick, result, ..})
         self._asked_tick = -1
 
@@ -192,12 +193,7 @@ class CandidatesPanel(Panel):
         snap = view.snap()
         if view.tick_number != self._asked_tick:        # the asked frame and the what if follow the shown tick
             self._asked_tick = view.tick_number
-            # the continuing pose's row: asked of a reopened session, paused (stepping to it costs a few ms)
-            self.continuing = self.ctx.actions.continuing_pose() if view.paused else None
-            if self.why_frame is not None:
-                self.ctx.actions.why_not(self.why_frame)
-            if self.what_if is not None:
-                self.ctx.actions.what_if()
+            self._follow_tick(view)
         cands = None if snap is None else self._candidates(view, snap)
         key = (id(cands), self.sort_key, self.descending, view.inspected)
         if snap is None:
@@ -258,6 +254,22 @@ class CandidatesPanel(Panel):
                 if k in fractions:
                     self._highlight(r, c, cost_color(fractions[k][r]))
             self._highlight(r, 1, (60, 110, 200, 170) if row["frame"] == snap.matched_frame else None)
+
+    def _follow_tick(self, view: View) -> None:
+        """Ask again at a new shown tick of a reopened session (only it can be asked: live, the answers
+        are dropped); the continuing pose only while paused (stepping to it costs a few ms a tick)."""
+        actions, reviewing = self.ctx.actions, view.mode == "SESSION"
+        self.continuing = actions.continuing_pose() if reviewing and view.paused else None
+        left, self._reviewing = self._reviewing and not reviewing, reviewing
+        if left:                                          # the session's answers go with it
+            self.show_why_not(None, [])
+            self.show_what_if(None)
+        if not reviewing:
+            return
+        if self.why_frame is not None:
+            actions.why_not(self.why_frame)
+        if self.what_if is not None:
+            actions.what_if()
 
     def _candidates(self, view: View, snap):
         """The what-if re-ranking when one is kept for the shown tick and controller, else the tick's own."""

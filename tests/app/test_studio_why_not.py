@@ -81,13 +81,15 @@ def test_why_not_and_what_if_in_a_reopened_session(xvfb_display, studio_cache, t
               {"frame": 18, "do": "what_if", "clear": True}, {"frame": 20, "do": "capture", "label": "cleared"},
               {"frame": 22, "do": "scrub", "tick": tick + LATER}, {"frame": 25, "do": "capture", "label": "branch"},
               {"frame": 27, "do": "scrub", "tick": tick - 20}, {"frame": 30, "do": "capture", "label": "before"},
-              {"frame": 32, "do": "scrub", "tick": 50}, {"frame": 35, "do": "capture", "label": "early"}]
+              {"frame": 32, "do": "scrub", "tick": 50}, {"frame": 35, "do": "capture", "label": "early"},
+              {"frame": 37, "do": "live"}, {"frame": 40, "do": "capture", "label": "live"},
+              {"frame": 41, "do": "why_not", "database_frame": 5}, {"frame": 43, "do": "capture", "label": "live_ask"}]
     # run directly, not through run_studio: its prepared-vs-GUI check fails for any reopened session
     # (viewport and timeline from frame 1, before any action here), which is not this test's subject
     (tmp_path / "script.json").write_text(json.dumps({"actions": script}))
     env = dict(os.environ, DISPLAY=xvfb_display, LMM_STUDIO_CONFIG=str(tmp_path / "config"),
                LMM_STUDIO_CACHE=str(studio_cache), PYTHONPATH=str(ROOT), LP_NUM_THREADS="0")
-    proc = subprocess.run([sys.executable, "-m", "app.cli", "--open", str(session), "--frames", "37",
+    proc = subprocess.run([sys.executable, "-m", "app.cli", "--open", str(session), "--frames", "45",
                            "--script", str(tmp_path / "script.json"), "--dump-state", str(tmp_path / "dump.json"),
                            "--no-gamepads"], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=240)
     assert proc.returncode == 0, proc.stderr[-3000:]
@@ -122,3 +124,7 @@ def test_why_not_and_what_if_in_a_reopened_session(xvfb_display, studio_cache, t
     ghosts = [g["label"] for g in labels["branch"]["panels"]["viewport"]["previews"]]
     assert f"B (from tick {tick})" in ghosts, ghosts
     assert labels["before"]["panels"]["stats"]["branch"] == f"branch B from tick {tick}: before it, B is A"
+    # live again: the session's answers are dropped, and a live tick cannot be asked (one line says why)
+    assert labels["live"]["panels"]["candidates"]["why_not"] == "" and "LIVE" in labels["live"]["panels"]["menu"]["status"]
+    assert labels["live"]["panels"]["stats"]["branch"] == ""
+    assert labels["live_ask"]["panels"]["candidates"]["why_not"].startswith("why not / what if ask a reopened session")
