@@ -44,6 +44,15 @@ MAX_DT = 0.25
 
 PAD_WALK_BUTTONS = ("l1", "l2")
 PAD_STRAFE_BUTTONS = ("r2",)
+#: how Help names a pad button (PlayStation name / Xbox name)
+PAD_BUTTON_NAMES = {"l1": "L1/LB", "r1": "R1/RB", "l2": "L2/LT", "r2": "R2/RT"}
+
+
+def pad_buttons_help() -> str:
+    """Help's words for the pad's walk and strafe buttons, from the bindings themselves."""
+    def names(buttons):
+        return " or ".join(PAD_BUTTON_NAMES.get(b, b.upper()) for b in buttons)
+    return f"{names(PAD_WALK_BUTTONS)} walk, {names(PAD_STRAFE_BUTTONS)} strafe"
 
 
 @dataclass(frozen=True)

@@ -6,6 +6,7 @@ from __future__ import annotations
 from app.layout_files import builtin_names
 
 from app.command_registry import CommandRegistry
+from app.input.manager import pad_buttons_help
 
 from .base import PanelContext, View
 from .common import WINDOWS, TextCache, built_windows, window_tag
@@ -20,7 +21,8 @@ def keys_help(commands: CommandRegistry) -> str:
                       "  W A S D / arrows   move (camera relative)      Shift  walk        Ctrl  strafe",
                       "  I J K L            aim (right stick)           Q / E  turn the camera", *shortcuts,
                       "Mouse on the 3D view: left-drag orbit, right/middle-drag pan, wheel zoom.",
-                      "Gamepads (glfw or raw HID): left stick move, right stick aim/camera, LB walk, RB strafe."])
+                      "Gamepads (glfw or raw HID): left stick move, right stick aim/camera, "
+                      + pad_buttons_help() + "."])
 
 
 def hidden_note(hidden) -> str:
