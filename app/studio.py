@@ -213,7 +213,6 @@ class Studio(SessionActions):
         if s.input_log is not None:
             done = " (finished: last row holds)" if s.replay_finished() else ""
             replay = f"replaying {s.input_log.name}: {s.replay_time():.1f} / {s.input_log.duration:.1f} s{done}"
-        ref = s.reference
         return View(tick=p.displayed_tick(), history=s.history, live=p.live, paused=p.paused,
                     inspected=self.inspected, frame=self.frame_index,
                     problems={"lmm": self.lmm_problem} if self.lmm_problem else {},
@@ -224,7 +223,7 @@ class Studio(SessionActions):
                         rec.frames * s.dt, tuple(Path(f).name for f in rec.paths.values())),
                     last_recording=self.last_recording, input_name=s.input_log.name if s.input_log else "",
                     replay_line=replay, devices=tuple(self.gamepad_names()),
-                    reference=ref.name if ref is not None else "", layout=self.layouts.name,
+                    reference=getattr(s.reference, "name", ""), layout=self.layouts.name,
                     following=s.following.name if s.following is not None else "",
                     hidden_windows=self._hidden, physics_status=s.physics_status,
                     ragdoll={} if s.ragdolls is None else {"enabled": s.ragdolls.enabled,
@@ -287,8 +286,9 @@ class Studio(SessionActions):
             self.window_fit.check()          # the window was resized: the panels follow
             self._hidden = tuple(self.layouts.hidden())
         t3 = time.perf_counter()
-        self.viewport.render()          # the 3D view, once the panels are done (see there)
-        self.viewport.finish()          # and its pixels in dearpygui's texture
+        if not self.dialogs.visible:    # a file dialog covers the 3D view: faster frames catch its double-clicks
+            self.viewport.render()      # the 3D view, once the panels are done (see there)
+            self.viewport.finish()      # and its pixels in dearpygui's texture
         t_read = time.perf_counter()
         self.observer.frame_shown(self.frame_index, view, self.session, n, self.viewport.drawn.get("roots", {}))
         for label in self.script.captures:
