@@ -256,15 +256,15 @@ class CandidatesPanel(Panel):
             self._highlight(r, 1, (60, 110, 200, 170) if row["frame"] == snap.matched_frame else None)
 
     def _follow_tick(self, view: View) -> None:
-        """Ask again at a new shown tick of a reopened session (only it can be asked: live, the answers
-        are dropped); the continuing pose only while paused (stepping to it costs a few ms a tick)."""
+        """Ask again at a new shown tick of a reopened session, paused (only it can be asked: live, the
+        answers are dropped; playing, they stay those of the tick they name: each costs a few ms)."""
         actions, reviewing = self.ctx.actions, view.mode == "SESSION"
         self.continuing = actions.continuing_pose() if reviewing and view.paused else None
         left, self._reviewing = self._reviewing and not reviewing, reviewing
         if left:                                          # the session's answers go with it
             self.show_why_not(None, [])
             self.show_what_if(None)
-        if not reviewing:
+        if not reviewing or not view.paused:              # playing: the answers name the tick they are of
             return
         if self.why_frame is not None:
             actions.why_not(self.why_frame)
