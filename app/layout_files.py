@@ -45,6 +45,13 @@ MIN_VIEWPORT = (320, 240)
 MAX_LAYOUT_BYTES = 1 << 20
 LAYOUT_DIR = Path(__file__).resolve().parents[1] / "layouts"
 
+#: where a window a built-in layout hides opens when shown (Windows menu, a Search Candidates click):
+#: over the panels below or beside the 3D view, never over it or Tuning (they opened where another
+#: layout had left them: the Database window over Tuning and the 3D view)
+_BELOW_VIEW, _RIGHT_LOWER = (320, 522, 770, 378), (1090, 512, 510, 388)
+OPENS_AT = {"default": {"database": _BELOW_VIEW, "coverage": _BELOW_VIEW, "motion_search": _BELOW_VIEW,
+                        "physics": _RIGHT_LOWER}}
+
 # name -> window key -> (x, y, width, height) at 1600x900, or None for hidden
 BUILTIN: dict[str, dict[str, tuple[int, int, int, int] | None]] = {
     "default": {
@@ -249,17 +256,25 @@ def load(name_or_path: str) -> Layout:
     except OSError as e:
         raise LayoutError(f"{path}: cannot read ({e.strerror})") from None
     name = name_or_path if name_or_path in BUILTIN else path.stem
-    return parse(text, name=name, path=path)
+    layout = parse(text, name=name, path=path)
+    # a shipped layout's hidden windows open where OPENS_AT says (dearpygui writes no place for a
+    # window that was never shown, so the file holds a place another layout left)
+    for key, (x, y, w, h) in OPENS_AT.get(name if name_or_path in BUILTIN else "", {}).items():
+        if key in layout.hidden:
+            layout.windows[key] = {"pos": (x, y), "size": (w, h), "docked": False}
+    return layout
 
 
 def from_builtin(name: str) -> Layout:
-    """A built-in arrangement straight from :data:`BUILTIN` (no file)."""
+    """A built-in arrangement straight from :data:`BUILTIN` (no file); a hidden window with a place in
+    :data:`OPENS_AT` is put there, hidden, so that showing it never covers the 3D view."""
     spec = BUILTIN[name]
     layout = Layout(name=name, path=None)
     for key, rect in spec.items():
         if rect is None:
             layout.hidden.add(key)
-        else:
+            rect = OPENS_AT.get(name, {}).get(key)
+        if rect is not None:
             x, y, w, h = rect
             layout.windows[key] = {"pos": (x, y), "size": (w, h), "docked": False}
     return layout

@@ -154,4 +154,10 @@ def test_sideways_run_framing_ragdoll_and_ghost_after_layout_switch(run_studio, 
     assert off_centre < focus_radius(cam["distance"], 45.0) + 0.3, (off_centre, root, target)
     assert vp["ragdoll"] is None and "ragdoll" not in vp["labels"]
     assert labels["ghost"]["panels"]["viewport"]["previews"], "the candidate click showed no ghost"
+    # the Database window the click showed opens below the 3D view, not over it or Tuning
+    from app.layout_files import OPENS_AT
+
+    db_window = labels["ghost"]["panels"]["windows"]["database"]
+    x, y, w, h = OPENS_AT["default"]["database"]
+    assert db_window["shown"] and db_window["pos"] == [x, y] and db_window["size"] == [w, h], db_window
     assert labels["after"]["panels"]["viewport"]["previews"] == [], "the ghost stayed after the layout switch"
