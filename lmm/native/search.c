@@ -13,10 +13,13 @@
 #include <stdint.h>
 
 #if defined(__GNUC__) && !defined(__clang__) && (defined(__x86_64__) || defined(__i386__))
-#define CLONES __attribute__((target_clones("default", "arch=haswell", "arch=skylake-avx512")))
+/* dispatched on the CPU's features (an "arch=" clone would test the CPU model, not what it supports) */
+#define CLONES __attribute__((target_clones("default", "avx2", "avx512f")))
 #else
 #define CLONES
 #endif
+/* every helper is inlined into each clone (a called function would run the default clone's instructions) */
+#define INLINE static inline __attribute__((always_inline))
 
 #define SLACK 0.9999f  /* a box bound shrunk by 1e-4 stays below every cost in the box, rounding included */
 #define MAX_K 64
@@ -28,12 +31,12 @@ typedef struct {
     float thr;         /* best[k-1] widened by the margin */
 } kbest;
 
-static void kbest_set_thr(kbest *b) {
+INLINE void kbest_set_thr(kbest *b) {
     float t = b->best[b->k - 1];
     b->thr = isinf(t) ? INFINITY : t + 1e-4f * (fabsf(t) + b->scale);
 }
 
-static void kbest_push(kbest *b, float v) {
+INLINE void kbest_push(kbest *b, float v) {
     int i = b->k - 1;
     if (!(v < b->best[i])) return;
     while (i > 0 && b->best[i - 1] > v) { b->best[i] = b->best[i - 1]; i--; }
@@ -42,7 +45,7 @@ static void kbest_push(kbest *b, float v) {
 }
 
 /* squared distance from q to the box [lo, hi] over n dims */
-static inline float box_bound(const float *lo, const float *hi, const float *q, int n) {
+INLINE float box_bound(const float *lo, const float *hi, const float *q, int n) {
     float acc[8] = {0, 0, 0, 0, 0, 0, 0, 0};
     int d = 0;
     for (; d + 8 <= n; d += 8)
@@ -61,7 +64,7 @@ static inline float box_bound(const float *lo, const float *hi, const float *q, 
 }
 
 /* squared distance of a row to q over n dims */
-static inline float row_cost(const float *x, const float *q, int n) {
+INLINE float row_cost(const float *x, const float *q, int n) {
     float acc[8] = {0, 0, 0, 0, 0, 0, 0, 0};
     int d = 0;
     for (; d + 8 <= n; d += 8)
@@ -87,7 +90,7 @@ typedef struct {
 } scan;
 
 /* keep only the collected frames within the threshold; 0 when the buffer is still full */
-static int compact(scan *s, const kbest *b) {
+INLINE int compact(scan *s, const kbest *b) {
     int j = 0;
     for (int i = 0; i < s->n_out; i++)
         if (s->out_key[i] <= b->thr) { s->out[j] = s->out[i]; s->out_key[j] = s->out_key[i]; j++; }
@@ -96,7 +99,7 @@ static int compact(scan *s, const kbest *b) {
 }
 
 /* the small blocks of one large block, then their frames; 0 on overflow */
-static int visit_large(scan *s, kbest *b, int64_t large) {
+INLINE int visit_large(scan *s, kbest *b, int64_t large) {
     const int d = s->dims, per = s->per, sb = s->sb;
     const float *lo = s->l2_lo + large * per * d, *hi = s->l2_hi + large * per * d;
     for (int j = 0; j < per; j++) {
