@@ -107,7 +107,8 @@ def test_the_replaced_results_are_freed_on_the_tick_worker():
             freed.append(threading.current_thread().name)
 
     stepped = []
-    session = SimpleNamespace(step=lambda inp: stepped.append(inp) or SimpleNamespace(snapshots={}), step_ms={})
+    session = SimpleNamespace(step=lambda inp: stepped.append(inp) or SimpleNamespace(snapshots={}), step_ms={},
+                              deliver_reports=lambda: None)
     worker = TickWorker(session)
     try:
         worker.submit([InputState()], release=Heavy())
