@@ -80,7 +80,7 @@ class Preparer:
     def job(self, view, shown: set, next_frame: int):
         """The function the worker calls with the newest tick, or None when the next frame will not show
         it (not live: paused or scrubbing)."""
-        if not view.live or not self.panels:
+        if not view.live or not self.panels or view.mode == "SESSION":   # a reopened session: not the worker's ticks
             return None
         panels = [(k, p, p.prepare_key(view)) for k, p in self.panels.items() if k in shown]
         key = view_key(view)
@@ -110,7 +110,8 @@ class Preparer:
             if pkey == panel.prepare_key(view):
                 hit = data
         if hit is None:
-            if view.live or panel.prepare_uses_frame:
+            # a reopened session's history changes while its newest tick stays: nothing kept for it
+            if view.live or panel.prepare_uses_frame or view.mode == "SESSION":
                 self.inline[key] += 1
                 return None
             return self._kept_result(key, panel, view)

@@ -118,3 +118,26 @@ def test_the_replaced_results_are_freed_on_the_tick_worker():
         assert freed == ["studio-ticks", threading.current_thread().name]
     finally:
         worker.close()
+
+
+def test_a_reopened_sessions_frames_are_worked_out_each_time_never_kept():
+    """A reopened session's history fills around each pick while its newest tick stays the session's
+    last, so a result kept from an earlier paused frame could be stale: each frame works it out (and the
+    worker prepares nothing for it, since its ticks are not the session's)."""
+    panel = Counting()
+    prep = Preparer({"stats": panel})
+    tick = SimpleNamespace(tick=3)
+    history = History(10)
+    history.is_session = True
+    paused = View(tick=tick, history=history, live=False, paused=True, inspected="mm", frame=1)
+    assert paused.mode == "SESSION"
+    for frame in range(1, 4):
+        assert prep.result("stats", View(tick=tick, history=history, live=False, paused=True, inspected="mm",
+                                         frame=frame)) is None
+    assert prep.inline["stats"] == 3 and prep.kept.get("stats", 0) == 0
+    playing = View(tick=tick, history=history, live=True, paused=False, inspected="mm", frame=4)
+    assert prep.job(playing, {"stats"}, 5) is None
+    # the same paused frames outside a session keep the first result
+    live_history = View(tick=tick, history=History(10), live=False, paused=True, inspected="mm", frame=5)
+    first = prep.result("stats", live_history)
+    assert first is not None and prep.result("stats", live_history) is first and prep.kept["stats"] == 1
