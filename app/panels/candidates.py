@@ -128,18 +128,20 @@ class CandidatesPanel(Panel):
     def _build_questions(self) -> None:
         """Why not a typed frame; what if: one scratch weight, tag bias or cost at a time; branch here."""
         dpg, actions = self.dpg, self.ctx.actions
-        with dpg.group(horizontal=True):
-            dpg.add_input_int(label="why not frame", tag="cand_why_frame", width=90, on_enter=True,
-                              callback=lambda s, v: actions.why_not(int(v)))
-            dpg.add_button(label="branch here (what if)", callback=lambda: actions.branch_here(scratch=True))
-        with dpg.group(horizontal=True):
-            dpg.add_combo(what_if_fields(self.ctx.engine.channel_names, self.ctx.tuning), tag="cand_wi_field",
-                          default_value="transition_cost", width=200)
-            dpg.add_input_float(tag="cand_wi_value", width=80, step=0, format="%.3f")
-            dpg.add_button(label="what if", callback=lambda: self.ask_what_if(dpg.get_value("cand_wi_field"),
-                                                                               dpg.get_value("cand_wi_value")))
-            dpg.add_button(label="clear what if", callback=lambda: actions.what_if(clear=True))
-        dpg.add_text("", tag="cand_why", wrap=0)
+        # folded by default: the ranked table is what the panel is for, and it keeps its rows in small layouts
+        with dpg.collapsing_header(label="why not / what if", tag="cand_questions", default_open=False):
+            with dpg.group(horizontal=True):
+                dpg.add_input_int(label="why not frame", tag="cand_why_frame", width=90, on_enter=True,
+                                  callback=lambda s, v: actions.why_not(int(v)))
+                dpg.add_button(label="branch here (what if)", callback=lambda: actions.branch_here(scratch=True))
+            with dpg.group(horizontal=True):
+                dpg.add_combo(what_if_fields(self.ctx.engine.channel_names, self.ctx.tuning), tag="cand_wi_field",
+                              default_value="transition_cost", width=200)
+                dpg.add_input_float(tag="cand_wi_value", width=80, step=0, format="%.3f")
+                dpg.add_button(label="what if", callback=lambda: self.ask_what_if(dpg.get_value("cand_wi_field"),
+                                                                                   dpg.get_value("cand_wi_value")))
+                dpg.add_button(label="clear what if", callback=lambda: actions.what_if(clear=True))
+        dpg.add_text("", tag="cand_why", wrap=0, show=False)     # shown while it holds an answer
 
     def ask_what_if(self, entry: str, value) -> None:
         """One more scratch edit (``entry`` of :func:`what_if_fields`) and the tick's search re-ranked."""
@@ -215,7 +217,7 @@ class CandidatesPanel(Panel):
             kept = "kept" if c["frame"] == int(cands.frames[0]) else "beaten"
             status += (f"\ncontinuing pose {c['frame']}: total {c['total']:.3f} = features {c['feature_cost']:.3f}"
                        f" + bias {c['bias']:.3f} (no transition cost); {kept}")
-        self.text.set("cand_why", self.why_text)
+        self._show_why()
         self.text.set("cand_status", status)
         if key == self._shown_for:
             return
@@ -281,7 +283,11 @@ class CandidatesPanel(Panel):
     def show_why_not(self, frame: int | None, lines: list[str]) -> None:
         """What the why-not command found for ``frame`` (None: nothing asked)."""
         self.why_frame, self.why_text = frame, "\n".join(lines)
+        self._show_why()
+
+    def _show_why(self) -> None:
         self.text.set("cand_why", self.why_text)
+        self.text.configure("cand_why", show=bool(self.why_text))
 
     def show_what_if(self, what_if: dict | None) -> None:
         """The what-if re-ranking to show in the table (None: the tick's own search again)."""

@@ -75,9 +75,9 @@ def _call(case: dict):
     raise ValueError(f"unknown call {call!r}")
 
 
-# the cache's own subfolders: trace logs, the motion search index, a database's derived arrays (named by
-# the database's hash, never by user text)
-_CACHE_SUBFOLDER = re.compile(r"^(logs|motion_search|db-[0-9a-f]{8,}\.npz\.derived)$")
+# the cache's own subfolders: trace logs, the motion search index, the compiled search filter (named by
+# its source's hash), a database's derived arrays (named by the database's hash, never by user text)
+_CACHE_SUBFOLDER = re.compile(r"^(logs|motion_search|native|db-[0-9a-f]{8,}\.npz\.derived)$")
 
 
 def _files_outside(root: Path, cache: Path) -> list[str]:
