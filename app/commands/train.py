@@ -3,7 +3,9 @@
 Writes ``default.npz`` (decompressor, stepper, projector), ``compressor.npz`` and
 ``training_log.csv`` into ``--out``. The default recipe is the fast one measured to train the whole
 pipeline on the shipped database in under 45 minutes on 2 CPU cores (see lmm/data/weights/README.md).
-Prints a few summary lines; ``--json OUT`` (``-``: standard output) writes the whole summary. Ctrl+C or
+Shows one progress line per stage (redrawn in place on a terminal, a line a minute in a log file) and a
+few summary lines at the end; the losses of every ``--log-every`` iterations are in ``training_log.csv``
+(``--verbose`` prints them too). ``--json OUT`` (``-``: standard output) writes the whole summary. Ctrl+C or
 SIGTERM ends it with one line saying where it stopped; weights files are replaced whole or not at all.
 """
 from __future__ import annotations
@@ -56,13 +58,16 @@ def add_arguments(p) -> None:
     p.add_argument("--frames", type=number_in(MIN_FRAMES, 2 ** 31, integer=True),
                    help=f"train on the first N database frames only (quick checks), at least {MIN_FRAMES}")
     p.add_argument("--log-every", type=number_in(1, MAX_ITERATIONS, integer=True), default=200,
-                   help="print a loss line every N iterations")
+                   help="a row of mean losses in training_log.csv every N iterations (default 200)")
     p.add_argument("--resume", action="store_true",
                    help="stepper/projector: continue from the networks in --out with a new schedule")
     p.add_argument("--device", default="auto",
                    help="auto (CUDA when present, else CPU), cpu, cuda or cuda:N; under torchrun each process "
                         "takes its local rank's GPU (see lmm/offline/distributed.py)")
-    p.add_argument("--quiet", action="store_true", help="no progress bar or loss lines")
+    talk = p.add_mutually_exclusive_group()
+    talk.add_argument("--quiet", action="store_true", help="no progress lines (the summary still prints)")
+    talk.add_argument("--verbose", action="store_true",
+                      help="print each training_log.csv row (every --log-every iterations) instead of the progress")
 
 
 def main(args) -> int:
@@ -116,8 +121,9 @@ def main(args) -> int:
             print(f"training {', '.join(stages)} on {db.name} ({db.n_frames} frames, key {db.key[:16]}) on "
                   f"{where}, {threads} thread{'s' if threads > 1 else ''} ({how}) -> {args.out}", file=sys.stderr)
         t0 = time.perf_counter()
+        # WeightsError / OSError: one line from app/cli.py
         summary = train_pipeline(db, features, stages, recipe, args.out, frames=frames, quiet=args.quiet,
-                                 resume=args.resume, par=par)  # WeightsError / OSError: one line from app/cli.py
+                                 resume=args.resume, par=par, verbose=args.verbose)
         summary["command_wall_s"] = round(time.perf_counter() - t0, 1)
         summary["device"], summary["processes"] = str(par.device), par.world
         summary["threads"] = threads
@@ -134,10 +140,13 @@ def main(args) -> int:
 
 
 def summary_lines(summary: dict) -> str:
-    """A few lines: per stage its loss from first to last logged iteration and its time, then the files."""
+    """A few lines: per stage its loss from the first to the last logged row (one figure when a stage
+    logged one row) and its time, then the files."""
     lines = []
     for name, last in summary["final_loss"].items():
-        lines.append(f"{name:<12} loss {summary['first_loss'][name]:.4f} -> {last:.4f} in "
+        first = summary["first_loss"][name]   # the mean over the first --log-every iterations
+        losses = f"{last:.4f}" if first == last else f"{first:.4f} -> {last:.4f}"
+        lines.append(f"{name:<12} loss {losses} in "
                      f"{summary['wall_s'].get(name, summary['wall_s'].get(name + '_resumed', 0.0)):.1f} s")
     paths = summary["paths"]
     lines.append(f"wrote {paths['runtime']}, {paths['compressor']}, {paths['log']} "

@@ -108,7 +108,7 @@ def decompressor_losses(y_hat: torch.Tensor, y: torch.Tensor, q: torch.Tensor, z
 
 
 def train_decompressor(data: TrainingData, s: StageSettings, seed: int = 1234, latent: int = 32, hidden: int = 512,
-                       log_every: int = 200, csv_path=None, quiet: bool = False, stream=None,
+                       log_every: int = 200, csv_path=None, quiet: bool = False, stream=None, verbose: bool = False,
                        networks=None, checkpoint=None, par: Parallel | None = None):
     """Train compressor + decompressor jointly. Returns (compressor, decompressor, LossLog).
     ``par``: the device and the processes taking part (default: this process on the CPU)."""
@@ -121,7 +121,7 @@ def train_decompressor(data: TrainingData, s: StageSettings, seed: int = 1234, l
     params = list(compressor.parameters()) + list(decompressor.parameters())
     opt, sched = make_optimizer(params, s)
     log = LossLog("decompressor", s.iterations, log_every, csv_path if par.is_main else None, stream,
-                  quiet or not par.is_main)
+                  quiet or not par.is_main, verbose)
     starts = data.windows2
     for it in range(s.iterations):
         f0 = torch.from_numpy(starts[rng.integers(0, len(starts), s.batch)]).to(par.device)

@@ -117,7 +117,7 @@ def make_projector(data: TrainingData, Z: torch.Tensor, hidden: int = 512, noise
 
 
 def train_projector(data: TrainingData, Z: torch.Tensor, s: StageSettings, seed: int = 1234, hidden: int = 512,
-                    log_every: int = 200, csv_path=None, quiet=False, stream=None, projector=None,
+                    log_every: int = 200, csv_path=None, quiet=False, stream=None, verbose=False, projector=None,
                     log_name: str = "projector", noise: float = 0.5, neighbours: int = 16, margin: float = 0.1,
                     weights: dict | None = None, skip: bool = True, par: Parallel | None = None):
     """Noisy queries, their exact nearest frames as targets (features and latent), L1 losses, the
@@ -143,7 +143,7 @@ def train_projector(data: TrainingData, Z: torch.Tensor, s: StageSettings, seed:
     pool = data.frames if data.frames is not None else np.arange(X.shape[0])
     opt, sched = make_optimizer(projector.parameters(), s)
     log = LossLog(log_name, s.iterations, log_every, csv_path if par.is_main else None, stream,
-                  quiet or not par.is_main)
+                  quiet or not par.is_main, verbose)
     for it in range(s.iterations):
         f = torch.from_numpy(pool[rng.integers(0, len(pool), s.batch)]).to(par.device)
         q = noisy_queries(X, f, x_std, gen, noise)

@@ -25,8 +25,8 @@ def make_stepper(data: TrainingData, Z: torch.Tensor, windows: np.ndarray, laten
 
 
 def train_stepper(data: TrainingData, Z: torch.Tensor, s: StageSettings, window: int = 20, seed: int = 1234,
-                  hidden: int = 512, log_every: int = 200, csv_path=None, quiet=False, stream=None, stepper=None,
-                  log_name: str = "stepper", par: Parallel | None = None):
+                  hidden: int = 512, log_every: int = 200, csv_path=None, quiet=False, stream=None, verbose=False,
+                  stepper=None, log_name: str = "stepper", par: Parallel | None = None):
     par = par or Parallel(torch.device("cpu"))
     rng = seed_all(par.seed(seed + 1))
     starts = window_starts_from(data, window)
@@ -39,7 +39,7 @@ def train_stepper(data: TrainingData, Z: torch.Tensor, s: StageSettings, window:
     d_std = stepper.out_std
     opt, sched = make_optimizer(stepper.parameters(), s)
     log = LossLog(log_name, s.iterations, log_every, csv_path if par.is_main else None, stream,
-                  quiet or not par.is_main)
+                  quiet or not par.is_main, verbose)
     offsets = torch.arange(window, device=par.device)
     for it in range(s.iterations):
         f0 = torch.from_numpy(starts[rng.integers(0, len(starts), s.batch)]).to(par.device)

@@ -78,14 +78,16 @@ def _load_networks(path, names, db, features) -> tuple[dict, dict]:
 
 def train_pipeline(db, features: Features, stages=NETWORKS, recipe: Recipe | None = None, out_dir="lmm-weights",
                    frames: np.ndarray | None = None, quiet: bool = False, stream=None, resume: bool = False,
-                   par: Parallel | None = None) -> dict:
+                   par: Parallel | None = None, verbose: bool = False) -> dict:
     """Train the given stages in order and write ``default.npz`` (decompressor, stepper, projector),
     ``compressor.npz`` and ``training_log.csv`` into ``out_dir``. Stages not trained are taken from
     the files already in ``out_dir``. ``resume``: stepper/projector start from the ones in ``out_dir``
     (a further schedule on top of a finished run) instead of from scratch. ``par``: the device and, under
     torchrun, the processes taking part (see :mod:`lmm.offline.distributed`; only rank 0 writes files).
-    Returns a summary. Interrupted (Ctrl+C, SIGTERM), it writes one line saying where it stopped and
-    which files ``out_dir`` holds, and re-raises; weights files are only ever replaced whole, together."""
+    On ``stream``: a progress line per stage, or with ``verbose`` a loss line every ``recipe.log_every``
+    iterations (the CSV's rows), nothing when ``quiet``. Returns a summary. Interrupted (Ctrl+C, SIGTERM),
+    it writes one line saying where it stopped and which files ``out_dir`` holds, and re-raises; weights
+    files are only ever replaced whole, together."""
     par = par or Parallel(torch.device("cpu"))
     recipe = recipe or Recipe()
     if not recipe.threads:
@@ -95,7 +97,7 @@ def train_pipeline(db, features: Features, stages=NETWORKS, recipe: Recipe | Non
     saved: list[str] = []
     LossLog.latest = None
     try:
-        return _train(db, features, stages, recipe, Path(out_dir), frames, quiet, stream, resume, par, saved)
+        return _train(db, features, stages, recipe, Path(out_dir), frames, quiet, stream, resume, par, saved, verbose)
     except KeyboardInterrupt:
         if par.is_main:
             stream.write(interrupted_line(LossLog.latest, saved, out_dir) + "\n")
@@ -116,7 +118,7 @@ def interrupted_line(log: LossLog | None, saved: list[str], out_dir) -> str:
     return f"training stopped {where}; {held} ({out_dir})"
 
 
-def _train(db, features, stages, recipe, out_dir, frames, quiet, stream, resume, par, saved) -> dict:
+def _train(db, features, stages, recipe, out_dir, frames, quiet, stream, resume, par, saved, verbose) -> dict:
     out_dir.mkdir(parents=True, exist_ok=True)
     runtime_path, comp_path, csv_path = out_dir / RUNTIME_FILE, out_dir / COMPRESSOR_FILE, out_dir / LOG_FILE
     t_all = time.perf_counter()
@@ -175,7 +177,7 @@ def _train(db, features, stages, recipe, out_dir, frames, quiet, stream, resume,
             save_all(f"checkpoint: decompressor at iteration {it}/{s.iterations}")
 
         _, _, log = train_decompressor(data, s, recipe.seed, recipe.latent, recipe.hidden, recipe.log_every,
-                                       csv_path, quiet, stream, networks=pair,
+                                       csv_path, quiet, stream, verbose, networks=pair,
                                        checkpoint=None if frames is not None else checkpoint, par=par)
         wall["decompressor"] = round(time.perf_counter() - t0, 1)
         summary["first_loss"]["decompressor"], summary["final_loss"]["decompressor"] = log.first_loss, log.last_loss
@@ -184,7 +186,7 @@ def _train(db, features, stages, recipe, out_dir, frames, quiet, stream, resume,
     if "stepper" in stages:
         t0 = time.perf_counter()
         nets["stepper"], log = train_stepper(data, Z, recipe.stepper, recipe.stepper_window, recipe.seed, recipe.hidden,
-                                             recipe.log_every, csv_path, quiet, stream,
+                                             recipe.log_every, csv_path, quiet, stream, verbose,
                                              stepper=nets.get("stepper") if resume else None,
                                              log_name="stepper_resumed" if resume else "stepper", par=par)
         wall["stepper" + ("_resumed" if resume else "")] = round(time.perf_counter() - t0, 1)
@@ -193,7 +195,7 @@ def _train(db, features, stages, recipe, out_dir, frames, quiet, stream, resume,
     if "projector" in stages:
         t0 = time.perf_counter()
         nets["projector"], log = train_projector(data, Z, recipe.projector, recipe.seed, recipe.hidden,
-                                                 recipe.log_every, csv_path, quiet, stream,
+                                                 recipe.log_every, csv_path, quiet, stream, verbose,
                                                  projector=nets.get("projector") if resume else None,
                                                  log_name="projector_resumed" if resume else "projector",
                                                  noise=recipe.projector_noise, neighbours=recipe.projector_neighbours,

@@ -1,7 +1,7 @@
 """What the three training stages' loops share: the recipe (each stage's schedule), the optimiser with
-its warm-up and cosine decay, one optimisation step, the seeding, the loss log (console lines and
-the CSV of every stage's terms), the thread count a machine should train with, and holding Ctrl+C and
-SIGTERM while a set of files is written.
+its warm-up and cosine decay, one optimisation step, the seeding, the loss log (a progress line per stage
+on the console, the CSV of every stage's terms, loss lines on request), the thread count a machine should
+train with, and holding Ctrl+C and SIGTERM while a set of files is written.
 """
 from __future__ import annotations
 
@@ -111,23 +111,33 @@ def interrupts_held():
         signal.raise_signal(caught[0])   # now handled by the handler that was there before
 
 
+#: seconds between progress lines when the console is not a terminal (a log file): the full recipe's
+#: 36 minutes on one thread make about as many lines, where the terminal's 0.2 s would make thousands
+PIPED_PROGRESS_S = 60.0
+
+
 class LossLog:
-    """Collects per-iteration losses, prints a line every ``log_every`` iterations and writes a CSV.
+    """Collects per-iteration losses, writes a CSV row of their means every ``log_every`` iterations and
+    shows a progress line (redrawn in place on a terminal, one line a minute otherwise). ``verbose``
+    prints each CSV row as a loss line instead of the progress line; ``quiet`` prints nothing.
     ``LossLog.latest`` is the last one started (where an interrupted training stopped)."""
 
     latest: "LossLog | None" = None
 
-    def __init__(self, network: str, total: int, log_every: int, csv_path=None, stream=None, quiet=False):
+    def __init__(self, network: str, total: int, log_every: int, csv_path=None, stream=None, quiet=False,
+                 verbose=False):
         self.network = network
         self.log_every = max(int(log_every), 1)
         self.stream = stream if stream is not None else sys.stderr
-        self.quiet = quiet
+        self.verbose = verbose and not quiet
         self.rows: list[dict] = []
         self._acc: dict[str, float] = {}
         self._n = 0
         self.csv_path = Path(csv_path) if csv_path else None
         self.start = time.perf_counter()
-        self.progress = Progress(total, label=network, stream=self.stream, enabled=not quiet)
+        tty = bool(getattr(self.stream, "isatty", lambda: False)())
+        self.progress = Progress(total, label=network, stream=self.stream, enabled=not (quiet or self.verbose),
+                                 min_interval_s=0.2 if tty else PIPED_PROGRESS_S)
         LossLog.latest = self
 
     def add(self, iteration: int, lr: float, terms: dict[str, float]) -> None:
@@ -142,7 +152,7 @@ class LossLog:
             row.update({k: v / self._n for k, v in self._acc.items()})
             self.rows.append(row)
             self._acc, self._n = {}, 0
-            if not self.quiet:
+            if self.verbose:
                 terms_txt = " ".join(f"{k}={v:.4g}" for k, v in row.items() if k not in ("network", "iteration", "elapsed_s", "lr", "loss"))
                 self.stream.write(f"[{self.network}] it {row['iteration']} loss {row['loss']:.5f} lr {lr:.2e} "
                                   f"{row['elapsed_s']:.0f}s | {terms_txt}\n")

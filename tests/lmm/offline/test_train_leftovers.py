@@ -22,7 +22,7 @@ FILES = {"default.npz", "compressor.npz", "training_log.csv"}
 def test_a_killed_training_leaves_nothing_after_the_next_start(tmp_path):
     out = tmp_path / "weights"
     env = dict(os.environ, PYTHONPATH=str(ROOT))
-    p = subprocess.Popen(TRAIN + ["--iterations", "5000", "--out", str(out)], stderr=subprocess.PIPE,
+    p = subprocess.Popen(TRAIN + ["--iterations", "5000", "--verbose", "--out", str(out)], stderr=subprocess.PIPE,
                          stdout=subprocess.DEVNULL, text=True, cwd=ROOT, env=env)
     try:
         for line in p.stderr:   # SIGKILL after the first iterations, while the loss log is being rewritten

@@ -207,7 +207,7 @@ def test_train_stopped_by_a_signal_says_where_in_one_line_and_leaves_no_partial_
     root = Path(__file__).resolve().parents[3]
     out = tmp_path / "weights"
     p = subprocess.Popen([sys.executable, "-m", "app.cli", "train", "decompressor", "--iterations", "5000",
-                          "--log-every", "1", "--frames", "2000", "--threads", "1", "--out", str(out)],
+                          "--log-every", "1", "--verbose", "--frames", "2000", "--threads", "1", "--out", str(out)],
                          stderr=subprocess.PIPE, stdout=subprocess.PIPE, text=True, cwd=root,
                          env=dict(os.environ, PYTHONPATH=str(root)))
     lines = []
