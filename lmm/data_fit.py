@@ -11,7 +11,8 @@
   joint, within :data:`LOWEST_TOLERANCE_M`, in most frames.
 
 :func:`fit_warnings` gives each problem as one line (build-db and run print them as ``warning:``);
-:func:`status_text` is the studio's one-line form.
+:class:`DataFit` checks one database again and again as the tuning changes, and its ``status_text`` is the
+short form the studio's menu bar shows (the whole lines in its tooltip).
 """
 from __future__ import annotations
 
@@ -35,16 +36,25 @@ def root_speed_percentile(db, q: float = SPEED_PERCENTILE) -> float:
     return float(np.percentile(np.hypot(v[:, 0], v[:, 2]), q)) if len(v) else 0.0
 
 
+def speeds_beyond(tuning, p99_m_s: float) -> list[tuple[str, float]]:
+    """The tuning's speed fields (name, m/s) beyond :data:`SPEED_MARGIN` times a database's ``p99_m_s``."""
+    limit = SPEED_MARGIN * p99_m_s
+    return [(name, float(getattr(tuning, name))) for name in SPEED_FIELDS if float(getattr(tuning, name)) > limit]
+
+
+def _speed_lines(name: str, p99_m_s: float, beyond: list[tuple[str, float]]) -> list[str]:
+    if not beyond:
+        return []
+    asked = ", ".join(f"{field.removesuffix('_m_s')} {v:g}" for field, v in beyond)
+    return [f"the tuning asks for speeds the database {name} does not cover ({asked} m/s; its root speed p99 is "
+            f"{p99_m_s:.2f} m/s): the character will skate at those speeds; lower them in the tuning or add "
+            f"faster motion"]
+
+
 def speed_warnings(db, tuning) -> list[str]:
     """One line when the tuning asks for speeds beyond what the database covers (see the module doc)."""
     p99 = root_speed_percentile(db)
-    limit = SPEED_MARGIN * p99
-    beyond = [(name, float(getattr(tuning, name))) for name in SPEED_FIELDS if float(getattr(tuning, name)) > limit]
-    if not beyond:
-        return []
-    asked = ", ".join(f"{name.removesuffix('_m_s')} {v:g}" for name, v in beyond)
-    return [f"the tuning asks for speeds the database {db.name} does not cover ({asked} m/s; its root speed p99 is "
-            f"{p99:.2f} m/s): the character will skate at those speeds; lower them in the tuning or add faster motion"]
+    return _speed_lines(db.name, p99, speeds_beyond(tuning, p99))
 
 
 def _sample_heights(db, bones) -> np.ndarray:
@@ -85,19 +95,43 @@ def role_warnings(db) -> list[str]:
     return out
 
 
+class DataFit:
+    """The checks of one database for a caller that asks again as the tuning changes (the studio's status
+    line, every frame): what poses or sorts the database (the speed percentile, the role lines) is worked
+    out once, after which a check is six comparisons."""
+
+    def __init__(self, db):
+        self.name = db.name
+        self.speed_p99_m_s = root_speed_percentile(db)
+        self.roles = role_warnings(db)
+
+    def warnings(self, tuning) -> list[str]:
+        """Every line of :func:`speed_warnings` and :func:`role_warnings`."""
+        return _speed_lines(self.name, self.speed_p99_m_s, speeds_beyond(tuning, self.speed_p99_m_s)) + self.roles
+
+    def status_text(self, tuning) -> str:
+        """The short form a status line has room for: empty when the database fits, else
+        ``data: ...`` with the fastest speed asked against the data's p99 and how many role lines there are
+        (:meth:`warnings` has the whole lines)."""
+        parts = []
+        beyond = speeds_beyond(tuning, self.speed_p99_m_s)
+        if beyond:
+            parts.append(f"the tuning asks for up to {max(v for _, v in beyond):g} m/s, the database's root speed "
+                         f"p99 is {self.speed_p99_m_s:.2f} m/s")
+        if self.roles:
+            parts.append(f"{len(self.roles)} bone role problem{'s' if len(self.roles) > 1 else ''}")
+        return "data: " + "; ".join(parts) if parts else ""
+
+
 def fit_warnings(db, tuning) -> list[str]:
     """Every line of :func:`speed_warnings` and :func:`role_warnings`."""
-    return speed_warnings(db, tuning) + role_warnings(db)
+    return DataFit(db).warnings(tuning)
 
 
 def status_text(db, tuning) -> str:
-    """The studio status line's form: empty when the database fits, else the first problem (and how many
-    more there are)."""
-    lines = fit_warnings(db, tuning)
-    if not lines:
-        return ""
-    more = f" (+{len(lines) - 1} more)" if len(lines) > 1 else ""
-    return f"data: {lines[0]}{more}"
+    """:meth:`DataFit.status_text` of ``db``."""
+    return DataFit(db).status_text(tuning)
 
 
-__all__ = ["SPEED_FIELDS", "fit_warnings", "role_warnings", "root_speed_percentile", "speed_warnings", "status_text"]
+__all__ = ["DataFit", "SPEED_FIELDS", "fit_warnings", "role_warnings", "root_speed_percentile", "speed_warnings",
+           "speeds_beyond", "status_text"]

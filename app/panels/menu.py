@@ -1,5 +1,7 @@
 """The menu bar: files (input, reference BVH, presets, weights), layouts, window visibility, help,
-and a status line (mode, fps, tick, last error). Its items are the commands that name a menu
+and a status line (mode, fps, tick, last error), led by what needs the user's eye: the behind-real-time
+note and the data-fit note (:class:`lmm.data_fit.DataFit`: speeds the tuning asks for beyond the database,
+bone roles that look wrong; the whole lines in its tooltip). Its items are the commands that name a menu
 (:mod:`app.studio_commands`); the keys help lists the commands' shortcuts."""
 from __future__ import annotations
 
@@ -7,6 +9,7 @@ from app.layout_files import builtin_names
 
 from app.command_registry import CommandRegistry
 from app.input.manager import pad_buttons_help
+from lmm.data_fit import DataFit
 
 from .base import PanelContext, View
 from .common import WINDOWS, TextCache, built_windows, window_tag
@@ -45,6 +48,7 @@ class MenuBar:
         self.text = TextCache(ctx.dpg)
         self._fps = None        # (frame, fps) last worked out
         self.behind = lambda: ""    # the "behind real time" note (the studio sets it: app.realtime)
+        self.data_fit = DataFit(ctx.engine.db)   # the database is the studio's for its whole run
 
     def build(self) -> None:
         dpg = self.dpg
@@ -70,6 +74,9 @@ class MenuBar:
             with dpg.tooltip("menu_behind"):
                 dpg.add_text("Simulated time over wall time of the last 3 s: the machine cannot step the\n"
                              "characters as fast as the clock runs (or a script steps one tick a frame)")
+            dpg.add_text("", tag="menu_data_fit", color=(255, 170, 90))
+            with dpg.tooltip("menu_data_fit"):
+                dpg.add_text("", tag="menu_data_fit_lines", wrap=640)
             dpg.add_text("", tag="menu_status", color=(170, 200, 170))
 
     def _add_commands(self, menu: str) -> None:
@@ -121,6 +128,12 @@ class MenuBar:
             parts.append(note)
         self.text.set("menu_status", "   |   ".join(parts))
         self.text.set("menu_behind", self.behind())
+        fit = self.data_fit.status_text(self.ctx.tuning)   # follows the speed sliders
+        self.text.set("menu_data_fit", fit + "   " if fit else "")
+        if fit:
+            self.text.set("menu_data_fit_lines", "\n\n".join(self.data_fit.warnings(self.ctx.tuning)))
 
     def state(self) -> dict:
-        return {"status": self.text.get("menu_status", ""), "behind": self.text.get("menu_behind", "")}
+        return {"status": self.text.get("menu_status", ""), "behind": self.text.get("menu_behind", ""),
+                "data_fit": self.text.get("menu_data_fit", "").strip(),
+                "data_fit_lines": self.text.get("menu_data_fit_lines", "") if self.text.get("menu_data_fit") else ""}

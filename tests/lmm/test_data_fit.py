@@ -50,7 +50,13 @@ def test_slow_data_and_ankles_named_as_toes_are_each_one_line(slow_ankles):
     roles = data_fit.role_warnings(db)
     assert any("left_foot and left_toe are the same bone LeftFoot" in r for r in roles), roles
     assert any("not the lowest joints" in r and "LeftToe" in r for r in roles), roles
-    assert data_fit.status_text(db, Tuning()).startswith("data: the tuning asks for speeds")
+    # the status line's short form: the fastest speed asked against the data's p99, the role lines counted
+    status = data_fit.status_text(db, Tuning())
+    assert status.startswith("data: the tuning asks for up to 3.5 m/s, the database's root speed p99 is 0."), status
+    assert len(roles) == 3 and status.endswith("p99 is 0.17 m/s; 3 bone role problems"), status
+    assert data_fit.status_text(db, slow_tuning) == "data: 3 bone role problems"
+    fit = data_fit.DataFit(db)
+    assert fit.warnings(Tuning()) == data_fit.fit_warnings(db, Tuning()) == speeds + roles
     # a knee named as the foot and the ankle as the toe: the toe is not above the foot, but not the lowest
     knees = write_manifest(slow_ankles.with_name("knees.json"), left_foot="LeftLeg", right_foot="RightLeg",
                            left_toe="LeftFoot", right_toe="RightFoot")
