@@ -43,7 +43,10 @@ def add_arguments(p) -> None:
     p.add_argument("--weights", help="LMM network weights (--controller lmm; default: the shipped ones)")
     p.add_argument("--manifest", help="dataset manifest (default: the shipped LAFAN1 locomotion set)")
     p.add_argument("--realtime", action="store_true", help="pace the ticks to the wall clock")
-    p.add_argument("--quiet", action="store_true", help="print nothing but errors")
+    talk = p.add_mutually_exclusive_group()
+    talk.add_argument("--quiet", action="store_true", help="print nothing but errors")
+    talk.add_argument("--verbose", action="store_true",
+                      help="print every metric (default: the main ones; --metrics-json holds them all)")
     add_session_run_arguments(p)
 
 
@@ -161,7 +164,26 @@ def main(args) -> int:
         from lmm.data.jsonio import write_json
         write_json(args.metrics_json, report)
     if not args.quiet:
-        from lmm.metrics import format_metrics
         print(f"{args.controller} on {args.input}: {seconds:g} s, {metrics['ticks']} ticks")
-        print(format_metrics(metrics))
+        print(metrics_summary(metrics, every=args.verbose))
     return 0
+
+
+#: the metrics ``run`` prints by default, in this order (those a run has): skating, pops and snaps, how
+#: well the path is followed, how often it searches and switches, the step cost, broken poses
+SUMMARY_METRICS = ("foot_skating_cm_s", "foot_skating_max_cm_s", "ground_skating_fraction",
+                   "ground_skating_fraction_source", "quality_pops_per_min", "quality_knee_snaps_per_min",
+                   "quality_jerk_p99_ratio", "trajectory_error_mean_m", "transitions_per_s", "searches_per_s",
+                   "step_us_median", "non_finite_ticks")
+
+
+def metrics_summary(metrics: dict, every: bool = False) -> str:
+    """The main metrics as a two-column table and a line naming how many more there are (all of them
+    with ``every``): the whole table is over 40 lines, more than a terminal shows."""
+    from lmm.metrics import format_metrics
+
+    if every:
+        return format_metrics(metrics)
+    shown = {k: metrics[k] for k in SUMMARY_METRICS if k in metrics}
+    more = len(metrics) - len(shown)
+    return format_metrics(shown) + (f"\n({more} more metrics: --verbose, or --metrics-json PATH)" if more else "")

@@ -1,0 +1,67 @@
+"""Every command's output on success fits a terminal (24 lines) unless asked for more (``--verbose``,
+``--json -``): the details go to the files the commands write."""
+from __future__ import annotations
+
+import importlib.util
+import re
+
+import pytest
+
+from app.cli import main
+
+SCREEN_LINES = 24
+
+
+def lines_of(capsys, *argv) -> list[str]:
+    rc = main([str(a) for a in argv])
+    out = capsys.readouterr()
+    assert rc == 0, out.err
+    return (out.out + out.err).splitlines()
+
+
+@pytest.fixture(scope="module")
+def session_run(tmp_path_factory):
+    """A 2 s motion matching run kept as a session and a BVH recording."""
+    tmp = tmp_path_factory.mktemp("run")
+    assert main(["run", "--input", "builtin:circle", "--seconds", "2", "--record", str(tmp / "run.bvh"),
+                 "--session", str(tmp / "run.lmmsession"), "--quiet"]) == 0
+    (tmp / "b.json").write_text('{"transition_cost": 0.3}')
+    return tmp
+
+
+def test_run_prints_the_main_metrics_and_verbose_prints_them_all(capsys):
+    short = lines_of(capsys, "run", "--input", "builtin:circle", "--seconds", "1")
+    assert len(short) <= SCREEN_LINES, "\n".join(short)
+    assert any(line.startswith("foot_skating_cm_s ") for line in short)
+    assert short[-1].startswith("(") and "more metrics: --verbose, or --metrics-json PATH" in short[-1]
+    every = lines_of(capsys, "run", "--input", "builtin:circle", "--seconds", "1", "--verbose")
+    more = int(short[-1].strip("(").split()[0])
+    assert len(every) == len(short) - 1 + more and any(line.startswith("tag_share_walk ") for line in every)
+
+
+def test_check_data_summarises_and_verbose_lists_every_finding(capsys):
+    short = lines_of(capsys, "check-data")
+    assert len(short) <= SCREEN_LINES, "\n".join(short)
+    total = int(short[-1].split()[0])          # "53 findings in 6 takes, 0 inside used ranges"
+    assert short[-1].endswith("inside used ranges") and total > SCREEN_LINES
+    assert any(line.startswith("outside used ranges: ") for line in short)
+    every = lines_of(capsys, "check-data", "--verbose")
+    assert len([line for line in every if re.match(r"\S+: \w+ frames \d+-\d+ ", line)]) == total
+    assert any(line.startswith("seconds by root speed") for line in every)
+
+
+@pytest.mark.parametrize("argv", [
+    ["build-db"],
+    ["coverage", "--json", "{tmp}/coverage.json"],
+    ["compare", "{run}/run.bvh", "{run}/run.bvh"],
+    ["input-from", "{run}/run.bvh", "--out", "{tmp}/input.csv"],
+    ["replay", "{run}/run.lmmsession"],
+    ["ab", "{run}/run.lmmsession", "--tuning", "{run}/b.json", "--from-tick", "60"],
+    ["trace", "{run}/run.lmmsession", "--out", "{tmp}/trace.csv"],
+    ["physics", "{run}/run.bvh"],
+], ids=lambda argv: argv[0])
+def test_the_other_commands_fit_a_terminal(capsys, session_run, tmp_path, argv):
+    if argv[0] == "physics" and importlib.util.find_spec("mujoco") is None:
+        pytest.skip("physics needs mujoco (the physics extra)")
+    lines = lines_of(capsys, *(a.format(tmp=tmp_path, run=session_run) for a in argv))
+    assert 0 < len(lines) <= SCREEN_LINES, "\n".join(lines)
