@@ -14,9 +14,9 @@ Sections (later issues add theirs to ``SECTIONS``):
             vectorised form found (``einsum``, about twice as fast as ``np.sum((X - q) ** 2, 1)``;
             both cost passes alone are reported too). Each search is timed in its own pass over the
             queries, as at run time: the brute force chunk by chunk while the queries are collected,
-            right after the controllers' steps of the same chunk (so that the ``frame`` ratios to it
-            compare the same minutes), the accelerated one afterwards, with the hint the controller
-            gave it.
+            right after the controllers' steps of the same chunk (so that
+            ``frame.mm_search_in_controller_over_bruteforce`` compares the same minutes), the
+            accelerated one afterwards, with the hint the controller gave it.
             ``runtime_call_us``: the call the controller makes at a tick (every tag group in one pass,
             the playing frame and its exclusion window, the best frame only, keeping the K frames of
             least cost it evaluated as the next hint, the hint), back to back;
@@ -34,14 +34,20 @@ Sections (later issues add theirs to ``SECTIONS``):
             drifts (with ``lmm_advance_us`` and ``lmm_projector_us``, its parts);
             ``mm_search_in_controller_us``: median time of the search as the controller makes it
             (exclusion window, tag groups, top-K, inside a tick, caches as other per-tick work left
-            them), over the same runs, with ``..._over_bruteforce`` its ratio to ``search.bruteforce_us``;
-            ``mm_over_bruteforce`` / ``lmm_over_bruteforce``: the frame times over the brute force
-            (issue 16's target: at most 0.2); ``lmm_network_*_us`` with ``*_over_cpp``: each network per
-            call on the inputs a run gave it, over a plain C++ evaluation of the same network on the
-            same inputs (the reference demo's algorithm and release flags), built with the C++
-            compiler found and timed in the same run (``lmm_network_cpp_source`` "measured"; without a
-            compiler, "issue16": the figures the issue measured on another machine,
-            ``CPP_NETWORK_US``); target at most 1.3.
+            them), over the same runs, with ``..._over_bruteforce`` its ratio to ``search.bruteforce_us``.
+            The C++ references, built with ``cpp_flags`` (the reference demo's own Makefile flags,
+            ``-O3 -ffast-math -march=native``) by ``cpp_compiler``: ``lmm_network_*_us`` with
+            ``*_cpp_us`` and ``*_over_cpp``: each network per call on the inputs a run gave it, against a
+            plain C++ evaluation of the same network on the same inputs (the demo's algorithm;
+            ``lmm_network_cpp_source``); whole frames (:mod:`app.commands.bench_frame_reference`;
+            ``frame_reference.cpp`` says what a C++ frame includes): ``cpp_mm_frame_us`` and
+            ``cpp_lmm_frame_us`` beside ours on the same inputs, ``mm_frame_us`` and ``lmm_frame_us``
+            (median ticks, so the MM figures are of frames that did not search; ``..._frame_mean_us``
+            the means, searches included), in ``frame_rounds`` alternating rounds of ``frame_ticks``
+            ticks: medians over the rounds, ``mm_frame_over_cpp``, ``lmm_frame_over_cpp`` (and
+            ``..._mean_over_cpp``) the medians of the rounds' ratios; the searches and jumps of each
+            pass (``cpp_mm_frame_searches`` ...) show both did the same work; ``cpp_frame_source``
+            "measured", or why not. Without a C++ compiler one note says so and the C++ figures are None.
 
 Timings are wall-clock medians; every section also reports what it measured (counts, settings). How the
 queries and steps are collected: :mod:`app.commands.bench_runs`; the sections: :mod:`app.commands.bench_sections`.
@@ -65,6 +71,10 @@ def add_arguments(p) -> None:
     p.add_argument("--sections", type=_sections, default="search,frame,memory",
                    help=f"comma-separated sections to run ({', '.join(SECTIONS)})")
     p.add_argument("--manifest", help="dataset manifest (default: the shipped LAFAN1 locomotion set)")
+    p.add_argument("--frame-ticks", type=number_in(60, 36_000, integer=True), default=2400,
+                   help="ticks per pass of the whole-frame comparison with the C++ reference, 60..36000 (default 2400)")
+    p.add_argument("--frame-rounds", type=number_in(1, 50, integer=True), default=5,
+                   help="alternating rounds of that comparison, 1..50 (default 5)")
 
 
 # name -> function(db, features, n_queries, collected) returning a dict; later issues add theirs
@@ -113,14 +123,14 @@ def main(args) -> int:
             print("  with the learned controller stepping the same inputs, interleaved", file=sys.stderr)
         collected = collect_queries(db, features, args.queries, learned=learned, brute="search" in names)
     results = {}
+    options = {"frame": {"frame_ticks": args.frame_ticks, "frame_rounds": args.frame_rounds}}
     for name in names:
-        results[name] = SECTIONS[name](db, features, args.queries, collected)
+        results[name] = SECTIONS[name](db, features, args.queries, collected, **options.get(name, {}))
     if "search" in results and "frame" in results:  # ratios within one run (the machine may be shared)
         brute = results["search"]["bruteforce_us"]
         frame = results["frame"]
-        for key in ("mm_us", "lmm_us", "mm_search_in_controller_us"):
-            if frame.get(key) is not None and brute > 0:
-                frame[key.replace("_us", "_over_bruteforce")] = frame[key] / brute
+        if frame.get("mm_search_in_controller_us") is not None and brute > 0:
+            frame["mm_search_in_controller_over_bruteforce"] = frame["mm_search_in_controller_us"] / brute
         fast = results["search"]["accelerated_us"]
         if fast > 0 and frame.get("mm_search_in_controller_us") is not None:
             frame["mm_search_in_controller_over_accelerated"] = frame["mm_search_in_controller_us"] / fast

@@ -36,9 +36,8 @@ def collect_queries(db, features, n_queries: int, scenarios=None, tuning=None, l
     ``learned``: a function making a learned controller (see :func:`learned_factory`). One per scenario
     then steps the same inputs right after each motion matching chunk; with ``brute`` each chunk's
     queries are then searched by brute force (:func:`lmm.search.brute_force_search`, timed, one pass
-    over the chunk's queries). So the step times and the brute-force times, whose ratios issue 16 sets
-    targets on, are medians over the same minutes of a machine whose speed changes from minute to
-    minute."""
+    over the chunk's queries). So the step times and the brute-force times are medians over the same
+    minutes of a machine whose speed changes from minute to minute."""
     import numpy as np
 
     from lmm.data.inputs import builtin, builtin_names

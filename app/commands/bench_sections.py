@@ -1,6 +1,6 @@
 """The sections of ``lmm-studio bench`` (see :mod:`app.commands.bench` for what each reports): the
-search, the frame (motion matching and learned motion matching steps, the networks against the C++
-reference) and the memory figures."""
+search, the frame (motion matching and learned motion matching steps, the networks and whole frames
+against the C++ reference) and the memory figures."""
 from __future__ import annotations
 
 import sys
@@ -129,10 +129,8 @@ def bench_frame(db, features, n_queries: int = 2400, collected=None) -> dict:
             "mm_searches": int(search_us.size)}
 
 
-#: Per-call times (us) of the C++ reference demo's networks (``nnet.h``, -O3) on our weights, as issue 16
-#: measured them on its machine: ``bench`` uses them only when it cannot build and run the same-run C++
-#: reference (:mod:`app.commands.cpp_reference`), and says so (``lmm_network_cpp_source``).
-CPP_NETWORK_US = {"decompressor": 8.5, "stepper": 12.1, "projector": 17.3}
+#: the learned controller's runtime networks, as the bench names them
+NETWORKS = ("decompressor", "stepper", "projector")
 
 
 # -- learned motion matching (issue 4): frame.lmm_us and the paper's Table 3 memory figures ----------
@@ -159,13 +157,13 @@ def memory_figures(db, features, controllers: dict) -> dict:
     return out
 
 
-def benchmark_lmm(runs: LearnedRuns) -> dict:
+def benchmark_lmm(runs: LearnedRuns, cpp: bool = True) -> dict:
     """``frame.lmm_us`` (median learned-controller step, debug comparison off, through the one tick loop
     :func:`lmm.runner.step_controllers`, over the same inputs as the motion matching steps and
     interleaved with them: see :func:`collect_queries`), its advance and projector parts, and the
     networks alone at batch 1 (``network.*_us``, as in the paper's table) on the inputs the runs gave
     them, with the C++ reference's times on the same inputs (``network.*_cpp_us``, see
-    :mod:`app.commands.cpp_reference`)."""
+    :mod:`app.commands.cpp_reference`; None without ``cpp`` or when it cannot be measured)."""
     import numpy as np
 
     nets = runs.nets
@@ -196,11 +194,14 @@ def benchmark_lmm(runs: LearnedRuns) -> dict:
     from app.commands import cpp_reference
     from lmm.data.cache import default_cache_dir
 
-    cpp, why = cpp_reference.measure({name: getattr(nets, name) for name in samples}, samples, default_cache_dir())
-    if cpp is None:
-        print(f"note: C++ network reference not measured here ({why}); using issue 16's figures", file=sys.stderr)
-    figures["network.cpp_source"] = "measured" if cpp is not None else "issue16"
-    figures.update({f"network.{name}_cpp_us": (cpp or CPP_NETWORK_US)[name] for name in samples})
+    cpp_us, why = None, "no C++ compiler"
+    if cpp:
+        cpp_us, why = cpp_reference.measure({name: getattr(nets, name) for name in samples}, samples,
+                                            default_cache_dir())
+        if cpp_us is None:
+            print(f"note: C++ network reference not measured ({why})", file=sys.stderr)
+    figures["network.cpp_source"] = "measured" if cpp_us is not None else f"not measured: {why}"
+    figures.update({f"network.{name}_cpp_us": None if cpp_us is None else cpp_us[name] for name in samples})
     return figures
 
 
@@ -220,22 +221,57 @@ def _memory(db, features) -> dict:
     return figures
 
 
-def bench_frame_with_lmm(db, features, n_queries: int = 2400, collected=None) -> dict:
+def bench_frame_with_lmm(db, features, n_queries: int = 2400, collected=None, frame_ticks: int = 2400,
+                         frame_rounds: int = 5) -> dict:
     """``frame``: the motion matching step (above) plus ``lmm_us``, the median learned-controller step
     (shipped networks, debug nearest-neighbour comparison off) over the same inputs, interleaved with
-    the motion matching steps, and its parts; None without networks for this database."""
+    the motion matching steps, and its parts; None without networks for this database. Then the C++
+    references, built with ``cpp_flags``: the networks per call, and whole frames beside ours
+    (:mod:`app.commands.bench_frame_reference`); without a C++ compiler one note says so and their
+    figures are None."""
+    from app.commands import cpp_reference
+
     make = learned_factory(db, features)
     runs = collected or collect_queries(db, features, n_queries, learned=make)
     out = bench_frame(db, features, n_queries, runs)
     if runs.learned is None or not runs.learned.step_us:
         out["lmm_us"] = None
         return out
-    fig = benchmark_lmm(runs.learned)
+    cxx = cpp_reference.compiler()
+    if cxx is None:
+        print("note: no C++ reference figures: no C++ compiler ($CXX, or g++, clang++ or c++ on PATH)",
+              file=sys.stderr)
+    fig = benchmark_lmm(runs.learned, cpp=cxx is not None)
     out.update({k.split(".", 1)[1]: v for k, v in fig.items() if k.startswith("frame.")})
     out.update({k.replace("network.", "lmm_network_"): v for k, v in fig.items() if k.startswith("network.")})
-    for net in CPP_NETWORK_US:
+    for net in NETWORKS:
         ours, cpp = out.get(f"lmm_network_{net}_us"), out.get(f"lmm_network_{net}_cpp_us")
         out[f"lmm_network_{net}_over_cpp"] = ours / cpp if ours is not None and cpp else None
+    out["cpp_flags"] = " ".join(cpp_reference.FLAGS)
+    out["cpp_compiler"] = cxx
+    out.update(whole_frames(db, features, make, cxx is not None, frame_ticks, frame_rounds))
+    return out
+
+
+def whole_frames(db, features, make_learned, cpp: bool, ticks: int = 2400, rounds: int = 5) -> dict:
+    """Whole frames, ours and the C++ reference's, on the same inputs in alternating rounds (see
+    :func:`app.commands.bench_frame_reference.measure_frames`): ``cpp_mm_frame_us``,
+    ``cpp_lmm_frame_us``, ``mm_frame_us``, ``lmm_frame_us`` (median ticks; ``..._frame_mean_us`` the
+    means, searches included), their ``..._over_cpp`` ratios, searches and jumps per pass, and
+    ``cpp_frame_source``. Without ``cpp`` (or when the reference cannot run) only the source, saying why."""
+    from app.commands.bench_frame_reference import frame_inputs, measure_frames
+    from lmm.data.cache import default_cache_dir
+    from lmm.mm import MotionMatchingController
+
+    fig, why = None, "no C++ compiler"
+    if cpp:
+        fig, why = measure_frames(MotionMatchingController(db, features), make_learned(), frame_inputs(ticks),
+                                  default_cache_dir(), rounds)
+        if fig is None:
+            print(f"note: C++ frame reference not measured ({why})", file=sys.stderr)
+    keys = ("cpp_mm_frame_us", "cpp_lmm_frame_us", "mm_frame_us", "lmm_frame_us")
+    out = {"cpp_frame_source": "measured" if fig is not None else f"not measured: {why}"}
+    out.update(fig if fig is not None else {k: None for k in keys})
     return out
 
 
