@@ -9,6 +9,7 @@ peak resident memory. Valid control files must work (exit 0), so a broken harnes
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 import sys
 from pathlib import Path
@@ -50,6 +51,8 @@ def _head(text: str, n: int = 4) -> str:
 def problems(case: cc.Case, r: dict, targets: dict | None = None) -> list[str]:
     """What is wrong with a case's result (empty: it passed)."""
     out = []
+    if r.get("names"):   # known only when the job was made (a display's number)
+        case = dataclasses.replace(case, names=tuple(r["names"]))
     if r.get("timeout"):
         return [f"still running after {CASE_LIMIT_S:g} s: killed"]
     if r.get("died"):
@@ -73,14 +76,21 @@ def problems(case: cc.Case, r: dict, targets: dict | None = None) -> list[str]:
         out.append(f"changed or left files it was given: {', '.join(r['changed'][:4])}")
     if r.get("stray"):
         out.append(f"wrote outside its place: {', '.join(r['stray'][:4])}")
+    out += [f"setup: {p}" for p in r.get("setup_problems") or []]
+    out += [f"output: {p}" for p in r.get("output_problems") or []]
     rc = r.get("rc")
     if case.expect == "note":   # usable input that goes wrong at run time: exit 0 and one note line
         if rc != 0 or len(lines) != 1 or not lines[0].startswith(case.names[0]):
             out.append(f"expected exit 0 and one '{case.names[0]}' line: exit {rc}; stderr: {_head(stderr)}")
+        elif case.field and case.field not in lines[0]:
+            out.append(f"the note does not say {case.field!r}: {_head(stderr)}")
         return out
     if case.expect == "accept":
         if rc != 0:
             out.append(f"a valid file was refused: exit {rc}; stderr: {_head(stderr)}")
+        elif case.kind == "state" and any(not ln.startswith(("note: ", "warning: ")) for ln in lines):
+            # usable state: the command works as if it were intact, at most saying what it computed again
+            out.append(f"exit 0, but stderr has more than notes and warnings: {_head(stderr)}")
         return out
     if case.expect == "layout":
         if rc == 1:
@@ -117,8 +127,9 @@ def _one_line_naming(case, lines, stderr) -> list[str]:
     text = "\n".join(lines)
     if not any(n in text for n in case.names):
         out.append(f"the error does not name {' or '.join(case.names)}: {_head(stderr) or '(empty)'}")
-    if case.field and case.field.lower() not in text.lower():
-        out.append(f"the error does not name the field {case.field!r}: {_head(stderr) or '(empty)'}")
+    for word in (case.field,) if isinstance(case.field, str) else case.field or ():   # one word or several
+        if word.lower() not in text.lower():
+            out.append(f"the error does not name the field {word!r}: {_head(stderr) or '(empty)'}")
     return out
 
 

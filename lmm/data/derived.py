@@ -13,6 +13,8 @@ An entry is never trusted: its CRC-32 is stored beside it (``.crc32``) when it i
 when it is opened, so a bit flip, a NaN written into it, a truncated or 0-byte file is computed and
 written again with a one-line note on stderr, never used (a damaged entry once gave a different
 recording with exit 0, or stopped every command, ``build-db --rebuild`` included, with ``EOFError``).
+Its shape, type and values are checked against the database too, so one whose checksum was written to
+match is not used either (:func:`misfit`).
 """
 from __future__ import annotations
 
@@ -116,6 +118,67 @@ def damage(path: Path) -> str | None:
     return None if found == recorded else f"its CRC-32 {found} is not the {recorded[:8]} written with it"
 
 
+def _frames(db) -> int | None:
+    n = getattr(db, "n_frames", None)
+    return int(n) if isinstance(n, (int, np.integer)) else None
+
+
+def _ranges(db) -> int | None:
+    starts = getattr(db, "range_starts", None)
+    return None if starts is None else int(len(starts))
+
+
+#: what each kind of entry must be for ``db``: (shape, None where any length; dtype kind; value rule).
+#: A checksum written to match does not make an entry right (a hand-made one gave exit 70 or another
+#: recording), so a trusted entry's shape, type and values are checked too
+_KINDS = {
+    "features": (lambda db: (_frames(db), None), "f", "finite"),
+    "root_local_velocities": (lambda db: (_frames(db), 6), "f", "finite"),
+    "compressor_latents": (lambda db: (_frames(db), None), "f", "finite"),
+    "range_contact_heights": (lambda db: (_ranges(db),), "f", "not_inf"),   # NaN: a range without contact
+    "default_start_frame": (lambda db: (), "i", "frame"),
+    "source_ground_skating": (lambda db: (2,), "i", "counts"),
+}
+
+
+def _finite_on_disk(path: Path, array: np.ndarray, chunk: int = 1 << 20) -> bool:
+    """Whether every value of the ``.npy`` file ``path`` (whose array is ``array``) is finite, read in
+    pieces through the page cache like its checksum: a random-access entry's map keeps its pages out."""
+    with open(path, "rb") as f:
+        f.seek(path.stat().st_size - array.nbytes)   # an .npy file ends with its data
+        while True:
+            part = np.fromfile(f, dtype=array.dtype, count=max(chunk // array.dtype.itemsize, 1))
+            if part.size == 0:
+                return True
+            if not np.isfinite(part).all():
+                return False
+
+
+def misfit(db, name: str, array: np.ndarray, on_disk: Path | None = None) -> str | None:
+    """Why a cached ``name`` array cannot be ``db``'s (None: it can): its shape, its type and its values
+    (read from the file ``on_disk`` when given, so a random-access map stays cold)."""
+    kind = _KINDS.get(name)
+    if kind is None:
+        return None
+    shape_of, dtype_kind, rule = kind
+    want = shape_of(db)
+    if array.ndim != len(want) or any(w is not None and w != n for w, n in zip(want, array.shape)):
+        return f"shape {array.shape}, expected {tuple('any' if w is None else w for w in want)}"
+    if array.dtype.kind != dtype_kind:
+        return f"type {array.dtype}"
+    if rule == "finite" and not (_finite_on_disk(on_disk, array) if on_disk is not None
+                                 else np.isfinite(array).all()):
+        return "values that are not finite"
+    if rule == "not_inf" and np.isinf(array).any():
+        return "infinite values"
+    n = _frames(db)
+    if rule == "frame" and not (0 <= int(array) < (n if n is not None else np.iinfo(np.int64).max)):
+        return f"frame {int(array)} outside the database"
+    if rule == "counts" and not (0 <= int(array[0]) <= int(array[1])):
+        return f"counts {array.tolist()} that cannot be"
+    return None
+
+
 def cached(db, name: str, params, compute: Callable[[], np.ndarray], random_access: bool = False) -> np.ndarray:
     """``compute()``'s array for ``db``, from the cache beside its file when there (read-only memory map),
     else computed and stored. A cache that cannot be read or written is ignored (the array is computed).
@@ -126,7 +189,10 @@ def cached(db, name: str, params, compute: Callable[[], np.ndarray], random_acce
         if why is None:
             try:
                 # mapped when the database is (a large one), else read whole: see npz_mmap.worth_mapping
-                return _map(path, random_access, mapped=worth_mapping(getattr(db, "source_path", None) or path))
+                array = _map(path, random_access, mapped=worth_mapping(getattr(db, "source_path", None) or path))
+                why = misfit(db, name, array, on_disk=path if random_access else None)
+                if why is None:
+                    return array
             except Exception as e:  # noqa: BLE001 - whatever np.load makes of it (EOFError...): computed again
                 why = f"cannot be read ({type(e).__name__})"
         if why != "no checksum":

@@ -22,6 +22,7 @@ import numpy as np
 from corpus_harness import Job
 import session_files
 import special_cases
+import state_cases
 
 CORPUS = Path(__file__).resolve().parent
 ROOT = CORPUS.parents[1]
@@ -260,7 +261,7 @@ class Case:
     what: str
     expect: str               # "reject" (exit 1), "usage" (exit 2), "accept" (exit 0), "layout"
     names: tuple = ()         # one of these must be in the error line
-    field: str | None = None
+    field: str | tuple | None = None   # a word the error line must hold (a tuple: every one of them)
     solo: bool = False
     call: dict = dataclasses.field(default_factory=dict)   # what the driver runs
     recording: str | None = None               # a recording that, if left behind, must load
@@ -345,6 +346,14 @@ def case_table() -> list[Case]:
     for cid, argv, word in special_cases.NOTES:
         cases.append(Case(f"special:{cid}", "special", argv[0], cid, "weights whose networks give NaN or runaway "
                           "poses: run on, one note naming the tick, none of them recorded", "note", (word,)))
+    for cid, command, _, expect, what, _, _ in state_cases.derived_cases():
+        note = expect == "note"
+        cases.append(Case(f"state:{cid}", "state", command, cid, what, expect, ("note: ",) if note else (),
+                          "damaged cached array" if note else None))
+    for cid, command, _, what, _ in state_cases.no_home_cases():
+        cases.append(Case(f"state:{cid}", "state", command, cid, what, "accept"))
+    for cid, _, _, names, field, what in state_cases.display_cases():
+        cases.append(Case(f"state:{cid}", "state", "studio", cid, what, "reject", names, field))
     controls = [("bvh", "good/walk.bvh"), ("manifest", "good/manifest.json"), ("input", "good/input.csv"),
                 ("preset", "good/preset.json"), ("weights", "shipped/default.npz"), ("layout", "good/layout.ini"),
                 ("session", GOOD_SESSION)]
@@ -501,9 +510,10 @@ def case_path(case: Case, gen: Path) -> Path:
 # ---- unwritable targets -----------------------------------------------------------------------------
 
 def make_targets(tmp: Path) -> tuple[dict, list]:
-    """{variant: folder or None} and the mount points to unmount. notdir: a folder path under a regular
-    file (always). readonly: a read-only tmpfs; full: a full tmpfs; nearlyfull: one with 48 KiB left
-    (these need mount: root; not root, readonly is a chmod 555 folder)."""
+    """{variant: folder or None} and the mount points to unmount (and display servers to stop, see
+    :func:`unmount`). notdir: a folder path under a regular file (always). readonly: a read-only tmpfs;
+    full: a full tmpfs; nearlyfull: one with 48 KiB left (these need mount: root; not root, readonly is a
+    chmod 555 folder). ``displays``: {variant: DISPLAY or None} (state_cases.start_displays)."""
     targets = {"notdir": None, "readonly": None, "full": None, "nearlyfull": None}
     plain = tmp / "targets" / "a_regular_file"
     plain.parent.mkdir(parents=True, exist_ok=True)
@@ -539,12 +549,19 @@ def make_targets(tmp: Path) -> tuple[dict, list]:
         ro.mkdir(parents=True, exist_ok=True)
         ro.chmod(0o555)
         targets["readonly"] = ro
-    return targets, mounts
+    # the displays a studio cannot open its window on (state_cases.display_cases): Xvfb servers
+    targets["displays"], servers = state_cases.start_displays()
+    return targets, mounts + servers
 
 
 def unmount(mounts: list) -> None:
+    """Unmount the target folders and stop the display servers :func:`make_targets` started."""
     for d in mounts:
-        subprocess.run(["umount", "-l", str(d)], capture_output=True)
+        if isinstance(d, subprocess.Popen):
+            d.terminate()
+            d.wait(timeout=10)
+        else:
+            subprocess.run(["umount", "-l", str(d)], capture_output=True)
 
 
 # ---- jobs -----------------------------------------------------------------------------------------------
@@ -553,14 +570,33 @@ def build_jobs(cases: list[Case], tmp: Path, targets: dict) -> tuple[list[Job], 
     """Driver jobs for ``cases`` (generating what they need) -> (jobs, {case id: skip reason})."""
     gen = tmp / "generated"
     needed = {c.file for c in cases if (c.file in FILES and FILES[c.file].generated) or c.file == GOOD_SESSION}
+    if any(c.kind == "special" and c.file in special_cases.NEEDS_SESSION for c in cases):
+        needed.add(GOOD_SESSION)
     generate(gen, needed)
     (tmp / "out").mkdir(parents=True, exist_ok=True)
     good = CORPUS / "good"
     skipped = {}
     grouped: dict[str, list[dict]] = {}
     solo: list[tuple[str, dict, bool]] = []
+    group_env: dict[str, dict] = {}   # a group's own environment (state cases)
+
+    def env_for(name, sandboxed):
+        env = {"LMM_STUDIO_CONFIG": str(tmp / "config"), "PYTHONPATH": str(ROOT), "PYTHONDONTWRITEBYTECODE": "1"}
+        if sandboxed:  # a private cache 6 folders deep, so a path escaping it still lands in the sandbox
+            sandbox = tmp / "sandbox" / name
+            cache = sandbox / "a" / "b" / "c" / "d" / "e" / "f" / "cache"
+            cache.mkdir(parents=True, exist_ok=True)
+            env.update({"CORPUS_SANDBOX": str(sandbox), "LMM_STUDIO_CACHE": str(cache)})
+        return {**env, **group_env.get(name, {})}
+
     for c in cases:
-        if c.kind == "args":
+        if c.kind == "state":
+            got = _state_entry(c, tmp, targets, env_for, group_env)
+            if isinstance(got, str):
+                skipped[c.id] = got
+                continue
+            call, group = got
+        elif c.kind == "args":
             argv = [a.format(good=good, out=tmp / "out") for a in dict((i, v) for i, v, _ in ARG_CASES)[
                 c.id.split(":", 1)[1]]]
             call = {"call": "cli", "argv": argv}
@@ -577,6 +613,8 @@ def build_jobs(cases: list[Case], tmp: Path, targets: dict) -> tuple[list[Job], 
         elif c.kind == "special":   # its own folder of copies, checked unchanged by the driver
             folder = tmp / "special" / _safe(c.file)
             special_cases.prepare(folder, c.file)
+            if c.file in special_cases.NEEDS_SESSION:
+                shutil.copyfile(gen / GOOD_SESSION, folder / "s.lmmsession")
             argv = dict((i, v) for i, v, _ in special_cases.COLLISIONS + special_cases.SPECIAL_INPUTS
                         + special_cases.NOTES)[c.file]
             call = {"call": "cli", "argv": [a.format(T=folder, good=good) for a in argv], "watch": str(folder)}
@@ -595,19 +633,56 @@ def build_jobs(cases: list[Case], tmp: Path, targets: dict) -> tuple[list[Job], 
         else:
             grouped.setdefault(group, []).append(entry)
     jobs = []
-
-    def env_for(name, sandboxed):
-        env = {"LMM_STUDIO_CONFIG": str(tmp / "config"), "PYTHONPATH": str(ROOT), "PYTHONDONTWRITEBYTECODE": "1"}
-        if sandboxed:  # a private cache 6 folders deep, so a path escaping it still lands in the sandbox
-            sandbox = tmp / "sandbox" / name
-            cache = sandbox / "a" / "b" / "c" / "d" / "e" / "f" / "cache"
-            cache.mkdir(parents=True, exist_ok=True)
-            env.update({"CORPUS_SANDBOX": str(sandbox), "LMM_STUDIO_CACHE": str(cache)})
-        return env
-
     for name, entry, sandboxed in solo:  # the slow ones first, so they overlap the cheap groups
         jobs.append(Job(name, [entry], env_for(name, sandboxed)))
     for name, entries in grouped.items():
-        sandboxed = name.split("-")[0] in ("bvh", "manifest") or name in ("control-bvh", "control-manifest")
+        sandboxed = (name.split("-")[0] in ("bvh", "manifest", "state")
+                     or name in ("control-bvh", "control-manifest"))
         jobs.append(Job(name, entries, env_for(name, sandboxed)))
     return jobs, skipped
+
+
+def _fill(obj, **values):
+    """``obj`` (strings, lists, dicts of them) with ``{NAME}`` replaced by ``values``."""
+    if isinstance(obj, str):
+        return obj.format(**values)
+    if isinstance(obj, list):
+        return [_fill(x, **values) for x in obj]
+    if isinstance(obj, dict):
+        return {k: _fill(v, **values) for k, v in obj.items()}
+    return obj
+
+
+def _state_entry(c: Case, tmp: Path, targets: dict, env_for, group_env: dict):
+    """A state case's driver entry and job group (preparing the group's state once), or why it is skipped."""
+    derived = {row[0]: row for row in state_cases.derived_cases()}
+    no_home = {row[0]: row for row in state_cases.no_home_cases()}
+    display = {row[0]: row for row in state_cases.display_cases()}
+    if c.file in derived:
+        _, command, argv, _, _, damage, after = derived[c.file]
+        group = f"state-derived-{command}"
+        T, O = tmp / "state" / group / "in", tmp / "state" / group / "out"
+        if not T.exists():
+            cache = Path(env_for(group, True)["LMM_STUDIO_CACHE"])
+            state_cases.prepare_derived(T, O, cache)
+        return {"call": "cli", "argv": _fill(argv, T=T, O=O), "watch": str(T), "before": damage,
+                "after": _fill(after, O=O)}, group
+    if c.file in no_home:
+        _, _, argv, _, after = no_home[c.file]
+        group = "state-no-home"
+        sandbox = tmp / "sandbox" / group
+        tmpdir = sandbox / "tmp"
+        tmpdir.mkdir(parents=True, exist_ok=True)
+        home = state_cases.no_home_dir(tmpdir)
+        group_env[group] = {**{k: None for k in state_cases.NO_HOME_UNSET}, "TMPDIR": str(tmpdir),
+                            "CORPUS_CACHE": str(home / ".cache" / "lmm-studio")}
+        return {"call": "cli", "argv": argv, "watch": str(CORPUS / "good"), "no_passwd": True,
+                "after": _fill(after, H=home)}, group
+    _, variant, argv, names, _, _ = display[c.file]
+    shown = (targets.get("displays") or {}).get(variant)
+    if shown is None:
+        return f"no {variant} display on this machine (needs Xvfb; :77 must be free)"
+    group = f"state-display-{variant}"
+    group_env[group] = {**state_cases.display_env(variant, shown),
+                        "LMM_STUDIO_CONFIG": str(tmp / "sandbox" / group / "config")}
+    return {"call": "cli", "argv": argv, "names": [n.format(display=repr(shown)) for n in names]}, group

@@ -28,7 +28,7 @@ POLL_S = 0.05
 class Job:
     name: str
     cases: list[dict]
-    env: dict = field(default_factory=dict)
+    env: dict = field(default_factory=dict)   # added to the environment; a None value unsets the name
 
 
 def _read_lines(path: Path, offset: int) -> tuple[list[dict], int]:
@@ -60,7 +60,7 @@ def _one_driver(job: Job, cases: list[dict], workdir: Path, attempt: int, python
     results_file = workdir / f"{stem}.results.jsonl"
     log_file = workdir / f"{stem}.log"
     cases_file.write_text(json.dumps(cases))
-    env = {**os.environ, **job.env}
+    env = {k: v for k, v in {**os.environ, **job.env}.items() if v is not None}   # None: unset
     with open(log_file, "wb") as log:
         proc = subprocess.Popen([python, str(DRIVER), str(results_file), str(cases_file), str(MEMORY_CAP_BYTES),
                                  str(MEMORY_LIMIT_BYTES)], stdin=subprocess.DEVNULL, stdout=log, stderr=log,

@@ -7,7 +7,9 @@ Each case calls ``app.cli.main(argv)`` (``call: cli``), ``lmm.data.bvh.load`` (`
 Python and from C libraries is both captured. An exception escaping the call is what a real run would
 show as a traceback: it is reported as ``uncaught``. Before a case: ``{"start": id}``; after it: the
 result. The process stops after a case that pushed its peak resident memory above STOP_ABOVE_BYTES, so
-the harness can attribute memory to one case and go on in a fresh process.
+the harness can attribute memory to one case and go on in a fresh process. A case may carry ``before``
+and ``after`` specs (tests/corpus/state_cases.py: the state it reads, the output it must leave) and
+``no_passwd`` (run as a uid without passwd entry).
 """
 from __future__ import annotations
 
@@ -106,7 +108,9 @@ def main() -> int:
         resource.setrlimit(resource.RLIMIT_DATA, (mem_cap, mem_cap))
     cases = json.loads(Path(cases_path).read_text())
     sandbox = Path(os.environ["CORPUS_SANDBOX"]) if os.environ.get("CORPUS_SANDBOX") else None
-    cache = Path(os.environ.get("LMM_STUDIO_CACHE", "")) if sandbox else None
+    # the cache the commands use: CORPUS_CACHE where it is not LMM_STUDIO_CACHE (the no-home cases)
+    cache_env = os.environ.get("CORPUS_CACHE") or os.environ.get("LMM_STUDIO_CACHE")
+    cache = Path(cache_env) if cache_env else None
     seen = set(_files_outside(sandbox, cache)) if sandbox else set()
     with open(results_path, "a", encoding="utf-8") as results:
         def emit(obj):
@@ -133,6 +137,14 @@ def main() -> int:
             if case.get("watch"):   # a folder whose every file must be left as it was
                 from special_cases import fingerprint
                 watched = fingerprint(Path(case["watch"]))
+            hooks = {}
+            if case.get("before"):   # the state the case reads (tests/corpus/state_cases.py)
+                from state_cases import before
+                try:
+                    hooks["setup_problems"] = before(case["before"], cache)
+                except Exception as e:  # noqa: BLE001 - a broken setup fails the case, not the driver
+                    hooks["setup_problems"] = [f"setup failed: {type(e).__name__}: {e}"]
+            restore = _no_passwd() if case.get("no_passwd") else None
             t0 = time.perf_counter()
             try:
                 rc, extra = _call(case)
@@ -142,6 +154,8 @@ def main() -> int:
             except BaseException as e:  # noqa: BLE001 - whatever escapes is the finding
                 uncaught = {"type": type(e).__name__, "message": str(e)[:300], "trace": traceback.format_exc()[-3000:]}
             seconds = time.perf_counter() - t0
+            if restore is not None:
+                restore()
             try:
                 sys.stdout.flush()
                 sys.stderr.flush()
@@ -158,9 +172,14 @@ def main() -> int:
             if watched is not None:
                 now_seen = fingerprint(Path(case["watch"]))
                 extra["changed"] = sorted(k for k in set(watched) | set(now_seen) if watched.get(k) != now_seen.get(k))
+            if case.get("after"):    # the right output (tests/corpus/state_cases.py)
+                from state_cases import after
+                hooks["output_problems"] = after(case["after"], cache, out[1])
             maxrss = peak_rss_bytes()
             result = {"id": case["id"], "argv": case.get("argv") or case.get("path"), "rc": rc, "stdout": out[1], "stderr": out[2], "uncaught": uncaught,
-                      "seconds": seconds, "maxrss": maxrss, **extra}
+                      "seconds": seconds, "maxrss": maxrss, **extra, **hooks}
+            if case.get("names"):   # what the error must name, known only when the job was made
+                result["names"] = case["names"]
             if sandbox:
                 now = set(_files_outside(sandbox, cache))
                 result["stray"] = sorted(now - seen)
@@ -169,6 +188,19 @@ def main() -> int:
             if maxrss > stop_above:
                 return 3
     return 0
+
+
+def _no_passwd():
+    """Make this uid one without a passwd entry (as in some containers) until the returned call."""
+    import pwd
+
+    real = pwd.getpwuid
+
+    def missing(uid):
+        raise KeyError(f"getpwuid(): uid not found: {uid}")
+
+    pwd.getpwuid = missing
+    return lambda: setattr(pwd, "getpwuid", real)
 
 
 def peak_rss_bytes() -> int:

@@ -1,0 +1,275 @@
+"""Issue 36's corpus cases that need a prepared state or environment rather than a bad file argument:
+damaged derived arrays (``<database>.derived/*.npy``) of each kind, a missing home folder, and a studio
+that cannot open its window (a display no X server answers at, an X server without GLX, a graphics
+driver that cannot be loaded).
+
+Each case runs in the driver like any other (time, memory, traceback, nothing left behind, inputs
+unchanged), with two hooks the driver calls around it: :func:`before` (damage the cache the case reads,
+from a pristine copy made once per job by :func:`prepare_derived`) and :func:`after` (the right output:
+the recording or coverage JSON equal to the one made from the intact cache, every cached array intact
+again, the fallback home's cache written). ``after`` returns what is wrong, as lines.
+"""
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+CORPUS = Path(__file__).resolve().parent
+ROOT = CORPUS.parents[1]
+GOOD = CORPUS / "good"
+
+# ---- damaged derived arrays --------------------------------------------------------------------------
+
+#: every kind of derived array a command line reads (lmm.data.derived.cached callers; the studio's
+#: compressor_latents needs the shipped database and is read through the same ``cached``)
+KINDS = ("features", "root_local_velocities", "range_contact_heights", "default_start_frame",
+         "source_ground_skating")
+#: damage -> (what, expectation): "note" = exit 0 and one "damaged cached array" note; "accept" = exit 0
+#: and no line but notes and warnings (an entry without its checksum is computed again without a note:
+#: older code wrote none); build-db --rebuild is "accept" (one note per damaged array it read)
+DAMAGES = {
+    "empty": ("a 0-byte file (EOFError in run, coverage and build-db --rebuild)", "note"),
+    "flip": ("one bit of its last value flipped (a different recording, exit 0)", "note"),
+    "nan": ("a NaN written into it (a different recording, exit 0)", "note"),
+    "truncated": ("cut to half its bytes", "note"),
+    "wrong_shape": ("an array of another shape (3 rows) in its place", "note"),
+    "not_npy": ("text in place of the array", "note"),
+    "crc_garbage": ("its checksum file holds no checksum", "note"),
+    "no_crc": ("its checksum file removed", "accept"),
+    "consistent_wrong_shape": ("an array of another shape, its checksum written to match", "note"),
+    "consistent_nan": ("a NaN written into it, its checksum written to match", "note"),
+}
+#: a NaN in range_contact_heights is what it legitimately holds where a range has no contact frames
+NOT_A_DAMAGE = {("range_contact_heights", "nan"), ("range_contact_heights", "consistent_nan")}
+
+_RUN = ["run", "--manifest", "{T}/manifest.json", "--input", "builtin:circle", "--seconds", "2", "--quiet"]
+
+
+def derived_cases() -> list[tuple]:
+    """(id, command, argv, expect, what, damage spec, after spec) of every derived-array case. ``{T}``: the
+    job's folder of inputs (watched), ``{O}``: its output folder, ``{C}``: its cache."""
+    out = []
+    for damage, (what, expect) in DAMAGES.items():
+        for kind in KINDS:
+            if (kind, damage) in NOT_A_DAMAGE:
+                continue
+            out.append((f"derived-run-{kind}-{damage}", "run", _RUN + ["--record", f"{{O}}/{kind}-{damage}.bvh"],
+                        expect, f"run on a cache whose {kind} array is {what}", {"kinds": [kind], "damage": damage},
+                        {"same": [[f"{{O}}/{kind}-{damage}.bvh", "{O}/reference.bvh"]], "intact": True}))
+        out.append((f"derived-coverage-features-{damage}", "coverage",
+                    ["coverage", "--manifest", "{T}/manifest.json", "--json", f"{{O}}/coverage-{damage}.json"],
+                    expect, f"coverage on a cache whose features array is {what}",
+                    {"kinds": ["features"], "damage": damage},
+                    {"same": [[f"{{O}}/coverage-{damage}.json", "{O}/reference.json"]], "intact": True}))
+        out.append((f"derived-rebuild-all-{damage}", "build-db",
+                    ["build-db", "--manifest", "{T}/manifest.json", "--rebuild", "--quiet", "--no-checks"],
+                    "accept", f"build-db --rebuild on a cache whose every derived array is {what}",
+                    {"kinds": list(KINDS), "damage": damage}, {"intact": True}))
+    return out
+
+
+def prepare_derived(T: Path, O: Path, cache: Path) -> None:
+    """``T``: a manifest and its take; ``cache``: the database and every derived array (a run), kept
+    pristine beside the cache for :func:`before`; ``O``: the reference recording and coverage JSON."""
+    T.mkdir(parents=True, exist_ok=True)
+    O.mkdir(parents=True, exist_ok=True)
+    shutil.copyfile(GOOD / "walk.bvh", T / "walk.bvh")
+    shutil.copyfile(GOOD / "manifest.json", T / "manifest.json")
+    import json
+
+    m = json.loads((T / "manifest.json").read_text())
+    m["clips"] = [{"file": "walk.bvh"}]
+    (T / "manifest.json").write_text(json.dumps(m))
+    env = {**os.environ, "LMM_STUDIO_CACHE": str(cache), "PYTHONPATH": str(ROOT), "PYTHONDONTWRITEBYTECODE": "1"}
+    for argv in ([a.format(T=T, O=O) for a in _RUN] + ["--record", str(O / "reference.bvh")],
+                 ["coverage", "--manifest", str(T / "manifest.json"), "--json", str(O / "reference.json")]):
+        subprocess.run([sys.executable, "-m", "app.cli", *argv], cwd=ROOT, env=env, check=True,
+                       stdout=subprocess.DEVNULL)
+    (folder,) = cache.glob("*.derived")
+    shutil.rmtree(_pristine(cache), ignore_errors=True)
+    shutil.copytree(folder, _pristine(cache))
+    missing = [k for k in KINDS if not list(folder.glob(f"{k}-*.npy"))]
+    if missing:
+        raise RuntimeError(f"the run made no derived array of kind {missing}: the kinds list is stale")
+
+
+def _pristine(cache: Path) -> Path:
+    return cache.parent / "pristine.derived"
+
+
+def _replace(path: Path, data: bytes) -> None:
+    """Write ``data`` under a new inode (never into a file some earlier case may still have mapped)."""
+    tmp = path.with_name(path.name + ".damage")
+    tmp.write_bytes(data)
+    os.replace(tmp, path)
+
+
+def _npy_bytes(a) -> bytes:
+    import io
+
+    import numpy as np
+
+    buf = io.BytesIO()
+    np.save(buf, a, allow_pickle=False)
+    return buf.getvalue()
+
+
+def _damaged(path: Path, damage: str) -> bytes | None:
+    """The entry's damaged bytes (None: the damage is to its checksum file)."""
+    import numpy as np
+
+    data = path.read_bytes()
+    a = np.load(path, allow_pickle=False)
+    if damage == "empty":
+        return b""
+    if damage == "flip":
+        b = bytearray(data)
+        b[-1 if a.dtype.kind in "iu" else -5] ^= 0x10
+        return bytes(b)
+    if damage in ("nan", "consistent_nan"):
+        b = a.astype(np.result_type(a.dtype, np.float32)).copy()
+        b.reshape(-1)[0] = np.nan
+        return _npy_bytes(b)
+    if damage == "truncated":
+        return data[:len(data) // 2]
+    if damage in ("wrong_shape", "consistent_wrong_shape"):
+        return _npy_bytes(np.zeros((3,) + a.shape[1:], a.dtype))
+    if damage == "not_npy":
+        return b"not an array\n"
+    return None
+
+
+def before(spec: dict, cache: Path) -> list[str]:
+    """Restore the job's pristine derived arrays, then damage those of ``spec['kinds']``. -> problems."""
+    from lmm.data.derived import checksum_path, file_crc32
+
+    (folder,) = cache.glob("*.derived") or [None]
+    if folder is None:
+        return [f"no derived folder in {cache}"]
+    shutil.rmtree(folder)
+    shutil.copytree(_pristine(cache), folder)
+    damaged = 0
+    damage = spec["damage"]
+    for kind in spec["kinds"]:
+        if (kind, damage) in NOT_A_DAMAGE:
+            continue
+        for path in folder.glob(f"{kind}-*.npy"):
+            data = _damaged(path, damage)
+            if data is not None:
+                if data == path.read_bytes():
+                    return [f"the damage {damage!r} leaves {path.name} as it was"]
+                _replace(path, data)
+                if damage.startswith("consistent_"):
+                    _replace(checksum_path(path), (file_crc32(path) + "\n").encode())
+            elif damage == "crc_garbage":
+                _replace(checksum_path(path), b"zz\n")
+            elif damage == "no_crc":
+                checksum_path(path).unlink()
+            damaged += 1
+    return [] if damaged else [f"no derived array of kinds {spec['kinds']} to damage"]
+
+
+def after(spec: dict, cache: Path | None, stdout: str = "") -> list[str]:
+    """What is wrong with a case's outputs: files that differ from their reference, cached arrays that
+    are still damaged or missing, expected files that were not written, words missing from stdout."""
+    import glob
+
+    out = []
+    if spec.get("stdout_has") and spec["stdout_has"] not in stdout:
+        out.append(f"stdout does not name {spec['stdout_has']}: {stdout[:200]!r}")
+    for a, b in spec.get("same", []):
+        pa, pb = Path(a), Path(b)
+        if not pa.is_file():
+            out.append(f"{pa.name} was not written")
+        elif pa.read_bytes() != pb.read_bytes():
+            out.append(f"{pa.name} differs from {pb.name}, made from the intact cache")
+    if spec.get("intact") and cache is not None:
+        from lmm.data.derived import damage
+
+        folders = list(cache.glob("*.derived"))
+        for kind in KINDS:
+            entries = [p for f in folders for p in f.glob(f"{kind}-*.npy")]
+            if len(entries) != 1:
+                out.append(f"{len(entries)} {kind} arrays in the cache afterwards, expected 1")
+            out += [f"{p.name} is still damaged afterwards ({why})" for p in entries if (why := damage(p))]
+    for pattern in spec.get("exists", []):
+        if not glob.glob(pattern):
+            out.append(f"nothing matches {pattern}")
+    return out
+
+
+# ---- no home folder ----------------------------------------------------------------------------------
+
+#: the environment of a uid without passwd entry and without HOME (the driver also makes pwd.getpwuid
+#: raise KeyError): the cache and the config go to $TMPDIR/lmm-studio-home-UID (lmm.data.cache.home_dir)
+NO_HOME_UNSET = ("HOME", "LMM_STUDIO_CACHE", "XDG_CACHE_HOME", "LMM_STUDIO_CONFIG", "XDG_CONFIG_HOME")
+
+
+def no_home_cases() -> list[tuple]:
+    """(id, command, argv, what, after spec): ``{H}`` is the fallback home folder."""
+    cache = "{H}/.cache/lmm-studio"
+    return [
+        ("no-home-build-db", "build-db", ["build-db", "--manifest", str(GOOD / "manifest.json"), "--quiet",
+                                          "--no-checks", "--jobs", "1"],
+         "no passwd entry, HOME unset: build-db (RuntimeError: Could not determine home directory)",
+         {"exists": [f"{cache}/db-*.npz"], "stdout_has": cache}),
+        ("no-home-run", "run", ["run", "--manifest", str(GOOD / "manifest.json"), "--input", "builtin:circle",
+                                "--seconds", "1", "--quiet"],
+         "no passwd entry, HOME unset: run", {"exists": [f"{cache}/db-*.npz.derived/features-*.npy"]}),
+    ]
+
+
+def no_home_dir(tmpdir: Path) -> Path:
+    return tmpdir / f"lmm-studio-home-{os.getuid()}"
+
+
+# ---- a studio that cannot open its window -------------------------------------------------------------
+
+DEAD_DISPLAY = ":77"
+_STUDIO = ["studio", "--frames", "1", "--no-lmm", "--no-physics", "--no-save-layout"]
+_NO_GL = "lmm-studio: error: cannot create an OpenGL context on the display "
+
+
+def display_cases() -> list[tuple]:
+    """(id, display variant, argv, names, field, what): ``dead`` is :data:`DEAD_DISPLAY`; ``noglx`` an Xvfb
+    without GLX; ``nodriver`` an Xvfb with GALLIUM_DRIVER naming no driver."""
+    return [
+        ("studio-dead-display", "dead", _STUDIO, (repr(DEAD_DISPLAY),), "lmm-studio: error: cannot open the display",
+         "DISPLAY=:77, no X server there (glfwSetWindowPos assertion, exit 134)"),
+        ("studio-display-without-glx", "noglx", _STUDIO, ("{display}",), (_NO_GL, "glXChooseFBConfig failed"),
+         "an X server without GLX (abort inside GLFW)"),
+        ("studio-driver-not-loadable", "nodriver", _STUDIO, ("{display}",), (_NO_GL, "cannot create context"),
+         "GALLIUM_DRIVER naming no driver (abort inside GLFW)"),
+    ]
+
+
+def start_displays() -> tuple[dict, list]:
+    """{variant: display or None} and the Xvfb processes to stop. ``dead`` is None when something answers
+    at :77 on this machine."""
+    displays = {"dead": None if Path(f"/tmp/.X11-unix/X{DEAD_DISPLAY[1:]}").exists() else DEAD_DISPLAY,
+                "noglx": None, "nodriver": None}
+    procs = []
+    exe = shutil.which("Xvfb")
+    if exe is None:
+        return displays, procs
+    for variant, extra in (("noglx", ["-extension", "GLX"]), ("nodriver", [])):
+        read_fd, write_fd = os.pipe()
+        proc = subprocess.Popen([exe, "-displayfd", str(write_fd), "-screen", "0", "800x600x24", "-nolisten", "tcp",
+                                 *extra], pass_fds=(write_fd,), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        os.close(write_fd)
+        procs.append(proc)
+        with os.fdopen(read_fd) as f:
+            number = f.readline().strip()
+        if number.isdigit():
+            displays[variant] = f":{number}"
+    return displays, procs
+
+
+def display_env(variant: str, display: str) -> dict:
+    env = {"DISPLAY": display, "WAYLAND_DISPLAY": None}
+    if variant == "nodriver":
+        env.update(LIBGL_ALWAYS_SOFTWARE="1", GALLIUM_DRIVER="nonexistent")
+    return env
