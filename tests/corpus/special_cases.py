@@ -71,6 +71,55 @@ COLLISIONS = [
     ("physics-json-is-the-file", ["physics", "{T}/walk.bvh", "--json", "{T}/walk.bvh"], "walk.bvh"),
     ("find-json-is-the-query", ["find", "{T}/walk.bvh", "--frames", "0:30", "--in", "{T}/manifest.json", "--json",
                                 "{T}/walk.bvh", "--quiet"], "walk.bvh"),
+    # every other output argument: an input, another output, a link to /dev/null or a FIFO
+    ("run-record-input-is-the-tuning", _RUN + ["--tuning", "{T}/preset.json", "--record-input", "{T}/preset.json"],
+     "preset.json"),
+    ("run-session-is-the-record", _RUN + ["--record", "{T}/x.bvh", "--session", "{T}/x.bvh"], "x.bvh"),
+    ("run-metrics-is-the-events", _RUN + ["--events", "{T}/preset.json", "--metrics-json", "{T}/preset.json"],
+     "preset.json"),
+    ("run-record-input-is-a-link-to-dev-null", _RUN + ["--record-input", "{T}/null"], "null"),
+    ("run-session-is-a-link-to-dev-null", _RUN + ["--session", "{T}/null"], "null"),
+    ("run-session-is-a-fifo", _RUN + ["--session", "{T}/fifo"], "fifo"),
+    ("run-record-is-a-fifo", _RUN + ["--record", "{T}/fifo"], "fifo"),
+    ("build-db-out-is-a-fifo", ["build-db", "--manifest", "{T}/manifest.json", "--out", "{T}/fifo", "--quiet",
+                                "--no-checks"], "fifo"),
+    ("train-json-is-the-manifest", ["train", "decompressor", "--manifest", "{T}/manifest.json", "--out", "{T}.out/w",
+                                    "--json", "{T}/manifest.json", "--iterations", "1", "--quiet"], "manifest.json"),
+    ("train-json-is-a-link-to-dev-null", ["train", "decompressor", "--manifest", "{T}/manifest.json", "--out",
+                                          "{T}.out/w", "--json", "{T}/null", "--iterations", "1", "--quiet"], "null"),
+    ("train-out-is-a-link-to-dev-null", ["train", "decompressor", "--manifest", "{T}/manifest.json", "--out",
+                                         "{T}/null", "--iterations", "1", "--quiet"], "null"),
+    ("eval-json-is-the-input", ["eval", "--input", "{T}/input.csv", "--json", "{T}/input.csv", "--seconds", "1",
+                                "--queries", "64"], "input.csv"),
+    ("eval-json-is-the-compressor", ["eval", "--weights", "{T}/w.npz", "--compressor", "{T}/compressor.npz", "--json",
+                                     "{T}/compressor.npz", "--seconds", "1", "--queries", "64"], "compressor.npz"),
+    ("eval-json-is-a-link-to-dev-null", ["eval", "--weights", "{T}/w.npz", "--json", "{T}/null", "--seconds", "1",
+                                         "--queries", "64"], "null"),
+    ("eval-plots-is-the-weights", ["eval", "--weights", "{T}/w.npz", "--plots", "{T}/w.npz", "--seconds", "1",
+                                   "--queries", "64"], "w.npz"),
+    ("export-onnx-out-is-a-link-to-dev-null", ["export-onnx", "--weights", "{T}/w.npz", "--out", "{T}/null"], "null"),
+    ("view-screenshot-is-a-link-to-dev-null", ["view", "{T}/walk.bvh", "--screenshot", "{T}/null"], "null"),
+    ("view-video-is-a-fifo", ["view", "{T}/walk.bvh", "--video", "{T}/fifo"], "fifo"),
+    ("coverage-json-is-a-link-to-dev-null", ["coverage", "--manifest", "{T}/manifest.json", "--json", "{T}/null"],
+     "null"),
+    ("coverage-png-is-a-fifo", ["coverage", "--manifest", "{T}/manifest.json", "--png", "{T}/fifo"], "fifo"),
+    ("check-data-json-is-a-link-to-dev-null", ["check-data", "--manifest", "{T}/manifest.json", "--quiet", "--json",
+                                               "{T}/null"], "null"),
+    ("check-data-png-is-a-fifo", ["check-data", "--manifest", "{T}/manifest.json", "--quiet", "--png", "{T}/fifo"],
+     "fifo"),
+    ("input-from-out-is-a-link-to-dev-null", ["input-from", "{T}/walk.bvh", "--manifest", "{T}/manifest.json",
+                                              "--out", "{T}/null"], "null"),
+    ("physics-json-is-a-fifo", ["physics", "{T}/walk.bvh", "--json", "{T}/fifo"], "fifo"),
+    ("compare-json-is-a-link-to-dev-null", ["compare", "{T}/walk.bvh", "{T}/walk.bvh", "--json", "{T}/null"], "null"),
+    ("find-json-is-a-fifo", ["find", "{T}/walk.bvh", "--frames", "0:30", "--in", "{T}/manifest.json", "--json",
+                             "{T}/fifo", "--quiet"], "fifo"),
+    ("replay-record-is-the-session", ["replay", "{T}/s.lmmsession", "--record", "{T}/s.lmmsession", "--quiet"],
+     "s.lmmsession"),
+    ("replay-metrics-is-a-link-to-dev-null", ["replay", "{T}/s.lmmsession", "--metrics-json", "{T}/null", "--quiet"],
+     "null"),
+    ("ab-json-is-the-tuning", ["ab", "{T}/s.lmmsession", "--tuning", "{T}/preset.json", "--json", "{T}/preset.json",
+                               "--quiet"], "preset.json"),
+    ("export-gltf-out-is-the-file", ["export-gltf", "{T}/walk.bvh", "--out", "{T}/walk.bvh"], "walk.bvh"),
 ]
 
 # special files and non-ASCII numbers given as inputs: (id, argv, a word the error line must hold)
@@ -109,7 +158,41 @@ SPECIAL_INPUTS = [
      "fifo"),
     ("find-in-fifo", ["find", "{good}/walk.bvh", "--frames", "0:30", "--in", "{T}/fifo", "--quiet"], "fifo"),
     ("find-query-fifo", ["find", "{T}/fifo", "--frames", "0:30", "--in", "{good}/manifest.json", "--quiet"], "fifo"),
+    # every other file argument: a FIFO, /dev/zero or /dev/urandom
+    ("run-input-dev-urandom", ["run", "--input", "/dev/urandom", "--quiet"], "/dev/urandom"),
+    ("run-weights-dev-zero", ["run", "--controller", "lmm", "--weights", "/dev/zero", "--input", "builtin:circle",
+                              "--seconds", "1", "--quiet"], "/dev/zero"),
+    ("build-db-manifest-dev-zero", ["build-db", "--manifest", "/dev/zero", "--quiet"], "/dev/zero"),
+    ("check-data-manifest-dev-zero", ["check-data", "--manifest", "/dev/zero", "--quiet"], "/dev/zero"),
+    ("coverage-manifest-fifo", ["coverage", "--manifest", "{T}/fifo", "--json", "{T}.out/c.json"], "fifo"),
+    ("coverage-manifest-dev-zero", ["coverage", "--manifest", "/dev/zero", "--json", "{T}.out/c.json"], "/dev/zero"),
+    ("train-manifest-fifo", ["train", "decompressor", "--manifest", "{T}/fifo", "--out", "{T}.out/w", "--iterations",
+                             "1", "--quiet"], "fifo"),
+    ("train-manifest-dev-zero", ["train", "decompressor", "--manifest", "/dev/zero", "--out", "{T}.out/w",
+                                 "--iterations", "1", "--quiet"], "/dev/zero"),
+    ("eval-weights-dev-zero", ["eval", "--weights", "/dev/zero", "--seconds", "1", "--queries", "64"], "/dev/zero"),
+    ("eval-compressor-fifo", ["eval", "--weights", "{T}/w.npz", "--compressor", "{T}/fifo", "--seconds", "1",
+                              "--queries", "64"], "fifo"),
+    ("eval-input-fifo", ["eval", "--input", "{T}/fifo", "--seconds", "1", "--queries", "64"], "fifo"),
+    ("eval-manifest-fifo", ["eval", "--manifest", "{T}/fifo", "--seconds", "1", "--queries", "64"], "fifo"),
+    ("eval-heldout-fifo", ["eval", "--reconstruction", "--heldout", "{T}/fifo"], "fifo"),
+    ("export-onnx-weights-dev-zero", ["export-onnx", "--weights", "/dev/zero", "--out", "{T}.out/o"], "/dev/zero"),
+    ("view-dev-zero", ["view", "/dev/zero", "--screenshot", "{T}.out/s.png"], "/dev/zero"),
+    ("compare-second-fifo", ["compare", "{good}/walk.bvh", "{T}/fifo"], "fifo"),
+    ("physics-dev-zero", ["physics", "/dev/zero"], "/dev/zero"),
+    ("export-gltf-fifo", ["export-gltf", "{T}/fifo", "--out", "{T}.out/x.glb"], "fifo"),
+    ("bench-manifest-fifo", ["bench", "--manifest", "{T}/fifo"], "fifo"),
+    ("replay-session-dev-zero", ["replay", "/dev/zero", "--quiet"], "/dev/zero"),
+    ("replay-tuning-fifo", ["replay", "{T}/s.lmmsession", "--tuning", "{T}/fifo", "--quiet"], "fifo"),
+    ("replay-manifest-fifo", ["replay", "{T}/s.lmmsession", "--manifest", "{T}/fifo", "--quiet"], "fifo"),
+    ("trace-session-fifo", ["trace", "{T}/fifo", "--out", "{T}.out/t.csv", "--quiet"], "fifo"),
+    ("ab-session-fifo", ["ab", "{T}/fifo", "--tuning", "{T}/preset.json", "--quiet"], "fifo"),
+    ("ab-tuning-fifo", ["ab", "{T}/s.lmmsession", "--tuning", "{T}/fifo", "--quiet"], "fifo"),
+    ("studio-open-fifo", ["studio", "--open", "{T}/fifo", "--frames", "1"], "fifo"),
 ]
+
+#: the cases that read a valid session ({T}/s.lmmsession, a copy of the corpus's generated one)
+NEEDS_SESSION = {cid for cid, argv, _ in COLLISIONS + SPECIAL_INPUTS if "{T}/s.lmmsession" in argv}
 
 
 # weights within every load limit whose networks give NaN or runaway poses: the run goes on (exit 0),
@@ -159,12 +242,14 @@ def prepare(T: Path, case_id: str) -> None:
         shutil.copyfile(GOOD / name, T / name)
     shutil.copyfile(GOOD / "input.csv", T / "take.input.csv")
     _manifest(T, "manifest.json")
-    if "weights" in case_id or "eval" in case_id:
+    if "weights" in case_id or "eval" in case_id or case_id.startswith("export-onnx"):
         shutil.copyfile(WEIGHTS, T / "w.npz")
     if case_id.startswith("run-weights-") and case_id[len("run-weights-"):] in dict(ADVERSARIAL_WEIGHTS):
         _adversarial(T, case_id)
     if case_id.startswith("export-onnx"):
         shutil.copyfile(WEIGHTS, T / "decompressor.onnx")
+    if "compressor" in case_id:
+        shutil.copyfile(WEIGHTS.with_name("compressor.npz"), T / "compressor.npz")
     os.mkfifo(T / "fifo")
     (T / "null").symlink_to(os.devnull)
     os.link(T / "input.csv", T / "hard.csv")
