@@ -43,10 +43,12 @@ Sections (later issues add theirs to ``SECTIONS``):
             ``frame_reference.cpp`` says what a C++ frame includes): ``cpp_mm_frame_us`` and
             ``cpp_lmm_frame_us`` beside ours on the same inputs, ``mm_frame_us`` and ``lmm_frame_us``
             (median ticks, so the MM figures are of frames that did not search; ``..._frame_mean_us``
-            the means, searches included), in ``frame_rounds`` alternating rounds of ``frame_ticks``
-            ticks: medians over the rounds, ``mm_frame_over_cpp``, ``lmm_frame_over_cpp`` (and
-            ``..._mean_over_cpp``) the medians of the rounds' ratios; the searches and jumps of each
-            pass (``cpp_mm_frame_searches`` ...) show both did the same work; ``cpp_frame_source``
+            the means, searches included; ``..._frame_searching_us`` the median tick that searched),
+            in ``frame_rounds`` alternating rounds of ``frame_ticks`` ticks: medians over the rounds,
+            ``mm_frame_over_cpp``, ``lmm_frame_over_cpp`` (and ``..._mean_over_cpp``,
+            ``..._searching_over_cpp``) the medians of the rounds' ratios; the searches and jumps of
+            each pass (``cpp_mm_frame_searches`` ...) show both did the same work (LMM jumps differ:
+            ours keeps to the idle set when the stick rests, the C++ projects); ``cpp_frame_source``
             "measured", or why not. Without a C++ compiler one note says so and the C++ figures are None.
 
 Timings are wall-clock medians; every section also reports what it measured (counts, settings). How the

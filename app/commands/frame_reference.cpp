@@ -36,7 +36,8 @@
 // decompressor, stepper, projector); int32 ticks, float32 inputs (ticks x: left x, y, right x, y, walk,
 // strafe, camera azimuth); int32 count, float32 tuning (TUNING below, in that order).
 // Usage: frame_reference FILE ROUNDS. Output: one JSON object on stdout; per round and controller the
-// median and mean frame time (us) over the ticks, searches and jumps, and checks `bench` verifies (the
+// median and mean frame time (us) over the ticks, the median over the ticks that searched, searches and
+// jumps, and checks `bench` verifies (the
 // first queries with the frames the search chose, the start state's decoded rotations).
 #include <algorithm>
 #include <chrono>
@@ -143,13 +144,19 @@ int search(const Data& d, const Boxes& large, const Boxes& small, const float* q
 
 using Clock = std::chrono::steady_clock;
 
-struct Pass { double median_us, mean_us; int searches, jumps; };
+struct Pass { double median_us, mean_us, searching_us; int searches, jumps; };
 
-Pass summarize(std::vector<double>& us, const Character& c) {
+double median(std::vector<double> v) {
+    if (v.empty()) return 0.0;
+    std::nth_element(v.begin(), v.begin() + long(v.size() / 2), v.end());
+    return v[v.size() / 2];
+}
+
+// a pass's figures from its per-tick times (`searched`: the times of the ticks that searched)
+Pass summarize(const std::vector<double>& us, const std::vector<double>& searched, const Character& c) {
     double sum = 0;
     for (double u : us) sum += u;
-    std::nth_element(us.begin(), us.begin() + long(us.size() / 2), us.end());
-    return {us[us.size() / 2], sum / double(us.size()), c.searches, c.jumps};
+    return {median(us), sum / double(us.size()), median(searched), c.searches, c.jumps};
 }
 
 // One pass of motion matching over every input tick; `checks` (when given) gets the first queries and picks.
@@ -160,9 +167,10 @@ Pass run_mm(const Data& d, const Boxes& large, const Boxes& small, std::string* 
     database_pose(d, frame, c.shown);
     const float dt = 1.0f / 60.0f;
     const size_t ticks = d.inputs.size() / 7;
-    std::vector<double> us(ticks);
+    std::vector<double> us(ticks), searched;
     for (size_t k = 0; k < ticks; ++k) {
         const auto t0 = Clock::now();
+        const int before = c.searches;
         V3 dv; Q dr;
         const bool forced = c.simulate(&d.inputs[k * 7], dt, dv, dr);
         if (c.search_due(forced, frame >= d.stop[size_t(frame)] - 1, dt)) {
@@ -192,8 +200,9 @@ Pass run_mm(const Data& d, const Boxes& large, const Boxes& small, std::string* 
         database_pose(d, frame, c.source);
         c.finish(dt);
         us[k] = std::chrono::duration<double, std::micro>(Clock::now() - t0).count();
+        if (c.searches != before) searched.push_back(us[k]);
     }
-    return summarize(us, c);
+    return summarize(us, searched, c);
 }
 
 // One pass of learned motion matching over every input tick.
@@ -208,7 +217,7 @@ Pass run_lmm(Data& d, std::vector<float>& start_state) {
     decode(d, y.data(), c.shown);
     const float dt = 1.0f / 60.0f;
     const size_t ticks = d.inputs.size() / 7;
-    std::vector<double> us(ticks);
+    std::vector<double> us(ticks), searched;
     auto cost = [&](const float* s) {     // network-space features -> the query's cost
         float sum = 0;
         for (int i = 0; i < D; ++i) {
@@ -219,6 +228,7 @@ Pass run_lmm(Data& d, std::vector<float>& start_state) {
     };
     for (size_t k = 0; k < ticks; ++k) {
         const auto t0 = Clock::now();
+        const int before = c.searches;
         V3 dv; Q dr;
         const bool forced = c.simulate(&d.inputs[k * 7], dt, dv, dr);
         if (c.search_due(forced, false, dt)) {
@@ -240,18 +250,20 @@ Pass run_lmm(Data& d, std::vector<float>& start_state) {
         decode(d, y.data(), c.source);
         c.finish(dt);
         us[k] = std::chrono::duration<double, std::micro>(Clock::now() - t0).count();
+        if (c.searches != before) searched.push_back(us[k]);
     }
-    return summarize(us, c);
+    return summarize(us, searched, c);
 }
 
 std::string pass_json(const std::vector<Pass>& p) {
     std::string out;
-    const char* names[] = {"median_us", "mean_us", "searches", "jumps"};
-    for (int f = 0; f < 4; ++f) {
+    const char* names[] = {"median_us", "mean_us", "searching_us", "searches", "jumps"};
+    for (int f = 0; f < 5; ++f) {
         out += std::string(f ? ", " : "") + "\"" + names[f] + "\": [";
         for (size_t r = 0; r < p.size(); ++r) {
             char b[48];
-            const double v = f == 0 ? p[r].median_us : f == 1 ? p[r].mean_us : f == 2 ? p[r].searches : p[r].jumps;
+            const double v = f == 0 ? p[r].median_us : f == 1 ? p[r].mean_us : f == 2 ? p[r].searching_us
+                           : f == 3 ? p[r].searches : p[r].jumps;
             std::snprintf(b, sizeof b, "%s%.4f", r ? ", " : "", v);
             out += b;
         }

@@ -107,6 +107,7 @@ def test_bench_json_sections(tmp_path):
         for name in ("mm", "lmm"):
             assert f[f"cpp_{name}_frame_us"] > 0 and f[f"{name}_frame_us"] > 0
             assert f[f"cpp_{name}_frame_mean_us"] > 0 and f[f"{name}_frame_over_cpp"] > 0
+            assert f[f"cpp_{name}_frame_searching_us"] > 0 and f[f"{name}_frame_searching_over_cpp"] > 0
             # both did the same work: the same searches over the same inputs
             assert f[f"cpp_{name}_frame_searches"] == f[f"{name}_frame_searches"] > 0
     assert "[search]" in r.stdout
