@@ -24,6 +24,7 @@ from .jobs import Jobs
 from .recording import Recording, RecordingResult, free_recording_paths, session_path_of
 from .reference_clip import ReferenceClip
 from .session_log import SessionLog
+from .quality_live import LiveQuality
 from .undo import TuningUndo
 
 TICK_RATE_HZ = 60.0
@@ -64,6 +65,7 @@ class Session:
         self.manifest = None           # the database's manifest (None: the shipped one), named in session files
         self.log = SessionLog(self)    # since the last reset: what a recording's session file replays
         self.undo = TuningUndo(tuning)  # undo / redo of tuning changes (app.undo)
+        self.quality = LiveQuality(db)  # pops, knee snaps, stops since the reset (app.quality_live)
 
     # -- the simulated characters (lmm.physics.ragdoll) -------------------------------------------
     def start_ragdolls(self) -> None:
@@ -156,6 +158,7 @@ class Session:
         self.history.clear()
         self.tick = 0
         self.log.reset()
+        self.quality.reset()
         self.pose_error, self._good_poses = "", {}
 
     # -- input ---------------------------------------------------------------------------------
@@ -221,6 +224,7 @@ class Session:
         self.log.after_step(poses)
         self._guard_poses(self.tick + 1, snaps)
         tick = Tick(self.tick + 1, (self.tick + 1) * self.dt, snaps, dict(extra or {}))
+        self.quality.add(tick.time_s, snaps)
         tick.extra.setdefault("input", inp)
         if self.following is not None:
             tick.series.update(self.follow_series(tick))

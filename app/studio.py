@@ -95,7 +95,7 @@ class Studio(SessionActions):
                              latent_dims=next((c.latent_dims for c in caps if c.latent_dims), 32),
                              controller_names=lambda: s.names, memory=lambda: s.memory,
                              features_of=lambda n: getattr(s.controllers.get(n), "features", None) or s.features,
-                             manifest=self._manifest())
+                             manifest=self._manifest(), quality_text=s.quality.text)
         return PanelContext(dpg=self.dpg, tuning=s.tuning, commands=self.commands, theme=self.theme, engine=engine)
 
     def _manifest(self):

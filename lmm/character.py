@@ -361,7 +361,8 @@ class CharacterController(Controller):
             if axes is None:
                 axes = self._toe_axes_floats = [tuple(a.tolist()) for a in self.toe_axes]
             solved = solve_legs(locks, g_pl, g_rl, self.leg_chains, targets, axes, tun.ik_toe_length_m,
-                                tun.ik_foot_height_m)
+                                tun.ik_foot_height_m, math.cos(math.radians(tun.ik_min_knee_deg)),
+                                tun.ik_soft_reach_m, dt, math.radians(tun.ik_knee_max_acceleration_deg_s2))
             if solved:  # only the legs changed: forward kinematics of their subtrees, not the whole skeleton
                 pose_update_legs(plan, g_rl, g_pl, rl, pl, solved)
         else:

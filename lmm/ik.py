@@ -16,6 +16,7 @@ lock update as a function of a state it leaves alone.
 """
 from __future__ import annotations
 
+import copy
 import math
 
 import numpy as np
@@ -54,10 +55,81 @@ def _angle_between(u, v) -> float:
     return math.acos(_clamp1(_dot(_unit(u), _unit(v))))
 
 
-def two_bone_ik(a, b, c, t, hip_rot, knee_rot, eps: float = 1e-4):
+def soft_reach(d: float, l_ab: float, l_cb: float, n_ac: float, min_knee_cos: float = 1.0,
+               soft: float = 0.0) -> float:
+    """The hip-ankle distance the leg is given for a target ``d`` away: ``d`` itself up to the start of
+    the soft zone, then an exponential approach to the longest leg allowed, so the knee straightens
+    ever more slowly instead of locking straight (the knee angle is very sensitive to the distance near
+    full extension: 1 cm short of straight is about 18 degrees of knee). The longest leg has the knee bent
+    at the angle whose cosine is ``min_knee_cos`` (the data's straightest knee), or the animated leg's
+    length ``n_ac`` when that is longer; the soft zone is ``soft`` metres below it but never starts
+    before ``n_ac``, so a target where the animation puts the ankle leaves the leg as it is. C1."""
+    if soft <= 0.0 and min_knee_cos >= 1.0:
+        return d
+    longest = math.sqrt(l_ab * l_ab + l_cb * l_cb + 2.0 * l_ab * l_cb * min_knee_cos)
+    if n_ac > longest:
+        longest = n_ac
+    start = max(longest - soft, n_ac)
+    if d <= start:
+        return d
+    width = longest - start
+    if width <= 1e-9:
+        return longest
+    return start + width * (1.0 - math.exp(-(d - start) / width))
+
+
+class KneeLimiter:
+    """Keeps one knee's angle from accelerating harder than ``max_acceleration`` (rad/s^2): the IK's
+    knee follows the angle it is asked for exactly while that moves within the limit (the animation
+    does: the data's own knees stay under it), and catches up with a bounded acceleration and no
+    overshoot when asked to jump (a lock letting go of a stretched leg, a target that moves fast near
+    full extension, where a centimetre is many degrees of knee). Angles are knee flexion (0 straight)."""
+    __slots__ = ("angle", "velocity", "asked")
+
+    def __init__(self):
+        self.angle = None      # the last angle given, None before the first
+        self.velocity = 0.0
+        self.asked = 0.0       # the last angle asked for
+
+    def step(self, asked: float, dt: float, max_acceleration: float) -> float:
+        if self.angle is None or dt <= 0.0 or max_acceleration <= 0.0:
+            self.angle, self.velocity, self.asked = asked, 0.0, asked
+            return asked
+        moving = (asked - self.asked) / dt                # the asked angle's own velocity
+        gap = asked - self.angle                          # to land on it this tick: gap / dt; closing on it
+        # no faster than it can stop in time, one tick of reaction included: v^2 / 2a + v dt <= |gap|
+        brake = max_acceleration * (math.sqrt(dt * dt + 2.0 * abs(gap) / max_acceleration) - dt)
+        wanted = moving + max(-brake, min(brake, gap / dt - moving))
+        dv = max(-max_acceleration * dt, min(max_acceleration * dt, wanted - self.velocity))
+        self.velocity += dv
+        self.angle += self.velocity * dt
+        self.asked = asked
+        return self.angle
+
+    def track(self, angle: float, dt: float) -> None:
+        """The leg was left to the animation this tick: follow it (its velocity too)."""
+        if self.angle is not None and dt > 0.0:
+            self.velocity = (angle - self.angle) / dt
+        self.angle = self.asked = angle
+
+    def settled(self, angle: float, tolerance: float = 1e-4) -> bool:
+        """Whether it gives ``angle`` as asked (it trails by less than ``tolerance`` rad)."""
+        return self.angle is None or abs(self.angle - angle) < tolerance
+
+
+def knee_flexion(l_ab: float, l_cb: float, l_ac: float) -> float:
+    """Knee flexion (rad, 0 straight) of a leg whose hip and ankle are ``l_ac`` apart (law of cosines)."""
+    c = (l_ab * l_ab + l_cb * l_cb - l_ac * l_ac) / (2.0 * l_ab * l_cb)
+    return math.pi - math.acos(-1.0 if c < -1.0 else 1.0 if c > 1.0 else c)
+
+
+def two_bone_ik(a, b, c, t, hip_rot, knee_rot, eps: float = 1e-4, min_knee_cos: float = 1.0,
+                soft: float = 0.0, knee=None):
     """Global rotations (hip, knee) that bring the ankle ``c`` onto the target ``t`` (or as close as the leg
     reaches); ``a``/``b`` the hip and knee positions. Sequences of floats in (positions 3, rotations 4),
-    two 4-tuples out.
+    two 4-tuples out. ``min_knee_cos`` and ``soft``: the reach limit (:func:`soft_reach`); the defaults
+    (1, 0) reach to full extension. ``knee``: None, or a function of the knee flexion asked for (rad)
+    giving the one to use (:class:`KneeLimiter`); the hip still aims the ankle at the target.
 
     Law of cosines: first the knee is bent (and the hip swung in the leg's plane) so the hip-ankle
     distance equals the hip-target distance, then the hip turns the leg onto the target. The leg's
@@ -75,7 +147,12 @@ def two_bone_ik(a, b, c, t, hip_rot, knee_rot, eps: float = 1e-4):
     l_cb = math.sqrt(cb0 * cb0 + cb1 * cb1 + cb2 * cb2)
     n_at = math.sqrt(at0 * at0 + at1 * at1 + at2 * at2)
     n_ac = math.sqrt(ac0 * ac0 + ac1 * ac1 + ac2 * ac2)
-    l_at = min(max(n_at, eps), l_ab + l_cb - eps)
+    l_at = min(max(soft_reach(n_at, l_ab, l_cb, n_ac, min_knee_cos, soft), eps), l_ab + l_cb - eps)
+    if knee is not None and l_ab > 1e-9 and l_cb > 1e-9:
+        asked = knee_flexion(l_ab, l_cb, l_at)
+        bent = max(knee(asked), min(asked, math.acos(min_knee_cos)))   # never straighter than the limit
+        l_at = min(max(math.sqrt(max(l_ab * l_ab + l_cb * l_cb + 2.0 * l_ab * l_cb * math.cos(bent), 0.0)), eps),
+                   l_ab + l_cb - eps)
 
     # unit vectors (_unit: (1, 0, 0) for a null vector) and the angles between them (_angle_between,
     # the cosine clamped to [-1, 1] as _clamp1 does)
@@ -136,7 +213,7 @@ class FootLockState:
     Mutable and kept in plain floats (the controller advances it in place once per tick, see
     :meth:`update`); the fields read as numpy arrays (``locked`` (2,) bool, ``lock_position`` (2, 3), ...).
     """
-    __slots__ = ("_locked", "_released", "_lowest", "_lock", "_off", "_off_v", "_previous")
+    __slots__ = ("_locked", "_released", "_lowest", "_lock", "_off", "_off_v", "_previous", "knees")
 
     def __init__(self):
         self._locked = [False, False]
@@ -146,6 +223,7 @@ class FootLockState:
         self._off = [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]
         self._off_v = [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]
         self._previous = None  # the last targets, 2 tuples
+        self.knees = [KneeLimiter(), KneeLimiter()]
 
     def copy(self) -> "FootLockState":
         s = FootLockState()
@@ -154,6 +232,7 @@ class FootLockState:
         s._off = [list(o) for o in self._off]
         s._off_v = [list(v) for v in self._off_v]
         s._previous = None if self._previous is None else list(self._previous)
+        s.knees = [copy.copy(k) for k in self.knees]
         return s
 
     @property
@@ -341,19 +420,22 @@ def toe_clear_ground(toe_y: float, q, toe_axis_local, toe_length: float, ground_
 
 
 def solve_leg(global_pos, global_rot, chain, toe_target, toe_axis_local, toe_length: float,
-              ground_height: float | None) -> tuple:
+              ground_height: float | None, min_knee_cos: float = 1.0, soft: float = 0.0, knee=None) -> tuple:
     """New global rotations for (hip, knee, foot, toe) of one leg so the toe reaches ``toe_target``, in the
     order of ``chain`` (bone indices). The foot keeps its global rotation (so the toe's offset from the
     ankle is unchanged); the ankle's target is the toe target minus that offset; with a ``ground_height``
     the toe is bent up to keep the tip of the foot above it. One pose as lists of tuples of floats
-    (``global_pos[j]`` a 3-tuple, ``global_rot[j]`` a 4-tuple; arrays work too)."""
+    (``global_pos[j]`` a 3-tuple, ``global_rot[j]`` a 4-tuple; arrays work too). ``min_knee_cos``, ``soft``:
+    the leg's reach (:func:`soft_reach`)."""
+    knee_limit = knee
     hip, knee, foot, toe = chain
     tp, fp = global_pos[toe], global_pos[foot]
     # toe_target - (toe - foot)
     ankle_target = (toe_target[0] - (tp[0] - fp[0]), toe_target[1] - (tp[1] - fp[1]),
                     toe_target[2] - (tp[2] - fp[2]))
     hip_rot, knee_rot = two_bone_ik(global_pos[hip], global_pos[knee], fp, ankle_target,
-                                           global_rot[hip], global_rot[knee])
+                                    global_rot[hip], global_rot[knee], min_knee_cos=min_knee_cos, soft=soft,
+                                    knee=knee_limit)
     toe_rot = global_rot[toe]
     if ground_height is not None:
         bent = toe_clear_ground(toe_target[1], toe_rot, toe_axis_local, toe_length, ground_height)
@@ -363,17 +445,28 @@ def solve_leg(global_pos, global_rot, chain, toe_target, toe_axis_local, toe_len
 
 
 def solve_legs(locks: FootLockState, global_pos, global_rot, leg_chains, targets, toe_axes, toe_length: float,
-               foot_height: float) -> list:
+               foot_height: float, min_knee_cos: float = 1.0, soft: float = 0.0, dt: float = 0.0,
+               max_knee_acceleration: float = 0.0) -> list:
     """:func:`solve_leg` for every leg whose toe must move this tick (locked, or free and not yet
     blended back onto the animation): a list of (leg index, new global rotations of its chain). A locked
-    toe keeps the tip of the foot above the ground (its lock height minus the foot height)."""
+    toe keeps the tip of the foot above the ground (its lock height minus the foot height). Each knee goes
+    through its :class:`KneeLimiter` (``max_knee_acceleration`` rad/s^2, 0: none); a leg left to the
+    animation is still solved until its limiter has caught up with the animated knee."""
     solved = []
     for i, leg in enumerate(leg_chains):
         target, toe = targets[i], global_pos[leg[3]]
         is_locked = locks.is_locked(i)
+        limiter = locks.knees[i]
         if not is_locked and (abs(target[0] - toe[0]) <= 1e-6 and abs(target[1] - toe[1]) <= 1e-6
                               and abs(target[2] - toe[2]) <= 1e-6):
-            continue  # free and fully blended back: nothing to solve
+            hp, kp, fp = global_pos[leg[0]], global_pos[leg[1]], global_pos[leg[2]]
+            shown = knee_flexion(_norm(_sub(kp, hp)), _norm(_sub(fp, kp)), _norm(_sub(fp, hp)))
+            if max_knee_acceleration <= 0.0 or limiter.settled(shown):
+                limiter.track(shown, dt)
+                continue  # free, fully blended back and the knee where the animation has it: nothing to solve
         ground = target[1] - foot_height if is_locked else None
-        solved.append((i, solve_leg(global_pos, global_rot, leg, target, toe_axes[i], toe_length, ground)))
+        knee = (lambda asked, k=limiter: k.step(asked, dt, max_knee_acceleration)) if max_knee_acceleration > 0.0 \
+            else None
+        solved.append((i, solve_leg(global_pos, global_rot, leg, target, toe_axes[i], toe_length, ground,
+                                    min_knee_cos, soft, knee)))
     return solved

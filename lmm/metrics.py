@@ -5,7 +5,10 @@
   contacts) over the ticks it is in contact, in the pose shown (after IK);
 * ground skating (:class:`GroundSkating`, :func:`ground_skating`, the one definition for runs, ``eval``
   and the source takes, :func:`source_ground_skating`): the fraction of ground-level toe steps whose
-  horizontal speed exceeds 30 cm/s. It needs no contact flags, so recordings and mocap are measured alike;
+  horizontal speed over a 1/30 s step exceeds 30 cm/s. It needs no contact flags, so recordings and mocap
+  are measured alike;
+* motion quality (:mod:`lmm.quality`): pops, knee snaps, straight knees, acceleration and jerk p99 as
+  ratios to the database's own, stops and settling;
 * trajectory following error: distance (m) between the character root and the simulation object;
 * transitions per second and searches per second;
 * search time per query (us) and controller step time (us);
@@ -19,6 +22,7 @@ import math
 import numpy as np
 
 from lmm.data.derived import cached
+from lmm.quality import QUALITY_FPS, MotionQuality, QualityJoints, reference_quality, resample
 
 
 class FootSkating:
@@ -164,11 +168,14 @@ class GroundSkating:
 
 
 def ground_skating(toes: np.ndarray, fps: float, floor_m: float | None = None) -> dict:
-    """The ground skating of one clip of toe positions (m, ``(F, 2, 3)``) at ``fps``: a dict with
-    ``fraction`` (NaN when no step was at ground level), ``skating_steps`` and ``ground_steps``
-    (see :class:`GroundSkating` for the rule and the floor)."""
+    """The ground skating of one clip of toe positions (m, ``(F, 2, 3)``) at ``fps``, taken over 1/30 s
+    steps (:func:`lmm.quality.resample`) like every motion figure: a dict with ``fraction`` (NaN when no
+    step was at ground level), ``skating_steps`` and ``ground_steps`` (see :class:`GroundSkating` for the
+    rule and the floor)."""
     g = GroundSkating(floor_m)
-    g.add(toes, 1.0 / fps)
+    toes = np.asarray(toes, np.float64).reshape(-1, 2, 3)
+    if len(toes) > 1:
+        g.add(resample(toes, fps), 1.0 / QUALITY_FPS)
     fast, ground = g.counts()
     return {"fraction": fast / ground if ground else float("nan"), "skating_steps": fast, "ground_steps": ground}
 
@@ -177,7 +184,7 @@ def source_ground_skating(db, include_mirrored: bool = False) -> dict:
     """Ground skating of the database's source ranges (the mocap), each range with its own floor, counts
     summed over ranges; mirrored copies are left out by default (they hold the same steps). The counts
     are cached beside the database file."""
-    fast, ground = (int(v) for v in cached(db, "source_ground_skating", [bool(include_mirrored)],
+    fast, ground = (int(v) for v in cached(db, "source_ground_skating", [bool(include_mirrored), QUALITY_FPS],
                                            lambda: _source_ground_skating_counts(db, include_mirrored)))
     return {"fraction": fast / ground if ground else float("nan"), "skating_steps": fast, "ground_steps": ground}
 
@@ -228,6 +235,20 @@ class DurationStats:
         self.count += 1
         self.sum += value
 
+    def add_many(self, values) -> None:
+        """:meth:`add` of each value, in one go (a pose's joints)."""
+        v = np.asarray(values, np.float64).ravel()
+        room = max(self.EXACT - self.count, 0)
+        head, tail = v[:room], v[room:]
+        self._exact[self.count:self.count + len(head)] = head
+        if len(tail):
+            if self._bins is None:
+                self._bins = np.zeros(self.N_BINS, np.int64)
+                np.add.at(self._bins, self._bin(self._exact), 1)
+            np.add.at(self._bins, self._bin(tail), 1)
+        self.count += len(v)
+        self.sum += float(v.sum())
+
     def _bin(self, v):
         ratio = np.maximum(np.asarray(v, np.float64), self.LOW) / self.LOW
         return np.clip(np.floor(np.log(ratio) / math.log(self.BIN_RATIO)), 0, self.N_BINS - 1).astype(np.int64)
@@ -259,7 +280,11 @@ class MotionMetrics:
         self._prev_toes = None
         self._prev_time = None
         self.skating = FootSkating()
-        self.ground = GroundSkating()
+        self.ground = GroundSkating()   # fed the quality's 1/30 s samples: one time step for every figure
+        joints = QualityJoints.of_database(db)
+        self.quality = MotionQuality(joints, reference_quality(db), DurationStats)
+        toes = joints.toes
+        self.quality.on_sample = lambda t, p: self.ground.add_frame(p[toes], self.quality.h)
         self._err_sum = 0.0
         self._err_max = 0.0
         self._angle_sum = 0.0
@@ -293,9 +318,7 @@ class MotionMetrics:
             if dt > 0:
                 self.skating.add(self._prev_toes, toes, snap.foot_contacts, dt)
                 self.seconds += dt
-            self.ground.add_frame(toes, dt)
-        else:
-            self.ground.add_frame(toes, 0.0)
+        self.quality.add(snap.time_s, pose.global_positions)
         self._prev_toes, self._prev_time = toes, snap.time_s
         root = pose.global_positions[0].astype(np.float64)
         err = float(np.linalg.norm(root - snap.simulation_position))
@@ -329,6 +352,7 @@ class MotionMetrics:
             "foot_skating_right_cm_s": per_foot[1],
             "foot_skating_max_cm_s": float(self.skating.max),
             **self.ground.result(),
+            **self.quality.result(),
             "contact_fraction": float(n_contact / (2 * max(self.ticks - 1, 1))),
             "trajectory_error_mean_m": float(self._err_sum / self.ticks) if self.ticks else float("nan"),
             "trajectory_error_max_m": float(self._err_max),

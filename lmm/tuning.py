@@ -243,6 +243,15 @@ class Tuning:
     ik_step_height_m: float = _f(
         0.04, "ik", 0.0, 0.2, "m", "A foot unlocked by the unlock radius (the last resort, during a contact) "
         "steps back to the animation with about this much lift instead of sliding.")
+    ik_min_knee_deg: float = _f(
+        7.0, "ik", 0.0, 45.0, "deg", "The IK never bends a knee straighter than this (the data's straightest "
+        "knee is about 6 degrees) unless the animation itself is.")
+    ik_knee_max_acceleration_deg_s2: float = _f(
+        18000.0, "ik", 0.0, 100000.0, "deg/s2", "The IK's knees never accelerate harder than this (the data's "
+        "knees stay under about 19,000 deg/s2): a leg let go by its lock catches up smoothly (0: no limit).")
+    ik_soft_reach_m: float = _f(
+        0.02, "ik", 0.0, 0.1, "m", "Soft reach: over this last distance before the longest leg, the leg "
+        "approaches it smoothly instead of snapping straight (0: a hard limit).")
 
     # -- change events ------------------------------------------------------------------------------
     def __post_init__(self):

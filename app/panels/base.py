@@ -42,6 +42,7 @@ class EngineFacts:
     features_of: Callable[[str], "Features"]            # the features a controller searches
     memory: Callable[[], dict]                          # controller -> part -> bytes kept at run time
     manifest: "Manifest | None" = None                  # the manifest the database was built from
+    quality_text: Callable[[], str] = lambda: ""        # the live motion quality rows (app.quality_live)
 
     @property
     def channel_names(self) -> list[str]:

@@ -76,6 +76,7 @@ class StatsPanel(Panel):
             dpg.add_text("", tag="stats_detail", color=(170, 170, 180))
             dpg.add_text("", tag="stats_memory_detail", color=(150, 150, 160))
             dpg.add_text("", tag="stats_process", color=(150, 150, 160))
+            dpg.add_text("", tag="stats_quality", color=(200, 190, 140))
             with dpg.plot(tag="stats_plot", height=-1, width=-1, no_menus=True, no_mouse_pos=True):
                 dpg.add_plot_legend(location=dpg.mvPlot_Location_NorthWest, horizontal=True)
                 dpg.add_plot_axis(dpg.mvXAxis, tag="stats_x", no_tick_labels=True)
@@ -128,6 +129,7 @@ class StatsPanel(Panel):
             self.text.set("stats_memory", head if totals.get("lmm") else "memory  " + lines[0])
             self.text.set("stats_memory_detail", "\n".join(lines))
             h, dt = view.history, self.ctx.engine.dt
+            self.text.set("stats_quality", self.ctx.engine.quality_text())
             self.text.set("stats_process", f"process {fmt_bytes(rss_bytes())}; history {len(h) * dt:.1f}"
                                            f" of {h.capacity * dt:.0f} s; {view.render_info}")
             self.last = {"fps": fps, "frame_ms": ft.median(), "python_ms": python_ms,

@@ -1,4 +1,6 @@
 """Two-bone IK and foot locking."""
+import math
+
 import numpy as np
 import pytest
 
@@ -112,7 +114,7 @@ def test_no_ground_level_glide_after_release():
     _, t = _lock_run(contact + swing + stand, [True] * 40 + [False] * 20 + [True] * 30)
     toes = np.stack([t, np.tile([1, 0.3, 0], (len(t), 1))], axis=1)
     g = ground_skating(toes, 60.0, floor_m=0.0)
-    assert g["ground_steps"] > 50 and g["skating_steps"] == 0
+    assert g["ground_steps"] > 25 and g["skating_steps"] == 0   # 1/30 s steps
     # locked again where the foot came down (what the blend had not absorbed stays as the lock's offset)
     assert np.allclose(t[-30:], t[-1]) and np.linalg.norm(t[-1] - stand[-1]) < 0.05
 
@@ -306,3 +308,54 @@ def test_rotated_unit_is_the_numpy_definition_bit_for_bit():
         q = tuple((q / np.linalg.norm(q)).tolist())
         v = tuple((rng.standard_normal(3) * 10.0 ** rng.uniform(-12, 2)).tolist()) if t % 50 else (0.0, 0.0, 0.0)
         assert _rotated_unit(q, v) == _unit_of_rotated(q, v), t
+
+
+def test_soft_reach_is_smooth_bounded_and_leaves_the_animation_alone():
+    from lmm.ik import soft_reach
+    a = b = 0.4
+    cos_min = math.cos(math.radians(7.0))
+    longest = math.sqrt(a * a + b * b + 2 * a * b * cos_min)
+    ds = np.linspace(0.5, 1.2, 2001)
+    out = np.array([soft_reach(d, a, b, 0.7, cos_min, 0.02) for d in ds])
+    assert (out <= longest + 1e-12).all() and (np.diff(out) >= 0).all()    # bounded and monotone
+    slope = np.diff(out) / np.diff(ds)
+    assert np.abs(np.diff(slope)).max() < 0.02                               # C1: no kink
+    assert soft_reach(0.7, a, b, 0.7, cos_min, 0.02) == 0.7                  # the animated leg: unchanged
+    assert soft_reach(0.83, a, b, 0.83, cos_min, 0.02) == 0.83               # ... even inside the soft zone
+    assert soft_reach(0.9, a, b, 0.79, 1.0, 0.0) == 0.9                      # the defaults: no limit
+
+
+def test_knee_limiter_follows_within_the_limit_and_catches_up_without_overshoot():
+    from lmm.ik import KneeLimiter
+    dt, limit = 1 / 60, math.radians(18000)
+    k = KneeLimiter()
+    smooth = [0.5 + 0.3 * math.sin(2 * math.pi * i * dt) for i in range(120)]   # 0.3 rad at 1 Hz: within the limit
+    got = [k.step(x, dt, limit) for x in smooth]
+    assert np.allclose(got, smooth, atol=1e-9)
+    k = KneeLimiter()
+    asked = [0.1] * 10 + [1.5] * 50                       # a jump of 80 degrees
+    got = np.array([k.step(x, dt, limit) for x in asked])
+    acc = np.abs(np.diff(got, 2)) / dt ** 2
+    assert acc.max() <= limit * (1 + 1e-9)
+    assert got.max() <= 1.5 + 1e-9 and abs(got[-1] - 1.5) < 1e-6          # no overshoot, and it gets there
+    k.track(0.2, dt)
+    assert k.settled(0.2) and not k.settled(0.5)
+
+
+def test_a_run_has_no_knee_snap_and_no_straighter_knee_than_the_data(db, features):
+    """Through the real controller: the IK's knees stay under the tuning's acceleration limit and never
+    straighter than its minimum unless the animation is (30 s of builtin:turns, MM)."""
+    from lmm.data.inputs import open_input
+    from lmm.factory import make_controller
+    from lmm.quality import QualityJoints, knee_angles_deg
+    from lmm.runner import run_headless
+    from lmm.tuning import Tuning
+    tuning = Tuning()
+    c = make_controller("mm", db, features, tuning, None, debug_comparison=False)
+    poses = []
+    run_headless(c, open_input("builtin:turns"), 30.0, on_step=lambda pose, snap: poses.append(
+        pose.global_positions.astype(np.float64)))
+    knees = knee_angles_deg(np.stack(poses), QualityJoints.of_database(db).legs)   # 60 fps
+    acc = np.abs(np.diff(knees, 2, axis=0)).max(axis=1) * 3600.0
+    assert np.quantile(acc, 0.999) <= tuning.ik_knee_max_acceleration_deg_s2 * 1.5
+    assert (knees >= tuning.ik_min_knee_deg - 0.5).mean() > 0.995

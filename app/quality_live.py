@@ -1,0 +1,53 @@
+"""The studio's live motion quality (:mod:`lmm.quality`): each controller's pops, knee snaps, straight
+knees and stops since the last reset, as the Stats panel's quality rows, and the latest flagged moments."""
+from __future__ import annotations
+
+import math
+
+from lmm.metrics import DurationStats, pose_problem
+from lmm.quality import MotionQuality, QualityJoints, reference_quality
+
+SHORT = {"mm": "MM", "lmm": "LMM"}
+
+
+class LiveQuality:
+    """One :class:`lmm.quality.MotionQuality` per controller, fed every tick's shown pose."""
+
+    def __init__(self, db):
+        self.joints = QualityJoints.of_database(db)
+        self.reference = reference_quality(db)
+        self.by_name: dict[str, MotionQuality] = {}
+
+    def reset(self) -> None:
+        self.by_name = {}
+
+    def add(self, time_s: float, snaps: dict) -> None:
+        for name, snap in snaps.items():
+            pose = snap.pose
+            if pose_problem(pose) is not None:
+                continue
+            q = self.by_name.get(name)
+            if q is None:
+                q = self.by_name[name] = MotionQuality(self.joints, self.reference, DurationStats)
+            q.add(time_s, pose.global_positions)
+
+    def flags(self, name: str) -> list[tuple[float, str]]:
+        q = self.by_name.get(name)
+        return list(q.flags) if q is not None else []
+
+    def text(self) -> str:
+        """One line per controller: its figures since the last reset (ratios to the database's own)."""
+        lines = []
+        for name, q in self.by_name.items():
+            r = q.result("")
+            if q.samples < 4:
+                continue
+
+            def num(v, fmt):
+                return "-" if v is None or (isinstance(v, float) and not math.isfinite(v)) else format(v, fmt)
+            lines.append(f"{SHORT.get(name, name)} quality: {num(r['pops_per_min'], '.1f')} pops/min, "
+                         f"{num(r['knee_snaps_per_min'], '.1f')} knee snaps/min, straight knee "
+                         f"{num(100 * r['straight_knee_fraction'], '.1f')} %, jerk p99 "
+                         f"{num(r['jerk_p99_ratio'], '.2f')}x data, stops {r['stops']} "
+                         f"({r['stops_unsettled']} slow to settle)")
+        return "\n".join(lines)

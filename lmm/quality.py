@@ -1,0 +1,321 @@
+"""Motion quality: pops, knee snaps, straight knees, acceleration and jerk, skating and stops, one
+definition each, for runs, recordings and the database alike.
+
+Every figure is taken over a fixed time step of 1/30 s (:data:`QUALITY_FPS`; a 60 fps run is sampled
+every other tick, other rates are interpolated), so a 60 fps recording and 30 fps mocap are measured on
+one time scale and the figures do not depend on the frame rate. The formulas are the kernels below
+(:func:`joint_accelerations`, :func:`joint_jerks`, :func:`knee_angles_deg`, :func:`horizontal_speeds`);
+:func:`reference_quality` applies them to the database's ranges (whole arrays, exact maxima and
+quantiles) and :class:`MotionQuality` to a stream of poses (a window of the last four samples, bounded
+memory). The database's own figures are the yardstick:
+
+* a **pop** is a sample at which some joint accelerates harder than anywhere in the database;
+* a **knee snap** is a sample at which a knee's angular acceleration exceeds the database's maximum;
+* a **straight knee** is a knee bent less than the database's straightest knee (angle between thigh
+  and shin, 0 = straight);
+* **acceleration p99 at low speed** (root slower than :data:`SLOW_ROOT_M_S`) and **jerk p99**, over
+  all joints, as ratios to the database's;
+* **stops**: after the root (the simulation bone) has moved at least :data:`STOP_FROM_M_S` and comes
+  to rest (below :data:`STOPPED_M_S`), the **settle time** is how long until the hips stay below
+  :data:`SETTLED_HIPS_M_S` for :data:`SETTLED_HOLD_S`, and the **stop toe height** the highest toe
+  while the root is below :data:`STOP_FROM_M_S` around that stop (a raised knee shows as a high toe).
+
+Ground skating (:class:`lmm.metrics.GroundSkating`) is fed the same 1/30 s samples by the metrics.
+"""
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+
+from lmm.data.derived import cached
+from lmm.skeleton import joint_of_role
+
+QUALITY_FPS = 30                 # the fixed time step of every figure: 1/30 s
+SLOW_ROOT_M_S = 0.5              # "at low speed": the root slower than this
+STOP_FROM_M_S = 1.0              # a stop is from at least this root speed; the stop window is below it
+STOPPED_M_S = 0.1                # the root has stopped below this
+SETTLED_HIPS_M_S = 0.05          # the hips have settled below this ...
+SETTLED_HOLD_S = 0.25            # ... held this long
+STOP_WINDOW_S = 2.0              # the stop window ends this long after the root stopped (or when it moves on)
+SETTLE_LIMIT_S = 1.5             # the issue's bound, reported as a count of stops over it
+RAISED_TOE_M = 0.25              # a toe this high in a stop window is a raised leg
+REFERENCE_KEYS = ("max_acceleration", "max_knee_acceleration", "min_knee_angle", "acceleration_p99_slow",
+                  "jerk_p99")
+
+
+@dataclass(frozen=True)
+class QualityJoints:
+    """The joints the figures need: the root (the simulation bone, joint 0), the hips, and per leg
+    (left, right) its hip, knee, ankle and toe joints (the knee is the ankle's parent, the hip the
+    knee's)."""
+    root: int
+    hips: int
+    legs: tuple
+
+    @classmethod
+    def of(cls, names, parents, bones=None) -> "QualityJoints":
+        names, parents = list(names), [int(p) for p in parents]
+        hips = joint_of_role(names, bones, "hips")
+        legs = []
+        for side in ("left", "right"):
+            ankle, toe = joint_of_role(names, bones, f"{side}_foot"), joint_of_role(names, bones, f"{side}_toe")
+            if ankle is None or toe is None or parents[ankle] < 0 or parents[parents[ankle]] < 0:
+                raise ValueError(f"no {side} leg (hip, knee, ankle, toe) in the skeleton")
+            knee = parents[ankle]
+            legs.append((parents[knee], knee, ankle, toe))
+        return cls(root=0, hips=0 if hips is None else hips, legs=tuple(legs))
+
+    @classmethod
+    def of_database(cls, db) -> "QualityJoints":
+        return cls.of(db.names, db.parents, db.bone_roles)
+
+    @property
+    def toes(self) -> list[int]:
+        return [leg[3] for leg in self.legs]
+
+
+# -- the kernels: one definition of each formula, on (n, J, 3) positions sampled every h seconds -----------
+
+def joint_accelerations(p: np.ndarray, h: float) -> np.ndarray:
+    """(n - 2, J) magnitudes (m/s^2) of the second differences, at samples 1 .. n - 2."""
+    return np.linalg.norm(p[2:] - 2.0 * p[1:-1] + p[:-2], axis=-1) / (h * h)
+
+
+def joint_jerks(p: np.ndarray, h: float) -> np.ndarray:
+    """(n - 3, J) magnitudes (m/s^3) of the third differences."""
+    return np.linalg.norm(p[3:] - 3.0 * p[2:-1] + 3.0 * p[1:-2] - p[:-3], axis=-1) / (h * h * h)
+
+
+def knee_angles_deg(p: np.ndarray, legs) -> np.ndarray:
+    """(n, 2) knee angles in degrees: the angle between the thigh (hip to knee) and the shin (knee to
+    ankle), 0 for a straight leg."""
+    out = []
+    for hip, knee, ankle, _ in legs:
+        thigh, shin = p[:, knee] - p[:, hip], p[:, ankle] - p[:, knee]
+        c = np.einsum("ij,ij->i", thigh, shin) / np.maximum(
+            np.linalg.norm(thigh, axis=-1) * np.linalg.norm(shin, axis=-1), 1e-12)
+        out.append(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
+    return np.stack(out, axis=-1)
+
+
+def horizontal_speeds(p: np.ndarray, h: float) -> np.ndarray:
+    """(n - 1,) horizontal (x, z) speeds (m/s) of one joint's (n, 3) positions, between samples."""
+    return np.hypot(p[1:, 0] - p[:-1, 0], p[1:, 2] - p[:-1, 2]) / h
+
+
+def resample(positions: np.ndarray, fps: float) -> np.ndarray:
+    """(F, J, 3) positions at ``fps`` -> positions every 1/30 s from the first frame (linear
+    interpolation; a whole multiple of 30 fps takes every k-th frame exactly)."""
+    positions = np.asarray(positions, np.float64)
+    ratio = fps / QUALITY_FPS
+    if abs(ratio - round(ratio)) < 1e-9 and round(ratio) >= 1:
+        return positions[::int(round(ratio))]
+    t = np.arange(0.0, (len(positions) - 1) / fps + 1e-9, 1.0 / QUALITY_FPS) * fps
+    i = np.minimum(np.floor(t).astype(np.int64), len(positions) - 2)
+    w = (t - i)[:, None, None]
+    return positions[i] * (1.0 - w) + positions[i + 1] * w
+
+
+# -- the database's figures ------------------------------------------------------------------------------
+
+def _reference_array(db) -> np.ndarray:
+    joints = QualityJoints.of_database(db)
+    h = 1.0 / QUALITY_FPS
+    acc_max = knee_acc_max = 0.0
+    knee_min = math.inf
+    slow, jerks = [], []
+    for r, (start, stop) in enumerate(zip(db.range_starts, db.range_stops)):
+        if db.range_mirrored[r]:
+            continue   # the same motion, mirrored: the same figures
+        _, pos = db.global_transforms(slice(int(start), int(stop)))
+        p = resample(pos, db.fps)
+        if len(p) < 4:
+            continue
+        acc = joint_accelerations(p, h)
+        knees = knee_angles_deg(p, joints.legs)
+        acc_max = max(acc_max, float(acc.max()))
+        knee_acc_max = max(knee_acc_max, float(np.abs(knees[2:] - 2 * knees[1:-1] + knees[:-2]).max() / (h * h)))
+        knee_min = min(knee_min, float(knees.min()))
+        root = horizontal_speeds(p[:, joints.root], h)
+        centre = 0.5 * (root[1:] + root[:-1])      # the speed at samples 1 .. n - 2
+        slow.append(acc[centre < SLOW_ROOT_M_S].ravel())
+        jerks.append(joint_jerks(p, h).ravel())
+    slow_all = np.concatenate(slow) if slow else np.zeros(0)
+    jerk_all = np.concatenate(jerks) if jerks else np.zeros(0)
+    return np.array([acc_max, knee_acc_max, knee_min if knee_min < math.inf else float("nan"),
+                     float(np.quantile(slow_all, 0.99)) if len(slow_all) else float("nan"),
+                     float(np.quantile(jerk_all, 0.99)) if len(jerk_all) else float("nan")])
+
+
+def reference_quality(db) -> dict:
+    """The database's own figures (its source ranges, mirrored copies left out), cached beside its file:
+    ``max_acceleration`` (m/s^2), ``max_knee_acceleration`` (deg/s^2), ``min_knee_angle`` (deg),
+    ``acceleration_p99_slow`` (m/s^2) and ``jerk_p99`` (m/s^3)."""
+    values = cached(db, "quality_reference", [QUALITY_FPS, SLOW_ROOT_M_S], lambda: _reference_array(db))
+    return {k: float(v) for k, v in zip(REFERENCE_KEYS, np.asarray(values).tolist())}
+
+
+# -- a stream of poses -----------------------------------------------------------------------------------
+
+class MotionQuality:
+    """The figures of a stream of poses, fed one tick at a time (:meth:`add`) in bounded memory.
+
+    ``reference``: the database's figures (:func:`reference_quality`). ``quantiles``: a factory of
+    streaming quantile accumulators (``add_many``, ``quantile``) for the p99s."""
+
+    def __init__(self, joints: QualityJoints, reference: dict, quantiles):
+        self.joints, self.reference = joints, reference
+        self.h = 1.0 / QUALITY_FPS
+        self._window = deque(maxlen=4)       # the last samples, (J, 3) each
+        self._knees = deque(maxlen=3)        # their knee angles, (2,) each
+        self._last_tick = None               # (time, positions) of the previous tick, for interpolation
+        self._first = 0.0                    # time of the first sample: the others follow every 1/30 s
+        self.samples = 0
+        self.pops = 0
+        self.knee_snaps = 0
+        self.straight_knee_samples = 0
+        self.worst = {"pop": (0.0, -1.0), "knee_snap": (0.0, -1.0), "straight_knee": (math.inf, -1.0)}
+        self._slow_acc = quantiles()
+        self._jerk = quantiles()
+        # stops: the state machine of :meth:`_stop_step`
+        self._peak_speed = 0.0
+        self._stop_at = None                 # time the root stopped, while a stop is being watched
+        self._window_toe = 0.0               # highest toe since the root fell below STOP_FROM_M_S
+        self._settled_since = None
+        self.stops = []                      # (time, settle seconds or None, highest toe m)
+        self.flags = deque(maxlen=256)       # the latest flagged moments: (time s, "pop" | "knee snap" | "straight knee")
+        self.on_sample = None                # optional callback(time, positions) for each sample
+
+    def add(self, time_s: float, positions) -> None:
+        """One tick's world positions (J, 3) at ``time_s`` (increasing)."""
+        p = np.asarray(positions, np.float64)
+        last = self._last_tick
+        if last is None:
+            self._first = time_s
+            self._sample(time_s, p)
+        else:
+            t0, p0 = last
+            while True:
+                ts = self._first + self.samples * self.h
+                if ts > time_s + 1e-9:
+                    break
+                w = (ts - t0) / (time_s - t0) if time_s > t0 else 1.0
+                self._sample(ts, p if abs(1.0 - w) < 1e-6 else p0 + (p - p0) * w)
+        self._last_tick = (time_s, p)
+
+    def _sample(self, t: float, p: np.ndarray) -> None:
+        self.samples += 1
+        if self.on_sample is not None:
+            self.on_sample(t, p)
+        w, h, ref = self._window, self.h, self.reference
+        w.append(p)
+        knees = knee_angles_deg(p[None], self.joints.legs)[0]
+        self._knees.append(knees)
+        k_min = float(knees.min())
+        if k_min < ref["min_knee_angle"]:
+            self.straight_knee_samples += 1
+            self.flags.append((t, "straight knee"))
+            if k_min < self.worst["straight_knee"][0]:
+                self.worst["straight_knee"] = (k_min, t)
+        if len(w) >= 3:
+            arr = np.stack(list(w)[-3:])
+            acc = joint_accelerations(arr, h)[0]
+            a_max = float(acc.max())
+            if a_max > ref["max_acceleration"]:
+                self.pops += 1
+                self.flags.append((t - h, "pop"))
+            if a_max > self.worst["pop"][0]:
+                self.worst["pop"] = (a_max, t - h)
+            root = horizontal_speeds(arr[:, self.joints.root], h)
+            if 0.5 * (root[0] + root[1]) < SLOW_ROOT_M_S:
+                self._slow_acc.add_many(acc)
+            k = self._knees
+            knee_acc = float(np.abs(k[2] - 2.0 * k[1] + k[0]).max()) / (h * h)
+            if knee_acc > ref["max_knee_acceleration"]:
+                self.knee_snaps += 1
+                self.flags.append((t - h, "knee snap"))
+            if knee_acc > self.worst["knee_snap"][0]:
+                self.worst["knee_snap"] = (knee_acc, t - h)
+        if len(w) >= 4:
+            self._jerk.add_many(joint_jerks(np.stack(list(w)), h)[0])
+        if len(w) >= 2:
+            self._stop_step(t, w[-2], p)
+
+    def _stop_step(self, t: float, prev: np.ndarray, p: np.ndarray) -> None:
+        """A stop: the root falls below :data:`STOP_FROM_M_S` (its window opens: the highest toe is kept),
+        comes to rest below :data:`STOPPED_M_S` (the stop), and the hips settle; the stop ends when it
+        settled and the window has lasted :data:`STOP_WINDOW_S`, when the root moves again, or after 10 s."""
+        j, h = self.joints, self.h
+        root = math.hypot(p[j.root, 0] - prev[j.root, 0], p[j.root, 2] - prev[j.root, 2]) / h
+        hips = math.hypot(p[j.hips, 0] - prev[j.hips, 0], p[j.hips, 2] - prev[j.hips, 2]) / h
+        if root >= STOP_FROM_M_S:
+            if self._stop_at is not None:
+                self._end_stop(t)
+            self._peak_speed, self._window_toe = max(self._peak_speed, root), 0.0
+            return
+        if self._stop_at is None and self._peak_speed < STOP_FROM_M_S:
+            return   # not slowing down from a move
+        self._window_toe = max(self._window_toe, max(float(p[i, 1]) for i in j.toes))
+        if self._stop_at is None:
+            if root < STOPPED_M_S:
+                self._stop_at, self._settled_since, self._peak_speed = t, None, 0.0
+            return
+        if root > 2.0 * STOPPED_M_S:
+            self._end_stop(t)   # moving again
+            return
+        if hips < SETTLED_HIPS_M_S:
+            if self._settled_since is None:
+                self._settled_since = t
+        else:
+            self._settled_since = None
+        if (self._settled_time(t) is not None and t - self._stop_at >= STOP_WINDOW_S) or t - self._stop_at > 10.0:
+            self._end_stop(t)
+
+    def _settled_time(self, t: float) -> float | None:
+        s = self._settled_since
+        return None if s is None or t - s < SETTLED_HOLD_S - 1e-9 else max(s - self._stop_at, 0.0)
+
+    def _end_stop(self, t: float) -> None:
+        """Record the watched stop: its settle time, +inf when it had not settled after
+        :data:`SETTLE_LIMIT_S`, None when the root moved on before that (no verdict)."""
+        settle = self._settled_time(t)
+        if settle is None and t - self._stop_at >= SETTLE_LIMIT_S:
+            settle = math.inf
+        self.stops.append((self._stop_at, settle, self._window_toe))
+        self._stop_at, self._settled_since, self._window_toe = None, None, 0.0
+
+    def result(self, prefix: str = "quality_") -> dict:
+        minutes = (self.samples - 1) * self.h / 60.0 if self.samples > 1 else float("nan")
+        ref = self.reference
+        verdicts = [s for _, s, _ in self.stops if s is not None]      # inf: not settled in SETTLE_LIMIT_S
+        settles = [s for s in verdicts if math.isfinite(s)]
+        slow_p99, jerk_p99 = self._slow_acc.quantile(0.99), self._jerk.quantile(0.99)
+        return {
+            f"{prefix}pops_per_min": self.pops / minutes if minutes > 0 else float("nan"),
+            f"{prefix}knee_snaps_per_min": self.knee_snaps / minutes if minutes > 0 else float("nan"),
+            f"{prefix}straight_knee_fraction": self.straight_knee_samples / self.samples if self.samples
+            else float("nan"),
+            f"{prefix}acceleration_p99_slow_ratio": slow_p99 / ref["acceleration_p99_slow"],
+            f"{prefix}jerk_p99_ratio": jerk_p99 / ref["jerk_p99"],
+            f"{prefix}stops": len(self.stops),
+            f"{prefix}settle_s_median": float(np.median(verdicts)) if verdicts else float("nan"),
+            f"{prefix}settle_s_max": max(settles) if settles else float("nan"),
+            f"{prefix}stops_unsettled": sum(1 for s in verdicts if s > SETTLE_LIMIT_S),
+            f"{prefix}stop_toe_max_m": max((toe for _, _, toe in self.stops), default=float("nan")),
+            f"{prefix}stops_raised_toe": sum(1 for _, _, toe in self.stops if toe > RAISED_TOE_M),
+            f"{prefix}worst_pop_s": self.worst["pop"][1],
+            f"{prefix}worst_knee_snap_s": self.worst["knee_snap"][1],
+        }
+
+
+def clip_quality(positions, fps: float, joints: QualityJoints, reference: dict, quantiles,
+                 prefix: str = "quality_") -> dict:
+    """:class:`MotionQuality`'s figures of a whole clip of world positions (F, J, 3) at ``fps`` (a
+    recording, a take): the stream fed frame by frame, so a clip and a run are measured alike."""
+    q = MotionQuality(joints, reference, quantiles)
+    for i, p in enumerate(np.asarray(positions, np.float64)):
+        q.add(i / fps, p)
+    return q.result(prefix)

@@ -1,0 +1,132 @@
+"""Motion quality (lmm.quality): the product's figures against an independent computation on a made-up
+motion with one known pop and one known knee snap; the stream against the whole-clip kernels; the
+database's own figures; stops and settling."""
+
+import math
+
+import numpy as np
+import pytest
+
+from lmm.metrics import DurationStats
+from lmm.quality import (QualityJoints, MotionQuality, clip_quality, knee_angles_deg, reference_quality, resample)
+
+NAMES = ["Simulation", "Hips", "LeftUpLeg", "LeftLeg", "LeftFoot", "LeftToe",
+         "RightUpLeg", "RightLeg", "RightFoot", "RightToe"]
+PARENTS = [-1, 0, 1, 2, 3, 4, 1, 6, 7, 8]
+REF = {"max_acceleration": 60.0, "max_knee_acceleration": 20000.0, "min_knee_angle": 5.0,
+       "acceleration_p99_slow": 5.0, "jerk_p99": 500.0}
+
+
+def _walk(seconds=4.0, fps=60.0, speed=1.0):
+    """World positions (F, 10, 3): the root and hips moving at ``speed`` along x, each leg's knee bending
+    smoothly between 10 and 40 degrees (legs 0.4 m + 0.4 m in the x-y plane), toes 5 cm ahead of the ankles."""
+    t = np.arange(int(seconds * fps)) / fps
+    F = len(t)
+    p = np.zeros((F, 10, 3))
+    p[:, 0, 0] = speed * t
+    p[:, 1] = p[:, 0] + [0, 0.9, 0]
+    for side, (hip, knee, ankle, toe), phase in ((0, (2, 3, 4, 5), 0.0), (1, (6, 7, 8, 9), math.pi)):
+        z = 0.1 if side else -0.1
+        p[:, hip] = p[:, 1] + [0, 0, z]
+        bend = np.radians(25 + 15 * np.sin(2 * math.pi * t + phase))
+        p[:, knee] = p[:, hip] + np.stack([np.zeros(F), -0.4 * np.ones(F), np.zeros(F)], -1)
+        p[:, ankle] = p[:, knee] + 0.4 * np.stack([np.sin(bend), -np.cos(bend), np.zeros(F)], -1)
+        p[:, toe] = p[:, ankle] + [0.05, -0.05, 0]
+    return p
+
+
+def _independent(p60, ref):
+    """The definitions written out sample by sample in plain Python (1/30 s: every other 60 fps frame)."""
+    p = p60[::2]
+    h = 1 / 30
+    legs = [(2, 3, 4), (6, 7, 8)]
+
+    def knee(q, leg):
+        a, b, c = (np.array(q[j]) for j in leg)
+        u, v = b - a, c - b
+        return math.degrees(math.acos(max(-1.0, min(1.0, float(u @ v) / (np.linalg.norm(u) * np.linalg.norm(v))))))
+
+    pops = snaps = straight = 0
+    for i in range(len(p)):
+        if min(knee(p[i], leg) for leg in legs) < ref["min_knee_angle"]:
+            straight += 1
+        if 1 <= i < len(p) - 1:
+            a = max(float(np.linalg.norm(p[i + 1, j] - 2 * p[i, j] + p[i - 1, j])) / h ** 2 for j in range(10))
+            pops += a > ref["max_acceleration"]
+            ka = max(abs(knee(p[i + 1], leg) - 2 * knee(p[i], leg) + knee(p[i - 1], leg)) / h ** 2 for leg in legs)
+            snaps += ka > ref["max_knee_acceleration"]
+    minutes = (len(p) - 1) * h / 60
+    return pops / minutes, snaps / minutes, straight / len(p)
+
+
+def test_one_pop_and_one_knee_snap_agree_with_an_independent_computation():
+    joints = QualityJoints.of(NAMES, PARENTS)
+    smooth = _walk()
+    clean = clip_quality(smooth, 60.0, joints, REF, DurationStats)
+    assert clean["quality_pops_per_min"] == 0 and clean["quality_knee_snaps_per_min"] == 0
+    assert clean["quality_straight_knee_fraction"] == 0
+    p = smooth.copy()
+    p[60, 9] += [0.0, 0.08, 0.0]            # the right toe jumps 8 cm up for one 30 fps sample: a pop
+    p[120, 4] = p[120, 3] + (p[120, 3] - p[120, 2])   # the left leg straight for one sample: a knee snap
+    p[120, 5] = p[120, 4] + [0.05, -0.05, 0]
+    got = clip_quality(p, 60.0, joints, REF, DurationStats)
+    pops, snaps, straight = _independent(p, REF)
+    assert got["quality_pops_per_min"] == pytest.approx(pops)
+    assert got["quality_knee_snaps_per_min"] == pytest.approx(snaps)
+    assert got["quality_straight_knee_fraction"] == pytest.approx(straight)
+    minutes = (len(p[::2]) - 1) / 30 / 60
+    assert round(snaps * minutes) >= 1 and round(pops * minutes) >= 2   # the snap pops the foot too
+    assert got["quality_worst_pop_s"] in (pytest.approx(1.0, abs=0.04), pytest.approx(2.0, abs=0.04))
+    assert got["quality_worst_knee_snap_s"] == pytest.approx(2.0, abs=0.04)
+
+
+def test_figures_do_not_depend_on_the_frame_rate():
+    joints = QualityJoints.of(NAMES, PARENTS)
+    p = _walk()
+    p[120, 9] += [0.0, 0.08, 0.0]
+    a = clip_quality(p, 60.0, joints, REF, DurationStats)
+    b = clip_quality(p[::2], 30.0, joints, REF, DurationStats)
+    for k in ("quality_pops_per_min", "quality_knee_snaps_per_min", "quality_straight_knee_fraction",
+              "quality_jerk_p99_ratio"):
+        assert a[k] == pytest.approx(b[k]), k
+    # an odd rate is interpolated onto the same 1/30 s steps
+    assert len(resample(p[:121], 60.0)) == 61 and len(resample(np.zeros((49, 2, 3)), 48.0)) == 31
+
+
+def test_knee_angle_is_zero_for_a_straight_leg():
+    p = np.zeros((1, 10, 3))
+    p[0, 3, 1], p[0, 4, 1] = -0.4, -0.8
+    p[0, 7, 1], p[0, 8] = -0.4, [0.4, -0.4, 0]
+    k = knee_angles_deg(p, QualityJoints.of(NAMES, PARENTS).legs)
+    assert k[0, 0] == pytest.approx(0.0, abs=1e-6) and k[0, 1] == pytest.approx(90.0)
+
+
+def test_a_stop_settles_and_a_raised_toe_is_seen():
+    joints = QualityJoints.of(NAMES, PARENTS)
+    run = _walk(seconds=2.0, speed=2.0)
+    still = np.repeat(run[-1:], 240, axis=0)          # then 4 s standing still
+    p = np.concatenate([run, still])
+    q = MotionQuality(joints, REF, DurationStats)
+    for i, x in enumerate(p):
+        q.add(i / 60, x)
+    r = q.result()
+    assert r["quality_stops"] == 1 and r["quality_stops_unsettled"] == 0
+    assert r["quality_settle_s_median"] < 0.1
+    raised = p.copy()
+    raised[150:170, 5, 1] += 0.4                         # a toe 40 cm up while standing: a raised leg
+    q = MotionQuality(joints, REF, DurationStats)
+    for i, x in enumerate(raised):
+        q.add(i / 60, x)
+    assert q.result()["quality_stops_raised_toe"] == 1
+
+
+def test_the_databases_own_figures(db):
+    ref = reference_quality(db)
+    assert 50 < ref["max_acceleration"] < 1000 and 0 < ref["min_knee_angle"] < 20
+    assert 0 < ref["acceleration_p99_slow"] < ref["max_acceleration"] and ref["jerk_p99"] > 0
+    # measured by the stream, the database's longest range has no pop and no knee snap beyond its own maxima
+    r = int(np.argmax(db.range_stops - db.range_starts))
+    _, pos = db.global_transforms(slice(int(db.range_starts[r]), int(db.range_stops[r])))
+    got = clip_quality(pos, db.fps, QualityJoints.of_database(db), ref, DurationStats)
+    assert got["quality_pops_per_min"] == 0 and got["quality_knee_snaps_per_min"] == 0
+    assert got["quality_straight_knee_fraction"] == 0
