@@ -101,12 +101,73 @@ def test_controller_runs_and_fills_the_snapshot(dbf, nets):
                                    "projector": nets.projector.nbytes()}
 
 
-def test_without_the_debug_comparison_nothing_is_searched(dbf, nets):
+def test_without_the_debug_comparison_only_the_projected_frame_is_searched(dbf, nets):
     db, features = dbf
     ctrl = LearnedMotionMatchingController(db, features, networks=nets, compare_with_search=False)
     snaps = [ctrl.step(InputState(left_y=1.0), 1.0 / 60.0)[1] for _ in range(30)]
     assert any(s.searched for s in snaps)
-    assert all(s.projected_frame == -1 and "projected_frame_search" not in s.timings_us for s in snaps)
+    assert all("nn_search" not in s.timings_us and s.nn_frame == snaps[0].nn_frame for s in snaps)
+    assert all((s.projected_frame >= 0) == s.searched == ("projected_frame_search" in s.timings_us) for s in snaps)
+
+
+def _headless_lmm_run(db, features, nets, seconds, patch=None):
+    """``seconds`` of builtin:random:1 through a headless LMM (no debug comparison), as ``run`` steps it:
+    (metrics, snapshots, poses' global positions, per tick whether the state took a projection: the
+    base controller's jump, seen by wrapping ``_search``)."""
+    from lmm.data.inputs import open_input
+    from lmm.runner import run_headless
+
+    ctrl = LearnedMotionMatchingController(db, features, networks=nets, compare_with_search=False)
+    for name, fn in (patch or {}).items():
+        setattr(ctrl, name, fn.__get__(ctrl))
+    took, search = {}, ctrl._search
+
+    def spy(query, forced):
+        outcome = search(query, forced)
+        took[ctrl.tick + 1] = outcome.target is not None
+        return outcome
+    ctrl._search = spy
+    snaps, poses = [], []
+    metrics = run_headless(ctrl, open_input("builtin:random:1", seconds), seconds,
+                           on_step=lambda pose, snap: (snaps.append(snap), poses.append(pose.global_positions.copy())))
+    return metrics, snaps, np.array(poses), took
+
+
+def test_headless_lmm_reports_the_projected_frame_as_its_match_and_projector_jumps_as_transitions(dbf, nets):
+    """matched_frame is the last taken projection's frame advanced by the frames played since (kept in its
+    range), transitioned a taken projection that does not continue it: counted here from the snapshots'
+    projected frames and the state's jumps, without the controller's own bookkeeping."""
+    from lmm.mm import default_start_frame
+
+    db, features = dbf
+    metrics, snaps, _, took = _headless_lmm_run(db, features, nets, 20.0)
+    fps, tol = db.fps, LearnedMotionMatchingController.CONTINUATION_TOLERANCE_S * db.fps
+    frame, since = default_start_frame(db), 0   # where run_headless resets it
+    jumps = 0
+    for snap in snaps:
+        since += 1
+        if snap.searched and took[snap.tick]:
+            p = snap.projected_frame
+            cont = min(frame + round(since / 60.0 * fps), db.range_stop_of(frame) - 1)
+            jumps += db.range_index(p) != db.range_index(frame) or abs(p - cont) > tol
+            frame, since = p, 0
+        assert snap.matched_frame == min(frame + round(since / 60.0 * fps), db.range_stop_of(frame) - 1)
+    assert sum(took.values()) > jumps > 10          # not every taken projection is a jump
+    assert metrics["transitions"] == jumps == sum(s.transitioned for s in snaps)
+    assert len({s.matched_frame for s in snaps}) > 50
+    shares = [v for k, v in metrics.items() if k.startswith("tag_share_")]
+    assert any(0.0 < v < 1.0 for v in shares), shares
+
+
+def test_the_lmm_pose_does_not_read_its_matched_frame(dbf, nets):
+    """With the matched frame's search and bookkeeping replaced by nothing (every projection "nearest" to
+    frame 0, no match taken), the same 10 s gives the same poses bit for bit."""
+    db, features = dbf
+    _, snaps, poses, _ = _headless_lmm_run(db, features, nets, 10.0)
+    off = {"exact_nearest": lambda self, q, top_k=None: (0, 0.0, None), "_take_match": lambda self, frame: None}
+    _, snaps_off, poses_off, _ = _headless_lmm_run(db, features, nets, 10.0, off)
+    assert sum(s.transitioned for s in snaps) > 10 and not any(s.transitioned for s in snaps_off)
+    assert np.array_equal(poses, poses_off)
 
 
 def test_the_motion_does_not_depend_on_the_debug_comparison(dbf, nets):
