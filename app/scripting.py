@@ -28,9 +28,14 @@ class Script:
         self.keys: set[str] = set()           # keys the script holds down
         self.captures: list[str] = []         # labels to capture after this frame's panels updated
 
+    #: a script is a few hundred actions; a FIFO or /dev/zero given as one blocked or grew without limit
+    MAX_BYTES = 16 << 20
+
     @classmethod
     def load(cls, path) -> "Script":
-        data = json.loads(Path(path).read_text())
+        from lmm.data.reading import read_limited
+
+        data = json.loads(read_limited(path, cls.MAX_BYTES, "studio script").decode("utf-8"))
         return cls(data["actions"] if isinstance(data, dict) else data)
 
     def quit_when_exists(self, path) -> None:

@@ -350,10 +350,12 @@ def case_table() -> list[Case]:
         note = expect == "note"
         cases.append(Case(f"state:{cid}", "state", command, cid, what, expect, ("note: ",) if note else (),
                           "damaged cached array" if note else None))
+    for cid, command, _, expect, what, _, _ in state_cases.db_cache_cases():
+        cases.append(Case(f"state:{cid}", "state", command, cid, what, expect, ("note: ",), "building"))
     for cid, command, _, what, _ in state_cases.no_home_cases():
         cases.append(Case(f"state:{cid}", "state", command, cid, what, "accept"))
-    for cid, _, _, names, field, what in state_cases.display_cases():
-        cases.append(Case(f"state:{cid}", "state", "studio", cid, what, "reject", names, field))
+    for cid, _, _, expect, names, field, what, _ in state_cases.display_cases():  # solo: a job each
+        cases.append(Case(f"state:{cid}", "state", "studio", cid, what, expect, names, field))
     controls = [("bvh", "good/walk.bvh"), ("manifest", "good/manifest.json"), ("input", "good/input.csv"),
                 ("preset", "good/preset.json"), ("weights", "shipped/default.npz"), ("layout", "good/layout.ini"),
                 ("session", GOOD_SESSION)]
@@ -655,12 +657,12 @@ def _fill(obj, **values):
 
 def _state_entry(c: Case, tmp: Path, targets: dict, env_for, group_env: dict):
     """A state case's driver entry and job group (preparing the group's state once), or why it is skipped."""
-    derived = {row[0]: row for row in state_cases.derived_cases()}
+    derived = {row[0]: row for row in state_cases.derived_cases() + state_cases.db_cache_cases()}
     no_home = {row[0]: row for row in state_cases.no_home_cases()}
     display = {row[0]: row for row in state_cases.display_cases()}
     if c.file in derived:
         _, command, argv, _, _, damage, after = derived[c.file]
-        group = f"state-derived-{command}"
+        group = f"state-{c.file.split('-')[0]}-{command}"   # state-derived-run, state-db-run, ...
         T, O = tmp / "state" / group / "in", tmp / "state" / group / "out"
         if not T.exists():
             cache = Path(env_for(group, True)["LMM_STUDIO_CACHE"])
@@ -678,11 +680,16 @@ def _state_entry(c: Case, tmp: Path, targets: dict, env_for, group_env: dict):
                             "CORPUS_CACHE": str(home / ".cache" / "lmm-studio")}
         return {"call": "cli", "argv": argv, "watch": str(CORPUS / "good"), "no_passwd": True,
                 "after": _fill(after, H=home)}, group
-    _, variant, argv, names, _, _ = display[c.file]
+    _, variant, argv, _, names, _, _, solo = display[c.file]
     shown = (targets.get("displays") or {}).get(variant)
     if shown is None:
         return f"no {variant} display on this machine (needs Xvfb; :77 must be free)"
-    group = f"state-display-{variant}"
+    group = f"state-display-{variant}" + (f"-{_safe(c.file)}" if solo else "")
     group_env[group] = {**state_cases.display_env(variant, shown),
                         "LMM_STUDIO_CONFIG": str(tmp / "sandbox" / group / "config")}
-    return {"call": "cli", "argv": argv, "names": [n.format(display=repr(shown)) for n in names]}, group
+    F = tmp / "state" / group
+    if not F.exists():
+        F.mkdir(parents=True)
+        os.mkfifo(F / "fifo")
+    return {"call": "cli", "argv": _fill(argv, F=F), "watch": str(F),
+            "names": [n.format(display=repr(shown)) for n in names]}, group

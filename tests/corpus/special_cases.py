@@ -120,6 +120,20 @@ COLLISIONS = [
     ("ab-json-is-the-tuning", ["ab", "{T}/s.lmmsession", "--tuning", "{T}/preset.json", "--json", "{T}/preset.json",
                                "--quiet"], "preset.json"),
     ("export-gltf-out-is-the-file", ["export-gltf", "{T}/walk.bvh", "--out", "{T}/walk.bvh"], "walk.bvh"),
+    ("build-db-out-is-a-hard-link-of-the-take", ["build-db", "--manifest", "{T}/manifest.json", "--out",
+                                                 "{T}/hard.bvh", "--quiet", "--no-checks"], "hard.bvh"),
+    ("train-json-is-a-take", ["train", "decompressor", "--manifest", "{T}/manifest.json", "--out", "{T}.out/w",
+                              "--json", "{T}/walk.bvh", "--iterations", "1", "--quiet"], "walk.bvh"),
+    ("eval-json-is-the-manifest", ["eval", "--manifest", "{T}/manifest.json", "--json", "{T}/manifest.json",
+                                   "--seconds", "1", "--queries", "64"], "manifest.json"),
+    ("view-video-is-the-file", ["view", "{T}/walk.bvh", "--video", "{T}/walk.bvh"], "walk.bvh"),
+    ("coverage-json-is-the-png", ["coverage", "--manifest", "{T}/manifest.json", "--json", "{T}/c.out", "--png",
+                                  "{T}/c.out"], "c.out"),
+    ("check-data-json-is-the-png", ["check-data", "--manifest", "{T}/manifest.json", "--quiet", "--json",
+                                    "{T}/c.out", "--png", "{T}/c.out"], "c.out"),
+    ("physics-png-is-the-json", ["physics", "{T}/walk.bvh", "--json", "{T}/p.out", "--png", "{T}/p.out"], "p.out"),
+    ("input-from-json-is-the-manifest", ["input-from", "{T}/walk.bvh", "--manifest", "{T}/manifest.json", "--out",
+                                         "{T}.out/o.csv", "--json", "{T}/manifest.json"], "manifest.json"),
 ]
 
 # special files and non-ASCII numbers given as inputs: (id, argv, a word the error line must hold)
@@ -253,6 +267,7 @@ def prepare(T: Path, case_id: str) -> None:
     os.mkfifo(T / "fifo")
     (T / "null").symlink_to(os.devnull)
     os.link(T / "input.csv", T / "hard.csv")
+    os.link(T / "walk.bvh", T / "hard.bvh")
     (T / "loop").symlink_to(T / "loop")
     (T / "trainout").mkdir()
     os.mkfifo(T / "trainout" / "default.npz")

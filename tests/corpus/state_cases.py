@@ -1,5 +1,6 @@
 """Issue 36's corpus cases that need a prepared state or environment rather than a bad file argument:
-damaged derived arrays (``<database>.derived/*.npy``) of each kind, a missing home folder, and a studio
+damaged derived arrays (``<database>.derived/*.npy``) of each kind, hand-made database caches whose
+arrays disagree, a missing home folder, and a studio
 that cannot open its window (a display no X server answers at, an X server without GLX, a graphics
 driver that cannot be loaded).
 
@@ -71,6 +72,29 @@ def derived_cases() -> list[tuple]:
     return out
 
 
+#: hand-made database caches: a valid zip with the right key whose arrays disagree or whose ranges lie
+#: outside the frames (exit 70 later in the runtime): refused when opened, built again with one note
+DB_CHANGES = {
+    "range-stop-past-the-frames": lambda a, m: a.__setitem__("range_stops", a["range_stops"] + 10**6),
+    "empty-range": lambda a, m: a.__setitem__("range_stops", a["range_starts"].copy()),
+    "parent-after-child": lambda a, m: a["parents"].__setitem__(1, 5),
+    "contacts-of-another-length": lambda a, m: a.__setitem__("contacts", a["contacts"][:-3]),
+    "rotations-of-three-numbers": lambda a, m: a.__setitem__("rotations", a["rotations"][..., :3]),
+    "mirror-map-out-of-range": lambda a, m: a.__setitem__("mirror_map", a["mirror_map"] + 100),
+    "one-name-too-few": lambda a, m: m.__setitem__("names", m["names"][:-1]),
+    "fps-nan": lambda a, m: m.__setitem__("fps", float("nan")),
+    "range-names-missing": lambda a, m: m.pop("range_names"),
+    "bone-role-of-no-bone": lambda a, m: m["bone_roles"].__setitem__("hips", "NoSuchBone"),
+}
+
+
+def db_cache_cases() -> list[tuple]:
+    """(id, command, argv, expect, what, before spec, after spec) of every hand-made database cache."""
+    return [(f"db-cache-run-{change}", "run", _RUN + ["--record", f"{{O}}/db-{change}.bvh"], "note",
+             f"run on a hand-made database cache: {change}", {"db_change": change},
+             {"same": [[f"{{O}}/db-{change}.bvh", "{O}/reference.bvh"]], "database": True}) for change in DB_CHANGES]
+
+
 def prepare_derived(T: Path, O: Path, cache: Path) -> None:
     """``T``: a manifest and its take; ``cache``: the database and every derived array (a run), kept
     pristine beside the cache for :func:`before`; ``O``: the reference recording and coverage JSON."""
@@ -91,6 +115,8 @@ def prepare_derived(T: Path, O: Path, cache: Path) -> None:
     (folder,) = cache.glob("*.derived")
     shutil.rmtree(_pristine(cache), ignore_errors=True)
     shutil.copytree(folder, _pristine(cache))
+    (database,) = cache.glob("db-*.npz")
+    shutil.copyfile(database, cache.parent / "pristine.npz")
     missing = [k for k in KINDS if not list(folder.glob(f"{k}-*.npy"))]
     if missing:
         raise RuntimeError(f"the run made no derived array of kind {missing}: the kinds list is stale")
@@ -142,10 +168,29 @@ def _damaged(path: Path, damage: str) -> bytes | None:
     return None
 
 
+def _change_database(cache: Path, change: str) -> list[str]:
+    """Restore the job's pristine database cache, then write it again with ``change`` made."""
+    import numpy as np
+
+    from lmm.data import archive
+    from lmm.data.database import Database
+
+    (path,) = cache.glob("db-*.npz")
+    shutil.copyfile(cache.parent / "pristine.npz", path)
+    arrays, meta = Database.load(path, mmap=False).to_archive()
+    arrays = {k: np.array(v) for k, v in arrays.items()}
+    DB_CHANGES[change](arrays, meta)
+    archive.write(path, arrays, meta, sort_keys=False)
+    return []
+
+
 def before(spec: dict, cache: Path) -> list[str]:
-    """Restore the job's pristine derived arrays, then damage those of ``spec['kinds']``. -> problems."""
+    """Restore the job's pristine derived arrays (and database), then damage those of ``spec['kinds']``
+    (or make the database change ``spec['db_change']``). -> problems."""
     from lmm.data.derived import checksum_path, file_crc32
 
+    if "db_change" in spec:
+        return _change_database(cache, spec["db_change"])
     (folder,) = cache.glob("*.derived") or [None]
     if folder is None:
         return [f"no derived folder in {cache}"]
@@ -195,6 +240,14 @@ def after(spec: dict, cache: Path | None, stdout: str = "") -> list[str]:
             if len(entries) != 1:
                 out.append(f"{len(entries)} {kind} arrays in the cache afterwards, expected 1")
             out += [f"{p.name} is still damaged afterwards ({why})" for p in entries if (why := damage(p))]
+    if spec.get("database") and cache is not None:   # built again: the cache opens, consistent
+        from lmm.data.database import Database
+
+        for path in cache.glob("db-*.npz"):
+            try:
+                Database.load(path, mmap=False)
+            except Exception as e:  # noqa: BLE001 - whatever it is, the cache was left bad
+                out.append(f"{path.name} does not open afterwards: {type(e).__name__}: {str(e)[:120]}")
     for pattern in spec.get("exists", []):
         if not glob.glob(pattern):
             out.append(f"nothing matches {pattern}")
@@ -234,15 +287,31 @@ _NO_GL = "lmm-studio: error: cannot create an OpenGL context on the display "
 
 
 def display_cases() -> list[tuple]:
-    """(id, display variant, argv, names, field, what): ``dead`` is :data:`DEAD_DISPLAY`; ``noglx`` an Xvfb
-    without GLX; ``nodriver`` an Xvfb with GALLIUM_DRIVER naming no driver."""
+    """(id, display variant, argv, expect, names, field, what, solo): ``dead`` is :data:`DEAD_DISPLAY`;
+    ``noglx`` an Xvfb without GLX; ``nodriver`` an Xvfb with GALLIUM_DRIVER naming no driver; ``ok`` a
+    working Xvfb, where a studio given a FIFO or a device as a file goes on without it, saying so in one
+    line (exit 0), or refuses it (exit 1). ``{F}``: a folder holding a FIFO ``fifo``."""
+    good = ["--manifest", str(GOOD / "manifest.json")]
     return [
-        ("studio-dead-display", "dead", _STUDIO, (repr(DEAD_DISPLAY),), "lmm-studio: error: cannot open the display",
-         "DISPLAY=:77, no X server there (glfwSetWindowPos assertion, exit 134)"),
-        ("studio-display-without-glx", "noglx", _STUDIO, ("{display}",), (_NO_GL, "glXChooseFBConfig failed"),
-         "an X server without GLX (abort inside GLFW)"),
-        ("studio-driver-not-loadable", "nodriver", _STUDIO, ("{display}",), (_NO_GL, "cannot create context"),
-         "GALLIUM_DRIVER naming no driver (abort inside GLFW)"),
+        ("studio-dead-display", "dead", _STUDIO, "reject", (repr(DEAD_DISPLAY),),
+         "lmm-studio: error: cannot open the display",
+         "DISPLAY=:77, no X server there (glfwSetWindowPos assertion, exit 134)", False),
+        ("studio-display-without-glx", "noglx", _STUDIO, "reject", ("{display}",),
+         (_NO_GL, "glXChooseFBConfig failed"), "an X server without GLX (abort inside GLFW)", False),
+        ("studio-driver-not-loadable", "nodriver", _STUDIO, "reject", ("{display}",),
+         (_NO_GL, "cannot create context"), "GALLIUM_DRIVER naming no driver (abort inside GLFW)", False),
+        # a studio start each (dearpygui once per process): their own drivers
+        ("studio-script-fifo", "ok", _STUDIO + good + ["--script", "{F}/fifo"], "reject", ("fifo",), None,
+         "a FIFO as --script (blocked for ever)", True),
+        ("studio-script-dev-zero", "ok", _STUDIO + good + ["--script", "/dev/zero"], "reject", ("/dev/zero",), None,
+         "/dev/zero as --script", True),
+        ("studio-input-fifo", "ok", _STUDIO + good + ["--input", "{F}/fifo"], "note", ("lmm-studio: ",), "fifo",
+         "a FIFO as --input (the dialog's FIFO froze the GUI)", True),
+        ("studio-layout-fifo", "ok", _STUDIO + good + ["--layout", "{F}/fifo"], "note", ("lmm-studio: ",), "fifo",
+         "a FIFO as --layout", True),
+        ("studio-weights-fifo", "ok", ["studio", "--frames", "1", "--no-physics", "--no-save-layout", *good,
+                                       "--weights", "{F}/fifo"], "note", ("lmm-studio: ",), "fifo",
+         "a FIFO as --weights", True),
     ]
 
 
@@ -250,12 +319,12 @@ def start_displays() -> tuple[dict, list]:
     """{variant: display or None} and the Xvfb processes to stop. ``dead`` is None when something answers
     at :77 on this machine."""
     displays = {"dead": None if Path(f"/tmp/.X11-unix/X{DEAD_DISPLAY[1:]}").exists() else DEAD_DISPLAY,
-                "noglx": None, "nodriver": None}
+                "noglx": None, "nodriver": None, "ok": None}
     procs = []
     exe = shutil.which("Xvfb")
     if exe is None:
         return displays, procs
-    for variant, extra in (("noglx", ["-extension", "GLX"]), ("nodriver", [])):
+    for variant, extra in (("noglx", ["-extension", "GLX"]), ("nodriver", []), ("ok", [])):
         read_fd, write_fd = os.pipe()
         proc = subprocess.Popen([exe, "-displayfd", str(write_fd), "-screen", "0", "800x600x24", "-nolisten", "tcp",
                                  *extra], pass_fds=(write_fd,), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
