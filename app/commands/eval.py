@@ -29,7 +29,8 @@ def add_arguments(p) -> None:
     p.add_argument("--manifest", help="dataset manifest (default: the shipped LAFAN1 locomotion set)")
     p.add_argument("--reconstruction", action="store_true",
                    help="instead: drive MM and LMM with the input derived from held-out takes and compare "
-                        "their motion with the takes (DTW rotation/position error, root path, skating)")
+                        "their motion with the takes (DTW rotation/position error, root path, skating), beside "
+                        "the error of holding each take's mean pose and of the database's nearest pose")
     p.add_argument("--heldout", help="with --reconstruction: the held-out list (default: lmm/data/heldout.json)")
     p.add_argument("--data", help="with --reconstruction: folder of the 'shared:' takes "
                                   "(default: $LMM_LAFAN1_DIR or ../shared/data/lafan1 beside the repository)")
@@ -108,7 +109,7 @@ def reconstruction(args) -> int:
     from lmm.data.outputs import check_outputs
     from lmm.factory import make_controllers
     from lmm.features import build_features
-    from lmm.reconstruction import HELDOUT_FILE, format_table, load_heldout, run_take, summarize
+    from lmm.reconstruction import HELDOUT_FILE, PoseOracle, format_table, load_heldout, run_take, summarize
     from lmm.reporting import plot_rotation_errors
     from lmm.tuning import Tuning
 
@@ -130,9 +131,10 @@ def reconstruction(args) -> int:
     for problem, _ in problems:
         print(problem, file=sys.stderr)
     results = []
+    oracle = PoseOracle(db, manifest.hips_forward_axis)   # the nearest-frame baseline's poses, built once
     for take in takes:
         t0 = time.perf_counter()
-        results.append(run_take(take, db, features, manifest, controllers))
+        results.append(run_take(take, db, features, manifest, controllers, oracle=oracle))
         print(f"{take.name} [{take.frames[0]}:{take.frames[1]}]: {time.perf_counter() - t0:.1f} s", file=sys.stderr)
     names = list(controllers)
     summary = summarize(results, names)
