@@ -685,11 +685,18 @@ def _state_entry(c: Case, tmp: Path, targets: dict, env_for, group_env: dict):
     if shown is None:
         return f"no {variant} display on this machine (needs Xvfb; :77 must be free)"
     group = f"state-display-{variant}" + (f"-{_safe(c.file)}" if solo else "")
-    group_env[group] = {**state_cases.display_env(variant, shown),
-                        "LMM_STUDIO_CONFIG": str(tmp / "sandbox" / group / "config")}
+    config = tmp / "sandbox" / group / "config"   # inside the sandbox: a file the studio writes there is stray
+    after = {}
+    saved = state_cases.SAVED_LAYOUTS.get(c.file)
+    if saved is not None:   # the user's saved layout: moved aside (outside the sandbox, checked by after)
+        config = tmp / "state" / f"{group}-config"
+        config.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(saved, config / "layout.ini")
+        after = {"same": [[str(config / "layout.ini.bad"), str(saved)]]}
+    group_env[group] = {**state_cases.display_env(variant, shown), "LMM_STUDIO_CONFIG": str(config)}
     F = tmp / "state" / group
     if not F.exists():
         F.mkdir(parents=True)
         os.mkfifo(F / "fifo")
-    return {"call": "cli", "argv": _fill(argv, F=F), "watch": str(F),
+    return {"call": "cli", "argv": _fill(argv, F=F), "watch": str(F), "after": after,
             "names": [n.format(display=repr(shown)) for n in names]}, group

@@ -289,10 +289,20 @@ _NO_GL = "lmm-studio: error: cannot create an OpenGL context on the display "
 def display_cases() -> list[tuple]:
     """(id, display variant, argv, expect, names, field, what, solo): ``dead`` is :data:`DEAD_DISPLAY`;
     ``noglx`` an Xvfb without GLX; ``nodriver`` an Xvfb with GALLIUM_DRIVER naming no driver; ``ok`` a
-    working Xvfb, where a studio given a FIFO or a device as a file goes on without it, saying so in one
-    line (exit 0), or refuses it (exit 1). ``{F}``: a folder holding a FIFO ``fifo``."""
+    working Xvfb, where a studio given a FIFO or a device as a file, or a layout ImGui would crash on,
+    goes on without it, saying so in one line (exit 0), or refuses it (exit 1). ``{F}``: a folder holding
+    a FIFO ``fifo``. The saved-layout cases (:data:`SAVED_LAYOUTS`) start with that file as the user's
+    saved layout."""
     good = ["--manifest", str(GOOD / "manifest.json")]
+    given = [(n, _STUDIO + good + ["--layout", str(CORPUS / "layout" / n)]) for n in ("table_columns_2e9.ini",
+                                                                                      "table_columns_1e8.ini")]
     return [
+        ("studio-layout-given-table-columns-2e9", "ok", given[0][1], "note", ("lmm-studio: ",), given[0][0],
+         "--layout with [Table] 2e9 columns (segfault in ImGui)", True),
+        ("studio-layout-given-table-columns-1e8", "ok", given[1][1], "note", ("lmm-studio: ",), given[1][0],
+         "--layout with [Table] 1e8 columns (3.3 GB, then a negative count saved)", True),
+        ("studio-layout-saved-table-columns-negative", "ok", _STUDIO + good, "note", ("lmm-studio: ",), "layout.ini",
+         "the user's saved layout.ini holding [Table][0xD4BD52E9,-7936] (every later start crashed or hung)", True),
         ("studio-dead-display", "dead", _STUDIO, "reject", (repr(DEAD_DISPLAY),),
          "lmm-studio: error: cannot open the display",
          "DISPLAY=:77, no X server there (glfwSetWindowPos assertion, exit 134)", False),
@@ -315,6 +325,11 @@ def display_cases() -> list[tuple]:
     ]
 
 
+#: case -> the layout file the studio finds as the user's saved one (moved aside to layout.ini.bad, with
+#: one line, the default layout used)
+SAVED_LAYOUTS = {"studio-layout-saved-table-columns-negative": CORPUS / "layout" / "table_columns_negative.ini"}
+
+
 def start_displays() -> tuple[dict, list]:
     """{variant: display or None} and the Xvfb processes to stop. ``dead`` is None when something answers
     at :77 on this machine."""
@@ -326,8 +341,10 @@ def start_displays() -> tuple[dict, list]:
         return displays, procs
     for variant, extra in (("noglx", ["-extension", "GLX"]), ("nodriver", []), ("ok", [])):
         read_fd, write_fd = os.pipe()
+        # -noreset: the server does not reset as its last client leaves (a start in that moment found no display)
         proc = subprocess.Popen([exe, "-displayfd", str(write_fd), "-screen", "0", "800x600x24", "-nolisten", "tcp",
-                                 *extra], pass_fds=(write_fd,), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                                 "-noreset", *extra], pass_fds=(write_fd,), stdout=subprocess.DEVNULL,
+                                stderr=subprocess.DEVNULL)
         os.close(write_fd)
         procs.append(proc)
         with os.fdopen(read_fd) as f:
