@@ -47,9 +47,9 @@ Sections (later issues add theirs to ``SECTIONS``):
             in ``frame_rounds`` alternating rounds of ``frame_ticks`` ticks: medians over the rounds,
             ``mm_frame_over_cpp``, ``lmm_frame_over_cpp`` (and ``..._mean_over_cpp``,
             ``..._searching_over_cpp``) the medians of the rounds' ratios; the searches and jumps of
-            each pass (``cpp_mm_frame_searches`` ...) show both did the same work (LMM jumps differ:
-            ours keeps to the idle set when the stick rests, the C++ projects); ``cpp_frame_source``
-            "measured", or why not. Without a C++ compiler one note says so and the C++ figures are None.
+            each pass (``cpp_mm_frame_searches`` ...; a jump: the pose source jumped and an
+            inertialization started) show both did the same work; ``cpp_frame_source`` "measured", or
+            why not. Without a C++ compiler one note says so and the C++ figures are None.
 
 Timings are wall-clock medians; every section also reports what it measured (counts, settings). How the
 queries and steps are collected: :mod:`app.commands.bench_runs`; the sections: :mod:`app.commands.bench_sections`.

@@ -22,7 +22,8 @@
 //   two-bone IK and a toe look-at per leg, and forward kinematics again.
 // Not included (ours does them, the demo does not): ground calibration, the root-shift counter-adjustment
 // of planted feet, swing-foot clearance, LMM's idle set (the C++ projects where ours searches the idle
-// frames), the debug snapshot, pose packing to arrays. Nothing is drawn.
+// frames), LMM's exact search for the database frame nearest each projection (ours finds the matched
+// frame for the debugger and the metrics), the debug snapshot, pose packing to arrays. Nothing is drawn.
 //
 // Input file (little-endian), written by app/commands/bench_frame_reference.py: "LMMFR1"; int32 J,
 // parents (J), leg chains (2 x hip knee foot toe); int32 N, D; float32 local positions (N x J x 3),

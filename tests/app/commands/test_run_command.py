@@ -108,8 +108,9 @@ def test_bench_json_sections(tmp_path):
             assert f[f"cpp_{name}_frame_us"] > 0 and f[f"{name}_frame_us"] > 0
             assert f[f"cpp_{name}_frame_mean_us"] > 0 and f[f"{name}_frame_over_cpp"] > 0
             assert f[f"cpp_{name}_frame_searching_us"] > 0 and f[f"{name}_frame_searching_over_cpp"] > 0
-            # both did the same work: the same searches over the same inputs
+            # both did the same work: the same searches over the same inputs, about as many jumps
             assert f[f"cpp_{name}_frame_searches"] == f[f"{name}_frame_searches"] > 0
+            assert abs(f[f"cpp_{name}_frame_jumps"] - f[f"{name}_frame_jumps"]) <= 0.25 * f[f"{name}_frame_jumps"] + 3
     assert "[search]" in r.stdout
     r = cli("bench", "--sections", "nope")
     assert r.returncode == 2 and "unknown bench section" in r.stderr
