@@ -116,6 +116,14 @@ def interrupts_held():
 PIPED_PROGRESS_S = 60.0
 
 
+def console_progress(total: int, label: str, stream=None, enabled: bool = True) -> Progress:
+    """A progress line for a phase of training: redrawn in place on a terminal, a line every
+    :data:`PIPED_PROGRESS_S` otherwise (and at the end)."""
+    stream = stream if stream is not None else sys.stderr
+    tty = bool(getattr(stream, "isatty", lambda: False)())
+    return Progress(total, label=label, stream=stream, enabled=enabled, min_interval_s=0.2 if tty else PIPED_PROGRESS_S)
+
+
 class LossLog:
     """Collects per-iteration losses, writes a CSV row of their means every ``log_every`` iterations and
     shows a progress line (redrawn in place on a terminal, one line a minute otherwise). ``verbose``
@@ -135,9 +143,7 @@ class LossLog:
         self._n = 0
         self.csv_path = Path(csv_path) if csv_path else None
         self.start = time.perf_counter()
-        tty = bool(getattr(self.stream, "isatty", lambda: False)())
-        self.progress = Progress(total, label=network, stream=self.stream, enabled=not (quiet or self.verbose),
-                                 min_interval_s=0.2 if tty else PIPED_PROGRESS_S)
+        self.progress = console_progress(total, network, self.stream, enabled=not (quiet or self.verbose))
         LossLog.latest = self
 
     def add(self, iteration: int, lr: float, terms: dict[str, float]) -> None:

@@ -117,6 +117,13 @@ def test_frame_neighbours_bound_their_block_without_changing_the_answer(data, mo
     assert max(seen) == 7 and sum(seen) == 1500
 
 
+def test_frame_neighbours_report_the_rows_done_after_each_block(data):
+    X = data.X[:1000]
+    done = []
+    assert torch.equal(frame_neighbours(X, 5, chunk=300, progress=done.append), frame_neighbours(X, 5, chunk=300))
+    assert done == [300, 600, 900, 1000]
+
+
 def test_nearest_neighbours_are_exact(data):
     X = data.X[:2000]
     q = X[:50] + 0.3 * torch.randn(50, X.shape[1])
