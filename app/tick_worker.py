@@ -6,6 +6,8 @@ from __future__ import annotations
 import queue
 import threading
 
+import numpy as np
+
 from lmm.controller import InputState
 
 from .history import Tick
@@ -64,6 +66,12 @@ class TickWorker:
         return out
 
     def _loop(self) -> None:
+        # numpy's error state is per thread: as on the GUI thread (app.commands.studio), a network given
+        # absurd weights overflows without a warning line per tick; the pose guard says it once
+        with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+            self._jobs_until_closed()
+
+    def _jobs_until_closed(self) -> None:
         while True:
             job = self._jobs.get()
             if job is None:

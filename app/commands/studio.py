@@ -123,4 +123,9 @@ def main(args: argparse.Namespace) -> int:
                          samples=args.samples, render_scale=args.render_scale, readback_3d=args.readback_3d,
                          tuning=args.tuning, tuning_preset=preset, ui_antialiasing=args.ui_antialiasing,
                          open=args.open)
-    return Studio(opts).run()
+    import numpy as np
+
+    # a network given absurd weights overflows: numpy's warnings were a few lines on every frame (490 in
+    # 60 frames); the pose guard reports it once instead (the tick worker's thread does the same)
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        return Studio(opts).run()

@@ -698,5 +698,8 @@ def _state_entry(c: Case, tmp: Path, targets: dict, env_for, group_env: dict):
     if not F.exists():
         F.mkdir(parents=True)
         os.mkfifo(F / "fifo")
+    if c.file in state_cases.ADVERSARIAL_STUDIO:
+        special_cases.make_adversarial(F, state_cases.ADVERSARIAL_STUDIO[c.file])
+        group_env[group].update(CORPUS_SANDBOX=None, LMM_STUDIO_CACHE=os.environ.get("LMM_STUDIO_CACHE"))
     return {"call": "cli", "argv": _fill(argv, F=F), "watch": str(F), "after": after,
             "names": [n.format(display=repr(shown)) for n in names]}, group

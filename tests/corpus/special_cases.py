@@ -222,10 +222,11 @@ NOTES = [(f"run-weights-{cid}", ["run", "--controller", "lmm", "--weights", "{T}
           "note: tick") for cid, _ in ADVERSARIAL_WEIGHTS]
 
 
-def _adversarial(T: Path, case_id: str) -> None:
+def make_adversarial(T: Path, name: str) -> None:
+    """``T/adversarial.npz``: the shipped weights changed as :data:`ADVERSARIAL_WEIGHTS` ``name`` says."""
     import numpy as np
 
-    change = dict(ADVERSARIAL_WEIGHTS)[case_id[len("run-weights-"):]]
+    change = dict(ADVERSARIAL_WEIGHTS)[name]
     with np.load(WEIGHTS, allow_pickle=False) as z:
         arrays = {k: z[k] for k in z.files}
     for key in arrays:
@@ -259,7 +260,7 @@ def prepare(T: Path, case_id: str) -> None:
     if "weights" in case_id or "eval" in case_id or case_id.startswith("export-onnx"):
         shutil.copyfile(WEIGHTS, T / "w.npz")
     if case_id.startswith("run-weights-") and case_id[len("run-weights-"):] in dict(ADVERSARIAL_WEIGHTS):
-        _adversarial(T, case_id)
+        make_adversarial(T, case_id[len("run-weights-"):])
     if case_id.startswith("export-onnx"):
         shutil.copyfile(WEIGHTS, T / "decompressor.onnx")
     if "compressor" in case_id:

@@ -311,6 +311,11 @@ def display_cases() -> list[tuple]:
         ("studio-driver-not-loadable", "nodriver", _STUDIO, "reject", ("{display}",),
          (_NO_GL, "cannot create context"), "GALLIUM_DRIVER naming no driver (abort inside GLFW)", False),
         # a studio start each (dearpygui once per process): their own drivers
+        *[(f"studio-weights-adversarial-{cid}", "ok", ["studio", "--frames", "30", "--no-physics", "--no-save-layout",
+                                                       "--input", "builtin:circle", "--weights", "{F}/adversarial.npz"],
+           "note", ("lmm-studio: Pose guard: tick",), "the lmm pose",
+           f"weights {cid}: their networks give NaN or runaway poses (the LMM root was [null, null, null], no "
+           f"message; then a numpy warning line per frame)", True) for cid in ADVERSARIAL_STUDIO.values()],
         ("studio-script-fifo", "ok", _STUDIO + good + ["--script", "{F}/fifo"], "reject", ("fifo",), None,
          "a FIFO as --script (blocked for ever)", True),
         ("studio-script-dev-zero", "ok", _STUDIO + good + ["--script", "/dev/zero"], "reject", ("/dev/zero",), None,
@@ -324,6 +329,11 @@ def display_cases() -> list[tuple]:
          "a FIFO as --weights", True),
     ]
 
+
+#: the shipped networks with absurd weights (special_cases.ADVERSARIAL_WEIGHTS), in the studio: on the
+#: shipped database, so these use the suite's own cache (not a private one: a cold build of it is slow)
+ADVERSARIAL_STUDIO = {f"studio-weights-adversarial-{cid}": cid for cid in ("stepper-1e4", "stepper-in-std-1e-38",
+                                                                           "decompressor-1e4", "projector-1e4")}
 
 #: case -> the layout file the studio finds as the user's saved one (moved aside to layout.ini.bad, with
 #: one line, the default layout used)
