@@ -54,8 +54,13 @@ MERGE_GAP_S = 0.2                # runs of a finding separated by less than this
 COMMON_FPS = (24.0, 25.0, 30.0, 48.0, 50.0, 60.0, 90.0, 100.0, 120.0, 200.0, 240.0, 250.0)
 HUMAN_HEIGHT_M = (1.0, 2.5)      # head height range of a standing adult
 
-KINDS = ("calibration_pose", "airborne", "contact_sliding", "speed_outlier", "turn_outlier",
-         "frame_rate", "unit_scale")
+RAISED_LEG_M = 0.25              # a toe this far above the ground ...
+RAISED_LEG_MAX_HIPS_M_S = 1.0    # ... while the hips move slower than this (not a running stride) ...
+RAISED_LEG_MIN_S = 0.15          # ... for this long is a raised leg (a gesture, a step over something)
+RAISED_ARM_MIN_HIPS_M_S = 2.0    # a hand above the head while running faster than this ...
+RAISED_ARM_MIN_S = 0.15          # ... for this long is a raised arm
+KINDS = ("calibration_pose", "airborne", "contact_sliding", "raised_leg", "raised_arm", "speed_outlier",
+         "turn_outlier", "frame_rate", "unit_scale")
 
 
 class CheckError(InputError):
@@ -98,6 +103,7 @@ class TakeSignals:
     turn_signed_deg_s: np.ndarray   # (F,) facing turn rate, smoothed, + toward +x (the coverage's sign)
     tpose: np.ndarray               # (F,) bool
     head_height_m: np.ndarray       # (F,) highest joint above the lower toe
+    hand_over_head_m: np.ndarray | None = None   # (F,) the higher hand above the head joint (None: no such joints)
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -197,7 +203,9 @@ def take_signals(global_positions: np.ndarray, global_rotations: np.ndarray | No
         lh, rh, ls, rs = (g[:, j] for j in hand)
         tpose = ((np.abs(lh[:, 1] - ls[:, 1]) < TPOSE_HAND_HEIGHT_M) & (np.abs(rh[:, 1] - rs[:, 1]) < TPOSE_HAND_HEIGHT_M)
                  & (np.linalg.norm(lh - rh, axis=-1) > TPOSE_HAND_SPAN_M))
-    return TakeSignals(fps=float(fps), ground_m=float(ground_m), toe_height_m=toe_y - ground_m,
+    head = joint_of_role(names, bones, "head")
+    over = None if None in hand[:2] or head is None else g[:, hand[:2], 1].max(axis=1) - g[:, head, 1]
+    return TakeSignals(fps=float(fps), ground_m=float(ground_m), toe_height_m=toe_y - ground_m, hand_over_head_m=over,
                        toe_speed_m_s=horizontal_speed(g[:, toes], fps), hips_speed_m_s=hips_speed,
                        turn_rate_deg_s=turn, turn_signed_deg_s=turn_signed, tpose=tpose, head_height_m=g[..., 1].max(axis=1) - toe_y.min(axis=1))
 
@@ -224,6 +232,17 @@ def find_issues(s: TakeSignals, file: str) -> list[Finding]:
     for a, b in runs(sliding, frames(SLIDE_MIN_S), 0):
         out.append(Finding(file, "contact_sliding", a, b,
                            f"a toe at ground level moves faster than {SLIDE_SPEED_M_S:.1f} m/s for {(b - a) / fps:.2f} s"))
+
+    high = s.toe_height_m.max(axis=1)
+    for a, b in runs((high > RAISED_LEG_M) & (s.hips_speed_m_s < RAISED_LEG_MAX_HIPS_M_S), frames(RAISED_LEG_MIN_S), gap):
+        out.append(Finding(file, "raised_leg", a, b,
+                           f"a toe up to {high[a:b].max() * 100:.0f} cm above the ground while the hips move slower "
+                           f"than {RAISED_LEG_MAX_HIPS_M_S:g} m/s, {(b - a) / fps:.2f} s: a gesture a stop would show"))
+    if s.hand_over_head_m is not None:
+        up = (s.hand_over_head_m > 0.0) & (s.hips_speed_m_s > RAISED_ARM_MIN_HIPS_M_S)
+        for a, b in runs(up, frames(RAISED_ARM_MIN_S), gap):
+            out.append(Finding(file, "raised_arm", a, b,
+                               f"a hand above the head while running, {(b - a) / fps:.2f} s"))
 
     for kind, signal, floor, unit in (("speed_outlier", s.hips_speed_m_s, SPEED_OUTLIER_FLOOR_M_S, "m/s"),
                                       ("turn_outlier", s.turn_rate_deg_s, TURN_OUTLIER_FLOOR_DEG_S, "deg/s")):

@@ -98,7 +98,7 @@ class DebugSnapshot:
     candidates: Candidates = LazyField()  # the last search's ranked top K (MM: searched on first read)
     searched: bool                       # a search (MM) / projection (LMM) ran this tick
     forced_search: bool                  # ... because the input changed sharply
-    transitioned: bool                   # the played frame jumped (inertialization started)
+    transitioned: bool                   # MM: the played frame jumped; LMM: a projector jump (see lmm.learned)
     best_cost: float
     # pose, ghost and contacts
     pose: Pose
@@ -113,7 +113,8 @@ class DebugSnapshot:
     nn_frame: int = -1                            # exact nearest neighbour of the same query
     nn_cost: float = float("nan")
     projected_cost: float = float("nan")          # query cost of the projector's features
-    projected_frame: int = -1                     # exact nearest database frame to the projector's features
+    projected_frame: int = -1                     # LMM, on every tick that projected: the exact nearest database
+                                                  # frame to the projector's features
                                                   # (LMM, on ticks it projected with the debug comparison on)
     matched_latent: np.ndarray | None = None      # (L,) compressor latent of the played frame (MM, when a
                                                   # latent table is attached: MotionMatchingController.set_latent_table)

@@ -6,9 +6,11 @@ in order (units: metres, seconds, m/s; costs are squared distances of normalised
 
 * ``tick``, ``time_s`` (the time at the end of the tick: ``(tick + 1) * dt``), ``controller``;
 * the input: ``left_x``, ``left_y``, ``right_x``, ``right_y``, ``walk``, ``strafe``, ``camera_azimuth``;
-* ``frame``: the database frame played (MM) or the nearest frame to what is played (LMM); ``clip`` its range's
+* ``frame``: the database frame played (MM) or the last projected frame the state jumped to, advanced by the
+  frames played since (LMM, see :mod:`lmm.learned`); ``clip`` its range's
   name, ``tags`` the range's tags joined by ``|``;
-* ``searched`` (a search / projection ran), ``forced_search``, ``transitioned`` (the played frame jumped),
+* ``searched`` (a search / projection ran), ``forced_search``, ``transitioned`` (MM: the played frame jumped; LMM: a projector
+  jump),
   ``best_cost`` (the last search's best), ``current_cost`` (the played pose against this tick's query) and
   ``cost_<channel>`` for each feature channel (``current_cost`` split by channel);
 * LMM only (else -1 / empty): ``nn_frame``, ``nn_cost`` (the exact nearest frame to the query and its cost),

@@ -156,3 +156,26 @@ def test_check_data_cli_writes_json_and_png(tmp_path, capsys):
     from PIL import Image
     assert Image.open(out_png).size[0] > 100
     assert "walk" in capsys.readouterr().out
+
+
+def test_raised_leg_while_slow_and_raised_arm_while_running_are_found():
+    """A toe 40 cm up while standing is a raised leg; the same toe height in a running stride is not; a hand
+    above the head while running is a raised arm (made-up joint paths at 30 fps)."""
+    from lmm.checks import find_issues, take_signals
+    names = ["Hips", "LeftToe", "RightToe", "LeftHand", "RightHand", "LeftArm", "RightArm", "Head"]
+    fps, F = 30.0, 240
+    g = np.zeros((F, len(names), 3))
+    g[:, 0, 1], g[:, 1:3, 1], g[:, 3:5, 1], g[:, 5:7, 1], g[:, 7, 1] = 1.0, 0.05, 1.0, 1.4, 1.6
+    g[:, 1, 2], g[:, 2, 2], g[:, 3, 2], g[:, 4, 2], g[:, 5, 2], g[:, 6, 2] = -.1, .1, -.3, .3, -.2, .2
+    g[30:45, 1, 1] = 0.45                                   # standing: the left toe up for 0.5 s
+    run = slice(120, 240)                                   # then running at 3 m/s
+    g[run, :, 0] += (np.arange(120) * 3.0 / fps)[:, None]
+    g[run, :, 0] -= g[120, 0, 0]
+    g[150:165, 2, 1] = 0.40                                 # a high stride while running: not a raised leg
+    g[190:200, 4, 1] = 1.9                                  # the right hand above the head while running
+    g[120:, :, 0] += 10.0                                   # (a jump of place between the parts: never looked at)
+    found = find_issues(take_signals(g, None, names, fps), "made-up")
+    legs = [f for f in found if f.kind == "raised_leg"]
+    arms = [f for f in found if f.kind == "raised_arm"]
+    assert [(f.start_frame, f.end_frame) for f in legs] == [(30, 45)], [f.line() for f in found]
+    assert len(arms) == 1 and abs(arms[0].start_frame - 190) <= 1 and abs(arms[0].end_frame - 200) <= 1
