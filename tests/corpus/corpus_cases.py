@@ -696,10 +696,11 @@ def _state_entry(c: Case, tmp: Path, targets: dict, env_for, group_env: dict):
     group_env[group] = {**state_cases.display_env(variant, shown), "LMM_STUDIO_CONFIG": str(config)}
     F = tmp / "state" / group
     if not F.exists():
-        F.mkdir(parents=True)
-        os.mkfifo(F / "fifo")
-    if c.file in state_cases.ADVERSARIAL_STUDIO:
-        special_cases.make_adversarial(F, state_cases.ADVERSARIAL_STUDIO[c.file])
+        state_cases.prepare_display_case(F, c.file)
+    if c.file in state_cases.SHARED_CACHE:
         group_env[group].update(CORPUS_SANDBOX=None, LMM_STUDIO_CACHE=os.environ.get("LMM_STUDIO_CACHE"))
-    return {"call": "cli", "argv": _fill(argv, F=F), "watch": str(F), "after": after,
+    generated = tmp / "generated"
+    if "{gen}" in " ".join(argv):
+        generate(generated, {a.split("{gen}/", 1)[1] for a in argv if "{gen}" in a})
+    return {"call": "cli", "argv": _fill(argv, F=F, gen=generated), "watch": str(F), "after": after,
             "names": [n.format(display=repr(shown)) for n in names]}, group

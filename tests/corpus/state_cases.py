@@ -311,6 +311,11 @@ def display_cases() -> list[tuple]:
         ("studio-driver-not-loadable", "nodriver", _STUDIO, "reject", ("{display}",),
          (_NO_GL, "cannot create context"), "GALLIUM_DRIVER naming no driver (abort inside GLFW)", False),
         # a studio start each (dearpygui once per process): their own drivers
+        ("studio-zero-offsets", "ok", _STUDIO + ["--manifest", "{F}/zero_offsets.json"], "note", ("lmm-studio: ",),
+         "offsets_all_zero.bvh", "a take with every OFFSET 0 (a raw traceback from ik.py, then paused)", True),
+        *[(f"studio-input-{name}", "ok", _STUDIO + good + ["--input", f"{{gen}}/input/{name}_1.1m_rows.csv"], "note",
+           ("lmm-studio: ",), "lines", f"an input log of 1.1 M rows ended by {sep} (2.1 GB in the studio)", True)
+          for name, sep in (("cr_only", "CR alone"), ("u2028", "U+2028"))],
         *[(f"studio-weights-adversarial-{cid}", "ok", ["studio", "--frames", "30", "--no-physics", "--no-save-layout",
                                                        "--input", "builtin:circle", "--weights", "{F}/adversarial.npz"],
            "note", ("lmm-studio: Pose guard: tick",), "the lmm pose",
@@ -334,6 +339,27 @@ def display_cases() -> list[tuple]:
 #: shipped database, so these use the suite's own cache (not a private one: a cold build of it is slow)
 ADVERSARIAL_STUDIO = {f"studio-weights-adversarial-{cid}": cid for cid in ("stepper-1e4", "stepper-in-std-1e-38",
                                                                            "decompressor-1e4", "projector-1e4")}
+
+#: the cases whose studio opens the shipped database (a fallback, or the networks' own): they use the
+#: suite's cache, not a private one (a cold build of the shipped database is slow)
+SHARED_CACHE = {"studio-zero-offsets", *ADVERSARIAL_STUDIO}
+
+
+def prepare_display_case(F: Path, cid: str) -> None:
+    """The folder ``F`` of a studio case: a FIFO, the adversarial weights or the manifest it names."""
+    import json
+
+    import special_cases
+
+    F.mkdir(parents=True, exist_ok=True)
+    os.mkfifo(F / "fifo")
+    if cid in ADVERSARIAL_STUDIO:
+        special_cases.make_adversarial(F, ADVERSARIAL_STUDIO[cid])
+    if cid == "studio-zero-offsets":
+        m = json.loads((GOOD / "manifest.json").read_text())
+        m["clips"] = [{"file": str(CORPUS / "bvh" / "offsets_all_zero.bvh")}]
+        (F / "zero_offsets.json").write_text(json.dumps(m))
+
 
 #: case -> the layout file the studio finds as the user's saved one (moved aside to layout.ini.bad, with
 #: one line, the default layout used)
