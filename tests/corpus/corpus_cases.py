@@ -699,8 +699,17 @@ def _state_entry(c: Case, tmp: Path, targets: dict, env_for, group_env: dict):
         state_cases.prepare_display_case(F, c.file)
     if c.file in state_cases.SHARED_CACHE:
         group_env[group].update(CORPUS_SANDBOX=None, LMM_STUDIO_CACHE=os.environ.get("LMM_STUDIO_CACHE"))
+    extra = {}
+    if c.file == "studio-no-home":   # the no-home environment (as state-no-home) on a working display
+        tmpdir = tmp / "sandbox" / group / "tmp"
+        tmpdir.mkdir(parents=True, exist_ok=True)
+        home = state_cases.no_home_dir(tmpdir)
+        group_env[group].update({k: None for k in state_cases.NO_HOME_UNSET}, TMPDIR=str(tmpdir),
+                                CORPUS_CACHE=str(home / ".cache" / "lmm-studio"))
+        extra = {"no_passwd": True}
+        after = {"exists": [str(home / ".cache" / "lmm-studio" / "db-*.npz")]}
     generated = tmp / "generated"
     if "{gen}" in " ".join(argv):
         generate(generated, {a.split("{gen}/", 1)[1] for a in argv if "{gen}" in a})
-    return {"call": "cli", "argv": _fill(argv, F=F, gen=generated), "watch": str(F), "after": after,
+    return {"call": "cli", "argv": _fill(argv, F=F, gen=generated), "watch": str(F), "after": after, **extra,
             "names": [n.format(display=repr(shown)) for n in names]}, group

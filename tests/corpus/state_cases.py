@@ -311,6 +311,8 @@ def display_cases() -> list[tuple]:
         ("studio-driver-not-loadable", "nodriver", _STUDIO, "reject", ("{display}",),
          (_NO_GL, "cannot create context"), "GALLIUM_DRIVER naming no driver (abort inside GLFW)", False),
         # a studio start each (dearpygui once per process): their own drivers
+        ("studio-no-home", "ok", _STUDIO + good, "accept", (), None, "no passwd entry, HOME unset: the studio "
+         "(its config and cache in the stated fallback)", True),
         ("studio-zero-offsets", "ok", _STUDIO + ["--manifest", "{F}/zero_offsets.json"], "note", ("lmm-studio: ",),
          "offsets_all_zero.bvh", "a take with every OFFSET 0 (a raw traceback from ik.py, then paused)", True),
         *[(f"studio-input-{name}", "ok", _STUDIO + good + ["--input", f"{{gen}}/input/{name}_1.1m_rows.csv"], "note",
