@@ -4,12 +4,18 @@ from __future__ import annotations
 import sys
 
 
+#: data-check warnings build-db prints by default (the rest are counted; check-data lists them all)
+LISTED_WARNINGS = 8
+
+
 def add_arguments(p) -> None:
     p.add_argument("--manifest", help="dataset manifest (JSON or TOML); default: the shipped LAFAN1 locomotion set")
     p.add_argument("--out", help="write the database .npz here instead of the cache folder")
     p.add_argument("--rebuild", action="store_true", help="ignore the cache and build again")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--no-checks", action="store_true", help="skip the data checks (see check-data)")
+    p.add_argument("--verbose", action="store_true",
+                   help=f"print every data-check warning (default: the first {LISTED_WARNINGS} and a count)")
     p.add_argument("--jobs", type=int, default=None, metavar="N",
                    help="processes that build takes side by side (default: one per core, at most 4; 1: none)")
 
@@ -82,7 +88,7 @@ def main(args) -> int:
     print(f"bones     {db.n_bones}")
     print(f"bytes     {db.pose_bytes()} ({db.pose_bytes() / 2**20:.1f} MiB pose data)")
     if checks is not None:
-        _print_warnings(checks)
+        _print_warnings(checks, every=args.verbose)
     from lmm.data_fit import fit_warnings
     from lmm.tuning import Tuning
 
@@ -203,6 +209,12 @@ def _start_checks(manifest_path, jobs: int):
     return result
 
 
-def _print_warnings(checks) -> None:
-    for line in checks():
+def _print_warnings(checks, every: bool = False) -> None:
+    """The data checks' lines on stderr: the first :data:`LISTED_WARNINGS` and how many more, or all."""
+    lines = checks()
+    shown = lines if every else lines[:LISTED_WARNINGS]
+    for line in shown:
         print(line, file=sys.stderr)
+    if len(lines) > len(shown):
+        print(f"warning: {len(lines) - len(shown)} more data-check findings inside used ranges (--verbose, or "
+              f"lmm-studio check-data --used-only --verbose, lists them)", file=sys.stderr)

@@ -72,17 +72,15 @@ LISTED_FINDINGS = 10
 
 
 def summary_text(used: list, others: list, coverage) -> str:
-    """The default output: the used-range findings (the first :data:`LISTED_FINDINGS`), a count per kind
-    of ``others``, the seconds per tag on one line and the share of speed x turn cells holding motion."""
+    """The default output: the used-range findings (the first :data:`LISTED_FINDINGS`, the rest counted
+    per kind), a count per kind of ``others``, the seconds per tag on one line and the share of speed x
+    turn cells holding motion."""
     lines = [f.line() for f in used[:LISTED_FINDINGS]]
     if len(used) > LISTED_FINDINGS:
-        lines.append(f"... {len(used) - LISTED_FINDINGS} more inside used ranges (--verbose lists them)")
+        rest = used[LISTED_FINDINGS:]
+        lines.append(f"... {len(rest)} more inside used ranges: {kind_counts(rest)} (--verbose lists them)")
     if others:
-        kinds: dict[str, int] = {}
-        for f in others:
-            kinds[f.kind] = kinds.get(f.kind, 0) + 1
-        counts = ", ".join(f"{n} {kind}" for kind, n in sorted(kinds.items(), key=lambda kv: -kv[1]))
-        lines.append(f"outside used ranges: {counts} (--verbose lists them)")
+        lines.append(f"outside used ranges: {kind_counts(others)} (--verbose lists them)")
     tags = ", ".join(f"{tag} {sec:.1f} s" for tag, sec in coverage.seconds_per_tag.items())
     lines.append(f"coverage: {coverage.seconds_total:.1f} s of source motion in used ranges (x2 when mirrored)"
                  + (f"; {tags}" if tags else ""))
@@ -93,3 +91,11 @@ def summary_text(used: list, others: list, coverage) -> str:
     lines.append(f"speed x turn rate: {int(held.sum())} of {held.size} cells hold motion{top} "
                  f"(--verbose prints the table, --png draws it)")
     return "\n".join(lines)
+
+
+def kind_counts(findings: list) -> str:
+    """``12 airborne, 3 contact_sliding``: how many findings of each kind, most first."""
+    kinds: dict[str, int] = {}
+    for f in findings:
+        kinds[f.kind] = kinds.get(f.kind, 0) + 1
+    return ", ".join(f"{n} {kind}" for kind, n in sorted(kinds.items(), key=lambda kv: -kv[1]))

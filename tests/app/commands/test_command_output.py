@@ -50,6 +50,18 @@ def test_check_data_summarises_and_verbose_lists_every_finding(capsys):
     assert any(line.startswith("seconds by root speed") for line in every)
 
 
+def test_build_db_prints_a_few_data_check_warnings_and_verbose_all_of_them(capsys):
+    from app.commands.build_db import LISTED_WARNINGS
+
+    used = int(lines_of(capsys, "check-data", "--quiet")[-1].split(", ")[1].split()[0])
+    findings = lambda lines: [line for line in lines if re.match(r"warning: \S+: \w+ frames \d+-\d+ ", line)]  # noqa: E731
+    short = lines_of(capsys, "build-db")
+    assert len(findings(short)) == min(used, LISTED_WARNINGS)
+    assert any(f"warning: {used - LISTED_WARNINGS} more data-check findings" in line for line in short) == (
+        used > LISTED_WARNINGS)
+    assert len(findings(lines_of(capsys, "build-db", "--verbose"))) == used
+
+
 @pytest.mark.parametrize("argv", [
     ["build-db"],
     ["coverage", "--json", "{tmp}/coverage.json"],
