@@ -16,11 +16,14 @@ ROOT = Path(__file__).resolve().parents[3]
 needs_cxx = pytest.mark.skipif(cpp_reference.compiler() is None, reason="no C++ compiler")
 
 
-def test_a_cxx_that_is_not_there_means_no_compiler(monkeypatch):
+def test_a_cxx_that_is_not_there_means_no_compiler(monkeypatch, tmp_path):
     monkeypatch.setenv("CXX", "/nonexistent/c++")
     assert cpp_reference.compiler() is None
     with pytest.raises(RuntimeError, match="no C.. compiler"):
         cpp_reference.build(Path("/nonexistent"), frames.SOURCE)
+    monkeypatch.delenv("CXX")
+    monkeypatch.setenv("PATH", str(tmp_path))      # nothing on PATH either
+    assert cpp_reference.compiler() is None
 
 
 def test_bench_without_a_compiler_says_so_in_one_line(tmp_path):
