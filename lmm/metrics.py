@@ -318,7 +318,7 @@ class MotionMetrics:
             if dt > 0:
                 self.skating.add(self._prev_toes, toes, snap.foot_contacts, dt)
                 self.seconds += dt
-        self.quality.add(snap.time_s, pose.global_positions)
+        self.quality.add(snap.time_s, pose.global_positions, getattr(snap, "desired_velocity", None))
         self._prev_toes, self._prev_time = toes, snap.time_s
         root = pose.global_positions[0].astype(np.float64)
         err = float(np.linalg.norm(root - snap.simulation_position))

@@ -15,6 +15,10 @@ memory). The database's own figures are the yardstick:
   and shin, 0 = straight);
 * **acceleration p99 at low speed** (root slower than :data:`SLOW_ROOT_M_S`) and **jerk p99**, over
   all joints, as ratios to the database's;
+* **response**: when the desired velocity (the stick, through the speeds) changes by at least
+  :data:`STEP_M_S` in one tick (a start, a reversal, a 90-degree turn, a stop), the time until the root's
+  velocity is within 1 - :data:`STEP_REACHED` of that change from the desired velocity (the desired
+  velocity of the moment: after a reversal it keeps turning with the facing);
 * **stops**: after the root (the simulation bone) has moved at least :data:`STOP_FROM_M_S` and comes
   to rest (below :data:`STOPPED_M_S`), the **settle time** is how long until the hips stay below
   :data:`SETTLED_HIPS_M_S` for :data:`SETTLED_HOLD_S`, and the **stop toe height** the highest toe
@@ -42,6 +46,9 @@ SETTLED_HOLD_S = 0.25            # ... held this long
 STOP_WINDOW_S = 2.0              # the stop window ends this long after the root stopped (or when it moves on)
 SETTLE_LIMIT_S = 1.5             # the issue's bound, reported as a count of stops over it
 RAISED_TOE_M = 0.25              # a toe this high in a stop window is a raised leg
+STEP_M_S = 1.0                   # a change of the desired velocity this large in one tick is a step ...
+STEP_REACHED = 0.9               # ... reached when the root velocity has closed this share of it
+STEP_TIMEOUT_S = 5.0             # ... or never, if not within this
 REFERENCE_KEYS = ("max_acceleration", "max_knee_acceleration", "min_knee_angle", "acceleration_p99_slow",
                   "jerk_p99")
 
@@ -188,10 +195,22 @@ class MotionQuality:
         self.stops = []                      # (time, settle seconds or None, highest toe m)
         self.flags = deque(maxlen=256)       # the latest flagged moments: (time s, "pop" | "knee snap" | "straight knee")
         self.on_sample = None                # optional callback(time, positions) for each sample
+        self._desired = None                 # the latest desired velocity (x, z) given to add
+        self._step = None                    # (time, start velocity, target velocity) of the step being timed
+        self.responses = []                  # seconds to reach each step (inf: not within STEP_TIMEOUT_S)
 
-    def add(self, time_s: float, positions) -> None:
-        """One tick's world positions (J, 3) at ``time_s`` (increasing)."""
+    def add(self, time_s: float, positions, desired_velocity=None) -> None:
+        """One tick's world positions (J, 3) at ``time_s`` (increasing); ``desired_velocity`` (3,), when
+        given, times the response to its steps."""
         p = np.asarray(positions, np.float64)
+        if desired_velocity is not None:
+            d = (float(desired_velocity[0]), float(desired_velocity[2]))
+            old = self._desired
+            if old is not None and math.hypot(d[0] - old[0], d[1] - old[1]) >= STEP_M_S:
+                if self._step is not None and time_s - self._step[0] >= STEP_TIMEOUT_S:
+                    self.responses.append(math.inf)
+                self._step = (time_s, self._root_velocity(), d)   # a new step replaces one not reached yet
+            self._desired = d
         last = self._last_tick
         if last is None:
             self._first = time_s
@@ -243,6 +262,26 @@ class MotionQuality:
             self._jerk.add_many(joint_jerks(np.stack(list(w)), h)[0])
         if len(w) >= 2:
             self._stop_step(t, w[-2], p)
+            self._response_step(t)
+
+    def _root_velocity(self) -> tuple[float, float]:
+        w, r = self._window, self.joints.root
+        if len(w) < 2:
+            return (0.0, 0.0)
+        return ((w[-1][r, 0] - w[-2][r, 0]) / self.h, (w[-1][r, 2] - w[-2][r, 2]) / self.h)
+
+    def _response_step(self, t: float) -> None:
+        if self._step is None:
+            return
+        t0, (ax, az), (bx, bz) = self._step
+        vx, vz = self._root_velocity()
+        cx, cz = self._desired     # the desired velocity now: after a reversal or a turn it keeps turning
+        if math.hypot(vx - cx, vz - cz) <= (1.0 - STEP_REACHED) * math.hypot(bx - ax, bz - az):
+            self.responses.append(t - t0)
+            self._step = None
+        elif t - t0 > STEP_TIMEOUT_S:
+            self.responses.append(math.inf)
+            self._step = None
 
     def _stop_step(self, t: float, prev: np.ndarray, p: np.ndarray) -> None:
         """A stop: the root falls below :data:`STOP_FROM_M_S` (its window opens: the highest toe is kept),
@@ -306,6 +345,9 @@ class MotionQuality:
             f"{prefix}stops_unsettled": sum(1 for s in verdicts if s > SETTLE_LIMIT_S),
             f"{prefix}stop_toe_max_m": max((toe for _, _, toe in self.stops), default=float("nan")),
             f"{prefix}stops_raised_toe": sum(1 for _, _, toe in self.stops if toe > RAISED_TOE_M),
+            f"{prefix}steps": len(self.responses),
+            f"{prefix}response_s_median": float(np.median(self.responses)) if self.responses else float("nan"),
+            f"{prefix}response_s_max": max(self.responses) if self.responses else float("nan"),
             f"{prefix}worst_pop_s": self.worst["pop"][1],
             f"{prefix}worst_knee_snap_s": self.worst["knee_snap"][1],
         }

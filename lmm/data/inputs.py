@@ -5,7 +5,7 @@ An input log is a table of rows ``time,left_x,left_y,right_x,right_y,walk,strafe
 last row holds forever. Sticks are in [-1, 1]; ``walk``/``strafe`` are 0/1 (``true``/``false`` also read).
 
 Built-in scenarios (``builtin:NAME``) are deterministic logs for tests, evaluation and benchmarks:
-``circle``, ``zigzag``, ``stop-and-go``, ``strafe``, ``turns`` and ``random:SEED``.
+``circle``, ``zigzag``, ``stop-and-go``, ``strafe``, ``turns``, ``steps`` and ``random:SEED``.
 
 Every problem in a log raises :class:`InputLogError` (an :class:`lmm.errors.InputError`) naming the file,
 the 1-based line and the column. Accepted ranges and costs are checked before the work:
@@ -27,7 +27,7 @@ from lmm.data.stream import BufferedStreamWriter, StreamFile
 
 COLUMNS = ("time", "left_x", "left_y", "right_x", "right_y", "walk", "strafe")
 OPTIONAL_COLUMNS = ("camera_azimuth",)
-BUILTIN_SCENARIOS = ("circle", "zigzag", "stop-and-go", "strafe", "turns", "random:SEED")
+BUILTIN_SCENARIOS = ("circle", "zigzag", "stop-and-go", "strafe", "turns", "steps", "random:SEED")
 BUILTIN_RATE_HZ = 60.0
 DEFAULT_BUILTIN_SECONDS = 60.0
 _TIME_EPS = 1e-9  # a query a rounding error before a row's time still gets that row
@@ -361,6 +361,17 @@ def _turns(t):
     return lx, ly, 0.0, 0.0, walk, 0.0
 
 
+def _steps(t):
+    # responsiveness: a 16 s cycle of steps in the stick: stand 3 s, run forward 3 s, reverse (180 degrees)
+    # 3 s, turn 90 degrees 3 s, stop and stand 4 s
+    phase = t % 16.0
+    dirs = np.radians(np.array([0.0, 0.0, 180.0, 270.0, 0.0]))
+    k = np.searchsorted([3.0, 6.0, 9.0, 12.0], phase, side="right")
+    moving = (k >= 1) & (k <= 3)
+    lx, ly = _stick(dirs[k], np.where(moving, 1.0, 0.0))
+    return lx, ly, 0.0, 0.0, 0.0, 0.0
+
+
 def _random(seed: int, seconds: float) -> InputLog:
     """Random segments of 0.3-3 s: stick direction/magnitude (sometimes idle), walk and strafe flags.
 
@@ -393,7 +404,8 @@ def _random(seed: int, seconds: float) -> InputLog:
     return log
 
 
-_TABLE = {"circle": _circle, "zigzag": _zigzag, "stop-and-go": _stop_and_go, "strafe": _strafe, "turns": _turns}
+_TABLE = {"circle": _circle, "zigzag": _zigzag, "stop-and-go": _stop_and_go, "strafe": _strafe, "turns": _turns,
+          "steps": _steps}
 
 
 def builtin_names(random_seeds=(1,)) -> list[str]:

@@ -130,3 +130,32 @@ def test_the_databases_own_figures(db):
     got = clip_quality(pos, db.fps, QualityJoints.of_database(db), ref, DurationStats)
     assert got["quality_pops_per_min"] == 0 and got["quality_knee_snaps_per_min"] == 0
     assert got["quality_straight_knee_fraction"] == 0
+
+
+def test_response_time_to_a_step_of_the_desired_velocity():
+    """The root follows a step of the desired velocity from 0 to 3 m/s as 1 - exp(-t / tau): 90 % of it is
+    reached at tau ln 10 (within a 1/30 s sample)."""
+    joints = QualityJoints.of(NAMES, PARENTS)
+    tau, fps = 0.4, 60.0
+    q = MotionQuality(joints, REF, DurationStats)
+    x = 0.0
+    for i in range(int(6 * fps)):
+        t = i / fps
+        on = t >= 1.0
+        v = 3.0 * (1.0 - math.exp(-(t - 1.0) / tau)) if on else 0.0
+        x += v / fps
+        p = _walk(seconds=1 / fps, speed=0.0)[0]
+        p[:, 0] += x
+        q.add(t, p, (3.0, 0.0, 0.0) if on else (0.0, 0.0, 0.0))
+    r = q.result()
+    assert r["quality_steps"] == 1
+    assert r["quality_response_s_median"] == pytest.approx(tau * math.log(10.0), abs=1.5 / 30)
+
+
+def test_the_steps_input_stands_runs_reverses_turns_and_stops():
+    from lmm.data.inputs import builtin
+    log = builtin("steps", 32.0)
+    speeds = [math.hypot(log(t).left_x, log(t).left_y) for t in (1.0, 4.0, 7.0, 10.0, 14.0, 17.0, 20.0)]
+    assert speeds == pytest.approx([0, 1, 1, 1, 0, 0, 1])
+    fwd, back, side = log(4.0), log(7.0), log(10.0)
+    assert fwd.left_y == pytest.approx(1) and back.left_y == pytest.approx(-1) and abs(side.left_x) == pytest.approx(1)
