@@ -27,6 +27,18 @@ def kind_of(mode: int) -> str:
     return "not a regular file"
 
 
+def not_regular(path, what: str) -> str:
+    """Why ``path``, which is not a regular file, cannot be read as a ``what`` (for the one-line error):
+    ``WHAT not found`` when nothing is there, else what is there (a FIFO, a device, a folder: those said
+    "not found" too) or why it cannot be looked at."""
+    try:
+        return f"is {kind_of(os.stat(path).st_mode)}, expected a regular {what}"
+    except FileNotFoundError:
+        return f"{what} not found"
+    except OSError as e:
+        return f"cannot be opened: {e.strerror or type(e).__name__}"
+
+
 def open_regular(path, what: str = "file"):
     """``open(path, "rb")`` for a regular file only. The file is opened with ``O_NONBLOCK`` so a FIFO
     cannot block the open itself, then checked with ``fstat`` on the very descriptor that is read (no

@@ -206,16 +206,10 @@ def load(path, require=None, db_key: str | None = None, layout_dicts: list[dict]
     layout_dicts: when given (``features.layout_dicts()``), must describe the same feature layout.
     """
     path = Path(path)
-    if not path.is_file():   # a FIFO or a device said "not found"; say what is there
-        import errno
+    if not path.is_file():
+        from lmm.data.reading import not_regular
 
-        from lmm.data.reading import kind_of
-
-        try:
-            what = f"is {kind_of(path.stat().st_mode)}, expected a regular weights file"
-        except OSError as e:
-            what = "weights file not found" if e.errno == errno.ENOENT else f"cannot be opened: {e.strerror}"
-        raise WeightsError(f"{path}: {what}")
+        raise WeightsError(f"{path}: {not_regular(path, 'weights file')}")
     with archive.read(path, WeightsError, "weights file") as r:
         metadata = r.metadata(MAX_METADATA_BYTES)
         check_metadata(path, metadata)

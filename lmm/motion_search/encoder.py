@@ -171,7 +171,9 @@ def load(path) -> ConvNet:
     """Load and validate a search network file (see the module doc for what is refused)."""
     path = Path(path)
     if not path.is_file():
-        _fail(path, "search network file not found")
+        from lmm.data.reading import not_regular
+
+        _fail(path, not_regular(path, "search network file"))
     with archive.read(path, SearchWeightsError, "search network file") as r:
         if METADATA not in r:
             _fail(path, "not a search network file (no metadata record)")

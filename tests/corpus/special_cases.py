@@ -132,6 +132,9 @@ COLLISIONS = [
     ("check-data-json-is-the-png", ["check-data", "--manifest", "{T}/manifest.json", "--quiet", "--json",
                                     "{T}/c.out", "--png", "{T}/c.out"], "c.out"),
     ("physics-png-is-the-json", ["physics", "{T}/walk.bvh", "--json", "{T}/p.out", "--png", "{T}/p.out"], "p.out"),
+    ("eval-search-json-is-a-link-to-dev-null", ["eval-search", "--json", "{T}/null"], "null"),
+    ("ab-report-is-the-tuning", ["ab", "{T}/s.lmmsession", "--tuning", "{T}/preset.json", "--report",
+                                 "{T}/preset.json", "--quiet"], "preset.json"),
     ("input-from-json-is-the-manifest", ["input-from", "{T}/walk.bvh", "--manifest", "{T}/manifest.json", "--out",
                                          "{T}.out/o.csv", "--json", "{T}/manifest.json"], "manifest.json"),
 ]
@@ -203,6 +206,14 @@ SPECIAL_INPUTS = [
     ("ab-session-fifo", ["ab", "{T}/fifo", "--tuning", "{T}/preset.json", "--quiet"], "fifo"),
     ("ab-tuning-fifo", ["ab", "{T}/s.lmmsession", "--tuning", "{T}/fifo", "--quiet"], "fifo"),
     ("studio-open-fifo", ["studio", "--open", "{T}/fifo", "--frames", "1"], "fifo"),
+    ("eval-search-data-fifo", ["eval-search", "--data", "{T}/fifo"], "fifo"),
+    ("eval-search-encoder-fifo", ["eval-search", "--encoder", "{T}/fifo"], "fifo"),
+    ("eval-search-classifier-dev-zero", ["eval-search", "--classifier", "/dev/zero"], "/dev/zero"),
+    ("trace-manifest-fifo", ["trace", "{T}/s.lmmsession", "--manifest", "{T}/fifo", "--out", "{T}.out/t.csv",
+                             "--quiet"], "fifo"),
+    ("ab-manifest-fifo", ["ab", "{T}/s.lmmsession", "--tuning", "{T}/preset.json", "--manifest", "{T}/fifo",
+                          "--quiet"], "fifo"),
+    ("export-gltf-dev-zero", ["export-gltf", "/dev/zero", "--out", "{T}.out/x.glb"], "/dev/zero"),
 ]
 
 #: the cases that read a valid session ({T}/s.lmmsession, a copy of the corpus's generated one)
