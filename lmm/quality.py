@@ -20,8 +20,10 @@ memory). The database's own figures are the yardstick:
   velocity is within 1 - :data:`STEP_REACHED` of that change from the desired velocity (the desired
   velocity of the moment: after a reversal it keeps turning with the facing);
 * **stops**: after the root (the simulation bone) has moved at least :data:`STOP_FROM_M_S` and comes
-  to rest (below :data:`STOPPED_M_S`), the **settle time** is how long until the hips stay below
-  :data:`SETTLED_HIPS_M_S` for :data:`SETTLED_HOLD_S`, and the **stop toe height** the highest toe
+  to rest (below :data:`STOPPED_M_S`), the **settle time** is how long until the hips' net movement over
+  the next :data:`SETTLED_HOLD_S` is below :data:`SETTLED_HIPS_M_S` on average (the data's own idles sway at
+  4-6 cm/s from one sample to the next, so an instantaneous speed would call them unsettled), and the
+  **stop toe height** the highest toe
   while the root is below :data:`STOP_FROM_M_S` around that stop (a raised knee shows as a high toe).
 
 Ground skating (:class:`lmm.metrics.GroundSkating`) is fed the same 1/30 s samples by the metrics.
@@ -41,8 +43,8 @@ QUALITY_FPS = 30                 # the fixed time step of every figure: 1/30 s
 SLOW_ROOT_M_S = 0.5              # "at low speed": the root slower than this
 STOP_FROM_M_S = 1.0              # a stop is from at least this root speed; the stop window is below it
 STOPPED_M_S = 0.1                # the root has stopped below this
-SETTLED_HIPS_M_S = 0.05          # the hips have settled below this ...
-SETTLED_HOLD_S = 0.25            # ... held this long
+SETTLED_HIPS_M_S = 0.05          # the hips have settled when they move less than this on average ...
+SETTLED_HOLD_S = 0.5             # ... over this long (net distance / time: a standing sway cancels, a drift not)
 STOP_WINDOW_S = 2.0              # the stop window ends this long after the root stopped (or when it moves on)
 SETTLE_LIMIT_S = 1.5             # the issue's bound, reported as a count of stops over it
 RAISED_TOE_M = 0.25              # a toe this high in a stop window is a raised leg
@@ -191,7 +193,8 @@ class MotionQuality:
         self._peak_speed = 0.0
         self._stop_at = None                 # time the root stopped, while a stop is being watched
         self._window_toe = 0.0               # highest toe since the root fell below STOP_FROM_M_S
-        self._settled_since = None
+        self._settled_since = None           # start of the first quiet window after the stop
+        self._hips_track = deque(maxlen=int(round(SETTLED_HOLD_S * QUALITY_FPS)) + 1)   # (t, x, z)
         self.stops = []                      # (time, settle seconds or None, highest toe m)
         self.flags = deque(maxlen=256)       # the latest flagged moments: (time s, "pop" | "knee snap" | "straight knee")
         self.on_sample = None                # optional callback(time, positions) for each sample
@@ -289,7 +292,8 @@ class MotionQuality:
         settled and the window has lasted :data:`STOP_WINDOW_S`, when the root moves again, or after 10 s."""
         j, h = self.joints, self.h
         root = math.hypot(p[j.root, 0] - prev[j.root, 0], p[j.root, 2] - prev[j.root, 2]) / h
-        hips = math.hypot(p[j.hips, 0] - prev[j.hips, 0], p[j.hips, 2] - prev[j.hips, 2]) / h
+        track = self._hips_track
+        track.append((t, float(p[j.hips, 0]), float(p[j.hips, 2])))
         if root >= STOP_FROM_M_S:
             if self._stop_at is not None:
                 self._end_stop(t)
@@ -305,17 +309,16 @@ class MotionQuality:
         if root > 2.0 * STOPPED_M_S:
             self._end_stop(t)   # moving again
             return
-        if hips < SETTLED_HIPS_M_S:
-            if self._settled_since is None:
-                self._settled_since = t
-        else:
-            self._settled_since = None
+        t0, x0, z0 = track[0]
+        if (self._settled_since is None and len(track) == track.maxlen and t0 >= self._stop_at - 1e-9
+                and math.hypot(track[-1][1] - x0, track[-1][2] - z0) / (t - t0) < SETTLED_HIPS_M_S):
+            self._settled_since = t0
         if (self._settled_time(t) is not None and t - self._stop_at >= STOP_WINDOW_S) or t - self._stop_at > 10.0:
             self._end_stop(t)
 
     def _settled_time(self, t: float) -> float | None:
         s = self._settled_since
-        return None if s is None or t - s < SETTLED_HOLD_S - 1e-9 else max(s - self._stop_at, 0.0)
+        return None if s is None else max(s - self._stop_at, 0.0)
 
     def _end_stop(self, t: float) -> None:
         """Record the watched stop: its settle time, +inf when it had not settled after
