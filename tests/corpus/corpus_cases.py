@@ -683,7 +683,7 @@ def _state_entry(c: Case, tmp: Path, targets: dict, env_for, group_env: dict):
     _, variant, argv, _, names, _, _, solo = display[c.file]
     shown = (targets.get("displays") or {}).get(variant)
     if shown is None:
-        return f"no {variant} display on this machine (needs Xvfb; :77 must be free)"
+        return f"no {variant} display on this machine (needs Xvfb, or a free display number from :77)"
     group = f"state-display-{variant}" + (f"-{_safe(c.file)}" if solo else "")
     config = tmp / "sandbox" / group / "config"   # inside the sandbox: a file the studio writes there is stray
     after = {}
