@@ -20,6 +20,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "tests" / "corpus"))
 sys.path.insert(0, str(ROOT / "tests"))
+# the repository first: with tests/ ahead of it, tests/lmm (no __init__) was taken for the package lmm
+# under an editable install's finder, and the recording check's `from lmm.data import bvh` failed
+sys.path.insert(0, str(ROOT))
 
 import corpus_cases as cc  # noqa: E402
 from corpus_harness import run_jobs  # noqa: E402
