@@ -1,11 +1,12 @@
 """The bad-input corpus (tests/corpus/, see its README.md) against every command that reads each kind.
 
-Each case is one file (or argument, or output target) x one command, run in a driver subprocess
-(tests/corpus/driver.py; cheap cases grouped per command, runaway-prone ones alone) with a hard 30 s
-limit and a memory cap. A rejected case must: exit 1 (2 for bad arguments), print exactly one non-empty
+Each case is one file (or argument, output target, or prepared state: tests/corpus/state_cases.py) x one
+command, run in a driver subprocess (tests/corpus/driver.py; cheap cases grouped per command,
+runaway-prone ones and studio starts alone) with a hard 30 s limit and a memory cap. A rejected case must: exit 1 (2 for bad arguments), print exactly one non-empty
 stderr line that names the file (and the field, where the table gives one), print no traceback, never
 echo a referenced file's contents, write nothing outside its place, and stay under 30 s and 1 GiB of
-peak resident memory. Valid control files must work (exit 0), so a broken harness cannot pass.
+peak resident memory. Valid control files must work (exit 0), so a broken harness cannot pass; a usable
+state must give the right output (the state cases' ``after`` checks).
 """
 from __future__ import annotations
 
