@@ -308,6 +308,15 @@ def _argv(kind: str, command: str, path: str, tmp: Path, cid: str) -> dict:
     return {"call": "cli", "argv": argv}
 
 
+def _watched(call: dict, path: Path) -> list[str]:
+    """The files a file case must leave as they were: the case's file, and the manifest wrapping it."""
+    out = [str(path)]
+    argv = call.get("argv", [])
+    if "--manifest" in argv and argv[argv.index("--manifest") + 1] != str(path):
+        out.append(argv[argv.index("--manifest") + 1])
+    return out
+
+
 def _safe(s: str) -> str:
     return "".join(c if c.isalnum() or c in "-_." else "_" for c in s)
 
@@ -624,9 +633,11 @@ def build_jobs(cases: list[Case], tmp: Path, targets: dict) -> tuple[list[Job], 
         elif c.kind == "control":
             kind = c.call["kind"]
             call = _argv(kind, c.command, str(case_path(c, gen)), tmp, c.id)
+            call["watch_files"] = _watched(call, case_path(c, gen))
             group = f"control-{kind}"
         else:
             call = _argv(c.kind, c.command, str(case_path(c, gen)), tmp, c.id)
+            call["watch_files"] = _watched(call, case_path(c, gen))
             group = f"{c.kind}-{c.command}"
         entry = {"id": c.id, **call}
         sandboxed = c.kind in ("bvh", "manifest") or (c.kind == "control" and c.call.get("kind") in ("bvh", "manifest"))

@@ -134,9 +134,8 @@ def main() -> int:
                 os.dup2(capture[fd].fileno(), fd)
             rc, extra, uncaught = None, {}, None
             watched = None
-            if case.get("watch"):   # a folder whose every file must be left as it was
-                from special_cases import fingerprint
-                watched = fingerprint(Path(case["watch"]))
+            if case.get("watch") or case.get("watch_files"):   # what must be left as it was: a folder's
+                watched = _fingerprints(case)                   # every file, the case's own files
             hooks = {}
             if case.get("before"):   # the state the case reads (tests/corpus/state_cases.py)
                 from state_cases import before
@@ -170,7 +169,7 @@ def main() -> int:
                 out[fd] = f.read(OUTPUT_LIMIT).decode("utf-8", errors="replace")
                 f.close()
             if watched is not None:
-                now_seen = fingerprint(Path(case["watch"]))
+                now_seen = _fingerprints(case)
                 extra["changed"] = sorted(k for k in set(watched) | set(now_seen) if watched.get(k) != now_seen.get(k))
             if case.get("after"):    # the right output (tests/corpus/state_cases.py)
                 from state_cases import after
@@ -188,6 +187,14 @@ def main() -> int:
             if maxrss > stop_above:
                 return 3
     return 0
+
+
+def _fingerprints(case: dict) -> dict:
+    from special_cases import fingerprint, fingerprint_of
+
+    out = fingerprint(Path(case["watch"])) if case.get("watch") else {}
+    out.update({p: fingerprint_of(p) for p in case.get("watch_files", [])})
+    return out
 
 
 def _no_passwd():

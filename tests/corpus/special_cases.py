@@ -298,26 +298,36 @@ def prepare(T: Path, case_id: str) -> None:
 
 
 def fingerprint(T: Path) -> dict:
-    """Every entry under ``T``: a regular file by its content's hash, anything else by its kind (and a
-    link by its target and the kind of what it points at)."""
-    import hashlib
-    import stat
-
+    """Every entry under ``T`` by :func:`fingerprint_of` (relative paths)."""
     out = {}
     for dirpath, dirnames, filenames in os.walk(T):
         for name in filenames + [d for d in dirnames if os.path.islink(os.path.join(dirpath, d))]:
             p = os.path.join(dirpath, name)
-            rel = os.path.relpath(p, T)
-            st = os.lstat(p)
-            if stat.S_ISLNK(st.st_mode):
-                try:
-                    target_mode = stat.S_IFMT(os.stat(p).st_mode)
-                except OSError:
-                    target_mode = None
-                out[rel] = f"link -> {os.readlink(p)} ({target_mode})"
-            elif stat.S_ISREG(st.st_mode):
-                with open(p, "rb") as f:
-                    out[rel] = hashlib.sha256(f.read()).hexdigest()
-            else:
-                out[rel] = f"mode {stat.S_IFMT(st.st_mode)}"
+            out[os.path.relpath(p, T)] = fingerprint_of(p)
     return out
+
+
+def fingerprint_of(p) -> str:
+    """A regular file by its content's hash (read in pieces: a case file may be a 1 GiB sparse one),
+    anything else by its kind, a link by its target and the kind of what it points at, a missing path
+    as missing."""
+    import hashlib
+    import stat
+
+    try:
+        st = os.lstat(p)
+    except FileNotFoundError:
+        return "missing"
+    if stat.S_ISLNK(st.st_mode):
+        try:
+            target_mode = stat.S_IFMT(os.stat(p).st_mode)
+        except OSError:
+            target_mode = None
+        return f"link -> {os.readlink(p)} ({target_mode})"
+    if stat.S_ISREG(st.st_mode):
+        h = hashlib.sha256()
+        with open(p, "rb") as f:
+            for chunk in iter(lambda: f.read(1 << 20), b""):
+                h.update(chunk)
+        return h.hexdigest()
+    return f"mode {stat.S_IFMT(st.st_mode)}"
