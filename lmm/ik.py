@@ -61,15 +61,14 @@ def soft_reach(d: float, l_ab: float, l_cb: float, n_ac: float, min_knee_cos: fl
     the soft zone, then an exponential approach to the longest leg allowed, so the knee straightens
     ever more slowly instead of locking straight (the knee angle is very sensitive to the distance near
     full extension: 1 cm short of straight is about 18 degrees of knee). The longest leg has the knee bent
-    at the angle whose cosine is ``min_knee_cos`` (the data's straightest knee), or the animated leg's
-    length ``n_ac`` when that is longer; the soft zone is ``soft`` metres below it but never starts
-    before ``n_ac``, so a target where the animation puts the ankle leaves the leg as it is. C1."""
+    at the angle whose cosine is ``min_knee_cos`` (the data's straightest knee: an animated leg straighter
+    than that, from a blend, is bent to it too); the soft zone is ``soft`` metres below it but never
+    starts before the animated leg's length ``n_ac``, so a target where the animation puts the ankle
+    leaves the leg as it is (unless it is too straight). C1."""
     if soft <= 0.0 and min_knee_cos >= 1.0:
         return d
     longest = math.sqrt(l_ab * l_ab + l_cb * l_cb + 2.0 * l_ab * l_cb * min_knee_cos)
-    if n_ac > longest:
-        longest = n_ac
-    start = max(longest - soft, n_ac)
+    start = max(longest - soft, min(n_ac, longest))
     if d <= start:
         return d
     width = longest - start
@@ -150,7 +149,7 @@ def two_bone_ik(a, b, c, t, hip_rot, knee_rot, eps: float = 1e-4, min_knee_cos: 
     l_at = min(max(soft_reach(n_at, l_ab, l_cb, n_ac, min_knee_cos, soft), eps), l_ab + l_cb - eps)
     if knee is not None and l_ab > 1e-9 and l_cb > 1e-9:
         asked = knee_flexion(l_ab, l_cb, l_at)
-        bent = max(knee(asked), min(asked, math.acos(min_knee_cos)))   # never straighter than the limit
+        bent = max(knee(asked), math.acos(min_knee_cos))   # never straighter than the limit
         l_at = min(max(math.sqrt(max(l_ab * l_ab + l_cb * l_cb + 2.0 * l_ab * l_cb * math.cos(bent), 0.0)), eps),
                    l_ab + l_cb - eps)
 
@@ -453,6 +452,7 @@ def solve_legs(locks: FootLockState, global_pos, global_rot, leg_chains, targets
     through its :class:`KneeLimiter` (``max_knee_acceleration`` rad/s^2, 0: none); a leg left to the
     animation is still solved until its limiter has caught up with the animated knee."""
     solved = []
+    straightest = math.acos(min(max(min_knee_cos, -1.0), 1.0))
     for i, leg in enumerate(leg_chains):
         target, toe = targets[i], global_pos[leg[3]]
         is_locked = locks.is_locked(i)
@@ -461,7 +461,7 @@ def solve_legs(locks: FootLockState, global_pos, global_rot, leg_chains, targets
                               and abs(target[2] - toe[2]) <= 1e-6):
             hp, kp, fp = global_pos[leg[0]], global_pos[leg[1]], global_pos[leg[2]]
             shown = knee_flexion(_norm(_sub(kp, hp)), _norm(_sub(fp, kp)), _norm(_sub(fp, hp)))
-            if max_knee_acceleration <= 0.0 or limiter.settled(shown):
+            if (max_knee_acceleration <= 0.0 or limiter.settled(shown)) and shown >= straightest - 1e-6:
                 limiter.track(shown, dt)
                 continue  # free, fully blended back and the knee where the animation has it: nothing to solve
         ground = target[1] - foot_height if is_locked else None
