@@ -356,7 +356,8 @@ class CharacterController(Controller):
             targets = locks.update(
                 toe_now, toe_vel, contacts.tolist() if isinstance(contacts, np.ndarray) else contacts,
                 tun.ik_unlock_radius_m, tun.ik_blend_halflife_s, tun.ik_foot_height_m, dt, tun.ik_lift_height_m,
-                tun.ik_ground_blend_speed_m_s, tun.ik_step_height_m, shift, tun.ik_swing_clearance_m)
+                tun.ik_ground_blend_speed_m_s, tun.ik_step_height_m, shift, tun.ik_swing_clearance_m,
+                tun.ik_lock_max_speed_m_s)
             axes = self._toe_axes_floats
             if axes is None:
                 axes = self._toe_axes_floats = [tuple(a.tolist()) for a in self.toe_axes]

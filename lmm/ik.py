@@ -267,7 +267,7 @@ class FootLockState:
 
     def update(self, anim, vel, contacts, unlock_radius: float, blend_halflife: float, foot_height: float,
                dt: float, lift_height: float = 0.02, ground_blend_speed: float = 0.1, step_height: float = 0.04,
-               root_shift=None, swing_clearance: float = 0.0) -> list:
+               root_shift=None, swing_clearance: float = 0.0, lock_speed: float = math.inf) -> list:
         """:func:`foot_lock_update` in place, on plain floats: ``anim``/``vel`` two 3-tuples each,
         ``contacts`` two bools, ``root_shift`` None or two 3-sequences. Returns the two targets (3-tuples)."""
         locked, released, lowest, lock = self._locked, self._released, self._lowest, self._lock
@@ -297,7 +297,9 @@ class FootLockState:
                         off_v[i][1] += step_height * y * math.e
                     targets.append(lock[i])  # this tick the foot is still where it was locked
                     continue
-            elif c and not released[i]:
+            elif c and not released[i] and math.hypot(vel[i][0], vel[i][2]) <= lock_speed:
+                # (a toe shown moving faster than lock_speed, e.g. a transition's blend bringing a contact
+                # to a swinging foot, is not frozen at once: that is a pop; it locks once it has slowed)
                 # a contact (it began, or a transition brought one): lock where the toe is shown now
                 shown = (a[0] + off[i][0], max(a[1] + off[i][1], foot_height), a[2] + off[i][2])
                 locked[i] = True
