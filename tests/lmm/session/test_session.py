@@ -7,7 +7,6 @@ files give one line and exit 1; the trace's columns and values are the run's own
 """
 from __future__ import annotations
 
-import csv
 import json
 import os
 import signal
@@ -237,8 +236,16 @@ def test_outputs_never_overwrite_the_inputs(recorded, tmp_path, capsys):
     assert session.read_bytes() == before
 
 
-def test_trace_csv_holds_the_runs_own_snapshots(db, features, tmp_path, capsys):
-    """A session made through the API while its snapshots are kept; the trace's rows equal them."""
+def test_trace_loads_in_pandas_with_the_documented_columns_and_the_runs_own_snapshots(db, features, tmp_path,
+                                                                                    capsys):
+    """A session made through the API while its snapshots are kept: its trace loads in pandas (CSV, and parquet
+    where pyarrow is installed) with the columns lmm/session/trace.py documents, and holds the snapshots' values."""
+    import math
+    import re
+
+    import numpy as np
+    import pandas as pd
+
     from lmm.data.inputs import open_input
     from lmm.factory import make_controller
     from lmm.runner import run_headless
@@ -255,32 +262,53 @@ def test_trace_csv_holds_the_runs_own_snapshots(db, features, tmp_path, capsys):
     writer = SessionWriter(path, fps=FPS, db=db, manifest=None, controllers={"mm": controller}, tuning=tuning,
                            start={"input": "builtin:zigzag", "seconds": 4.0, "reset": {}})
     session = SessionRecorder(tuning, {"mm": controller}, [], writer)
-    seen = {}
+    seen = []                               # one entry per step, in order
 
     def keep(pose, snap):
-        seen[snap.tick] = (int(snap.matched_frame), pose.global_positions[0].astype(float).tolist(),
-                           [bool(c) for c in snap.foot_contacts], bool(snap.transitioned))
+        seen.append({"frame": int(snap.matched_frame), "root": pose.global_positions[0].astype(float).tolist(),
+                     "contacts": [bool(c) for c in snap.foot_contacts], "transitioned": bool(snap.transitioned),
+                     "searched": bool(snap.searched), "best_cost": float(snap.best_cost),
+                     "current_cost": float(snap.current_cost), "left_x": float(snap.input.left_x)})
 
     run_headless(controller, open_input("builtin:zigzag", 4.0), 4.0, dt=1.0 / FPS, on_step=keep,
                  before_step=session.before_step, after_step=session.after_step)
     session.close()
+    # the documented names, in the order the docstring first names them, are the columns (cost_<channel>: one
+    # per feature channel)
+    documented = dict.fromkeys(re.findall(r"``(\w+|cost_<channel>)``", trace.__doc__))
+    channels = [f"cost_{c}" for c in features.names]
+    expected = [c for name in documented for c in (channels if name == "cost_<channel>" else [name])]
+    assert expected == trace.columns(features.names)
     out = tmp_path / "t.csv"
     rc, text, err = cli(capsys, "trace", path, "--out", out)
     assert rc == 0, err
-    with open(out, newline="") as f:
-        rows = list(csv.DictReader(f))
-    assert list(rows[0]) == trace.columns(features.names)
-    assert len(rows) == 4 * FPS
-    ticks = sorted(seen)                    # the controller's own tick numbers, one per step in order
-    for i in (0, 1, 37, 120, len(rows) - 1):
-        frame, root, contacts, transitioned = seen[ticks[i]]
-        row = rows[i]
-        assert int(row["tick"]) == i and row["controller"] == "mm"
-        assert int(row["frame"]) == frame
-        assert [float(row[k]) for k in ("root_x", "root_y", "root_z")] == root
-        assert [row["contact_left"], row["contact_right"]] == ["1" if c else "0" for c in contacts]
-        assert row["transitioned"] == ("1" if transitioned else "0")
-        assert row["clip"] == db.range_names[int(db.range_index(frame))]
+    frames = {"csv": pd.read_csv(out)}
+    try:
+        import pyarrow  # noqa: F401
+    except ImportError:
+        pass
+    else:
+        assert cli(capsys, "trace", path, "--out", tmp_path / "t.parquet")[0] == 0
+        frames["parquet"] = pd.read_parquet(tmp_path / "t.parquet")
+    for kind, df in frames.items():
+        assert list(df.columns) == expected, kind
+        assert len(df) == len(seen) == 4 * FPS, kind
+        assert (df["tick"] == np.arange(len(df))).all() and (df["controller"] == "mm").all(), kind
+        assert np.allclose(df["time_s"], (df["tick"] + 1) / FPS, rtol=0, atol=1e-12), kind
+        # the channels split the played pose's cost (summed here in another order than the float32 total)
+        assert np.allclose(df[channels].sum(axis=1), df["current_cost"], rtol=1e-5, atol=1e-6), kind
+        assert (df["nn_frame"] == -1).all() and df["nn_cost"].isna().all(), kind      # MM: no LMM columns
+        for i in (0, 1, 37, 120, len(df) - 1):
+            want, row = seen[i], df.iloc[i]
+            assert int(row["frame"]) == want["frame"], (kind, i)
+            assert row["clip"] == db.range_names[int(db.range_index(want["frame"]))], (kind, i)
+            assert [float(row[k]) for k in ("root_x", "root_y", "root_z")] == want["root"], (kind, i)
+            assert [bool(row["contact_left"]), bool(row["contact_right"])] == want["contacts"], (kind, i)
+            assert bool(row["transitioned"]) == want["transitioned"] and bool(row["searched"]) == want["searched"]
+            assert float(row["left_x"]) == want["left_x"], (kind, i)
+            for cost in ("best_cost", "current_cost"):      # exact (CSV: repr), NaN as an empty cell
+                assert (math.isnan(row[cost]) and math.isnan(want[cost])) or float(row[cost]) == want[cost], (kind, i)
+    assert any(s["searched"] for s in seen) and any(s["transitioned"] for s in seen)     # the checks saw both
 
 
 def test_parquet_without_pyarrow_is_one_line(recorded, tmp_path, capsys):
