@@ -5,7 +5,9 @@ studio shows them instead of its live ones, paused, with the timeline covering t
 :class:`SessionHistory` stands in for the rewind history the panels read: asking for any tick
 re-simulates it from the nearest controller-state checkpoint (one a second, kept as the seeker passes),
 and the ticks stepped on the way fill the history's plots, so every panel shows the picked tick. Going
-live again (Home, Play) leaves the session and resets the live characters.
+live again (Home, Play) leaves the session and resets the live characters. The whole session's
+per-channel cost timeline (:mod:`lmm.session.cost_timeline`) is worked out once, by a background job
+started when the session opens: reopening waits for none of it.
 """
 from __future__ import annotations
 
@@ -24,6 +26,33 @@ class SessionHistory:
         self.last = seeker.ticks
         self.ring = History(capacity)
         self._tuning: dict | None = None
+        self._cost_job = None
+
+    def start_cost_timeline(self, jobs, db, features) -> None:
+        """Work out the session's channel cost timeline on a thread of ``jobs`` (an :class:`app.jobs.Jobs`)."""
+        from lmm.session.cost_timeline import session_cost_timeline
+
+        path = self.seeker.session.path
+        self._cost_job = jobs.submit("cost-timeline", lambda job: session_cost_timeline(
+            path, db, features, report=job.report, cancelled=lambda: job.cancelled))
+
+    @property
+    def cost_timeline(self):
+        """``(timeline, status)``: the :class:`lmm.session.cost_timeline.CostTimeline` once worked out (else
+        None) and one line while it is not ("" once it is)."""
+        job = self._cost_job
+        if job is None or job.cancelled:
+            return None, "no channel cost timeline"
+        if not job.finished:
+            return None, f"working out the whole session's channel costs: {100 * (job.progress or 0.0):.0f} %"
+        if job.error:
+            return None, f"channel costs unavailable: {job.error}"
+        return job.result, ""
+
+    def close(self) -> None:
+        """The session is left: stop the background work."""
+        if self._cost_job is not None:
+            self._cost_job.cancel()
 
     def __getattr__(self, name):             # window, times, has_series, capacity, count ...
         return getattr(self.ring, name)
@@ -106,11 +135,13 @@ def open_recorded_session(studio, path) -> bool:
     s.controllers.clear()
     s.controllers.update(seeker.controllers)         # what the panels ask the controllers is the session's
     s.history = SessionHistory(seeker, live_history.capacity)
+    s.history.start_cost_timeline(s.jobs, s.db, s.features)
     studio.playback.review(s.history)
 
     def leave() -> None:
         """Back to the live characters (reset: the live history was left behind)."""
         shown = set(s.controllers)
+        s.history.close()
         s.controllers.clear()
         s.controllers.update(live_controllers)
         s.history = studio.playback.history = live_history

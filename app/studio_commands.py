@@ -86,6 +86,8 @@ def register_studio_commands(reg: CommandRegistry, s) -> CommandRegistry:
         s.panels["tuning"].set_field(field, value, channel), args=("field", "value", "channel"))
     add("sort", "Sort the candidates", lambda key, descending=False:
         s.panels["candidates"].set_sort(key, bool(descending)), args=("key", "descending"))
+    add("search_view", "Show a tab of the Nearest Neighbour vs Projector panel (projector, channels)",
+        lambda view: s.panels["search"].show_view(view), args=("view",))
     add("click_candidate", "Preview a candidate row", lambda row: s.panels["candidates"].click_row(int(row)),
         args=("row",))
     probe = TickProbe(s)

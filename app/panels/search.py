@@ -13,6 +13,7 @@ import numpy as np
 from app.history import masks_agreement, search_masks
 
 from .base import Panel, View
+from .channel_costs import ChannelCostPlot
 from .common import COLORS, GOOD, decimate, fmt_num, seconds_axis
 
 
@@ -61,58 +62,75 @@ def _window_sums(mask: np.ndarray, window: int) -> np.ndarray:
 
 
 class SearchPanel(Panel):
-    """Nearest neighbour vs projector, with the cost timeline."""
+    """Nearest neighbour vs projector, with the cost timeline; a second tab, the per-channel cost timeline
+    (:mod:`.channel_costs`)."""
     key = "search"
-    reads = ("history", "problems", "snap_of", "tick_number")
+    reads = ("history", "problems", "snap_of", "tick_number", "tick", "inspected")
     seconds = 10.0
     tolerance = 6
+    view_name = "projector"          # the tab shown: "projector" or "channels"
 
     def __init__(self, ctx):
         super().__init__(ctx)
         self._labels: dict[int, tuple[str, str]] = {}
+        engine = ctx.engine
+        self.channel_plot = ChannelCostPlot(ctx.dpg, ctx.theme, engine.channel_names, engine.features_of, engine.dt)
+
+    def show_view(self, name: str) -> None:
+        """Show the tab ``name`` ("projector": nearest neighbour vs projector; "channels": channel costs)."""
+        if name not in ("projector", "channels"):
+            raise ValueError(f"no view {name!r} in the search panel (projector, channels)")
+        self.view_name = name
+        if self.dpg.get_value("search_tabs") != f"search_tab_{name}":
+            self.dpg.set_value("search_tabs", f"search_tab_{name}")
 
     def build(self, window_kwargs: dict) -> None:
         dpg = self.dpg
         with self.window(window_kwargs):
-            dpg.add_text("", tag="nn_status")
-            with dpg.table(header_row=True, borders_innerH=True, borders_outerH=True, borders_innerV=True,
-                           row_background=True, policy=dpg.mvTable_SizingStretchProp, tag="nn_table"):
-                dpg.add_table_column(label="", init_width_or_weight=0.55)
-                dpg.add_table_column(label="exact NN", init_width_or_weight=1.0)
-                dpg.add_table_column(label="LMM projector", init_width_or_weight=1.0)
-                dpg.add_table_column(label="MM search", init_width_or_weight=1.0)
-                for key, label in (("frame", "frame"), ("clip", "clip, time"), ("cost", "query cost")):
-                    with dpg.table_row():
-                        dpg.add_text(label)
-                        for col in ("nn", "proj", "mm"):
-                            dpg.add_text("-", tag=f"nn_{col}_{key}")
-            with dpg.group(horizontal=True):
-                dpg.add_text("distance |proj - X[nn]|")
-                dpg.add_text("-", tag="nn_distance", color=(230, 230, 140))
-                dpg.add_text("  agreement")
-                dpg.add_text("-", tag="nn_agreement", color=(230, 230, 140))
-            with dpg.tooltip("nn_agreement"):
-                dpg.add_text("Share of the LMM searches in the window where the database frame nearest to the\n"
-                             "projector's output lies within the tolerance of the exact nearest neighbour.")
-            with dpg.plot(tag="cost_plot", height=-28, width=-1, no_menus=True, no_mouse_pos=True):
-                dpg.add_plot_legend(location=dpg.mvPlot_Location_North, horizontal=True, outside=True)
-                dpg.add_plot_axis(dpg.mvXAxis, tag="cost_x", label="seconds")
-                with dpg.plot_axis(dpg.mvYAxis, tag="cost_y", label="cost", auto_fit=True):
-                    z = [0.0]
-                    dpg.add_line_series(z, z, tag="cost_mm", label="MM best")
-                    dpg.add_line_series(z, z, tag="cost_nn", label="LMM exact NN")
-                    dpg.add_line_series(z, z, tag="cost_proj", label="LMM projected")
-                    dpg.add_scatter_series(z, z, tag="cost_transitions", label="MM transitions")
-                with dpg.plot_axis(dpg.mvYAxis2, tag="cost_y2", label="agreement", opposite=True):
-                    dpg.add_line_series(z, z, tag="cost_agree", label="agreement")
-                dpg.set_axis_limits("cost_y2", 0.0, 1.05)
-            with dpg.group(horizontal=True):
-                dpg.add_text("tolerance")
-                dpg.add_slider_int(tag="nn_tolerance", default_value=self.tolerance, min_value=0, max_value=60,
-                                   width=110, format="%d frames", callback=lambda s, a: setattr(self, "tolerance", int(a)))
-                dpg.add_text("window")
-                dpg.add_slider_float(tag="nn_seconds", default_value=self.seconds, min_value=2.0, max_value=20.0,
-                                     width=90, format="%.0f s", callback=lambda s, a: setattr(self, "seconds", a))
+            # the tab bar's value is the shown tab's tag
+            with dpg.tab_bar(tag="search_tabs", callback=lambda s, a: self.show_view(str(a)[len("search_tab_"):])):
+                with dpg.tab(label="NN vs projector", tag="search_tab_projector"):
+                    dpg.add_text("", tag="nn_status")
+                    with dpg.table(header_row=True, borders_innerH=True, borders_outerH=True, borders_innerV=True,
+                                   row_background=True, policy=dpg.mvTable_SizingStretchProp, tag="nn_table"):
+                        dpg.add_table_column(label="", init_width_or_weight=0.55)
+                        dpg.add_table_column(label="exact NN", init_width_or_weight=1.0)
+                        dpg.add_table_column(label="LMM projector", init_width_or_weight=1.0)
+                        dpg.add_table_column(label="MM search", init_width_or_weight=1.0)
+                        for key, label in (("frame", "frame"), ("clip", "clip, time"), ("cost", "query cost")):
+                            with dpg.table_row():
+                                dpg.add_text(label)
+                                for col in ("nn", "proj", "mm"):
+                                    dpg.add_text("-", tag=f"nn_{col}_{key}")
+                    with dpg.group(horizontal=True):
+                        dpg.add_text("distance |proj - X[nn]|")
+                        dpg.add_text("-", tag="nn_distance", color=(230, 230, 140))
+                        dpg.add_text("  agreement")
+                        dpg.add_text("-", tag="nn_agreement", color=(230, 230, 140))
+                    with dpg.tooltip("nn_agreement"):
+                        dpg.add_text("Share of the LMM searches in the window where the database frame nearest to the\n"
+                                     "projector's output lies within the tolerance of the exact nearest neighbour.")
+                    with dpg.plot(tag="cost_plot", height=-28, width=-1, no_menus=True, no_mouse_pos=True):
+                        dpg.add_plot_legend(location=dpg.mvPlot_Location_North, horizontal=True, outside=True)
+                        dpg.add_plot_axis(dpg.mvXAxis, tag="cost_x", label="seconds")
+                        with dpg.plot_axis(dpg.mvYAxis, tag="cost_y", label="cost", auto_fit=True):
+                            z = [0.0]
+                            dpg.add_line_series(z, z, tag="cost_mm", label="MM best")
+                            dpg.add_line_series(z, z, tag="cost_nn", label="LMM exact NN")
+                            dpg.add_line_series(z, z, tag="cost_proj", label="LMM projected")
+                            dpg.add_scatter_series(z, z, tag="cost_transitions", label="MM transitions")
+                        with dpg.plot_axis(dpg.mvYAxis2, tag="cost_y2", label="agreement", opposite=True):
+                            dpg.add_line_series(z, z, tag="cost_agree", label="agreement")
+                        dpg.set_axis_limits("cost_y2", 0.0, 1.05)
+                    with dpg.group(horizontal=True):
+                        dpg.add_text("tolerance")
+                        dpg.add_slider_int(tag="nn_tolerance", default_value=self.tolerance, min_value=0, max_value=60,
+                                           width=110, format="%d frames", callback=lambda s, a: setattr(self, "tolerance", int(a)))
+                        dpg.add_text("window")
+                        dpg.add_slider_float(tag="nn_seconds", default_value=self.seconds, min_value=2.0, max_value=20.0,
+                                             width=90, format="%.0f s", callback=lambda s, a: setattr(self, "seconds", a))
+                with dpg.tab(label="channel costs", tag="search_tab_channels"):
+                    self.channel_plot.build()
         theme = self.ctx.theme
         theme.series("cost_mm", COLORS["mm"], weight=2.0)
         theme.series("cost_nn", (0.95, 0.95, 0.95), weight=1.5)
@@ -139,7 +157,7 @@ class SearchPanel(Panel):
             self._labels[frame] = cells
 
     def prepare_key(self, view: View) -> tuple:
-        return (self.seconds, self.tolerance)
+        return (self.seconds, self.tolerance, self.view_name)
 
     def prepare(self, view: View) -> dict:
         """The table's numbers, the agreement and the cost plot's series of the window ending at the
@@ -152,7 +170,8 @@ class SearchPanel(Panel):
         t = seconds_axis(n, dt)
         lmm, mm = view.snap_of("lmm"), view.snap_of("mm")
         shown = {}
-        out = {"shown": shown, "end": end, "t": t, "lmm": lmm is not None}
+        out = {"shown": shown, "end": end, "t": t, "lmm": lmm is not None,
+               "channels": self.channel_plot.prepare(view, self.view_name == "channels")}
         if lmm is not None:
             # each series is gathered once: the table, the agreement and its curve share them
             searched = h.window("lmm", "searched", end, n)
@@ -231,6 +250,7 @@ class SearchPanel(Panel):
             dpg.set_value("cost_agree", p["agree_curve"])
         cache.configure("cost_agree", show=p["lmm"])
         cache.axis_limits("cost_x", float(t[0]), 0.0)
+        self.channel_plot.update(view, p["channels"], self.view_name == "channels")
         self.last = {"tick": end, "nn_frame": shown.get("nn", (-1,))[0], "nn_cost": shown.get("nn", (0, None))[1],
                      "projected_frame": shown.get("proj", (-1,))[0],
                      "projected_cost": shown.get("proj", (0, None))[1],
@@ -238,4 +258,5 @@ class SearchPanel(Panel):
                      "distance": dist, "agreement": rate, "searches": k}
 
     def state(self) -> dict:
-        return {k: (None if isinstance(v, float) and not np.isfinite(v) else v) for k, v in self.last.items()}
+        out = {k: (None if isinstance(v, float) and not np.isfinite(v) else v) for k, v in self.last.items()}
+        return dict(out, view=self.view_name, channel_costs=self.channel_plot.last)

@@ -5,14 +5,11 @@ under a scratch tuning as :func:`lmm.session.why_not.what_if` does, marked *what
 from __future__ import annotations
 
 import json
-import os
-import subprocess
-import sys
 
 import numpy as np
 import pytest
 
-from studio_testutil import ROOT
+from studio_testutil import run_reopened
 
 pytestmark = pytest.mark.gui
 
@@ -84,16 +81,7 @@ def test_why_not_and_what_if_in_a_reopened_session(xvfb_display, studio_cache, t
               {"frame": 32, "do": "scrub", "tick": 50}, {"frame": 35, "do": "capture", "label": "early"},
               {"frame": 37, "do": "live"}, {"frame": 40, "do": "capture", "label": "live"},
               {"frame": 41, "do": "why_not", "database_frame": 5}, {"frame": 43, "do": "capture", "label": "live_ask"}]
-    # run directly, not through run_studio: its prepared-vs-GUI check fails for any reopened session
-    # (viewport and timeline from frame 1, before any action here), which is not this test's subject
-    (tmp_path / "script.json").write_text(json.dumps({"actions": script}))
-    env = dict(os.environ, DISPLAY=xvfb_display, LMM_STUDIO_CONFIG=str(tmp_path / "config"),
-               LMM_STUDIO_CACHE=str(studio_cache), PYTHONPATH=str(ROOT), LP_NUM_THREADS="0")
-    proc = subprocess.run([sys.executable, "-m", "app.cli", "--open", str(session), "--frames", "45",
-                           "--script", str(tmp_path / "script.json"), "--dump-state", str(tmp_path / "dump.json"),
-                           "--no-gamepads"], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=240)
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    data = json.loads((tmp_path / "dump.json").read_text())
+    data = run_reopened(session, tmp_path, xvfb_display, studio_cache, script, frames=45)
     assert not data["errors"], data["errors"]
     labels = data["labels"]
     for label, frame in (("excluded", excluded), ("ranked", ranked)):
