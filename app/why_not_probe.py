@@ -1,14 +1,18 @@
 """Why not that frame, and what if: the studio's questions about the search of the shown tick.
 
-Both need the inspected controller as it was just before the shown tick's search, which only a reopened
-session can give back (:meth:`lmm.session.seek.SessionSeeker.before`: re-simulated from a checkpoint, the
-seeker put back after); a live studio is asked to open a session (the studio writes one beside every
-recording). :meth:`TickProbe.why_not` explains one frame beside the chosen one and the continuing pose
-(:func:`lmm.session.why_not.explain_frame`); :meth:`TickProbe.what_if` keeps a scratch tuning (the
-session's tuning at the shown tick plus the user's edits) and re-ranks the tick's search under it
-(:func:`lmm.session.why_not.what_if`: nothing re-simulated). The Search Candidates panel shows both.
+Both need the inspected controller as it was just before the shown tick's search. A reopened session gives
+it back exactly (:meth:`lmm.session.seek.SessionSeeker.before`: re-simulated from a checkpoint, the seeker
+put back after). A paused live studio has stepped on, but what a search reads of its controller besides the
+tuning is two numbers the rewind history holds (:func:`live_before`): the frame that was playing (the tick
+before's) and how long the stick had been released (the idle set); the live tuning must be the tick's (a
+tuning change made after it is refused in one line). :meth:`TickProbe.why_not` explains one frame beside
+the chosen one and the continuing pose (:func:`lmm.session.why_not.explain_frame`); :meth:`TickProbe.what_if`
+keeps a scratch tuning (the tuning at the shown tick plus the user's edits) and re-ranks the tick's search
+under it (:func:`lmm.session.why_not.what_if`: nothing re-simulated). The Search Candidates panel shows both.
 """
 from __future__ import annotations
+
+from contextlib import contextmanager
 
 from lmm.errors import InputError
 
@@ -37,11 +41,29 @@ class TickProbe:
         return seeker, int(tick.tick) - 1, s.inspected, tick.snapshots[s.inspected]
 
     def _shown(self):
-        """:meth:`shown_any` of a controller with a ranked search (motion matching)."""
-        seeker, step, name, snap = self.shown_any()
-        if not hasattr(seeker.controllers.get(name), "tag_groups"):
+        """``(before, tuning, step, name, snap)`` of a controller with a ranked search (motion matching):
+        ``before(step)`` is a context manager giving the controllers as they were just before that step
+        (the reopened session's seeker's, or the paused live studio's: :func:`live_before`), ``tuning``
+        the tuning they searched with."""
+        s = self.studio
+        if not s.playback.reviewing:
+            if not s.playback.paused:
+                raise ProbeUnavailable("why not / what if ask a reopened session or the paused studio: pause "
+                                       "(Space), or open one (File > Open session)")
+            tick = s.playback.displayed_tick()
+            if tick is None or s.inspected not in tick.snapshots:
+                raise ProbeUnavailable("no tick is shown")
+            name, session = s.inspected, s.session
+            before, tuning, snap = (lambda step: live_before(session, step + 1, name)), session.tuning, \
+                tick.snapshots[name]
+            step, controller = int(tick.tick) - 1, session.controllers.get(name)
+        else:
+            seeker, step, name, snap = self.shown_any()
+            before, tuning, controller = (lambda step: session_before(seeker, step, name)), seeker.tuning, \
+                seeker.controllers.get(name)
+        if not hasattr(controller, "tag_groups"):
             raise ProbeUnavailable(f"{name} has no ranked search to ask (inspect the motion matching controller)")
-        return seeker, step, name, snap
+        return before, tuning, step, name, snap
 
     def why_not(self, frame: int) -> dict:
         """``{tick, controller, note, asked, chosen, continuing}``: the explanations
@@ -49,9 +71,9 @@ class TickProbe:
         and of the pose that was playing (the continuing pose, no transition cost) against the tick's query."""
         from lmm.session.why_not import explain_frame
 
-        seeker, step, name, snap = self._shown()
+        before, _, step, name, snap = self._shown()
         query = snap.query
-        with seeker.before(step) as controllers:
+        with before(step) as controllers:
             c = controllers[name]
             playing = int(c.frame)
             out = {"tick": step + 1, "controller": name, "asked": explain_frame(c, query, frame),
@@ -67,17 +89,17 @@ class TickProbe:
         from lmm.session.why_not import explain_frame
 
         try:
-            seeker, step, name, snap = self._shown()
+            before, _, step, name, snap = self._shown()
         except ProbeUnavailable:
             return None
         if not snap.searched:
             return None
-        with seeker.before(step) as controllers:
+        with before(step) as controllers:
             c = controllers[name]
             return explain_frame(c, snap.query, int(c.frame))
 
     def scratch(self, base):
-        """The scratch tuning: a copy of ``base`` (the session's at the shown tick) with the edits applied."""
+        """The scratch tuning: a copy of ``base`` (the tuning at the shown tick) with the edits applied."""
         tuning = base.copy()
         for field, value, channel in self.changes:
             tuning.set(field, value, channel)
@@ -96,11 +118,80 @@ class TickProbe:
         (``result``: a ``lmm.search_ranking.SearchResult``), and the scratch tuning's edits."""
         from lmm.session.why_not import what_if
 
-        seeker, step, name, snap = self._shown()
-        with seeker.before(step) as controllers:
-            result = what_if(controllers[name], snap.query, self.scratch(seeker.tuning))
+        before, tuning, step, name, snap = self._shown()
+        with before(step) as controllers:
+            result = what_if(controllers[name], snap.query, self.scratch(tuning))
         return {"tick": step + 1, "controller": name, "result": result, "changes": list(self.changes),
                 "searched": bool(snap.searched)}
+
+
+@contextmanager
+def session_before(seeker, step: int, name: str):
+    """:meth:`lmm.session.seek.SessionSeeker.before` ``step``, with the stick release of controller ``name``
+    counted for the step's input: the step counts it before it searches, so the search saw one tick more
+    than the state before the step holds (at the idle delay, the idle set one tick earlier)."""
+    with seeker.before(step) as controllers:
+        c = controllers[name]
+        released = not stick_pushed(seeker.input_at(step), c.tuning)
+        c.stick_released_s = c.stick_released_s + seeker.dt if released else 0.0
+        yield controllers
+
+
+@contextmanager
+def live_before(session, tick: int, name: str):
+    """For the body of a ``with``: the live controllers (an :class:`app.session.Session`'s, paused) with
+    ``name`` put as it was at history tick ``tick``'s search: playing the frame the tick before played,
+    the stick released as long as the history's inputs say; put back as it was afterwards. Raises
+    :class:`ProbeUnavailable` when the history cannot say (the tick before has left it) or the tuning
+    changed after that tick (the controllers search with the tuning of now)."""
+    from lmm.session.checkpoint import ControllerState
+
+    history, log = session.history, session.log
+    previous = history.get(tick - 1)
+    if previous is None or name not in previous.snapshots:
+        raise ProbeUnavailable(f"tick {tick - 1}, the one before the shown tick, is not in the rewind history: "
+                               "ask a later tick")
+    step = log.tick - 1 - (session.tick - tick)      # the log's number of the step that made ``tick``
+    later = [p["field"] + (f".{p['channel']}" if p.get("channel") else "")
+             for t, kind, p in log.events if kind == "tuning" and t > step]
+    if later:
+        raise ProbeUnavailable(f"the tuning changed after tick {tick} ({', '.join(later[:3])}"
+                               f"{', ...' if len(later) > 3 else ''}): ask a tick after the change, or the session "
+                               "(a recording writes one)")
+    c = session.controllers[name]
+    state = ControllerState(c)
+    try:
+        c.frame = int(previous.snapshots[name].matched_frame)
+        c.stick_released_s = stick_released_s(history, tick, c.tuning, session.dt)
+        yield session.controllers
+    finally:
+        state.restore(c)
+
+
+def stick_released_s(history, tick: int, tuning, dt: float) -> float:
+    """A controller's ``stick_released_s`` at history tick ``tick``'s search: ``dt`` added once per tick
+    (as the controller adds it) since the left stick was last outside its deadzone, counted back through the
+    history's inputs to that tick or to the reset that started the history; exact unless the stick was
+    released before the history's oldest tick (then it is longer than the history, far past the idle delay,
+    and only that matters to a search)."""
+    released, t = 0, tick
+    while True:
+        held = history.get(t)
+        inp = None if held is None else held.extra.get("input")
+        if inp is None or stick_pushed(inp, tuning):
+            break
+        released, t = released + 1, t - 1
+    seconds = 0.0
+    for _ in range(released):
+        seconds = seconds + dt
+    return seconds
+
+
+def stick_pushed(inp, tuning) -> bool:
+    """Whether the left stick of ``inp`` is outside its deadzone (a controller then counts no release)."""
+    from lmm.trajectory import stick_world
+
+    return any(stick_world(inp.left_x, inp.left_y, tuning.stick_deadzone, inp.camera_azimuth))
 
 
 def chosen_frame(snap) -> int:

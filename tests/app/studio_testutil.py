@@ -81,11 +81,18 @@ class RealKeyStudio:
         return json.loads((self.tmp / "dump.json").read_text())
 
 
+
 def run_reopened(session, tmp_path, display, cache, script, frames: int, timeout: float = 240) -> dict:
     """Run the studio on ``session`` reopened (``--open``) for ``frames`` frames with the ``script`` actions
     and return its state dump (the run must exit 0). Not through the ``run_studio`` fixture: its
     prepared-vs-GUI check fails for any reopened session (viewport and timeline from frame 1), which is
     not what these runs test."""
+    return run_scripted(["--open", str(session), "--frames", str(frames)], tmp_path, display, cache, script,
+                        timeout=timeout)
+
+
+def run_scripted(args, tmp_path, display, cache, script, env_extra=None, timeout: float = 240) -> dict:
+    """Run the studio with ``args`` and the ``script`` actions in ``tmp_path``; its state dump (it must exit 0)."""
     import json
     import os
     import subprocess
@@ -94,9 +101,9 @@ def run_reopened(session, tmp_path, display, cache, script, frames: int, timeout
     tmp = Path(tmp_path)
     (tmp / "script.json").write_text(json.dumps({"actions": script}))
     env = dict(os.environ, DISPLAY=display, LMM_STUDIO_CONFIG=str(tmp / "config"), LMM_STUDIO_CACHE=str(cache),
-               PYTHONPATH=str(ROOT), LP_NUM_THREADS="0")
-    proc = subprocess.run([sys.executable, "-m", "app.cli", "--open", str(session), "--frames", str(frames),
-                           "--script", str(tmp / "script.json"), "--dump-state", str(tmp / "dump.json"),
-                           "--no-gamepads"], cwd=tmp, env=env, capture_output=True, text=True, timeout=timeout)
+               PYTHONPATH=str(ROOT), LP_NUM_THREADS="0", **(env_extra or {}))
+    proc = subprocess.run([sys.executable, "-m", "app.cli", *map(str, args), "--script", str(tmp / "script.json"),
+                           "--dump-state", str(tmp / "dump.json"), "--no-gamepads"], cwd=tmp, env=env,
+                          capture_output=True, text=True, timeout=timeout)
     assert proc.returncode == 0, proc.stderr[-3000:]
     return json.loads((tmp / "dump.json").read_text())
