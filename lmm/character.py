@@ -353,9 +353,12 @@ class CharacterController(Controller):
             # the root shift is read only for an unlocked foot near the ground: worked out per foot when read
             shift = (LazyRootShift(self._root_position_t, self._root_rotation_t, toe_now, *integrated)
                      if tun.ik_counter_adjustment else None)
+            # standing (the stick released past the idle delay), a foot still planted where the stride left
+            # it steps to the standing pose sooner: the idle's stance, not a frozen stride
+            standing = tun.ik_idle_unlock_radius_m > 0.0 and self.stick_released_s >= tun.idle_delay_s
             targets = locks.update(
                 toe_now, toe_vel, contacts.tolist() if isinstance(contacts, np.ndarray) else contacts,
-                tun.ik_unlock_radius_m, tun.ik_blend_halflife_s, tun.ik_foot_height_m, dt, tun.ik_lift_height_m,
+                min(tun.ik_unlock_radius_m, tun.ik_idle_unlock_radius_m) if standing else tun.ik_unlock_radius_m, tun.ik_blend_halflife_s, tun.ik_foot_height_m, dt, tun.ik_lift_height_m,
                 tun.ik_ground_blend_speed_m_s, tun.ik_step_height_m, shift, tun.ik_swing_clearance_m,
                 tun.ik_lock_max_speed_m_s)
             axes = self._toe_axes_floats

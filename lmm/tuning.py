@@ -243,6 +243,9 @@ class Tuning:
     ik_step_height_m: float = _f(
         0.04, "ik", 0.0, 0.2, "m", "A foot unlocked by the unlock radius (the last resort, during a contact) "
         "steps back to the animation with about this much lift instead of sliding.")
+    ik_idle_unlock_radius_m: float = _f(
+        0.08, "ik", 0.0, 0.5, "m", "Standing (the stick released longer than the idle delay), a locked foot steps to "
+        "the animation once it is this far from it, so a stop ends in the idle's stance, not a frozen stride (0: off).")
     ik_lock_max_speed_m_s: float = _f(
         1.0, "ik", 0.0, 10.0, "m/s", "A foot locks when its contact begins only once its toe moves slower than "
         "this: a transition that brings a contact to a swinging foot would otherwise freeze it mid-swing (a pop).")

@@ -360,3 +360,28 @@ def test_a_run_has_no_knee_snap_and_no_straighter_knee_than_the_data(db, feature
     acc = np.abs(np.diff(knees, 2, axis=0)).max(axis=1) * 3600.0
     assert np.quantile(acc, 0.999) <= tuning.ik_knee_max_acceleration_deg_s2 * 1.5
     assert (knees >= tuning.ik_min_knee_deg - 0.01).all()
+
+
+@pytest.mark.parametrize("radius", [0.0, None])
+def test_standing_ends_in_the_idles_stance_not_a_frozen_stride(db, features, radius):
+    """MM through builtin:steps (stand 4 s after each stop): 1.5 s and more into a standstill, the
+    straighter knee is bent like the data's idles (12-23 degrees), because a foot left planted where the
+    stride put it steps to the standing pose (ik_idle_unlock_radius_m); with that off (0) a leg stays
+    stretched to the knee floor on a tenth of those ticks."""
+    from lmm.data.inputs import open_input
+    from lmm.factory import make_controller
+    from lmm.quality import QualityJoints, knee_angles_deg
+    from lmm.runner import run_headless
+    from lmm.tuning import Tuning
+    tuning = Tuning()
+    if radius is not None:
+        tuning.ik_idle_unlock_radius_m = radius
+    c = make_controller("mm", db, features, tuning, None, debug_comparison=False)
+    standing = []
+    run_headless(c, open_input("builtin:steps", 32.0), 32.0, on_step=lambda pose, snap: standing.append(
+        pose.global_positions.astype(np.float64)) if c.stick_released_s > 1.5 else None)
+    straighter = knee_angles_deg(np.stack(standing), QualityJoints.of_database(db).legs).min(axis=1)
+    if radius is None:
+        assert np.quantile(straighter, 0.1) > 10.0
+    else:
+        assert np.quantile(straighter, 0.1) < 10.0     # the frozen stride the default prevents
