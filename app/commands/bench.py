@@ -51,15 +51,17 @@ Sections (later issues add theirs to ``SECTIONS``):
             inertialization started) show both did the same work; ``cpp_frame_source`` "measured", or
             why not. Without a C++ compiler one note says so and the C++ figures are None.
 
-Timings are wall-clock medians; every section also reports what it measured (counts, settings). How the
-queries and steps are collected: :mod:`app.commands.bench_runs`; the sections: :mod:`app.commands.bench_sections`.
+The terminal gets a summary of the headline figures (:func:`format_summary`), ``--verbose`` every figure,
+``--json PATH`` the whole nested JSON. Timings are wall-clock medians; every section also reports what it
+measured (counts, settings). How the queries and steps are collected: :mod:`app.commands.bench_runs`; the
+sections: :mod:`app.commands.bench_sections`.
 """
 from __future__ import annotations
 
 import sys
 
 from .bench_runs import collect_queries, learned_factory
-from .bench_sections import bench_frame_with_lmm, bench_memory, bench_search
+from .bench_sections import NETWORKS, bench_frame_with_lmm, bench_memory, bench_search
 
 
 def add_arguments(p) -> None:
@@ -77,6 +79,8 @@ def add_arguments(p) -> None:
                    help="ticks per pass of the whole-frame comparison with the C++ reference, 60..36000 (default 2400)")
     p.add_argument("--frame-rounds", type=number_in(1, 50, integer=True), default=5,
                    help="alternating rounds of that comparison, 1..50 (default 5)")
+    p.add_argument("--verbose", action="store_true",
+                   help="print every figure (about 90 lines), not only the headline summary")
 
 
 # name -> function(db, features, n_queries, collected) returning a dict; later issues add theirs
@@ -84,6 +88,7 @@ SECTIONS = {"search": bench_search, "frame": bench_frame_with_lmm, "memory": ben
 
 
 def format_results(results: dict) -> str:
+    """Every figure of every section, one per line (``--verbose``; about 90 lines for all sections)."""
     lines = []
     for section, values in results.items():
         lines.append(f"[{section}]")
@@ -91,6 +96,64 @@ def format_results(results: dict) -> str:
         for k, v in values.items():
             text = f"{v:.4g}" if isinstance(v, float) else str(v)
             lines.append(f"  {k.ljust(width)}  {text}")
+    return "\n".join(lines)
+
+
+def _num(v, unit: str = "") -> str:
+    """A figure as the summary shows it: 4 significant digits and its unit, "n/a" when not measured."""
+    if v is None or (isinstance(v, float) and v != v):
+        return "n/a"
+    return f"{v:.4g}{unit}"
+
+
+def _megabytes(n) -> str:
+    return "n/a" if n is None else f"{n / 1e6:.2f} MB"
+
+
+def format_summary(results: dict) -> str:
+    """The headline figures of the sections that ran, in at most about 20 lines (a terminal's worth):
+    the search percentiles and brute force against accelerated, our whole frames against the C++
+    reference's, the networks per call against C++, the memory of both controllers; then how many
+    figures there are in all and where they are (``--verbose``, ``--json PATH``)."""
+    lines = []
+    s = results.get("search")
+    if s is not None:
+        lines += [f"[search] {s['frames']} frames, {s['queries']} queries; the same best frame in "
+                  f"{s['agreement']:.1%}, the same top {s['top_k']} in {s['topk_agreement']:.1%}",
+                  f"  brute force {_num(s['bruteforce_us'], ' us')}, accelerated {_num(s['accelerated_us'], ' us')}"
+                  f" ({_num(s['speedup'], 'x')} faster)",
+                  f"  runtime call p50 / p90 / p99: {_num(s['runtime_call_p50_us'])} / "
+                  f"{_num(s['runtime_call_p90_us'])} / {_num(s['runtime_call_p99_us'], ' us')}"
+                  f" ({'compiled filter' if s['runtime_call_compiled'] else 'numpy index'})",
+                  f"  numpy index alone p50 / p90 / p99: {_num(s['runtime_call_numpy_p50_us'])} / "
+                  f"{_num(s['runtime_call_numpy_p90_us'])} / {_num(s['runtime_call_numpy_p99_us'], ' us')}"]
+    f = results.get("frame")
+    if f is not None:
+        lines += [f"[frame] controller step medians: MM {_num(f['mm_us'], ' us')} (its search "
+                  f"{_num(f.get('mm_search_in_controller_us'), ' us')}), LMM {_num(f.get('lmm_us'), ' us')}"]
+        if f.get("cpp_frame_source", "measured") == "measured" and "cpp_mm_frame_us" in f:
+            lines.append(f"  whole frame, ours / C++ ({f['cpp_flags']}, {f['frame_rounds']} round(s) of "
+                         f"{f['frame_ticks']} ticks):")
+            for name in ("mm", "lmm"):
+                lines.append(f"    {name.upper():3s} median {_num(f[f'{name}_frame_us'])} / "
+                             f"{_num(f[f'cpp_{name}_frame_us'], ' us')} = {_num(f[f'{name}_frame_over_cpp'], 'x')},"
+                             f" a tick that searched {_num(f[f'{name}_frame_searching_over_cpp'], 'x')},"
+                             f" mean {_num(f[f'{name}_frame_mean_over_cpp'], 'x')}")
+        elif "cpp_frame_source" in f:
+            lines.append(f"  whole frame against C++: {f['cpp_frame_source']}")
+        if f.get("lmm_network_cpp_source") == "measured":
+            lines.append("  networks per call, ours / C++:")
+            lines += [f"    {net:12s} {_num(f[f'lmm_network_{net}_us'])} / "
+                      f"{_num(f[f'lmm_network_{net}_cpp_us'], ' us')}"
+                      f" = {_num(f[f'lmm_network_{net}_over_cpp'], 'x')}" for net in NETWORKS]
+        elif "lmm_network_cpp_source" in f:
+            lines.append(f"  networks against C++: {f['lmm_network_cpp_source']}")
+    m = results.get("memory")
+    if m is not None:
+        lines.append(f"[memory] MM {_megabytes(m['mm_bytes'])}, LMM {_megabytes(m['lmm_bytes'])}"
+                     + (f" ({m['lmm_over_mm']:.3f} of MM)" if m.get("lmm_over_mm") is not None else ""))
+    total = sum(len(v) for v in results.values())
+    lines.append(f"({total} figures in all: --verbose prints them, --json PATH writes them)")
     return "\n".join(lines)
 
 
@@ -136,7 +199,7 @@ def main(args) -> int:
         fast = results["search"]["accelerated_us"]
         if fast > 0 and frame.get("mm_search_in_controller_us") is not None:
             frame["mm_search_in_controller_over_accelerated"] = frame["mm_search_in_controller_us"] / fast
-    print(format_results(results))
+    print(format_results(results) if args.verbose else format_summary(results))
     if args.json_path:
         from lmm.data.jsonio import write_json
         write_json(args.json_path, results)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib.util
+import json
 import re
 
 import pytest
@@ -60,6 +61,28 @@ def test_build_db_prints_a_few_data_check_warnings_and_verbose_all_of_them(capsy
     assert any(f"warning: {used - LISTED_WARNINGS} more data-check findings" in line for line in short) == (
         used > LISTED_WARNINGS)
     assert len(findings(lines_of(capsys, "build-db", "--verbose"))) == used
+
+
+def test_bench_prints_the_headline_figures_and_verbose_prints_them_all(capsys, tmp_path):
+    from app.commands.cpp_reference import compiler
+
+    short = lines_of(capsys, "bench", "--queries", "20", "--frame-ticks", "60", "--frame-rounds", "1",
+                     "--json", tmp_path / "bench.json")
+    assert len(short) <= SCREEN_LINES, "\n".join(short)
+    res = json.loads((tmp_path / "bench.json").read_text())
+    assert f"({sum(map(len, res.values()))} figures in all: --verbose prints them, --json PATH writes them)" in short
+    text = "\n".join(short)
+    s, f, m = res["search"], res["frame"], res["memory"]
+    assert f"runtime call p50 / p90 / p99: {s['runtime_call_p50_us']:.4g} / {s['runtime_call_p90_us']:.4g} / " \
+           f"{s['runtime_call_p99_us']:.4g} us" in text
+    assert f"brute force {s['bruteforce_us']:.4g} us, accelerated {s['accelerated_us']:.4g} us" in text
+    assert f"[memory] MM {m['mm_bytes'] / 1e6:.2f} MB, LMM {m['lmm_bytes'] / 1e6:.2f} MB" in text
+    if compiler():      # whole frames and networks, ours / C++ = ratio
+        assert (f"MM  median {f['mm_frame_us']:.4g} / {f['cpp_mm_frame_us']:.4g} us = "
+                f"{f['mm_frame_over_cpp']:.4g}x") in text
+        assert f"stepper      {f['lmm_network_stepper_us']:.4g} / {f['lmm_network_stepper_cpp_us']:.4g} us" in text
+    every = lines_of(capsys, "bench", "--sections", "memory", "--verbose")
+    assert every[0] == "[memory]" and [line.split()[0] for line in every[1:]] == list(m)
 
 
 @pytest.mark.parametrize("argv", [
