@@ -1,6 +1,7 @@
 """The "Search Candidates" panel: the ranked top-K candidates of the inspected controller's last search
 with per-channel costs (green = cheapest to red = dearest in each column), sortable by any column;
-clicking a row previews that database frame (the Database panel and a ghost in the 3D view)."""
+clicking a row previews that database frame (the Database panel and a ghost in the 3D view). While the ticks
+run, the rows hold still as long as the pointer is over one of them, so that the row clicked is the row seen."""
 from __future__ import annotations
 
 import numpy as np
@@ -10,6 +11,12 @@ from .common import SHORT, cost_color, fmt_num, short_channel_name
 from .search import frame_label, frame_tags
 
 MAX_ROWS = 64
+#: put before the status while the rows are held (see :meth:`CandidatesPanel._holds_rows`): at the start
+#: of the line, which a narrow panel does not cut
+HOLD_HINT = "rows held under the pointer | "
+#: frames the rows stay held after the pointer was last over one: the hover drops for a frame after a
+#: click (seen once in ten runs of 30 real clicks), and the rows must not move then
+HOLD_GRACE_FRAMES = 2
 
 
 def candidate_rows(candidates, db=None) -> list[dict]:
@@ -90,6 +97,8 @@ class CandidatesPanel(Panel):
         self._highlighted: dict = {}     # (row, column) -> the colour dearpygui has for the cell (None: none)
         self.rows: list[dict] = []
         self._rows_on_screen: list[dict] = []     # the rows of the picture a click was made on (see _on_click)
+        self._held_status: str | None = None      # the status shown while the rows are held (None: not held)
+        self._hovered_frame = -HOLD_GRACE_FRAMES - 1  # the last studio frame that found the pointer over a row
         self.columns: list[str] = []
         self.why_frame: int | None = None     # the frame asked about (refreshed when the shown tick changes)
         self.why_text = ""
@@ -159,8 +168,9 @@ class CandidatesPanel(Panel):
 
     def _on_click(self, sender, value, r):
         """A click runs two updates after the picture it was made on was set up (dearpygui takes it in
-        the next frame's drawing, its callback in the frame after), and the table re-sorts at every
-        search: the frame previewed is that of the row the user saw, not what row ``r`` holds now."""
+        the next frame's drawing, or the one after when it came during a drawing; its callback runs in
+        the frame after), and the table re-sorts at every search: the frame previewed is that of the row
+        drawn last, which is the row the user saw while the rows are held (:meth:`_holds_rows`)."""
         self.dpg.set_value(sender, False)      # a click previews; the row does not stay selected
         if 0 <= r < len(self._rows_on_screen):
             self.ctx.actions.preview_database_frame(int(self._rows_on_screen[r]["frame"]))
@@ -218,6 +228,12 @@ class CandidatesPanel(Panel):
             status += (f"\ncontinuing pose {c['frame']}: total {c['total']:.3f} = features {c['feature_cost']:.3f}"
                        f" + bias {c['bias']:.3f} (no transition cost); {kept}")
         self._show_why()
+        if self._holds_rows(view, key):        # the status stays that of the rows shown, and as many lines
+            if self._held_status is None:
+                self._held_status = HOLD_HINT + self.text.get("cand_status", "")
+            self.text.set("cand_status", self._held_status)
+            return
+        self._held_status = None
         self.text.set("cand_status", status)
         if key == self._shown_for:
             return
@@ -256,6 +272,18 @@ class CandidatesPanel(Panel):
                 if k in fractions:
                     self._highlight(r, c, cost_color(fractions[k][r]))
             self._highlight(r, 1, (60, 110, 200, 170) if row["frame"] == snap.matched_frame else None)
+
+    def _holds_rows(self, view: View, key: tuple) -> bool:
+        """Whether to keep the rows as shown: while the ticks run and the pointer is over a row (or was,
+        up to ``HOLD_GRACE_FRAMES`` frames ago). A click is taken one or two frames after the picture it
+        was made on, and dearpygui cannot say which; live, the table re-sorts at every search, so a row
+        under the pointer must not change for a click to preview the row the user saw. A sort, a what-if
+        or another inspected controller (another key but the candidates') redraws at once."""
+        if any(self.dpg.is_item_hovered(f"cand_{r}_rank") for r in range(min(len(self.rows), MAX_ROWS))):
+            self._hovered_frame = view.frame
+        if view.paused or self._shown_for is None or key[1:] != self._shown_for[1:]:
+            return False
+        return 0 <= view.frame - self._hovered_frame <= HOLD_GRACE_FRAMES
 
     def _follow_tick(self, view: View) -> None:
         """Ask again at a new shown tick of a reopened session, paused (only it can be asked: live, the
@@ -308,6 +336,7 @@ class CandidatesPanel(Panel):
 
     def state(self) -> dict:
         return {"sort": self.sort_key, "descending": self.descending, "why_not": self.why_text,
+                "held": self._held_status is not None,
                 "status": self.text.get("cand_status"),
                 "what_if": None if self.what_if is None else {"tick": self.what_if["tick"],
                                                               "changes": self.what_if["changes"]},
