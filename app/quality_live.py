@@ -21,7 +21,9 @@ class LiveQuality:
     def reset(self) -> None:
         self.by_name = {}
 
-    def add(self, time_s: float, snaps: dict) -> None:
+    def add(self, time_s: float, snaps: dict) -> dict[str, int]:
+        """Each usable pose of the tick; returns per controller how many moments this tick flagged."""
+        flagged = {}
         for name, snap in snaps.items():
             pose = snap.pose
             if pose_problem(pose) is not None:
@@ -29,11 +31,10 @@ class LiveQuality:
             q = self.by_name.get(name)
             if q is None:
                 q = self.by_name[name] = MotionQuality(self.joints, self.reference, DurationStats)
-            q.add(time_s, pose.global_positions)
-
-    def flags(self, name: str) -> list[tuple[float, str]]:
-        q = self.by_name.get(name)
-        return list(q.flags) if q is not None else []
+            before = q.pops + q.knee_snaps + q.straight_knee_samples
+            q.add(time_s, pose.global_positions, snap.desired_velocity)
+            flagged[name] = q.pops + q.knee_snaps + q.straight_knee_samples - before
+        return flagged
 
     def text(self) -> str:
         """One line per controller: its figures since the last reset (ratios to the database's own)."""

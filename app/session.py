@@ -224,7 +224,8 @@ class Session:
         self.log.after_step(poses)
         self._guard_poses(self.tick + 1, snaps)
         tick = Tick(self.tick + 1, (self.tick + 1) * self.dt, snaps, dict(extra or {}))
-        self.quality.add(tick.time_s, snaps)
+        for name, n in self.quality.add(tick.time_s, snaps).items():
+            tick.series[(name, "quality_flag")] = float(n)     # the timeline's markers (app.panels.timeline)
         tick.extra.setdefault("input", inp)
         if self.following is not None:
             tick.series.update(self.follow_series(tick))

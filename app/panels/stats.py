@@ -53,6 +53,7 @@ class StatsPanel(Panel):
     commands = ("branch_difference",)
     reads = ("frame", "frame_times", "history", "render_info", "snap", "tick")
     branch_text = ""
+    quality_text = ""
     _last_text_frame = -100
     _last_limit_frame = -100
 
@@ -129,7 +130,8 @@ class StatsPanel(Panel):
             self.text.set("stats_memory", head if totals.get("lmm") else "memory  " + lines[0])
             self.text.set("stats_memory_detail", "\n".join(lines))
             h, dt = view.history, self.ctx.engine.dt
-            self.text.set("stats_quality", self.ctx.engine.quality_text())
+            self.quality_text = self.ctx.engine.quality_text()
+            self.text.set("stats_quality", self.quality_text)
             self.text.set("stats_process", f"process {fmt_bytes(rss_bytes())}; history {len(h) * dt:.1f}"
                                            f" of {h.capacity * dt:.0f} s; {view.render_info}")
             self.last = {"fps": fps, "frame_ms": ft.median(), "python_ms": python_ms,
@@ -150,4 +152,4 @@ class StatsPanel(Panel):
                 self.text.axis_limits("stats_y", 0.0, max(top, 20.0))
 
     def state(self) -> dict:
-        return {**self.last, "branch": self.branch_text}
+        return {**self.last, "branch": self.branch_text, "quality": self.quality_text}

@@ -76,10 +76,17 @@ class TimelinePanel(Panel):
                     for name in COLORS:
                         dpg.add_line_series(z, z, tag=f"tl_speed_{name}", label=f"{name.upper()} speed",
                                             show=name in self.ctx.engine.controller_names())
+                    for name in COLORS:     # markers: transitions at the top, flagged quality moments at the bottom
+                        dpg.add_scatter_series(z, z, tag=f"tl_trans_{name}", label=f"{name.upper()} transitions",
+                                               show=False)
+                        dpg.add_scatter_series(z, z, tag=f"tl_flags_{name}", label=f"{name.upper()} pops / knee snaps",
+                                               show=False)
                 dpg.add_drag_line(tag="tl_drag", default_value=0.0, color=(255, 220, 90, 255), thickness=2.0)
         self.ctx.theme.series("tl_desired", (0.75, 0.75, 0.75), weight=1.0)
         for name in COLORS:
             self.ctx.theme.series(f"tl_speed_{name}", COLORS[name], weight=1.5)
+            self.ctx.theme.series(f"tl_trans_{name}", COLORS[name], weight=1.0)
+            self.ctx.theme.series(f"tl_flags_{name}", (1.0, 0.35, 0.3), weight=1.0)
 
     def _on_slider(self, sender, value):
         self.ctx.actions.scrub(int(value))
@@ -100,7 +107,17 @@ class TimelinePanel(Panel):
         wanted = h.window(names[0], "desired_speed", newest, n)[first:]
         desired = list(decimate(t[first:], wanted, 400))
         top = max([_peak(wanted)] + [_peak(h.window(name, "speed", newest, n)[first:]) for name in speeds])
-        return {"speeds": speeds, "desired": desired, "t0": float(t[0]), "y_max": speed_axis_top(top)}
+        y_max = speed_axis_top(top)
+        # markers: each controller's transitions (the snapshots' flag) along the top, its flagged quality
+        # moments (lmm.quality: pops, knee snaps, straight knees) along the bottom
+        trans, flags = {}, {}
+        for k, name in enumerate(speeds):
+            jumped = h.window(name, "transitioned", newest, n)[first:] > 0.5
+            trans[name] = (list(t[first:][jumped]), [y_max * (0.96 - 0.05 * k)] * int(jumped.sum()))
+            hit = h.window(name, "quality_flag", newest, n)[first:] > 0.5      # NaN (no figure) is not a hit
+            flags[name] = (list(t[first:][hit]), [y_max * (-0.02 - 0.02 * k)] * int(hit.sum()))
+        return {"speeds": speeds, "desired": desired, "t0": float(t[0]), "y_max": y_max, "trans": trans,
+                "flags": flags}
 
     def update(self, view: View, prepared: dict | None = None) -> None:
         dpg = self.dpg
@@ -132,8 +149,14 @@ class TimelinePanel(Panel):
             if curve is not None:
                 dpg.set_value(f"tl_speed_{name}", curve)
         dpg.set_value("tl_desired", p["desired"])
+        for name in COLORS:
+            for key, tag in (("trans", f"tl_trans_{name}"), ("flags", f"tl_flags_{name}")):
+                xy = p.get(key, {}).get(name)
+                self.text.configure(tag, show=bool(xy and xy[0]))
+                if xy and xy[0]:
+                    dpg.set_value(tag, [list(xy[0]), list(xy[1])])
         self.text.axis_limits("tl_x", p["t0"], 0.0)
-        self.text.axis_limits("tl_y", -0.05 * p["y_max"], p["y_max"])
+        self.text.axis_limits("tl_y", -0.07 * p["y_max"], p["y_max"])
         self.text.configure("tl_play", label="Play" if view.paused else "Pause")
         held = (newest - oldest + 1) * dt
         mode = view.mode
@@ -142,4 +165,6 @@ class TimelinePanel(Panel):
         status = f"{mode} {t_now:.2f} s" + (f" ({behind:+.2f} s)" if behind else "") + f" | {held:.0f} s held"
         self.text.set("tl_status", status)
         self.last = {"tick": view.tick_number, "newest": newest, "oldest": oldest, "live": view.live,
-                     "paused": view.paused}
+                     "paused": view.paused,
+                     "markers": {key: {name: len(xy[0]) for name, xy in p.get(key, {}).items()}
+                                 for key in ("trans", "flags")}}
