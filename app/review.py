@@ -7,7 +7,8 @@ re-simulates it from the nearest controller-state checkpoint (one a second, kept
 and the ticks stepped on the way fill the history's plots, so every panel shows the picked tick. Going
 live again (Home, Play) leaves the session and resets the live characters. The whole session's
 per-channel cost timeline (:mod:`lmm.session.cost_timeline`) is worked out once, by a background job
-started when the session opens: reopening waits for none of it.
+started when the session opens (in a child process: :mod:`app.cost_timeline_job`): reopening and seeking
+wait for none of it.
 """
 from __future__ import annotations
 
@@ -28,13 +29,14 @@ class SessionHistory:
         self._tuning: dict | None = None
         self._cost_job = None
 
-    def start_cost_timeline(self, jobs, db, features) -> None:
-        """Work out the session's channel cost timeline on a thread of ``jobs`` (an :class:`app.jobs.Jobs`)."""
-        from lmm.session.cost_timeline import session_cost_timeline
+    def start_cost_timeline(self, jobs, manifest_path=None) -> None:
+        """Work out the session's channel cost timeline as a job of ``jobs`` (an :class:`app.jobs.Jobs`),
+        in a child process (:mod:`app.cost_timeline_job`) on the database of ``manifest_path`` (default:
+        the recorded one)."""
+        from .cost_timeline_job import compute_in_child
 
         path = self.seeker.session.path
-        self._cost_job = jobs.submit("cost-timeline", lambda job: session_cost_timeline(
-            path, db, features, report=job.report, cancelled=lambda: job.cancelled))
+        self._cost_job = jobs.submit("cost-timeline", lambda job: compute_in_child(job, path, manifest_path))
 
     @property
     def cost_timeline(self):
@@ -135,7 +137,7 @@ def open_recorded_session(studio, path) -> bool:
     s.controllers.clear()
     s.controllers.update(seeker.controllers)         # what the panels ask the controllers is the session's
     s.history = SessionHistory(seeker, live_history.capacity)
-    s.history.start_cost_timeline(s.jobs, s.db, s.features)
+    s.history.start_cost_timeline(s.jobs, getattr(s.manifest, "path", None))
     studio.playback.review(s.history)
 
     def leave() -> None:

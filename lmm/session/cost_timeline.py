@@ -3,9 +3,10 @@ the tick's query, its cost split by feature channel (the trace's ``cost_<channel
 same way: :mod:`lmm.session.trace`), and the ticks the played pose jumped (``transitioned``).
 
 :func:`session_cost_timeline` replays the session once (:class:`lmm.session.player.SessionPlayer`), made to
-run beside a studio that shows the same session: it opens the file itself (a SQLite connection serves only
+run beside other readers of the same session and database (the studio runs it in a child process,
+:mod:`app.cost_timeline_job`; a thread works too): it opens the file itself (a SQLite connection serves only
 the thread that opened it) and its controllers search a copy of the features (the session's weight changes
-rescale that copy, never the features the studio's other readers share). It keeps 4 bytes per tick,
+rescale that copy, never the features the other readers share). It keeps 4 bytes per tick,
 controller and channel, and one per tick and controller for the transitions: a 30-minute session of MM and
 LMM on 7 channels is 3.2 MB.
 """
