@@ -171,9 +171,10 @@ def _sections(text: str) -> list[str]:
 
 def main(args) -> int:
     names = args.sections if isinstance(args.sections, list) else _sections(args.sections)
-    if args.json_path:
-        from lmm.data.atomic import check_writable
-        check_writable(args.json_path)  # before minutes of benchmarking
+    if args.json_path:   # before minutes of benchmarking: never over an input, a device or a FIFO
+        from app.commands.session_common import check_outputs
+        from lmm.data.build import manifest_inputs
+        check_outputs([("--json", args.json_path)], manifest_inputs(args.manifest))
 
     from lmm.data.build import load_or_build
     from lmm.features import build_features

@@ -56,6 +56,9 @@ COLLISIONS = [
     ("eval-json-is-the-weights", ["eval", "--weights", "{T}/w.npz", "--compressor", str(WEIGHTS.with_name(
         "compressor.npz")), "--json", "{T}/w.npz", "--seconds", "1", "--queries", "64"], "w.npz"),
     ("view-screenshot-is-the-file", ["view", "{T}/walk.bvh", "--screenshot", "{T}/walk.bvh"], "walk.bvh"),
+    ("bench-json-is-a-link-to-dev-null", ["bench", "--sections", "memory", "--json", "{T}/null"], "null"),
+    ("bench-json-is-the-manifest", ["bench", "--sections", "memory", "--manifest", "{T}/manifest.json", "--json",
+                                    "{T}/manifest.json"], "manifest.json"),
     ("coverage-json-is-the-manifest", ["coverage", "--manifest", "{T}/manifest.json", "--json", "{T}/manifest.json"],
      "manifest.json"),
     ("coverage-png-is-a-take", ["coverage", "--manifest", "{T}/manifest.json", "--png", "{T}/walk.bvh"], "walk.bvh"),
