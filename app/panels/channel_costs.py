@@ -7,7 +7,8 @@ In a reopened session it covers every tick: the session's :class:`lmm.session.co
 worked out once in the background when the session opens (:meth:`app.review.SessionHistory.cost_timeline`;
 until then the tab says how far it is), stacked and thinned to :data:`MAX_POINTS` once per controller
 (the largest cost of each run of ticks kept). Live, it covers the rewind history, worked out from the
-snapshots only while the tab is shown.
+snapshots only while the tab is shown, each tick once: about 1 ms a frame for 20 s of history (25 ms the
+first time the tab is shown).
 """
 from __future__ import annotations
 
@@ -37,6 +38,7 @@ class ChannelCostPlot:
         self._drawn_for = None               # (timeline id, controller) of the session series drawn
         self._bands = None                   # that timeline's thinned (x, stacked rows)
         self._shown_key = None               # what the bands hold now
+        self._memo: dict = {}                # (controller, tick number) -> (the Tick, its cost row, jumped)
         self.text = TextCache(dpg)
         self.last: dict = {}
 
@@ -74,17 +76,35 @@ class ChannelCostPlot:
             return out
         if not shown or name is None or view.tick is None:
             return out
-        ticks = [t for t in view.history.ticks_between(view.history.oldest_tick, tick) if name in t.snapshots]
-        if not ticks:
+        held = self._history_rows(view.history, name, tick)
+        if held is None:
             return out
-        snaps = [t.snapshots[name] for t in ticks]
-        costs = self.features_of(name).channel_costs(np.stack([s.query for s in snaps]),
-                                                     np.stack([s.current_features for s in snaps]))
-        numbers = np.array([t.tick for t in ticks])
-        jumps = numbers[np.array([bool(s.transitioned) for s in snaps])]
-        out.update(source="history", first=int(numbers[0]), x=np.array([t.time_s for t in ticks]),
-                   stack=stacked(costs), transitions=jumps, row=costs[-1] if numbers[-1] == tick else None)
+        numbers, times, costs, jumped = held
+        out.update(source="history", first=int(numbers[0]), x=times, stack=stacked(costs),
+                   transitions=numbers[jumped], row=costs[-1] if numbers[-1] == tick else None)
         return out
+
+    def _history_rows(self, history, name: str, last: int):
+        """``(tick numbers, times, channel costs (n, C), transitioned)`` of the held ticks of ``name`` up to
+        ``last`` (None without any). Each tick's row is worked out once, kept by the tick it is of (a memo:
+        the same numbers every time, only the ticks that came since cost anything)."""
+        ticks = [t for t in history.ticks_between(history.oldest_tick, last) if name in t.snapshots]
+        if not ticks:
+            return None
+        memo = self._memo
+        new = [t for t in ticks if memo.get((name, t.tick), (None,))[0] is not t]
+        if new:
+            snaps = [t.snapshots[name] for t in new]
+            costs = self.features_of(name).channel_costs(np.stack([s.query for s in snaps]),
+                                                         np.stack([s.current_features for s in snaps]))
+            for t, snap, row in zip(new, snaps, costs):
+                memo[(name, t.tick)] = (t, row, bool(snap.transitioned))
+            if len(memo) > 3 * len(ticks) + 600:                 # ticks gone from the history
+                held = {(name, t.tick) for t in ticks}
+                self._memo = memo = {k: v for k, v in memo.items() if k in held}
+        rows = [memo[(name, t.tick)] for t in ticks]
+        return (np.array([t.tick for t in ticks]), np.array([t.time_s for t in ticks]),
+                np.array([r[1] for r in rows]), np.array([r[2] for r in rows]))
 
     def update(self, view, p: dict, shown: bool) -> None:
         """Show ``p`` (:meth:`prepare`'s); the bands are handed to dearpygui only while ``shown`` and when
