@@ -136,14 +136,14 @@ def open_recorded_session(studio, path) -> bool:
     studio.reviewed = f
     s.controllers.clear()
     s.controllers.update(seeker.controllers)         # what the panels ask the controllers is the session's
-    s.history = SessionHistory(seeker, live_history.capacity)
-    s.history.start_cost_timeline(s.jobs, getattr(s.manifest, "path", None))
+    s.history = session_history = SessionHistory(seeker, live_history.capacity)
+    session_history.start_cost_timeline(s.jobs, getattr(s.manifest, "path", None))
     studio.playback.review(s.history)
 
     def leave() -> None:
         """Back to the live characters (reset: the live history was left behind)."""
         shown = set(s.controllers)
-        s.history.close()
+        session_history.close()
         s.controllers.clear()
         s.controllers.update(live_controllers)
         s.history = studio.playback.history = live_history
