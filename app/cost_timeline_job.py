@@ -1,13 +1,14 @@
 """A reopened session's channel cost timeline, worked out in a child process (``python -m
 app.cost_timeline_job SESSION OUT.npz [--manifest M]``) that a studio job waits on.
 
-The timeline replays the whole session (:func:`lmm.session.cost_timeline.session_cost_timeline`: 23 s for
-10 minutes of MM, 50 s of LMM, on a 2-core machine shared with other work; ``bench/session_cost_timeline.py``).
-On a thread of the studio it shares the interpreter lock with the GUI thread: there, showing a random tick
-of a reopened 10-minute MM session took 61 ms (median) instead of 24 ms while it ran; with the child
-process, 42 ms instead of 19 ms (the two cores were busy with other work too). The child loads the
-database from its cache (about a second), replays, and writes the timeline as arrays; it says its progress
-on stdout and stops when the studio goes (its parent changes) or the job is cancelled (it is killed).
+The timeline replays the whole session (:func:`lmm.session.cost_timeline.session_cost_timeline`: 22 s for
+10 minutes of MM, 50 s of LMM; ``bench/session_cost_timeline.py``). On a thread of the studio it would share
+the interpreter lock with the GUI thread; in a child it competes for a core only. Measured on a 2-core
+machine busy with other work (so the cores, not the lock, were scarce): showing a random tick of a reopened
+10-minute MM session took 21 ms median (p90 40) alone, 47 ms (p90 103) with the job on a thread and 45 ms
+(p90 74) with it in a child process (load average 5.5-6). The child loads the database from its cache
+(about a second), replays, and writes the timeline as arrays; it says its progress on stdout and stops when
+the studio goes (its parent changes) or the job is cancelled (it is killed).
 """
 from __future__ import annotations
 
