@@ -2,11 +2,12 @@
 ctypes; numpy stays the reference and the fallback.
 
 :meth:`lmm.search_index.SearchIndex.group_search` asks it for every candidate frame whose total may be in the
-top K (it walks the index's boxes in C with a threshold that tightens as frames are costed, and keeps a
-relative 1e-4 margin, far more than its own float rounding), then costs those few frames with numpy's row
-reduction and ranks them as the brute force does: the answer is the brute force's, bit for bit, whether
-or not the compiled filter runs. It only changes how long a search takes (its tail above all: the numpy
-index's worst searches on half a million frames take milliseconds).
+top K (it walks boxes over 256, 32 and 8 frames in C, the first two its own (:func:`top_boxes`), with a
+threshold that tightens as frames are costed, and keeps a relative 1e-4 margin, far more than its own float
+rounding), then costs those few frames with numpy's row reduction and ranks them as the brute force does:
+the answer is the brute force's, bit for bit, whether or not the compiled filter runs. It only changes how
+long a search takes (its tail above all: the numpy index's worst searches on half a million frames take
+milliseconds).
 
 The source is compiled with ``$CC`` (default ``cc``) ``-O3 -shared -fPIC`` into the cache folder
 (:func:`lmm.data.cache.default_cache_dir`, ``native/``), named from a hash of the source and the compiler,
@@ -31,6 +32,7 @@ import numpy as np
 SOURCE = Path(__file__).with_name("native") / "search.c"
 ENV_SWITCH = "LMM_STUDIO_NATIVE"
 MAX_K = 64          # the largest top K the C filter ranks (the source's MAX_K); above it numpy runs
+TOP_BLOCK = 8       # large blocks per top box (the source's PER_TOP): 256 frames with 32-frame blocks
 _OUT = 4096         # frames the filter may return before it gives up (many exact ties): numpy runs then
 
 _state: dict = {}   # "lib": the loaded library or None, "note": why not ("" when loaded or switched off)
@@ -75,7 +77,8 @@ def _build() -> tuple[ctypes.CDLL | None, str]:
         return None, f"loading {lib.name} failed: {exc}"
     fn = dll.lmm_group_filter
     P, I, F = ctypes.c_void_p, ctypes.c_int, ctypes.c_float
-    fn.argtypes = [P, P, P, P, I, P, P, ctypes.c_int64, I, I, I, P, P, P, P, F, F, P, I, F, I, P, P, P, I]
+    fn.argtypes = [P, P, P, ctypes.c_int64, I, P, P, P, P, ctypes.c_int64, I, I, I, P, P, P, P, F, F, P, I, F,
+                   I, P, P, P, I]
     fn.restype = I
     return dll, ""
 
@@ -113,22 +116,27 @@ class GroupFilter:
     """The compiled filter bound to one :class:`lmm.search_index.SearchIndex`'s arrays (rebuild it after
     :meth:`~lmm.search_index.SearchIndex.update`)."""
 
-    def __init__(self, index, fn):
+    def __init__(self, index, fn, top_block: int = TOP_BLOCK):
         self.fn, self.index = fn, index
-        self._keep = (np.ascontiguousarray(index.rows, dtype=np.float32), index.l1_lo, index.l1_hi,
-                      np.ascontiguousarray(index.l1_dims, dtype=np.int64), index.l2_lo, index.l2_hi)
+        t_lo, t_hi, g_lo, g_hi = top_boxes(index, top_block)
+        self._own = (t_lo, t_hi, g_lo, g_hi)
+        self._keep = (np.ascontiguousarray(index.rows, dtype=np.float32), t_lo, t_hi, g_lo, g_hi, index.l2_lo,
+                      index.l2_hi)
         for a in self._keep[1:]:
             assert a.flags.c_contiguous
-        self._static = [_ptr(a) for a in self._keep[:4]] + [len(index.l1_dims)] + \
-            [_ptr(a) for a in self._keep[4:]] + [index.n_large, index.per_large, index.small_block, index.n_dims]
-        self._lb = np.empty(index.n_large, dtype=np.float32)
+        n_top = t_lo.shape[1]
+        self._static = [_ptr(a) for a in self._keep[:3]] + [n_top, top_block] + [_ptr(a) for a in self._keep[3:]] + \
+            [index.n_large, index.per_large, index.small_block, index.n_dims]
+        self._tb = np.empty(n_top, dtype=np.float32)
+        self._q = np.empty(index.n_dims, dtype=np.float32)
+        self._biases = self._bias_ptrs = None
         self._out = np.empty(_OUT, dtype=np.int64)
         self._out_key = np.empty(_OUT, dtype=np.float32)
-        self._tail = (_ptr(self._lb), _ptr(self._out), _ptr(self._out_key), _OUT)
+        self._tail = (_ptr(self._tb), _ptr(self._out), _ptr(self._out_key), _OUT)
 
     def nbytes(self) -> int:
-        """Bytes of its own buffers (the index's arrays it reads are the index's)."""
-        return int(self._lb.nbytes + self._out.nbytes + self._out_key.nbytes)
+        """Bytes of its own arrays (the top boxes and buffers; the index's arrays it reads are the index's)."""
+        return int(sum(a.nbytes for a in (*self._own, self._tb, self._out, self._out_key)))
 
     def __call__(self, q: np.ndarray, frame_bias: np.ndarray, small_min: np.ndarray, large_min: np.ndarray,
                  tc: np.float32, spread: float, cont_key: float, k: int) -> np.ndarray | None:
@@ -136,10 +144,31 @@ class GroupFilter:
         playing frame's total (inf when it does not compete); None when the filter cannot say (numpy runs)."""
         if k > MAX_K:
             return None
-        q = np.ascontiguousarray(q, dtype=np.float32)
-        n = self.fn(*self._static, _ptr(frame_bias), _ptr(small_min), _ptr(large_min), _ptr(q), float(tc),
-                    float(spread), None, 0, float(cont_key), int(k), *self._tail)
+        if self._biases is None or any(a is not b for a, b in zip(self._biases, (frame_bias, small_min, large_min))):
+            # the index passes the same cached arrays every search: their pointers are read once (a pointer
+            # costs a microsecond, the call's own overhead is 3)
+            self._biases = (frame_bias, small_min, large_min)
+            self._bias_ptrs = [_ptr(a) for a in self._biases] + [_ptr(self._q)]
+        np.copyto(self._q, q)
+        n = self.fn(*self._static, *self._bias_ptrs, float(tc), float(spread), None, 0, float(cont_key), int(k),
+                    *self._tail)
         return None if n < 0 else self._out[:n].copy()
+
+
+def top_boxes(index, top_block: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The filter's upper levels over ``index``, every dimension: the boxes of its top blocks (``top_block``
+    consecutive large blocks), dimension-major (D, n_top), and the large blocks' boxes grouped by top block,
+    (n_top, D, top_block), so that a top block's are one contiguous piece (a missing block's box is empty:
+    lo inf, hi -inf)."""
+    d, per = index.n_dims, index.per_large
+    n_top = -(-index.n_large // top_block)
+    lo = np.full((n_top * top_block, d), np.inf, dtype=np.float32)
+    hi = np.full((n_top * top_block, d), -np.inf, dtype=np.float32)
+    lo[:index.n_large] = index.l2_lo.reshape(index.n_large, per, d).min(axis=1)
+    hi[:index.n_large] = index.l2_hi.reshape(index.n_large, per, d).max(axis=1)
+    lo, hi = lo.reshape(n_top, top_block, d), hi.reshape(n_top, top_block, d)
+    return (np.ascontiguousarray(lo.min(axis=1).T), np.ascontiguousarray(hi.max(axis=1).T),
+            np.ascontiguousarray(lo.transpose(0, 2, 1)), np.ascontiguousarray(hi.transpose(0, 2, 1)))
 
 
 def group_filter(index) -> GroupFilter | None:

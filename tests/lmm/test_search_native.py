@@ -65,6 +65,63 @@ def test_the_compiled_search_equals_the_brute_force_on_the_default_data(db, feat
     assert index._native, "the compiled filter ran"
 
 
+def test_the_compiled_search_equals_the_brute_force_on_run_time_queries(db, features, fresh_native):
+    """The queries, playing frames, hints and tag groups a motion matching controller searches with over 20 s
+    of random input (the compiled path on), each searched again as the controller searches it at a tick."""
+    from lmm.data.inputs import builtin
+    from lmm.mm import MotionMatchingController
+
+    index = _compiled_index(features.normalized)
+    c = MotionMatchingController(db, features)
+    c.search_log = []
+    log, dt = builtin("random:1", 20.0), 1.0 / 60.0
+    for i in range(1200):
+        c.step(log.at(i * dt), dt)
+    assert c.index._native, "the controller's search ran compiled"
+    groups, X = c.tag_groups(), features.normalized
+    args = dict(c.search_args(1), top_k=1)
+    assert len(c.search_log) > 100
+    for query, frame, hint in c.search_log:
+        args["current"] = frame
+        fast = index.group_search(query, groups, hint=hint, near=int(c.tuning.top_k), **args)
+        brute = biased_search(lambda **kw: brute_force_search(X, query, **kw), groups[0][1], None,
+                              group_masks=groups, **args)
+        assert _same(fast, brute), frame
+
+
+@pytest.mark.parametrize("n", [1, 33, 255, 257, 2049])
+def test_databases_of_any_length_search_exactly(n, fresh_native):
+    """Top blocks of 8 large blocks: a database that does not fill its last top block (or its first) leaves
+    empty boxes there, which no search visits; every length still gives the brute force's answer."""
+    rng = np.random.default_rng(n)
+    X = np.cumsum(rng.normal(0, 0.1, (n, 5)), axis=0).astype(np.float32)   # smooth, like motion features
+    index = _compiled_index(X)
+    mask = np.ones(n, bool)
+    for i in range(30):
+        q = X[int(rng.integers(n))] + rng.normal(0, 0.3, 5).astype(np.float32)
+        args = dict(current=int(rng.integers(-1, n)), transition_cost=0.1, exclude_window=3, top_k=1 + i % 4)
+        fast = index.group_search(q, [(0.0, mask)], **args)
+        assert _same(fast, brute_force_search(X, q, mask, **args)), i
+    assert index._native
+
+
+def test_top_boxes_hold_their_frames(features):
+    """Each top box (and each large box grouped under it) holds every feature row of its frames."""
+    index = SearchIndex(features.normalized)
+    t_lo, t_hi, g_lo, g_hi = search_native.top_boxes(index, search_native.TOP_BLOCK)
+    frames = search_native.TOP_BLOCK * index.large_block
+    X = features.normalized
+    for top in (0, 1, t_lo.shape[1] - 1):
+        rows = X[top * frames:(top + 1) * frames]
+        assert (t_lo[:, top] <= rows.min(axis=0)).all() and (t_hi[:, top] >= rows.max(axis=0)).all()
+        for j in range(search_native.TOP_BLOCK):
+            part = rows[j * index.large_block:(j + 1) * index.large_block]
+            if len(part):
+                assert (g_lo[top, :, j] <= part.min(axis=0)).all() and (g_hi[top, :, j] >= part.max(axis=0)).all()
+            else:   # past the last frame: an empty box
+                assert (g_lo[top, :, j] == np.inf).all() and (g_hi[top, :, j] == -np.inf).all()
+
+
 def test_without_a_compiler_one_note_and_the_same_answers(db, features, fresh_native, monkeypatch, tmp_path, capfd):
     X = features.normalized
     compiled = [(f, b) for _, f, b in _runtime_queries(db, features, _compiled_index(X), 40, 3)]
