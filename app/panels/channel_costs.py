@@ -31,8 +31,11 @@ class ChannelCostPlot:
     """Built into the panel's tab; ``prepare`` may run on the tick worker (reads only), ``update`` on the
     GUI thread keeps the drawn series of a session's timeline (made once per timeline and controller)."""
 
-    def __init__(self, dpg, theme, channel_names, features_of, dt: float):
+    def __init__(self, dpg, theme, channel_names, features_of, dt: float, on_pick=None):
         self.dpg, self.theme, self.dt = dpg, theme, float(dt)
+        self.on_pick = on_pick               # on_pick(tick): a click on the plot asks to show that tick
+        self._span = (0, -1)                 # the first and last tick the plot covers
+        self.picked: int | None = None       # the tick the last click asked for
         self.channels = list(channel_names)
         self.features_of = features_of       # controller -> the features it searches (live costs)
         self._drawn_for = None               # (timeline id, controller) of the session series drawn
@@ -54,6 +57,9 @@ class ChannelCostPlot:
                     dpg.add_shade_series(z, z, y2=z, tag=f"chc_band_{c}", label=short_channel_name(name))
                 dpg.add_scatter_series(z, z, tag="chc_transitions", label="transitions")
                 dpg.add_inf_line_series(z, tag="chc_tick", label="shown tick")
+        with dpg.item_handler_registry(tag="chc_handlers"):
+            dpg.add_item_clicked_handler(callback=lambda: self.pick(dpg.get_plot_mouse_pos()[0]))
+        dpg.bind_item_handler_registry("chc_plot", "chc_handlers")
         for c in range(len(self.channels)):
             self.theme.series(f"chc_band_{c}", PALETTE[c % len(PALETTE)])
         self.theme.series("chc_transitions", (0.95, 0.95, 0.95), marker=True, marker_size=2.0)
@@ -106,6 +112,14 @@ class ChannelCostPlot:
         return (np.array([t.tick for t in ticks]), np.array([t.time_s for t in ticks]),
                 np.array([r[1] for r in rows]), np.array([r[2] for r in rows]))
 
+    def pick(self, x_s: float) -> None:
+        """A click on the plot at ``x_s`` seconds: show the nearest tick it covers."""
+        first, last = self._span
+        if self.on_pick is not None and last >= first:
+            tick = tick_at(x_s, self.dt, first, last)
+            self.picked = tick
+            self.on_pick(tick)
+
     def update(self, view, p: dict, shown: bool) -> None:
         """Show ``p`` (:meth:`prepare`'s); the bands are handed to dearpygui only while ``shown`` and when
         they changed (a session's: once per timeline and controller)."""
@@ -136,6 +150,7 @@ class ChannelCostPlot:
             dpg.configure_item("chc_transitions", show=len(marks) > 0)
         if shown:
             dpg.set_value("chc_tick", [[view.tick_number * self.dt]])
+        self._span = (first, first + count - 1)
         row = p["row"]
         where = {"session": "the whole session", "history": "the rewind history"}.get(p["source"], "")
         status = p["status"] or (f"{p['controller']}: played pose vs query, cost by channel over {where} "
@@ -148,6 +163,7 @@ class ChannelCostPlot:
             self.text.set("chc_status", status)
         self.last = {"source": p["source"], "controller": p["controller"], "status": status, "first_tick": first,
                      "ticks": count, "channels": self.channels, "tick": p["tick"], "drawn_points": int(len(x)),
+                     "picked": self.picked,
                      "row": None if row is None else [float(v) for v in row],
                      "transitions": [int(t) for t in jumps]}
 
@@ -165,3 +181,8 @@ class ChannelCostPlot:
             self._drawn_for = key
         x, rows, jumps, count = self._bands
         return x, rows, jumps, 1, count
+
+
+def tick_at(x_s: float, dt: float, first: int, last: int) -> int:
+    """The tick shown at ``x_s`` seconds of the plot (tick ``n`` at ``n * dt``), kept within ``first..last``."""
+    return int(min(max(round(x_s / dt), first), last))

@@ -65,6 +65,7 @@ class SearchPanel(Panel):
     """Nearest neighbour vs projector, with the cost timeline; a second tab, the per-channel cost timeline
     (:mod:`.channel_costs`)."""
     key = "search"
+    commands = ("scrub",)
     reads = ("history", "problems", "snap_of", "tick_number", "tick", "inspected")
     seconds = 10.0
     tolerance = 6
@@ -74,7 +75,8 @@ class SearchPanel(Panel):
         super().__init__(ctx)
         self._labels: dict[int, tuple[str, str]] = {}
         engine = ctx.engine
-        self.channel_plot = ChannelCostPlot(ctx.dpg, ctx.theme, engine.channel_names, engine.features_of, engine.dt)
+        self.channel_plot = ChannelCostPlot(ctx.dpg, ctx.theme, engine.channel_names, engine.features_of, engine.dt,
+                                            on_pick=lambda tick: self.ctx.actions.scrub(tick=tick))
 
     def show_view(self, name: str) -> None:
         """Show the tab ``name`` ("projector": nearest neighbour vs projector; "channels": channel costs)."""

@@ -81,7 +81,6 @@ class RealKeyStudio:
         return json.loads((self.tmp / "dump.json").read_text())
 
 
-
 def run_reopened(session, tmp_path, display, cache, script, frames: int, timeout: float = 240) -> dict:
     """Run the studio on ``session`` reopened (``--open``) for ``frames`` frames with the ``script`` actions
     and return its state dump (the run must exit 0). Not through the ``run_studio`` fixture: its

@@ -53,3 +53,37 @@ def test_the_channel_cost_timeline_of_a_reopened_session_is_the_trace(xvfb_displ
         assert costs["transitions"] == transitioned
         assert 0 < costs["drawn_points"] <= ticks
     assert (tmp_path / "channel_costs.png").stat().st_size > 0
+
+
+def test_a_click_on_the_channel_costs_shows_that_tick_xdotool(xvfb_display, studio_cache, tmp_path):
+    """A real click (xdotool) a quarter of the way into the channel costs plot of a reopened session shows
+    the tick under the pointer: the tick the plot says it picked, within the plot's quarter."""
+    import shutil
+    import time
+
+    from app.cli import main as cli_main
+    from studio_testutil import RealKeyStudio
+
+    if shutil.which("xdotool") is None:
+        pytest.skip("xdotool is not installed")
+    session = tmp_path / "s.lmmsession"
+    assert cli_main(["run", "--controller", "mm", "--input", "builtin:random:1", "--seconds", str(SECONDS),
+                     "--session", str(session), "--quiet"]) == 0
+    rects = tmp_path / "rects.json"
+    actions = [{"frame": 3, "do": "search_view", "view": "channels"},
+               {"frame": 8, "do": "window_size", "window": "search", "width": 505, "height": 560},
+               *({"frame": 9, "do": "show", "window": w, "show": False} for w in ("candidates", "latent", "stats")),
+               {"frame": 100, "do": "write_rects", "path": str(rects), "items": ["chc_plot"]}]
+    with RealKeyStudio(tmp_path, xvfb_display, studio_cache, actions, ["--open", str(session)]) as s:
+        x0, y0, x1, y1 = s.rect(rects, "chc_plot")
+        s.xdo("windowfocus", "--sync", s.win)
+        s.xdo("mousemove", "--window", s.win, str(int(x0 + 0.25 * (x1 - x0))), str(int(y0 + 0.6 * (y1 - y0))))
+        time.sleep(0.5)
+        s.xdo("click", "1")
+        time.sleep(1.5)
+    assert s.returncode == 0, s.stderr[-3000:]
+    final = s.dump()["final"]
+    picked = final["search"]["channel_costs"]["picked"]
+    ticks = SECONDS * 60
+    assert picked is not None and 0.05 * ticks < picked < 0.45 * ticks, picked
+    assert final["timeline"]["tick"] == picked
