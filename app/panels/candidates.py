@@ -87,7 +87,7 @@ class CandidatesPanel(Panel):
     """Ranked candidates of the inspected controller's last search."""
     key = "candidates"
     commands = ("preview_database_frame", "why_not", "what_if", "branch_here", "continuing_pose")
-    reads = ("inspected", "mode", "paused", "snap", "tick_number")
+    reads = ("frame", "inspected", "mode", "paused", "snap", "tick_number")
 
     def __init__(self, ctx):
         super().__init__(ctx)
@@ -185,7 +185,7 @@ class CandidatesPanel(Panel):
         self._shown_for = None
 
     def prepare_key(self, view: View) -> tuple:
-        return (self.sort_key, self.descending)
+        return (self.sort_key, self.descending, id(self.what_if))   # a what-if re-ranks: prepare again
 
     def prepare(self, view: View) -> dict | None:
         """The sorted rows of the inspected controller's candidates and their colour fractions. Reading
