@@ -2,8 +2,9 @@
 
 From the shown tick of a reopened session, :meth:`BranchView.branch_here` makes a second
 :class:`lmm.session.seek.SessionSeeker` with the branch (the Tuning panel's tuning, or the what-if scratch
-tuning of :mod:`app.why_not_probe`) set at that tick: its own controllers and checkpoints, so any tick of B
-is reached as fast as A's. For the shown tick, :meth:`BranchView.difference` gives the difference row (pose
+tuning of :mod:`app.why_not_probe`) set at that tick: its own controllers and checkpoints, started from A's
+checkpoint before that tick (:meth:`lmm.session.seek.SessionSeeker.branched`), so any tick of B is reached
+as fast as A's. For the shown tick, :meth:`BranchView.difference` gives the difference row (pose
 difference between A and B, each arm's played-pose cost and transition) the Stats panel shows
 (:func:`app.panels.stats.branch_text`), and draws
 B's inspected character as a ghost beside A (the 3D view's preview ghosts, owner ``branch``).
@@ -29,8 +30,6 @@ class BranchView:
 
     def branch_here(self, scratch: bool = False) -> dict:
         """Branch at the shown tick with the scratch tuning (``scratch``) or the Tuning panel's."""
-        from lmm.session.seek import SessionSeeker
-
         s = self.studio
         seeker, step, name, _ = self.probe.shown_any()
         if scratch:
@@ -39,7 +38,7 @@ class BranchView:
         else:
             tuning = s.session.tuning.to_dict()
         self.clear()
-        self.seeker = SessionSeeker(seeker.session, s.session.db, s.session.features, branch=tuning, from_tick=step)
+        self.seeker = seeker.branched(tuning, step)     # from A's checkpoint before the tick, not the start
         self.from_tick, self.tuning = step + 1, tuning
         return {"from_tick": self.from_tick, "tuning": tuning}
 

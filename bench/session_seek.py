@@ -1,7 +1,7 @@
 """Seeking in a reopened session (issue 33): how long showing a random tick takes, and the checkpoints' memory.
 
     PYTHONPATH=. python bench/session_seek.py [--minutes 10] [--long-minutes 30] [--controllers mm lmm]
-                                              [--seeks 200] [--every 60] [--seed 0]
+                                              [--seeks 200] [--every 60] [--seed 0] [--branch-at 10]
 
 For each controller a ``--minutes`` session is made by ``run --events`` on builtin:random:1 (36 tuning
 changes and 6 actions, bench/sessions.py's), opened with :class:`lmm.session.seek.SessionSeeker`, stepped
@@ -9,7 +9,10 @@ through once (the checkpoints, one every ``--every`` ticks), then ``--seeks`` ra
 random order: each is the seek plus what the studio's panels read of the tick's snapshot (the ghost
 pose, trajectory and query). Prints the median and the distribution, and whether every pose with a recorded
 fingerprint matched. Memory: the checkpoints' bytes and the process's peak RSS for a ``--long-minutes``
-session (MM; 0 skips it).
+session (MM; 0 skips it). Branch here at the session's end (``--branch-at`` seconds before it, a preset
+changing one feature weight): the time to B's first tick from A's nearest checkpoint
+(:meth:`lmm.session.seek.SessionSeeker.branched`, what the studio does) against a branch replayed from the
+session's start, and whether the two give the same poses for the next second.
 """
 from __future__ import annotations
 
@@ -52,13 +55,9 @@ def open_seeker(path: Path, every: int):
     return SessionSeeker(session, db, features, every=every, weights=weights)
 
 
-def seek_times(path: Path, controller: str, n: int, every: int, rng) -> None:
+def seek_times(seeker, controller: str, n: int, every: int, fill_s: float, rng) -> None:
     from lmm.session.schema import pose_fingerprint
 
-    seeker = open_seeker(path, every)
-    t0 = time.perf_counter()
-    seeker.fill()
-    fill_s = time.perf_counter() - t0
     times, checked, wrong = [], 0, 0
     for tick in rng.integers(0, seeker.ticks, n):
         t0 = time.perf_counter()
@@ -76,6 +75,29 @@ def seek_times(path: Path, controller: str, n: int, every: int, rng) -> None:
           f"{seeker.checkpoint_bytes() / 2**20:.1f} MiB; first pass {fill_s:.1f} s")
     print(f"  show a random tick ({n}): median {q[2]:.1f} ms; p10 {q[0]:.1f}, p25 {q[1]:.1f}, p75 {q[3]:.1f}, "
           f"p90 {q[4]:.1f}, p99 {q[5]:.1f}, max {t.max():.1f} ms; {checked} fingerprinted ticks, {wrong} differ")
+
+
+def branch_start(seeker, controller: str, seconds_before_end: float) -> None:
+    from lmm.session.seek import SessionSeeker
+
+    branch = {"feature_weights": {"hip_velocity": 4.0}}
+    tick = seeker.ticks - int(round(seconds_before_end * seeker.session.fps))
+    seeker.seek(tick)                                       # the tick shown when Branch here is pressed
+    t0 = time.perf_counter()
+    b = seeker.branched(branch, tick)
+    first = b.seek(tick)[0][controller].global_positions.copy()
+    new_s, stepped = time.perf_counter() - t0, b.stepped
+    t0 = time.perf_counter()
+    replayed = SessionSeeker(seeker.session, seeker.db, seeker.features, weights=seeker.weights, branch=branch,
+                             from_tick=tick)
+    same = np.array_equal(first, replayed.seek(tick)[0][controller].global_positions)
+    old_s = time.perf_counter() - t0
+    for t in range(tick + 1, min(tick + 61, seeker.ticks)):
+        same &= np.array_equal(b.seek(t)[0][controller].global_positions,
+                               replayed.seek(t)[0][controller].global_positions)
+    print(f"  branch here at tick {tick} of {seeker.ticks}: B's first tick {new_s * 1e3:.0f} ms from the checkpoint "
+          f"({stepped} ticks stepped) against {old_s:.1f} s replayed from the start; the next second's poses "
+          f"{'identical' if same else 'DIFFER'}")
 
 
 def long_memory(path: Path, every: int) -> None:
@@ -97,6 +119,7 @@ def main() -> None:
     p.add_argument("--seeks", type=int, default=200)
     p.add_argument("--every", type=int, default=60)
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--branch-at", type=float, default=10.0, help="Branch here this many seconds before the end")
     a = p.parse_args()
     rng = np.random.default_rng(a.seed)
     with tempfile.TemporaryDirectory() as tmp:
@@ -104,7 +127,13 @@ def main() -> None:
         if a.long_minutes > 0:
             long_memory(make_session("mm", a.long_minutes, folder), a.every)
         for controller in a.controllers:
-            seek_times(make_session(controller, a.minutes, folder), controller, a.seeks, a.every, rng)
+            seeker = open_seeker(make_session(controller, a.minutes, folder), a.every)
+            t0 = time.perf_counter()
+            seeker.fill()
+            fill_s = time.perf_counter() - t0
+            if a.seeks > 0:
+                seek_times(seeker, controller, a.seeks, a.every, fill_s, rng)
+            branch_start(seeker, controller, a.branch_at)
 
 
 if __name__ == "__main__":

@@ -135,6 +135,7 @@ class ControllerState:
                 keep[id(value)] = value
                 _keep_arrays_of(value, keep)
         self._shared = keep                 # a deep copy's memo: these are not copied
+        self._source = id(controller)
         attributes = {n: v for n, v in vars(controller).items() if n not in NOT_KEPT}
         own = {n: v for n, v in attributes.items() if id(v) not in keep and not isinstance(v, _CALLS)}
         self.shared = {n: v for n, v in attributes.items() if id(v) in keep and v is not controller}
@@ -150,6 +151,35 @@ class ControllerState:
     def restore(self, controller) -> None:
         """Put the state back into ``controller`` (the one it was taken from): its buffers (the arrays its
         bound network calls write) get the values in place, and views of them stay views."""
+        self._put_values(controller, self._shared)
+        current = vars(controller)
+        current.update(self.shared)
+        for name, attributes in self.shared_attributes.items():
+            vars(current[name]).update(attributes)
+
+    def transplant(self, controller) -> None:
+        """Put the state into another controller of the same kind, built on the same database and networks
+        file (a branch's own: :meth:`lmm.session.seek.SessionSeeker.branched`). The objects of its own that
+        have attributes (its tuning, features, search index, networks) stay its own, and what the copied
+        values refer to among them is mapped to them by attribute name; give it the state's tuning next, so
+        that it re-derives them (as :meth:`restore`'s caller does). The other values kept by reference
+        (arrays, tuples, a search's ranked list: never written once made) are shared."""
+        current = vars(controller)
+        memo = dict(self._shared)
+        memo[self._source] = controller
+        own_objects = {n: v for n, v in self.shared.items()
+                       if hasattr(v, "__dict__") and type(current.get(n)) is type(v)}
+        for name, value in own_objects.items():
+            memo[id(value)] = current[name]
+            target = vars(current[name])
+            for attribute, old in self.shared_attributes.get(name, {}).items():
+                if id(old) in memo and attribute in target:
+                    memo[id(old)] = target[attribute]
+        self._put_values(controller, memo)
+        current.update({n: v for n, v in self.shared.items() if n not in own_objects})
+
+    def _put_values(self, controller, memo: dict) -> None:
+        """The copied values into ``controller``; the arrays it has already get them in place."""
         current = vars(controller)
         bases = {}
         for name, value in self.values.items():
@@ -161,7 +191,4 @@ class ControllerState:
         for src_id, dst in bases.items():
             src = next(_base(v) for v in self.values.values() if isinstance(v, np.ndarray) and id(_base(v)) == src_id)
             np.copyto(dst, src)
-        current.update(_copy_keeping_views(self.values, dict(self._shared), bases))
-        current.update(self.shared)
-        for name, attributes in self.shared_attributes.items():
-            vars(current[name]).update(attributes)
+        current.update(_copy_keeping_views(self.values, dict(memo), bases))

@@ -6,6 +6,11 @@ builds them) and keeps, every ``every`` ticks it passes, a checkpoint: each cont
 tick ``t`` restores the nearest checkpoint at or before ``t`` (unless stepping on from where it is is
 shorter) and steps to ``t``: at most ``every - 1`` ticks. The poses are the recorded ones bit for bit (a
 test compares them with the session's fingerprints). The studio's ``--open`` uses it; so can a script.
+
+A branch (:meth:`SessionSeeker.branched`, the studio's *Branch here*) is a seeker of its own controllers that
+starts from the state of the nearest checkpoint at or before the branch tick this seeker has (the arms are
+the same until then; :meth:`lmm.session.checkpoint.ControllerState.transplant`), not from the session's
+start: at the end of a 10-minute session that was a replay of the whole session.
 """
 from __future__ import annotations
 
@@ -24,6 +29,7 @@ class SessionSeeker:
 
         player = SessionPlayer(session, db, features, weights=weights, debug_comparison=debug_comparison)
         self.session, self.controllers, self.tuning = session, player.controllers, player.tuning
+        self.db, self.features, self.weights, self.debug_comparison = db, features, weights, debug_comparison
         self.dt = session.dt
         self.branch, self.from_tick = branch, int(from_tick)     # arm B of ``ab`` (SessionPlayer's meaning)
         self.every = int(every) if every else max(1, int(round(session.fps)))   # one a second
@@ -36,6 +42,21 @@ class SessionSeeker:
         self.checkpoints: dict[int, tuple] = {}
         self.stepped = 0                # ticks stepped in all (what seeking cost)
         self._keep()
+
+    def branched(self, branch: dict, from_tick: int) -> "SessionSeeker":
+        """Arm B: ``branch`` set at ``from_tick`` (:class:`lmm.session.player.SessionPlayer`'s meaning), its own
+        controllers given this seeker's state at its nearest checkpoint at or before ``from_tick``."""
+        b = SessionSeeker(self.session, self.db, self.features, every=self.every, weights=self.weights,
+                          debug_comparison=self.debug_comparison, branch=branch, from_tick=from_tick)
+        start = max(t for t in self.checkpoints if t <= b.from_tick)
+        tuning, states, next_event = self.checkpoints[start]
+        for (name, c), state in zip(b.controllers.items(), states):
+            state.transplant(c)
+        for field, value in tuning.items():      # after the states: the controllers re-derive what differs
+            setattr(b.tuning, field, value)
+        b._next, b.tick = next_event, start
+        b._keep()
+        return b
 
     @property
     def ticks(self) -> int:

@@ -88,3 +88,45 @@ def test_a_what_if_inside_before_leaves_the_session_as_it_was(session_path):
         assert np.array_equal(seeker.seek(tick)[0]["mm"].global_positions,
                               fresh.seek(tick)[0]["mm"].global_positions), tick
     session.close()
+
+
+@pytest.mark.parametrize("controller", ["mm", "lmm"])
+def test_a_branch_from_a_checkpoint_is_the_branch_replayed_from_the_start(controller, tmp_path):
+    """SessionSeeker.branched starts B's own controllers from A's checkpoint before the branch tick (a
+    feature weight and a tag bias before it, a teleport after it; the checkpoint's tick is not the branch's):
+    every tick shown, before and after the branch, is what a seeker replaying the branch from tick 0 shows
+    (pose, frame, transition, cost, MM's ranked candidates), and its first tick costs at most a second."""
+    import json
+
+    from app.cli import main as cli_main
+    from app.commands.session_common import open_with_database
+    from lmm.session.seek import SessionSeeker
+
+    events = [{"tick": 20, "kind": "tuning", "payload": {"field": "feature_weights", "channel": "left_foot_position",
+                                                         "new": 1.4}},
+              {"tick": 40, "kind": "tuning", "payload": {"field": "tag_bias", "channel": "run", "new": -0.3}},
+              {"tick": 120, "kind": "teleport", "payload": {"position": [1.0, 0.0, 2.0], "yaw_deg": 30.0}},
+              {"tick": 130, "kind": "tuning", "payload": {"field": "transition_cost", "new": 0.2}}]
+    (tmp_path / "events.json").write_text(json.dumps({"events": events}))
+    path = tmp_path / "s.lmmsession"
+    assert cli_main(["run", "--controller", controller, "--input", "builtin:random:1", "--seconds", "5", "--events",
+                     str(tmp_path / "events.json"), "--session", str(path), "--quiet"]) == 0
+    session, db, features, weights = open_with_database(path)
+    a = SessionSeeker(session, db, features, every=60, weights=weights)
+    a.seek(200)                                           # A passed the branch: its checkpoints 0, 60 ... 180
+    b = a.branched(BRANCH, FROM)
+    fresh = SessionSeeker(session, db, features, weights=weights, branch=BRANCH, from_tick=FROM)
+    differing = 0
+    for i, tick in enumerate((FROM, FROM + 1, 150, 280, FROM + 30, 100, 40, 250)):
+        pose_b, snap_b = (x[controller] for x in b.seek(tick))
+        if i == 0:
+            assert b.stepped <= 60, b.stepped            # from checkpoint 60, not from tick 0
+        pose_f, snap_f = (x[controller] for x in fresh.seek(tick))
+        assert np.array_equal(pose_b.global_positions, pose_f.global_positions), tick
+        assert (snap_b.matched_frame, snap_b.transitioned) == (snap_f.matched_frame, snap_f.transitioned), tick
+        assert np.array_equal(snap_b.current_cost, snap_f.current_cost, equal_nan=True), tick
+        if controller == "mm":
+            assert snap_b.candidates.frames.tolist() == snap_f.candidates.frames.tolist(), tick
+        differing += not np.array_equal(pose_b.global_positions, a.seek(tick)[0][controller].global_positions)
+    assert differing >= 2                                  # the branch does change the motion after its tick
+    session.close()
