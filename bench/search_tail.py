@@ -13,6 +13,13 @@ preempted call takes milliseconds whatever it computes), and the agreements (sam
 biases); --json OUT writes them.
 
     python bench/search_tail.py [--db FILE.npz] [--queries 10000] [--brute 10000] [--json out.json]
+                                [--against REV [--rounds 5]]
+
+--against REV also times the compiled filter as it was at git revision REV (its lmm/search_native.py and
+lmm/native/search.c, built into the cache folder like this tree's) against this tree's, on the same queries
+in alternating chunks of 500, --rounds times (the first path swapped each round): each round's p50/p90/p99
+of both and their p50 ratio, and the median over the rounds (a shared machine's speed changes from minute
+to minute; the ratio within a round does not).
 
 Without --db: the default database (the shipped locomotion set). The full LAFAN1 set:
 ``LAFAN1_DIR=/path/to/lafan1 lmm-studio build-db --manifest lmm/data/manifests/lafan1_full.json --out full.npz``.
@@ -20,8 +27,11 @@ Without --db: the default database (the shipped locomotion set). The full LAFAN1
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import json
+import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -47,6 +57,50 @@ def same(a, b) -> bool:
     return np.array_equal(a.frames, b.frames) and np.array_equal(a.costs, b.costs) and np.array_equal(a.bias, b.bias)
 
 
+def filter_at(rev: str):
+    """:mod:`lmm.search_native` as it was at git revision ``rev`` (a module of its own, with that revision's
+    C source beside it)."""
+    folder = Path(tempfile.mkdtemp(prefix="search_native-"))
+    (folder / "native").mkdir()
+    for path, out in (("lmm/search_native.py", folder / "search_native.py"),
+                      ("lmm/native/search.c", folder / "native" / "search.c")):
+        out.write_bytes(subprocess.run(["git", "-C", str(ROOT), "show", f"{rev}:{path}"], capture_output=True,
+                                       check=True).stdout)
+    spec = importlib.util.spec_from_file_location("search_native_at_rev", folder / "search_native.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def against(rev, X, queries, groups, near, args, rounds) -> dict:
+    """Runtime-call times with REV's compiled filter and this tree's, alternating (see the module's doc)."""
+    old = filter_at(rev)
+    indexes = {"against": SearchIndex(X), "this": SearchIndex(X)}
+    indexes["against"]._native = old.group_filter(indexes["against"])
+    indexes["this"]._native = search_native.group_filter(indexes["this"])
+    assert indexes["against"]._native and indexes["this"]._native, "both compiled filters load"
+    per_round = []
+    for r in range(rounds):
+        times = {name: [] for name in indexes}
+        order = list(indexes) if r % 2 == 0 else list(indexes)[::-1]
+        for start in range(0, len(queries), 500):
+            for name in order:
+                index = indexes[name]
+                for query, frame, hint, _ in queries[start:start + 500]:
+                    t = time.perf_counter()
+                    index.group_search(query, groups, current=frame, hint=hint, near=near, **args)
+                    times[name].append(time.perf_counter() - t)
+        row = {name: percentiles(t) for name, t in times.items()}
+        row["p50_ratio"] = row["this"]["p50_us"] / row["against"]["p50_us"]
+        per_round.append(row)
+        print(f"round {r}: {rev} p50 {row['against']['p50_us']:.1f} us, this tree {row['this']['p50_us']:.1f} us, "
+              f"ratio {row['p50_ratio']:.3f}", file=sys.stderr, flush=True)
+    med = {name: {key: float(np.median([row[name][key] for row in per_round])) for key in per_round[0][name]}
+           for name in indexes}
+    return {"rev": rev, "rounds": per_round, "median_over_rounds": med,
+            "median_p50_ratio": float(np.median([row["p50_ratio"] for row in per_round]))}
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--db", help="database .npz (default: the default database)")
@@ -56,6 +110,8 @@ def main(argv=None) -> int:
                     help="calls per query: the first call's times, and the least of them (a shared machine's "
                          "preemptions removed), are reported")
     ap.add_argument("--json", help="write the figures here")
+    ap.add_argument("--against", metavar="REV", help="also time REV's compiled filter against this tree's")
+    ap.add_argument("--rounds", type=int, default=5, help="alternating rounds of --against")
     a = ap.parse_args(argv)
     db = Database.load(a.db) if a.db else load_or_build()[0]
     features = build_features(db)
@@ -113,6 +169,8 @@ def main(argv=None) -> int:
                                                                                  results["numpy"])])),
            "brute_force_checked": n_brute,
            "agreement_compiled_brute_force": float(np.mean(brute_same)) if brute_same else float("nan")}
+    if a.against:
+        out["against"] = against(a.against, X, queries, groups, near, args, a.rounds)
     print(json.dumps(out, indent=1))
     if a.json:
         Path(a.json).write_text(json.dumps(out, indent=1))
