@@ -436,6 +436,9 @@ class SearchIndex:
         frames = self._native(q, frame_bias, small_min, large_min, tc, spread, cont_key, k)
         if frames is None:
             return None
+        if not frames.size:      # the usual tick: no frame comes near the playing frame (no gather, no reduction)
+            costs = np.zeros(0, dtype=np.float32)
+            return frames, costs, costs.copy(), cont, in_group, 0, (frames, costs)
         frames.sort()                                # ascending, as ranking reads them (ties: the lower frame)
         rows = self.X[frames]
         rows -= q
