@@ -26,7 +26,7 @@ OPEN_BY_DEFAULT = ("simulation", "speeds", "features", "search")
 CHECKS_PER_ROW = 3
 #: labels too long for the panel's label column (the tooltip says the rest)
 SHORT_LABELS = {"exclude current window frames": "exclude window", "exclude range end frames": "exclude range end",
-                "forced search threshold": "forced search rate"}
+                "forced search threshold": "forced search rate", "knee max acceleration": "knee accel limit"}
 CHAR_PX = 7          # the width of one character of dearpygui's default font (ProggyClean, 13 px)
 
 
@@ -38,7 +38,7 @@ def field_kind(f: dataclasses.Field) -> str:
 def pretty_label(name: str) -> str:
     """``simulation_velocity_halflife_s`` -> ``velocity halflife``; the unit is shown by the format."""
     words = name
-    for suffix in ("_m_s", "_s", "_m", "_deg"):
+    for suffix in ("_deg_s2", "_m_s", "_s", "_m", "_deg"):
         if words.endswith(suffix):
             words = words[: -len(suffix)]
             break

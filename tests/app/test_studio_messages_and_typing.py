@@ -86,9 +86,9 @@ def test_typing_into_fields_never_pauses_or_moves_xdotool(xvfb_display, studio_c
     slider = "tun_run_forward_speed_m_s"
     actions = [{"frame": 20, "do": "write_rects", "path": str(rects), "items": [slider, "rec_path"]}]
 
-    def centre(item):
+    def centre(item, across=0.5):
         x0, y0, x1, y1 = json.loads(rects.read_text())[item]
-        return str(int((x0 + x1) / 2)), str(int((y0 + y1) / 2))
+        return str(int(x0 + (x1 - x0) * across)), str(int((y0 + y1) / 2))
 
     with RealKeyStudio(tmp_path, xvfb_display, studio_cache, actions, ["--layout", "default"]) as s:
         xdo, win = s.xdo, s.win
@@ -98,7 +98,7 @@ def test_typing_into_fields_never_pauses_or_moves_xdotool(xvfb_display, studio_c
             time.sleep(0.5)
         time.sleep(1.0)
         xdo("windowfocus", "--sync", win)
-        xdo("mousemove", "--window", win, *centre(slider))
+        xdo("mousemove", "--window", win, *centre(slider, 0.25))   # on the slider, not its label
         xdo("keydown", "ctrl")
         xdo("click", "1")
         xdo("keyup", "ctrl")
