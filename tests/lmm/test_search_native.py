@@ -1,6 +1,7 @@
 """The compiled search filter (lmm/native/search.c through :mod:`lmm.search_native`): the runtime search
 through it gives the brute force's answer bit for bit (frames, totals, biases, per-channel costs) on the
-default data with tag biases, exclusion windows and playing frames (ties everywhere: test_search_tags);
+default data with tag biases, exclusion windows and playing frames, on a controller's own run-time queries and
+on databases of any length (ties everywhere: test_search_tags);
 without a compiler, one note and the numpy search, with the same answers; ``LMM_STUDIO_NATIVE=0`` turns it
 off without a note."""
 import numpy as np
