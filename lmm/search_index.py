@@ -144,9 +144,11 @@ class SearchIndex:
 
     def nbytes(self) -> int:
         """Bytes the index adds to the features it searches: its arrays, except those that are the
-        features themselves or views of them (``X`` and ``rows`` are, when no copy was needed)."""
-        return int(sum(a.nbytes for a in (getattr(self, n) for n in self._STRUCTURE)
-                       if not np.shares_memory(a, self.features_norm)))
+        features themselves or views of them (``X`` and ``rows`` are, when no copy was needed), and the
+        compiled filter's own arrays once a search has made it."""
+        own = sum(a.nbytes for a in (getattr(self, n) for n in self._STRUCTURE)
+                  if not np.shares_memory(a, self.features_norm))
+        return int(own + (self._native.nbytes() if self._native else 0))   # the compiled filter's top boxes
 
     def _valid(self, mask: np.ndarray) -> np.ndarray:
         """``mask`` padded with False to whole blocks plus ``_PAD`` (so a hint's neighbours -4..n+3 index it
