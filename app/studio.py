@@ -260,7 +260,7 @@ class Studio(SessionActions):
         self.errors.keep_shown()
         self.script.run(self.commands, self.frame_index)
         self._keys()
-        self.session.undo.end_frame()       # this frame's tuning changes are one undo step
+        self.session.undo.end_frame(self.dpg.is_mouse_button_down(0))   # this frame's changes: one step
         live = self._live_input(self.session.dt if self.fixed_step else frame_dt)
         n = self.playback.ticks_due(frame_dt)
         self.realtime.add(frame_dt, n * self.session.dt, self.playback.live and not self.playback.paused)

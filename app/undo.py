@@ -3,7 +3,8 @@
 
 A *step* is what one undo takes back: every change made in one studio frame (a preset load, a group reset,
 a typed value), and a slider drag as a whole (changes of one field that follow each other within
-:data:`DRAG_GAP_S`, frame after frame). Undo puts the old values back in reverse order, redo the new ones in
+:data:`DRAG_GAP_S`, frame after frame, or any time apart while the mouse button stays down: a slow drag
+at a few frames a second is still one drag). Undo puts the old values back in reverse order, redo the new ones in
 order, by plain assignment: the tuning ends exactly as it was (values and types), and the writes are
 announced like any other, so the sliders, the controllers and a session being recorded see them. A new
 change clears what could be redone.
@@ -27,6 +28,7 @@ class TuningUndo:
         self._open = False                  # the newest step takes this frame's changes
         self._last = (None, -1.0)           # (field, channel) of the newest change, and when it came
         self._applying = False
+        self._held = False                  # the mouse button was down at the end of the last frame
         tuning.events.connect(self._on_change)
 
     def _on_change(self, change) -> None:
@@ -34,7 +36,7 @@ class TuningUndo:
             return
         key, now = (change.field, change.channel), self.clock()
         step = self.undo_steps[-1] if self.undo_steps else None
-        drag = (step is not None and self._last[0] == key and now - self._last[1] < DRAG_GAP_S
+        drag = (step is not None and self._last[0] == key and (now - self._last[1] < DRAG_GAP_S or self._held)
                 and all((c.field, c.channel) == key for c in step))
         if step is not None and (self._open or drag):
             step.append(change)
@@ -45,9 +47,11 @@ class TuningUndo:
         self._last = (key, now)
         self.redo_steps.clear()
 
-    def end_frame(self) -> None:
-        """The studio's frame is over: the next change starts a new step (unless it continues a drag)."""
+    def end_frame(self, mouse_held: bool = False) -> None:
+        """The studio's frame is over: the next change starts a new step (unless it continues a drag;
+        ``mouse_held``: the mouse button is down, so a change of the same field still is one)."""
         self._open = False
+        self._held = bool(mouse_held)
 
     def undo(self) -> bool:
         """Take back the newest step; False when there is none."""
@@ -69,7 +73,7 @@ class TuningUndo:
 
     def _apply(self, writes) -> None:
         self._applying = True
-        self._open, self._last = False, (None, -1.0)
+        self._open, self._last, self._held = False, (None, -1.0), False
         try:
             for field, channel, value in writes:
                 if channel is None:

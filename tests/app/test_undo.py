@@ -71,6 +71,24 @@ def test_a_drag_is_one_step_and_one_frame_is_one_step():
     assert len(undo.undo_steps) == 2
 
 
+def test_a_slow_drag_with_the_mouse_held_is_one_step():
+    """A drag at a few frames a second (changes further apart than DRAG_GAP_S) is still one step while the
+    mouse button stays down; released between them, they are separate steps."""
+    for held, steps in ((True, 1), (False, 3)):
+        t = Tuning()
+        now = [0.0]
+        undo = TuningUndo(t, clock=lambda: now[0])
+        for v in (3.0, 2.5, 2.0):
+            t.set("run_forward_speed_m_s", v)
+            undo.end_frame(mouse_held=held)
+            now[0] += 2 * DRAG_GAP_S
+        assert len(undo.undo_steps) == steps
+        undo.end_frame(mouse_held=False)
+        now[0] += 2 * DRAG_GAP_S
+        t.set("run_forward_speed_m_s", 1.0)          # released: the next change is a step of its own
+        assert len(undo.undo_steps) == steps + 1
+
+
 def test_chord_shortcuts_need_their_modifiers():
     assert shortcut_modifiers("Ctrl+Z") == (True, False) and shortcut_modifiers("Ctrl+Shift+Z") == (True, True)
     assert shortcut_modifiers("Space") is None and shortcut_modifiers(",") is None and shortcut_modifiers("F") is None
