@@ -271,6 +271,15 @@ def evaluate(db, features, nets, compressor: MLP, inputs="builtin:random:1", sec
     out["ground_skating"] = {"mm": ground_skating(mm["positions"][:, toes], 1.0 / mm["dt"])["fraction"],
                              "lmm": ground_skating(lmm["positions"][:, toes], 1.0 / lmm["dt"])["fraction"],
                              "source": source_ground_skating(db)["fraction"]}
+    from lmm.metrics import DurationStats
+    from lmm.quality import QualityJoints, clip_quality, reference_quality
+    joints, reference = QualityJoints.of_database(db), reference_quality(db)
+    out["quality"] = {"database": reference, **{
+        name: clip_quality(run["positions"], 1.0 / run["dt"], joints, reference, DurationStats, prefix="")
+        for name, run in (("mm", mm), ("lmm", lmm))}}
+    log("quality: " + "; ".join(
+        f"{name} {q['pops_per_min']:.1f} pops/min, {q['knee_snaps_per_min']:.1f} knee snaps/min, jerk p99 "
+        f"{q['jerk_p99_ratio']:.2f}x" for name, q in ((n, out["quality"][n]) for n in ("mm", "lmm"))))
     out["physics"] = physics_of_runs(db, runs)
     if out["physics"].get("available"):
         log("physics: root residual force median " + ", ".join(

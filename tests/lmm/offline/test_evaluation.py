@@ -86,6 +86,10 @@ def test_eval_command_writes_every_metric_and_plot(setup, tmp_path):
     assert np.isfinite(m["stepper"]["drift_60"])
     assert np.isfinite(m["mm_vs_lmm"]["mean_joint_distance_cm"])
     assert set(m["foot_skating"]) == {"mm_cm_s", "lmm_cm_s"}
+    for name in ("mm", "lmm"):                    # the motion quality, as run --metrics-json has it
+        q = m["quality"][name]
+        assert q["pops_per_min"] >= 0 and q["knee_snaps_per_min"] >= 0 and q["jerk_p99_ratio"] > 0, q
+    assert m["quality"]["database"]["max_acceleration"] > 0
     assert m["lmm_run"]["finite"]
     for name in ("training_losses.png", "latent_traces.png", "per_joint_error.png"):
         png = tmp_path / name
