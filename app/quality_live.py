@@ -10,6 +10,11 @@ from lmm.quality import MotionQuality, QualityJoints, reference_quality
 SHORT = {"mm": "MM", "lmm": "LMM"}
 
 
+def _num(v, fmt: str) -> str:
+    """``v`` formatted, or "-" when nothing was measured (NaN, inf, None)."""
+    return "-" if v is None or (isinstance(v, float) and not math.isfinite(v)) else format(v, fmt)
+
+
 class LiveQuality:
     """One :class:`lmm.quality.MotionQuality` per controller, fed every tick's shown pose."""
 
@@ -40,15 +45,12 @@ class LiveQuality:
         """One line per controller: its figures since the last reset (ratios to the database's own)."""
         lines = []
         for name, q in self.by_name.items():
-            r = q.result("")
             if q.samples < 4:
                 continue
-
-            def num(v, fmt):
-                return "-" if v is None or (isinstance(v, float) and not math.isfinite(v)) else format(v, fmt)
-            lines.append(f"{SHORT.get(name, name)} quality: {num(r['pops_per_min'], '.1f')} pops/min, "
-                         f"{num(r['knee_snaps_per_min'], '.1f')} knee snaps/min, straight knee "
-                         f"{num(100 * r['straight_knee_fraction'], '.1f')} %, jerk p99 "
-                         f"{num(r['jerk_p99_ratio'], '.2f')}x data, stops {r['stops']} "
+            r = q.result("")
+            lines.append(f"{SHORT.get(name, name)} quality: {_num(r['pops_per_min'], '.1f')} pops/min, "
+                         f"{_num(r['knee_snaps_per_min'], '.1f')} knee snaps/min, straight knee "
+                         f"{_num(100 * r['straight_knee_fraction'], '.1f')} %, jerk p99 "
+                         f"{_num(r['jerk_p99_ratio'], '.2f')}x data, stops {r['stops']} "
                          f"({r['stops_unsettled']} slow to settle)")
         return "\n".join(lines)

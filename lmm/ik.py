@@ -421,14 +421,14 @@ def toe_clear_ground(toe_y: float, q, toe_axis_local, toe_length: float, ground_
 
 
 def solve_leg(global_pos, global_rot, chain, toe_target, toe_axis_local, toe_length: float,
-              ground_height: float | None, min_knee_cos: float = 1.0, soft: float = 0.0, knee=None) -> tuple:
+              ground_height: float | None, min_knee_cos: float = 1.0, soft: float = 0.0,
+              knee_limit=None) -> tuple:
     """New global rotations for (hip, knee, foot, toe) of one leg so the toe reaches ``toe_target``, in the
     order of ``chain`` (bone indices). The foot keeps its global rotation (so the toe's offset from the
     ankle is unchanged); the ankle's target is the toe target minus that offset; with a ``ground_height``
     the toe is bent up to keep the tip of the foot above it. One pose as lists of tuples of floats
     (``global_pos[j]`` a 3-tuple, ``global_rot[j]`` a 4-tuple; arrays work too). ``min_knee_cos``, ``soft``:
-    the leg's reach (:func:`soft_reach`)."""
-    knee_limit = knee
+    the leg's reach (:func:`soft_reach`); ``knee_limit``: :func:`two_bone_ik`'s ``knee``."""
     hip, knee, foot, toe = chain
     tp, fp = global_pos[toe], global_pos[foot]
     # toe_target - (toe - foot)

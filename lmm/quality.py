@@ -88,9 +88,14 @@ class QualityJoints:
 
 # -- the kernels: one definition of each formula, on (n, J, 3) positions sampled every h seconds -----------
 
+def second_differences(x: np.ndarray, h: float) -> np.ndarray:
+    """(n - 2, ...) second differences of samples ``h`` seconds apart, at samples 1 .. n - 2."""
+    return (x[2:] - 2.0 * x[1:-1] + x[:-2]) / (h * h)
+
+
 def joint_accelerations(p: np.ndarray, h: float) -> np.ndarray:
-    """(n - 2, J) magnitudes (m/s^2) of the second differences, at samples 1 .. n - 2."""
-    return np.linalg.norm(p[2:] - 2.0 * p[1:-1] + p[:-2], axis=-1) / (h * h)
+    """(n - 2, J) magnitudes (m/s^2) of the joints' second differences, at samples 1 .. n - 2."""
+    return np.linalg.norm(second_differences(p, h), axis=-1)
 
 
 def joint_jerks(p: np.ndarray, h: float) -> np.ndarray:
@@ -146,7 +151,7 @@ def _reference_array(db) -> np.ndarray:
         acc = joint_accelerations(p, h)
         knees = knee_angles_deg(p, joints.legs)
         acc_max = max(acc_max, float(acc.max()))
-        knee_acc_max = max(knee_acc_max, float(np.abs(knees[2:] - 2 * knees[1:-1] + knees[:-2]).max() / (h * h)))
+        knee_acc_max = max(knee_acc_max, float(np.abs(second_differences(knees, h)).max()))
         knee_min = min(knee_min, float(knees.min()))
         root = horizontal_speeds(p[:, joints.root], h)
         centre = 0.5 * (root[1:] + root[:-1])      # the speed at samples 1 .. n - 2
@@ -186,7 +191,7 @@ class MotionQuality:
         self.pops = 0
         self.knee_snaps = 0
         self.straight_knee_samples = 0
-        self.worst = {"pop": (0.0, -1.0), "knee_snap": (0.0, -1.0), "straight_knee": (math.inf, -1.0)}
+        self.worst = {"pop": (0.0, -1.0), "knee_snap": (0.0, -1.0)}   # (largest value, its time)
         self._slow_acc = quantiles()
         self._jerk = quantiles()
         # stops: the state machine of :meth:`_stop_step`
@@ -196,7 +201,6 @@ class MotionQuality:
         self._settled_since = None           # start of the first quiet window after the stop
         self._hips_track = deque(maxlen=int(round(SETTLED_HOLD_S * QUALITY_FPS)) + 1)   # (t, x, z)
         self.stops = []                      # (time, settle seconds or None, highest toe m)
-        self.flags = deque(maxlen=256)       # the latest flagged moments: (time s, "pop" | "knee snap" | "straight knee")
         self.on_sample = None                # optional callback(time, positions) for each sample
         self._desired = None                 # the latest desired velocity (x, z) given to add
         self._step = None                    # (time, start velocity, target velocity) of the step being timed
@@ -236,29 +240,22 @@ class MotionQuality:
         w.append(p)
         knees = knee_angles_deg(p[None], self.joints.legs)[0]
         self._knees.append(knees)
-        k_min = float(knees.min())
-        if k_min < ref["min_knee_angle"]:
+        if float(knees.min()) < ref["min_knee_angle"]:
             self.straight_knee_samples += 1
-            self.flags.append((t, "straight knee"))
-            if k_min < self.worst["straight_knee"][0]:
-                self.worst["straight_knee"] = (k_min, t)
         if len(w) >= 3:
             arr = np.stack(list(w)[-3:])
             acc = joint_accelerations(arr, h)[0]
             a_max = float(acc.max())
             if a_max > ref["max_acceleration"]:
                 self.pops += 1
-                self.flags.append((t - h, "pop"))
             if a_max > self.worst["pop"][0]:
                 self.worst["pop"] = (a_max, t - h)
             root = horizontal_speeds(arr[:, self.joints.root], h)
             if 0.5 * (root[0] + root[1]) < SLOW_ROOT_M_S:
                 self._slow_acc.add_many(acc)
-            k = self._knees
-            knee_acc = float(np.abs(k[2] - 2.0 * k[1] + k[0]).max()) / (h * h)
+            knee_acc = float(np.abs(second_differences(np.stack(self._knees), h)).max())
             if knee_acc > ref["max_knee_acceleration"]:
                 self.knee_snaps += 1
-                self.flags.append((t - h, "knee snap"))
             if knee_acc > self.worst["knee_snap"][0]:
                 self.worst["knee_snap"] = (knee_acc, t - h)
         if len(w) >= 4:
