@@ -25,6 +25,9 @@ ROW = 1                 # the second row, as the paused real-click test (test_da
 CLICKS = 30
 FIRST_CAPTURE, LAST_CAPTURE = 30, 2400
 MARGIN_S = 0.05         # for the X server to pass a pointer move on
+#: for a move off the rows to reach the studio before the frames that must see it: on a loaded 2-core CI
+#: machine the X server passed one on up to a frame later than MARGIN_S (a held frame 0.05-0.1 s after it)
+OFF_MARGIN_S = 0.15
 
 
 def _frames(dump) -> dict[int, dict]:
@@ -115,14 +118,17 @@ def test_the_rows_hold_while_the_pointer_is_over_them_and_follow_the_search_off_
         over = [n for n in frames if seen[n] is not None and back[1] + MARGIN_S < seen[n] < until]
         # off the rows since the pointer read by the update HOLD_GRACE_FRAMES before (they stay held that long)
         off_frames += [n for n in frames if seen[n] is not None and seen.get(n - HOLD_GRACE_FRAMES) is not None
-                       and away[1] + MARGIN_S < seen[n - HOLD_GRACE_FRAMES] and seen[n] < back[0]]
+                       and away[1] + OFF_MARGIN_S < seen[n - HOLD_GRACE_FRAMES] and seen[n] < back[0]]
         assert over, f"click {i}: no frame while the pointer was over the row"
         loose = [(n, round(seen[n] - back[1], 3), round(seen[n] - t1, 3)) for n in over
                  if not (frames[n]["held"] and frames[n]["status"].startswith(HOLD_HINT))]
         assert not loose, f"click {i}: not held (frame, s after the move back, s after the release): {loose}"
         assert len({tuple(frames[n]["rows"]) for n in over}) == 1, f"click {i}: the rows changed under the pointer"
         held_rows.append(tuple(frames[over[0]]["rows"]))
-    assert off_frames and not any(frames[n]["held"] or HOLD_HINT in frames[n]["status"] for n in off_frames)
+    assert off_frames
+    stuck = [n for n in off_frames if frames[n]["held"] or HOLD_HINT in frames[n]["status"]]
+    assert not stuck, f"held off the rows (frame, s since its pointer read's frame went off): " \
+                      f"{[(n, round(seen[n - HOLD_GRACE_FRAMES] - max(a[1] for a, _, _ in clicks if a[1] < seen[n]), 3)) for n in stuck]}"
     # off the table the rows follow the search: each time the pointer came back, other rows were held
     assert len(set(held_rows)) > len(held_rows) // 2, held_rows
 
