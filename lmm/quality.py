@@ -47,7 +47,11 @@ SETTLED_HIPS_M_S = 0.05          # the hips have settled when they move less tha
 SETTLED_HOLD_S = 0.5             # ... over this long (net distance / time: a standing sway cancels, a drift not)
 STOP_WINDOW_S = 2.0              # the stop window ends this long after the root stopped (or when it moves on)
 SETTLE_LIMIT_S = 1.5             # the issue's bound, reported as a count of stops over it
-RAISED_TOE_M = 0.25              # a toe this high in a stop window is a raised leg
+RAISED_TOE_M = 0.25              # a toe this high in a stop window is a raised leg ...
+RAISED_THIGH_DEG = 45.0          # ... a raised knee when its thigh is this far up from hanging straight down
+                                 # (the knee lifts; a toe that high behind a near-vertical thigh is a heel kicked
+                                 # up in a stride: stepping, 11-30 degrees in the runs' last strides, 71-132 in
+                                 # the gestures check-data finds in the takes)
 STEP_M_S = 1.0                   # a change of the desired velocity this large in one tick is a step ...
 STEP_REACHED = 0.9               # ... reached when the root velocity has closed this share of it
 STEP_TIMEOUT_S = 5.0             # ... or never, if not within this
@@ -91,6 +95,13 @@ class QualityJoints:
 def second_differences(x: np.ndarray, h: float) -> np.ndarray:
     """(n - 2, ...) second differences of samples ``h`` seconds apart, at samples 1 .. n - 2."""
     return (x[2:] - 2.0 * x[1:-1] + x[:-2]) / (h * h)
+
+
+def thigh_raise_deg(hip, knee) -> float:
+    """How far a thigh (hip to knee, y up) is raised from hanging straight down, in degrees (90: level)."""
+    dx, dy, dz = float(knee[0] - hip[0]), float(knee[1] - hip[1]), float(knee[2] - hip[2])
+    n = math.sqrt(dx * dx + dy * dy + dz * dz)
+    return math.degrees(math.acos(max(-1.0, min(1.0, -dy / n)))) if n > 0 else 0.0
 
 
 def joint_accelerations(p: np.ndarray, h: float) -> np.ndarray:
@@ -198,9 +209,10 @@ class MotionQuality:
         self._peak_speed = 0.0
         self._stop_at = None                 # time the root stopped, while a stop is being watched
         self._window_toe = 0.0               # highest toe since the root fell below STOP_FROM_M_S
+        self._window_knee_toe = 0.0          # ... of a leg whose knee was raised (RAISED_THIGH_DEG)
         self._settled_since = None           # start of the first quiet window after the stop
         self._hips_track = deque(maxlen=int(round(SETTLED_HOLD_S * QUALITY_FPS)) + 1)   # (t, x, z)
-        self.stops = []                      # (time, settle seconds or None, highest toe m)
+        self.stops = []                      # (time, settle seconds or None, highest toe m, of a raised knee)
         self.on_sample = None                # optional callback(time, positions) for each sample
         self._desired = None                 # the latest desired velocity (x, z) given to add
         self._step = None                    # (time, start velocity, target velocity) of the step being timed
@@ -294,11 +306,15 @@ class MotionQuality:
         if root >= STOP_FROM_M_S:
             if self._stop_at is not None:
                 self._end_stop(t)
-            self._peak_speed, self._window_toe = max(self._peak_speed, root), 0.0
+            self._peak_speed, self._window_toe, self._window_knee_toe = max(self._peak_speed, root), 0.0, 0.0
             return
         if self._stop_at is None and self._peak_speed < STOP_FROM_M_S:
             return   # not slowing down from a move
         self._window_toe = max(self._window_toe, max(float(p[i, 1]) for i in j.toes))
+        for hip, knee, _, toe in j.legs:
+            y = float(p[toe, 1])
+            if y > self._window_knee_toe and thigh_raise_deg(p[hip], p[knee]) > RAISED_THIGH_DEG:
+                self._window_knee_toe = y
         if self._stop_at is None:
             if root < STOPPED_M_S:
                 self._stop_at, self._settled_since, self._peak_speed = t, None, 0.0
@@ -323,13 +339,13 @@ class MotionQuality:
         settle = self._settled_time(t)
         if settle is None and t - self._stop_at >= SETTLE_LIMIT_S:
             settle = math.inf
-        self.stops.append((self._stop_at, settle, self._window_toe))
-        self._stop_at, self._settled_since, self._window_toe = None, None, 0.0
+        self.stops.append((self._stop_at, settle, self._window_toe, self._window_knee_toe))
+        self._stop_at, self._settled_since, self._window_toe, self._window_knee_toe = None, None, 0.0, 0.0
 
     def result(self, prefix: str = "quality_") -> dict:
         minutes = (self.samples - 1) * self.h / 60.0 if self.samples > 1 else float("nan")
         ref = self.reference
-        verdicts = [s for _, s, _ in self.stops if s is not None]      # inf: not settled in SETTLE_LIMIT_S
+        verdicts = [s for _, s, *_ in self.stops if s is not None]      # inf: not settled in SETTLE_LIMIT_S
         settles = [s for s in verdicts if math.isfinite(s)]
         slow_p99, jerk_p99 = self._slow_acc.quantile(0.99), self._jerk.quantile(0.99)
         return {
@@ -343,8 +359,9 @@ class MotionQuality:
             f"{prefix}settle_s_median": float(np.median(verdicts)) if verdicts else float("nan"),
             f"{prefix}settle_s_max": max(settles) if settles else float("nan"),
             f"{prefix}stops_unsettled": sum(1 for s in verdicts if s > SETTLE_LIMIT_S),
-            f"{prefix}stop_toe_max_m": max((toe for _, _, toe in self.stops), default=float("nan")),
-            f"{prefix}stops_raised_toe": sum(1 for _, _, toe in self.stops if toe > RAISED_TOE_M),
+            f"{prefix}stop_toe_max_m": max((toe for _, _, toe, _ in self.stops), default=float("nan")),
+            f"{prefix}stops_raised_toe": sum(1 for _, _, toe, _ in self.stops if toe > RAISED_TOE_M),
+            f"{prefix}stops_raised_knee": sum(1 for *_, knee in self.stops if knee > RAISED_TOE_M),
             f"{prefix}steps": len(self.responses),
             f"{prefix}response_s_median": float(np.median(self.responses)) if self.responses else float("nan"),
             f"{prefix}response_s_max": max(self.responses) if self.responses else float("nan"),

@@ -112,12 +112,36 @@ def test_a_stop_settles_and_a_raised_toe_is_seen():
     r = q.result()
     assert r["quality_stops"] == 1 and r["quality_stops_unsettled"] == 0
     assert r["quality_settle_s_median"] < 0.1
-    raised = p.copy()
-    raised[150:170, 5, 1] += 0.4                         # a toe 40 cm up while standing: a raised leg
-    q = MotionQuality(joints, REF, DurationStats)
-    for i, x in enumerate(raised):
-        q.add(i / 60, x)
-    assert q.result()["quality_stops_raised_toe"] == 1
+    assert r["quality_stops_raised_toe"] == r["quality_stops_raised_knee"] == 0
+
+    def stand_with(leg):   # the left leg (hip, knee, ankle, toe: joints 2-5) posed for 20 frames of the stand
+        raised = p.copy()
+        hip = raised[150:170, 2]
+        for j, offset in zip((3, 4, 5), leg):
+            raised[150:170, j] = hip + offset
+        q = MotionQuality(joints, REF, DurationStats)
+        for i, x in enumerate(raised):
+            q.add(i / 60, x)
+        return q.result()
+
+    # the knee lifted to level, the shin hanging: the toe 45 cm up in front, a raised knee
+    knee_up = stand_with([(0.4, 0.0, -0.1), (0.4, -0.4, -0.1), (0.45, -0.45, -0.1)])
+    assert knee_up["quality_stops_raised_toe"] == 1 and knee_up["quality_stops_raised_knee"] == 1
+    assert knee_up["quality_stop_toe_max_m"] == pytest.approx(0.9 - 0.45, abs=0.01)
+    # the thigh hanging 10 degrees back, the shin folded up behind it: the toe as high, a heel kicked up in a
+    # stride, not a raised knee
+    back = 0.4 * math.sin(math.radians(10)), -0.4 * math.cos(math.radians(10))
+    heel_up = stand_with([(-back[0], back[1], -0.1), (-back[0] - 0.4, back[1], -0.1),
+                          (-back[0] - 0.45, back[1] + 0.05, -0.1)])
+    assert heel_up["quality_stops_raised_toe"] == 1 and heel_up["quality_stops_raised_knee"] == 0
+
+
+def test_thigh_raise_deg():
+    from lmm.quality import thigh_raise_deg
+
+    assert thigh_raise_deg((0, 1, 0), (0, 0.6, 0)) == pytest.approx(0.0)
+    assert thigh_raise_deg((0, 1, 0), (0.4, 1, 0)) == pytest.approx(90.0)
+    assert thigh_raise_deg((0, 1, 0), (-0.3, 0.7, 0)) == pytest.approx(45.0)
 
 
 def test_the_databases_own_figures(db):
