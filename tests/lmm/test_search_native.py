@@ -160,3 +160,23 @@ def test_a_top_k_beyond_the_filter_runs_numpy(db, features, fresh_native):
     q = X[400] + np.float32(0.1)
     fast = index.group_search(q, [(0.0, mask)], **args)
     assert _same(fast, brute_force_search(X, q, mask, **args)) and fast.frames.size == args["top_k"]
+
+
+def test_nearest_frames_is_the_brute_force_nearest_frame(features, fresh_native):
+    """The projector training's targets (:meth:`SearchIndex.nearest_frames`): each query's nearest frame over
+    every frame and its cost, as the brute force finds them (its costs and its first least frame)."""
+    X = features.normalized
+    index = _compiled_index(X)
+    rng = np.random.default_rng(5)
+    Q = (X[rng.integers(0, len(X), 300)] + rng.normal(0, 0.5, (300, X.shape[1]))).astype(np.float32)
+    Q[:3] = X[[0, len(X) // 2, len(X) - 1]]          # on a frame: cost 0 (or a tie with an identical frame)
+    frames, costs = index.nearest_frames(Q)
+    for q, f, c in zip(Q, frames, costs):
+        d = X - q
+        all_costs = np.einsum("ij,ij->i", d, d)
+        assert c == all_costs[f] and f == int(all_costs.argmin()), (f, int(all_costs.argmin()))
+
+
+def test_nearest_frames_without_the_compiled_filter_is_none(features, fresh_native, monkeypatch):
+    monkeypatch.setenv(search_native.ENV_SWITCH, "0")
+    assert SearchIndex(features.normalized).nearest_frames(features.normalized[:4]) is None

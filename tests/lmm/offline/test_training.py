@@ -133,6 +133,26 @@ def test_nearest_neighbours_are_exact(data):
     assert torch.allclose(cost, brute.min(1).values, rtol=1e-5, atol=1e-6)
 
 
+def test_targets_through_the_search_index_are_the_brute_force_ones(data):
+    """The projector's targets on a CPU walk the run-time search's boxes (when compiled) and fall back to
+    the brute force: the same frames and costs as :func:`nearest_neighbours` on queries without near ties."""
+    from lmm import search_native
+
+    X = data.X
+    q = projector_training.noisy_queries(X, torch.arange(0, 3000, 15), X.std(0), torch.Generator().manual_seed(3))
+    aug = projector_training.augmented_frames(X)
+    ref_i, ref_c = nearest_neighbours(q, X, aug=aug)
+    index = projector_training.cpu_index(X)
+    assert (index is None) == (search_native.library() is None)
+    for idx in ([index] if index is not None else []) + [None]:
+        i, c = projector_training.targets(q, X, aug, idx)
+        brute = ((q[:, None] - X[None]) ** 2).sum(-1)
+        second = brute.topk(2, dim=1, largest=False).values
+        clear = (second[:, 1] - second[:, 0]) > 1e-4 * second[:, 1]     # no near tie: one right answer
+        assert clear.float().mean() > 0.9
+        assert torch.equal(i[clear], ref_i[clear]) and torch.allclose(c, ref_c, rtol=1e-5, atol=1e-6)
+
+
 def test_window_starts_stay_in_ranges(dbf, data):
     db, _ = dbf
     w = window_starts_from(data, 20)
@@ -185,6 +205,20 @@ def test_auto_threads_is_one_on_two_cores_or_a_busy_machine_else_the_free_cores_
     assert auto_threads(2, 0.0) == auto_threads(2, 9.0) == 1
     assert auto_threads(8, 6.5) == 1 and auto_threads(16, 4.0) == 11
     assert auto_threads() >= 1
+
+
+def test_auto_workers_is_two_on_two_cores_else_one():
+    from lmm.offline.training_loop import auto_workers
+
+    assert [auto_workers(c) for c in (1, 2, 3, 4, 16)] == [1, 2, 1, 1, 1]
+    assert auto_workers() >= 1
+
+
+def test_split_batch_keeps_the_global_batch():
+    from lmm.offline.distributed import split_batch
+
+    assert [split_batch(512, w) for w in (1, 2, 3)] == [512, 256, 171]
+    assert split_batch(1, 4) == 1
 
 
 def test_a_signal_inside_interrupts_held_waits_until_the_files_are_written():
