@@ -37,6 +37,11 @@ def thread_count(text: str) -> int:
     return number_in(1, MAX_THREADS, integer=True)(text)
 
 
+def worker_count(text: str) -> int:
+    """``auto`` (0: :func:`lmm.offline.training_loop.auto_workers` decides) or 1..MAX_THREADS."""
+    return thread_count(text)
+
+
 def add_arguments(p) -> None:
     p.add_argument("stage", nargs="?", default="all", choices=STAGES,
                    help="what to train (default: all; decompressor trains the compressor with it)")
@@ -53,6 +58,10 @@ def add_arguments(p) -> None:
                    help=f"torch threads, auto or 1..{MAX_THREADS} (default auto: 1 on 2 cores or fewer, else the "
                         "cores the load average leaves free less one; on a shared 2-core machine 2 threads "
                         "took 3-7x as long as 1, see the README)")
+    p.add_argument("--workers", type=worker_count, default=0, metavar="auto|N",
+                   help="training processes on the CPU, one thread each, the recipe's batch split among them "
+                        "(DDP, gloo); default auto: 2 on a 2-core machine, else 1 (README, \"Training threads and "
+                        "processes\")")
     p.add_argument("--json", dest="json_path", metavar="OUT",
                    help="write the summary (losses, times, paths) here as JSON; - prints it")
     p.add_argument("--frames", type=number_in(MIN_FRAMES, 2 ** 31, integer=True),
@@ -83,24 +92,39 @@ def main(args) -> int:
 
     from lmm.offline.distributed import pick_device, setup, teardown
 
-    pick_device(args.device)  # a device not here fails now (DeviceError: one line), before the database
+    device = pick_device(args.device)  # a device not here fails now (DeviceError: one line), before the database
+    from lmm.offline.distributed import SPLIT_ENV, launch_workers, split_batch
+    from lmm.offline.training_loop import auto_threads, auto_workers
+
+    workers = 1      # processes this command starts (under torchrun, or on a GPU: itself alone)
+    if "WORLD_SIZE" not in os.environ and device.type == "cpu":
+        workers = args.workers or (1 if args.threads else auto_workers())
+    if workers > 1 and args.threads > 1:
+        print(f"lmm-studio train: --workers {workers} runs one thread each; drop --threads {args.threads} "
+              "or ask for --workers 1", file=sys.stderr)
+        return 2
     from lmm.data.build import manifest_inputs
     from lmm.data.outputs import check_outputs
     from lmm.offline.training import COMPRESSOR_FILE, LOG_FILE, RUNTIME_FILE
 
     # a read-only or file --out, or one holding the manifest or a take, fails now, not after training
     json_out = None if args.json_path in (None, "-") else args.json_path
-    # under torchrun only rank 0 writes the files, so only it holds their locks (the others check the paths)
-    writer = os.environ.get("RANK", "0") == "0"
+    # under torchrun only rank 0 writes the files, so only it holds their locks (the others check the paths);
+    # a launcher of workers checks them for its rank 0, which locks them
+    writer = os.environ.get("RANK", "0") == "0" and workers == 1
     check_outputs([("--out", Path(args.out) / name) for name in (RUNTIME_FILE, COMPRESSOR_FILE, LOG_FILE)]
                   + [("--json", json_out)], manifest_inputs(args.manifest), lock=writer)
     if writer:   # what a killed training left half-written there (its locks are ours now: no live writer)
         from lmm.data.leftovers import remove_stale
         remove_stale(args.out)
-    db, _ = load_or_build(args.manifest)
+    db, _ = load_or_build(args.manifest)   # also a cache the workers below then read
     features = build_features(db)
-    from lmm.offline.training_loop import auto_threads
-
+    if workers > 1:
+        if args.stage not in ("all", "decompressor"):   # what the stage starts from: its error here, once
+            from lmm.offline.training import check_stage_inputs
+            check_stage_inputs(db, features, Path(args.out))
+        del db, features
+        return launch_workers(workers, worker_argv(args))
     threads = args.threads or auto_threads()
     recipe = Recipe(seed=args.seed, threads=threads, log_every=args.log_every)
     stages = NETWORKS if args.stage == "all" else (args.stage,)
@@ -114,10 +138,15 @@ def main(args) -> int:
             s.lr = args.lr
     frames = np.arange(min(args.frames, db.n_frames)) if args.frames else None
     par = setup(args.device)
+    if os.environ.get(SPLIT_ENV) and par.distributed:   # started by launch_workers: the batch is shared
+        for name in stages:
+            recipe.stage(name).batch = split_batch(recipe.stage(name).batch, par.world)
     try:
         if par.is_main:
             where = f"{par.device}" + (f" x {par.world} processes (DDP)" if par.distributed else "")
-            how = "auto" if not args.threads else "--threads"
+            if os.environ.get(SPLIT_ENV) and par.distributed:
+                where += " sharing each batch"
+            how = "auto" if not args.threads or os.environ.get(SPLIT_ENV) else "--threads"
             print(f"training {', '.join(stages)} on {db.name} ({db.n_frames} frames, key {db.key[:16]}) on "
                   f"{where}, {threads} thread{'s' if threads > 1 else ''} ({how}) -> {args.out}", file=sys.stderr)
         t0 = time.perf_counter()
@@ -127,6 +156,7 @@ def main(args) -> int:
         summary["command_wall_s"] = round(time.perf_counter() - t0, 1)
         summary["device"], summary["processes"] = str(par.device), par.world
         summary["threads"] = threads
+        summary["batch_per_process"] = {name: recipe.stage(name).batch for name in stages}
         if par.is_main:
             print(summary_lines(summary))
             if args.json_path == "-":
@@ -137,6 +167,27 @@ def main(args) -> int:
     finally:
         teardown(par)
     return 0
+
+
+def worker_argv(args) -> list[str]:
+    """The arguments of one of :func:`lmm.offline.distributed.launch_workers`' processes: this command's,
+    on the CPU, one thread."""
+    argv = [args.stage, "--out", str(args.out), "--seed", str(args.seed), "--log-every", str(args.log_every),
+            "--device", "cpu", "--threads", "1", "--workers", "1"]
+    for flag, value in (("--iterations", args.iterations), ("--batch", args.batch), ("--lr", args.lr),
+                        ("--manifest", args.manifest), ("--json", args.json_path), ("--frames", args.frames)):
+        if value is not None:
+            argv += [flag, str(value)]
+    argv += [flag for flag, on in (("--resume", args.resume), ("--quiet", args.quiet), ("--verbose", args.verbose))
+             if on]
+    return argv
+
+
+def how_many(summary: dict) -> str:
+    """``2 processes x 1 thread`` or ``1 thread``."""
+    threads = f"{summary['threads']} thread{'s' if summary['threads'] > 1 else ''}"
+    n = summary.get("processes", 1)
+    return f"{n} processes x {threads}" if n > 1 else threads
 
 
 def summary_lines(summary: dict) -> str:
@@ -150,5 +201,5 @@ def summary_lines(summary: dict) -> str:
                      f"{summary['wall_s'].get(name, summary['wall_s'].get(name + '_resumed', 0.0)):.1f} s")
     paths = summary["paths"]
     lines.append(f"wrote {paths['runtime']}, {paths['compressor']}, {paths['log']} "
-                 f"({summary['command_wall_s']:.1f} s, {summary['threads']} thread{'s' if summary['threads'] > 1 else ''})")
+                 f"({summary['command_wall_s']:.1f} s, {how_many(summary)})")
     return "\n".join(lines)

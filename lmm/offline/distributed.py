@@ -102,3 +102,98 @@ def setup(device: str = "auto") -> Parallel:
 def teardown(par: Parallel) -> None:
     if par.distributed and torch.distributed.is_initialized():
         torch.distributed.destroy_process_group()
+
+
+#: set by :func:`launch_workers` in the processes it starts: the recipe's batch is split among them, so the
+#: global batch stays the recipe's (torchrun's processes each train the whole batch, see the module doc)
+SPLIT_ENV = "LMM_TRAIN_SPLIT_BATCH"
+
+
+def split_batch(batch: int, world: int) -> int:
+    """One process's share of a ``batch`` split among ``world`` processes (at least 1)."""
+    return max(1, -(-int(batch) // max(int(world), 1)))
+
+
+def _free_port() -> int:
+    import socket
+
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _die_with_parent() -> None:   # in the child, before exec: a killed launcher takes its workers with it
+    import ctypes
+    import signal
+    try:
+        ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGTERM))   # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        pass
+
+
+def launch_workers(workers: int, argv: list[str], stream=None) -> int:
+    """Run ``lmm-studio train ARGV`` as ``workers`` single-threaded CPU processes on this machine whose
+    gradients DistributedDataParallel averages (gloo), the recipe's batch split among them; rank 0 logs and
+    writes the files. Ctrl+C and SIGTERM reach every worker once; a worker that fails stops the others.
+    Returns the exit status: rank 0's, or the first failing worker's."""
+    import signal
+    import subprocess
+    import sys
+    import tempfile
+
+    stream = stream if stream is not None else sys.stderr
+    env = {**os.environ, "MASTER_ADDR": "127.0.0.1", "MASTER_PORT": str(_free_port()),
+           "WORLD_SIZE": str(workers), "LOCAL_WORLD_SIZE": str(workers), "OMP_NUM_THREADS": "1", SPLIT_ENV: "1"}
+    procs, errs = [], []
+    for rank in range(workers):
+        err = None if rank == 0 else tempfile.TemporaryFile()   # the others' lines only if they fail alone
+        procs.append(subprocess.Popen(
+            [sys.executable, "-m", "app.cli", "train", *argv],
+            env={**env, "RANK": str(rank), "LOCAL_RANK": str(rank)}, start_new_session=True,
+            stdout=None if rank == 0 else subprocess.DEVNULL, stderr=err, preexec_fn=_die_with_parent))
+        errs.append(err)
+
+    def forward(signum, _frame):
+        for p in procs:
+            if p.poll() is None:
+                p.send_signal(signum)
+
+    import threading
+    main = threading.current_thread() is threading.main_thread()   # only it may set handlers
+    old = {s: signal.signal(s, forward) for s in (signal.SIGINT, signal.SIGTERM)} if main else {}
+    try:
+        codes = _wait_all(procs)
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
+    bad = [(r, c) for r, c in enumerate(codes) if c != 0]
+    if codes[0] == 0 and bad:          # rank 0 finished but another did not: say why, once
+        rank = bad[0][0]
+        errs[rank].seek(0)
+        text = errs[rank].read().decode("utf-8", "replace").strip()
+        stream.write((text.splitlines()[-1] if text else f"training worker {rank} failed") + "\n")
+    for f in errs[1:]:
+        f.close()
+    return codes[0] if codes[0] != 0 or not bad else bad[0][1]
+
+
+def _wait_all(procs) -> list[int]:
+    """Wait for every process; once one fails, the others are stopped (DDP would wait for it forever)."""
+    import time
+
+    while True:
+        codes = [p.poll() for p in procs]
+        if all(c is not None for c in codes):
+            return codes
+        if any(c not in (None, 0) for c in codes):
+            for p in procs:
+                if p.poll() is None:
+                    p.terminate()
+            deadline = time.monotonic() + 30
+            for p in procs:
+                try:
+                    p.wait(max(deadline - time.monotonic(), 0.1))
+                except Exception:   # subprocess.TimeoutExpired
+                    p.kill()
+            return [p.wait() for p in procs]
+        time.sleep(0.2)

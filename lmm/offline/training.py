@@ -118,6 +118,12 @@ def interrupted_line(log: LossLog | None, saved: list[str], out_dir) -> str:
     return f"training stopped {where}; {held} ({out_dir})"
 
 
+def check_stage_inputs(db, features: Features, out_dir: Path) -> None:
+    """Raise the loader's one-line error when ``out_dir`` lacks the compressor a stage after the
+    decompressor starts from (what :func:`_train` loads first)."""
+    _load_networks(Path(out_dir) / COMPRESSOR_FILE, ["compressor"], db, features)
+
+
 def _train(db, features, stages, recipe, out_dir, frames, quiet, stream, resume, par, saved, verbose) -> dict:
     out_dir.mkdir(parents=True, exist_ok=True)
     runtime_path, comp_path, csv_path = out_dir / RUNTIME_FILE, out_dir / COMPRESSOR_FILE, out_dir / LOG_FILE

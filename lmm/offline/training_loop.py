@@ -74,8 +74,8 @@ def auto_threads(cores: int | None = None, load: float | None = None) -> int:
     last minute's load average leaves free, less one (for the system), at least 1.
 
     Measured on a 2-core machine shared with other work (load 3-6): 30 decompressor iterations took
-    7.2-8.7 s with 1 thread and 23-60 s with 2 (README, "Training threads"); torch's threads spin waiting for
-    each other when a core is taken by someone else, so more threads than free cores is far slower."""
+    7.2-8.7 s with 1 thread and 23-60 s with 2 (README, "Training threads and processes"); torch's threads
+    spin waiting for each other when a core is taken by someone else, so more threads than free cores is far slower."""
     if cores is None:
         try:
             cores = len(os.sched_getaffinity(0))
@@ -89,6 +89,23 @@ def auto_threads(cores: int | None = None, load: float | None = None) -> int:
     if cores <= 2:
         return 1
     return max(1, min(cores - 1, int(cores - load) - 1))
+
+
+def auto_workers(cores: int | None = None) -> int:
+    """Training processes for a CPU run (``train --workers auto``): two single-threaded processes on a
+    machine of two cores, else one (whose torch threads :func:`auto_threads` picks).
+
+    Measured on this project's 2-core machine, three alternating runs each (README, "Training threads and processes"):
+    two processes sharing each batch against one process on one thread took 6.3-7.9 s against 9.1-9.6 s for
+    60 decompressor iterations, 41 against 53 ms a projector iteration, and the same for the stepper (its
+    batch of 128 is too small to share: 8.4-11.4 s against 8.4-8.6 s for 100 iterations). Machines with
+    more cores were not measured with several processes: there one process's threads share the work."""
+    if cores is None:
+        try:
+            cores = len(os.sched_getaffinity(0))
+        except (AttributeError, OSError):
+            cores = os.cpu_count() or 1
+    return 2 if cores == 2 else 1
 
 
 @contextmanager
