@@ -62,13 +62,22 @@ def noisy_queries(X: np.ndarray, n: int, rng: np.random.Generator, noise: float 
 
 
 def nearest(queries: np.ndarray, X: np.ndarray, chunk: int = 512) -> tuple[np.ndarray, np.ndarray]:
-    """Exact nearest neighbours (squared Euclidean): indices and costs."""
+    """Exact nearest neighbours (squared Euclidean): indices and costs. The matmul form ranks the frames;
+    those within its rounding of the least are costed directly, and equal costs go to the lowest frame, so
+    identical frames (an idle range repeats frames of a locomotion range) always give the same answer,
+    wherever the matrix product's blocking put them."""
     x_sq = np.einsum("ij,ij->i", X, X)
     idx = np.empty(queries.shape[0], np.int64)
     for a in range(0, queries.shape[0], chunk):
         q = queries[a:a + chunk]
         d = x_sq[None, :] - 2.0 * q @ X.T
-        idx[a:a + chunk] = np.argmin(d, axis=1)
+        least = d.min(axis=1)
+        slack = 1e-5 * (float(x_sq.max()) + np.einsum("ij,ij->i", q, q)) + 1e-12
+        for r in range(len(q)):
+            near = np.flatnonzero(d[r] <= least[r] + slack[r])
+            diff = X[near] - q[r]
+            costs = np.einsum("ij,ij->i", diff, diff)
+            idx[a + r] = near[int(np.argmin(costs))]   # the first least: the lowest frame
     cost = np.sum((queries - X[idx]) ** 2, axis=1)
     return idx, cost
 

@@ -97,8 +97,8 @@ def data_run(xvfb_display, studio_cache, tmp_path_factory):
         {"frame": 31, "do": "capture", "label": "selected"},
         {"frame": 32, "do": "database", "op": "play"},
         {"frame": 52, "do": "capture", "label": "played"},
-        {"frame": 53, "do": "database", "op": "selection", "start": 2100, "stop": 2104},
-        {"frame": 54, "do": "database", "op": "scrub", "source_frame": 2100},
+        {"frame": 53, "do": "database", "op": "selection", "start": 2040, "stop": 2044},
+        {"frame": 54, "do": "database", "op": "scrub", "source_frame": 2040},
         {"frame": 64, "do": "capture", "label": "looped"},
         {"frame": 65, "do": "database", "op": "copy"},
         {"frame": 66, "do": "capture", "label": "copied"},
@@ -168,14 +168,14 @@ def test_playing_advances_one_frame_per_studio_frame_and_loops_the_selection(dat
     assert b["panels"]["database"]["playing"]
     assert b["panels"]["viewport"]["previews"][0]["label"] != a["panels"]["viewport"]["previews"][0]["label"]
     looped = lab["looped"]["panels"]["database"]
-    assert looped["selection"] == [2100, 2104]
-    assert 2100 <= looped["source_frame"] <= 2103             # stays inside the looped selection
+    assert looped["selection"] == [2040, 2044]
+    assert 2040 <= looped["source_frame"] <= 2043             # stays inside the looped selection
 
 
 @pytest.mark.gui
 def test_copy_gives_the_manifest_range_in_the_files_frames(data_run):
     copied = labels(data_run)["copied"]["panels"]["database"]["copied"]
-    assert json.loads(copied) == {"range": [2100, 2104], "tags": ["walk", "strafe", "turn"]}
+    assert json.loads(copied) == {"range": [2040, 2044], "tags": ["walk", "strafe", "turn"]}
 
 
 @pytest.mark.gui
