@@ -1,7 +1,6 @@
 """Search: the accelerated index returns exactly the brute-force answer (best frame, cost, ordered top-K
 and per-channel costs), on synthetic data, on the default database and on 10,000 queries from runs."""
 import copy
-import time
 
 import numpy as np
 import pytest
@@ -117,20 +116,13 @@ def test_ten_thousand_run_queries_are_exact(db, features):
     X = c.features.normalized
     index = SearchIndex(X)
     args = dict(transition_cost=0.0, exclude_window=20, top_k=8, slices=features.slices)
-    t_brute = t_fast = 0.0
     mismatches = 0
     for q, frame, hint, _ in queries:
-        t0 = time.perf_counter()
         ref = brute_force_search(X, q, mask, current=frame, **args)
-        t1 = time.perf_counter()
         res = index.search(q, mask, current=frame, hint=hint, **args)
-        t2 = time.perf_counter()
-        t_brute += t1 - t0
-        t_fast += t2 - t1
         mismatches += not same(res, ref)
     assert mismatches == 0
-    # the real speed figure comes from `lmm-studio bench`; here only a loose floor (shared CI machines)
-    assert t_brute / t_fast > 3.0, (t_brute, t_fast)
+    # its speed is a benchmark, not a test: `lmm-studio bench` (search.speedup) and bench/search_tail.py
 
 
 def test_the_index_reads_the_features_padded_buffer_without_a_copy(db, features):
