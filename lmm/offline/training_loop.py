@@ -95,11 +95,11 @@ def auto_workers(cores: int | None = None) -> int:
     """Training processes for a CPU run (``train --workers auto``): two single-threaded processes on a
     machine of two cores, else one (whose torch threads :func:`auto_threads` picks).
 
-    Measured on this project's 2-core machine, three alternating runs each (README, "Training threads and processes"):
-    two processes sharing each batch against one process on one thread took 6.3-7.9 s against 9.1-9.6 s for
-    60 decompressor iterations, 41 against 53 ms a projector iteration, and the same for the stepper (its
-    batch of 128 is too small to share: 8.4-11.4 s against 8.4-8.6 s for 100 iterations). Machines with
-    more cores were not measured with several processes: there one process's threads share the work."""
+    Measured on this project's 2-core machine, three alternating rounds each (``bench/train_workers.py``; README,
+    "Training threads and processes"): two processes sharing each batch against one process on one thread were
+    1.16x (1.48x in an earlier round) for the decompressor, 1.11x for the projector and 1.04x (0.91x) for the
+    stepper, whose batch of 128 is too small to share. Machines with more cores were not measured with several
+    processes: there one process's threads share the work."""
     if cores is None:
         try:
             cores = len(os.sched_getaffinity(0))
