@@ -31,15 +31,11 @@ MIN_FRAMES = 256
 
 
 def thread_count(text: str) -> int:
-    """``auto`` (0: :func:`lmm.offline.training_loop.auto_threads` decides) or 1..MAX_THREADS."""
+    """``auto`` (0: :func:`lmm.offline.training_loop.auto_threads` or ``auto_workers`` decides) or
+    1..MAX_THREADS (``--threads`` and ``--workers``)."""
     if text.strip().lower() == "auto":
         return 0
     return number_in(1, MAX_THREADS, integer=True)(text)
-
-
-def worker_count(text: str) -> int:
-    """``auto`` (0: :func:`lmm.offline.training_loop.auto_workers` decides) or 1..MAX_THREADS."""
-    return thread_count(text)
 
 
 def add_arguments(p) -> None:
@@ -58,7 +54,7 @@ def add_arguments(p) -> None:
                    help=f"torch threads, auto or 1..{MAX_THREADS} (default auto: 1 on 2 cores or fewer, else the "
                         "cores the load average leaves free less one; on a shared 2-core machine 2 threads "
                         "took 3-7x as long as 1, see the README)")
-    p.add_argument("--workers", type=worker_count, default=0, metavar="auto|N",
+    p.add_argument("--workers", type=thread_count, default=0, metavar="auto|N",
                    help="training processes on the CPU, one thread each, the recipe's batch split among them "
                         "(DDP, gloo); default auto: 2 on a 2-core machine, else 1 (README, \"Training threads and "
                         "processes\")")
@@ -90,10 +86,9 @@ def main(args) -> int:
     from lmm.features import build_features
     from lmm.offline.training import NETWORKS, Recipe, train_pipeline
 
-    from lmm.offline.distributed import pick_device, setup, teardown
+    from lmm.offline.distributed import SPLIT_ENV, launch_workers, pick_device, setup, split_batch, teardown
 
     device = pick_device(args.device)  # a device not here fails now (DeviceError: one line), before the database
-    from lmm.offline.distributed import SPLIT_ENV, launch_workers, split_batch
     from lmm.offline.training_loop import auto_threads, auto_workers
 
     workers = 1      # processes this command starts (under torchrun, or on a GPU: itself alone)
@@ -138,15 +133,16 @@ def main(args) -> int:
             s.lr = args.lr
     frames = np.arange(min(args.frames, db.n_frames)) if args.frames else None
     par = setup(args.device)
-    if os.environ.get(SPLIT_ENV) and par.distributed:   # started by launch_workers: the batch is shared
+    shared = bool(os.environ.get(SPLIT_ENV)) and par.distributed   # started by launch_workers: the batch is shared
+    if shared:
         for name in stages:
             recipe.stage(name).batch = split_batch(recipe.stage(name).batch, par.world)
     try:
         if par.is_main:
             where = f"{par.device}" + (f" x {par.world} processes (DDP)" if par.distributed else "")
-            if os.environ.get(SPLIT_ENV) and par.distributed:
+            if shared:
                 where += " sharing each batch"
-            how = "auto" if not args.threads or os.environ.get(SPLIT_ENV) else "--threads"
+            how = "auto" if not args.threads or shared else "--threads"
             print(f"training {', '.join(stages)} on {db.name} ({db.n_frames} frames, key {db.key[:16]}) on "
                   f"{where}, {threads} thread{'s' if threads > 1 else ''} ({how}) -> {args.out}", file=sys.stderr)
         t0 = time.perf_counter()

@@ -69,6 +69,14 @@ def make_optimizer(params, s: StageSettings):
     return opt, torch.optim.lr_scheduler.LambdaLR(opt, factor)
 
 
+def usable_cores() -> int:
+    """The cores this process may run on (its affinity, else the machine's)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        return os.cpu_count() or 1
+
+
 def auto_threads(cores: int | None = None, load: float | None = None) -> int:
     """The torch thread count for this machine: 1 where there are 2 cores or fewer, else the cores the
     last minute's load average leaves free, less one (for the system), at least 1.
@@ -77,10 +85,7 @@ def auto_threads(cores: int | None = None, load: float | None = None) -> int:
     7.2-8.7 s with 1 thread and 23-60 s with 2 (README, "Training threads and processes"); torch's threads
     spin waiting for each other when a core is taken by someone else, so more threads than free cores is far slower."""
     if cores is None:
-        try:
-            cores = len(os.sched_getaffinity(0))
-        except (AttributeError, OSError):
-            cores = os.cpu_count() or 1
+        cores = usable_cores()
     if load is None:
         try:
             load = os.getloadavg()[0]
@@ -101,10 +106,7 @@ def auto_workers(cores: int | None = None) -> int:
     stepper, whose batch of 128 is too small to share. Machines with more cores were not measured with several
     processes: there one process's threads share the work."""
     if cores is None:
-        try:
-            cores = len(os.sched_getaffinity(0))
-        except (AttributeError, OSError):
-            cores = os.cpu_count() or 1
+        cores = usable_cores()
     return 2 if cores == 2 else 1
 
 
