@@ -104,9 +104,33 @@ def character_space(db, frames=slice(None)) -> np.ndarray:
                            g_vel.reshape(n, -1), g_ang.reshape(n, -1)], axis=1).astype(np.float32)
 
 
+def _folded_layers(weights, biases, in_mean, in_std, out_mean, out_std) -> list[np.ndarray]:
+    """The layers as float32 ``(n_in + 1, n_out)`` matrices (bias as the last row), the input
+    normalisation folded into the first and the output scaling into the last, in float64; a
+    hidden-to-hidden layer holds its very weights and bias (float32 -> float64 -> float32 is exact)."""
+    ws = [np.asarray(w, np.float32).astype(np.float64) for w in weights]
+    bs = [np.asarray(b, np.float32).astype(np.float64) for b in biases]
+    inv = (1.0 / np.asarray(in_std, np.float32)).astype(np.float32).astype(np.float64)
+    bs[0] = bs[0] - (np.asarray(in_mean, np.float32).astype(np.float64) * inv) @ ws[0]
+    ws[0] = inv[:, None] * ws[0]
+    std = np.asarray(out_std, np.float32).astype(np.float64)
+    ws[-1] = ws[-1] * std[None, :]
+    bs[-1] = bs[-1] * std + np.asarray(out_mean, np.float32).astype(np.float64)
+    return [np.ascontiguousarray(np.vstack([w, b[None, :]]), dtype=np.float32) for w, b in zip(ws, bs)]
+
+
 class MLP:
     """One network, float32, ReLU or ELU hidden activations, linear output; with ``skip`` the input is
-    added to the first ``n_in`` outputs (the projector: features = query + correction)."""
+    added to the first ``n_in`` outputs (the projector: features = query + correction).
+
+    Every layer is kept once, in inference form (issue 38: memory): at construction the input
+    normalisation is folded into the first layer (``W0 * in_inv_std[:, None]``, bias
+    ``b0 - (in_mean * in_inv_std) @ W0``) and the output scaling into the last (``W * out_std``, bias
+    ``b * out_std + out_mean``), computed in float64 and stored as float32, each layer one matrix whose
+    last row is its bias (see :meth:`_single_plan`). ``weights[i]`` and ``biases[i]`` are views of those
+    matrices and ``in_mean``, ``in_inv_std``, ``out_mean``, ``out_std`` read as the identity (zeros and
+    ones), so every consumer (the batched evaluation, the ONNX export, the C++ reference) computes the same
+    function from the one copy. The loaded normalisation stays in the weights file."""
 
     def __init__(self, weights: list[np.ndarray], biases: list[np.ndarray], activation: str,
                  in_mean: np.ndarray, in_std: np.ndarray, out_mean: np.ndarray, out_std: np.ndarray,
@@ -115,14 +139,14 @@ class MLP:
             raise ValueError(f"{name}: unknown activation {activation!r}")
         self.name = name
         self.activation = activation
-        self.weights = [np.ascontiguousarray(w, dtype=np.float32) for w in weights]
-        self.biases = [np.ascontiguousarray(b, dtype=np.float32) for b in biases]
-        self.in_mean = np.asarray(in_mean, np.float32)
-        # multiply, not divide, per call
-        self.in_inv_std = (1.0 / np.asarray(in_std, np.float32)).astype(np.float32)
-        self.out_mean = np.asarray(out_mean, np.float32)
-        self.out_std = np.asarray(out_std, np.float32)
         self.skip = bool(skip)
+        self._mats = _folded_layers(weights, biases, in_mean, in_std, out_mean, out_std)
+        self.weights = [m[:-1] for m in self._mats]
+        self.biases = [m[-1] for m in self._mats]
+        self.in_mean = np.zeros(self.n_in, np.float32)
+        self.in_inv_std = np.ones(self.n_in, np.float32)
+        self.out_mean = np.zeros(self.n_out, np.float32)
+        self.out_std = np.ones(self.n_out, np.float32)
         if self.skip and self.n_out < self.n_in:
             raise ValueError(f"{name}: a skip connection needs n_out >= n_in ({self.n_in} -> {self.n_out})")
         self._buffers: dict[int, list[np.ndarray]] = {}
@@ -152,12 +176,10 @@ class MLP:
         return self.weights[-1].shape[1]
 
     def nbytes(self) -> int:
-        """The parameters and normalisation vectors, plus the batch-1 plan's folded copy once it is built
-        (its hidden-to-hidden layers are the parameters themselves: counted once)."""
-        arrays = [self.in_mean, self.in_inv_std, self.out_mean, self.out_std]
-        plan = [] if self._plan is None else [m for m, *_ in self._plan[2]] + [self._plan[3]]
-        arrays += [a for a in (*self.weights, *self.biases) if not any(a.base is m for m in plan)]
-        return int(sum(a.nbytes for a in arrays + plan))
+        """The layers (each one matrix, its bias the last row; see the class) and the identity
+        normalisation vectors."""
+        arrays = [*self._mats, self.in_mean, self.in_inv_std, self.out_mean, self.out_std]
+        return int(sum(a.nbytes for a in arrays))
 
     def parameter_count(self) -> int:
         return int(sum(w.size + b.size for w, b in zip(self.weights, self.biases)))
@@ -172,33 +194,15 @@ class MLP:
         return bufs
 
     def _single_plan(self):
-        """Batch-1 evaluation plan: the network refolded for one vector at a time (built on first use).
-
-        The input normalisation is folded into the first layer (``W0 * in_inv_std[:, None]``, bias
-        ``b0 - (in_mean * in_inv_std) @ W0``) and the output scaling into the last (``W * out_std``, bias
-        ``b * out_std + out_mean``), computed in float64 and stored as float32. Each layer's bias is the
-        last row of its matrix, and every layer's input buffer ends with a constant 1, so a layer is one
-        ``np.dot`` and a hidden layer's activation one more call (ReLU; ELU three) into preallocated
-        buffers: 4 numpy calls for the decompressor instead of 9. Sums are reordered, so the outputs
-        differ from :meth:`__call__` on a batch in the last float32 bits (within 1e-5 of the output's
-        scale, tested), not more."""
+        """Batch-1 evaluation plan over the layers' matrices (built on first use): every layer's input
+        buffer ends with a constant 1 (the next matrix's bias row), so a layer is one ``np.dot`` and a
+        hidden layer's activation one more call (ReLU; ELU three) into preallocated buffers: 4 numpy calls
+        for the decompressor instead of 9. Sums are ordered differently from the batched evaluation, so
+        the outputs differ from it in the last float32 bits (within 1e-5 of the output's scale, tested),
+        not more."""
         plan = self._plan
         if plan is None:
-            ws = [w.astype(np.float64) for w in self.weights]
-            bs = [b.astype(np.float64) for b in self.biases]
-            inv = self.in_inv_std.astype(np.float64)
-            bs[0] = bs[0] - (self.in_mean.astype(np.float64) * inv) @ ws[0]
-            ws[0] = inv[:, None] * ws[0]
-            std = self.out_std.astype(np.float64)
-            ws[-1] = ws[-1] * std[None, :]
-            bs[-1] = bs[-1] * std + self.out_mean.astype(np.float64)
-            mats = [np.ascontiguousarray(np.vstack([w, b[None, :]]), dtype=np.float32) for w, b in zip(ws, bs)]
-            # a hidden-to-hidden layer is not refolded: its matrix holds the very weights and bias (float32 ->
-            # float64 -> float32 is exact), which from now on are views of it, kept once (issue 38: memory)
-            for i in range(1, len(mats) - 1):
-                w, b = mats[i][:-1], mats[i][-1]
-                if np.array_equal(w, self.weights[i]) and np.array_equal(b, self.biases[i]):
-                    self.weights[i], self.biases[i] = w, b
+            mats = self._mats
             x1 = np.ones(self.n_in + 1, np.float32)           # [x, 1]
             hidden = []
             for m in mats[:-1]:
@@ -343,9 +347,9 @@ class MLP:
             return self._call_single(x, out)
         x2 = x
         bufs = self._bufs(x2.shape[0])
-        h = bufs[0]
-        np.subtract(x2, self.in_mean, out=h)
-        np.multiply(h, self.in_inv_std, out=h)
+        h = x2 if x2.dtype == np.float32 else bufs[0]   # the normalisation is in the first layer
+        if h is not x2:
+            h[...] = x2
         last = len(self.weights) - 1
         for i, (w, b) in enumerate(zip(self.weights, self.biases)):
             nxt = bufs[i + 1]
@@ -360,8 +364,7 @@ class MLP:
                     np.maximum(nxt, 0.0, out=nxt)
                     nxt += neg
             h = nxt
-        y = h * self.out_std
-        y += self.out_mean
+        y = h.copy()                                   # the output scaling is in the last layer
         if self.skip:
             y[:, :x2.shape[1]] += x2
         if out is not None:

@@ -97,8 +97,12 @@ def test_controller_runs_and_fills_the_snapshot(dbf, nets):
     assert "advance" in snap.timings_us
     split = ctrl._run_decompressor_tick.nbytes      # the per-tick copy of the decompressor's last layer
     assert split == nets.decompressor._single_plan()[3].nbytes
-    assert ctrl.memory_bytes() == {"decompressor": nets.decompressor.nbytes() + split, "stepper": nets.stepper.nbytes(),
-                                   "projector": nets.projector.nbytes()}
+    want = {"decompressor": nets.decompressor.nbytes() + split, "stepper": nets.stepper.nbytes(),
+            "projector": nets.projector.nbytes()}
+    idle = ctrl.idle_states()
+    if idle is not None:     # the idle set: frames, network states and their normalised features
+        want["idle_set"] = idle[0].nbytes + idle[1].nbytes + len(idle[0]) * features.n_dims * 4
+    assert ctrl.memory_bytes() == want
 
 
 def test_without_the_debug_comparison_only_the_projected_frame_is_searched(dbf, nets):
