@@ -390,15 +390,16 @@ class LearnedMotionMatchingController(CharacterController):
 
     def memory_bytes(self) -> dict[str, int]:
         """The three runtime networks (each layer once, with its normalisation folded in; the
-        decompressor also keeps the per-tick split of its last layer) and, once built, the idle set: its
-        frames, their network states and their normalised features (read from the shared feature table,
-        counted as if kept, since a learned controller on its own would need them). The search index over
-        the database's features that the matched frame (and the debug comparison) searches is not
-        counted: the debugger's, not the controller's."""
+        decompressor also keeps the per-tick split of its last layer) and the idle set (built here if it
+        was not): its frames, their network states and their normalised features (read from the shared
+        feature table, counted as if kept, since a learned controller on its own would need them). The
+        search index over the database's features that the matched frame (and the debug comparison)
+        searches is not counted: the debugger's, not the controller's."""
         out = {name: int(getattr(self.nets, name).nbytes()) for name in RUNTIME_NETWORKS}
         out["decompressor"] += self._run_decompressor_tick.nbytes
-        if self._idle:
-            frames, states = self._idle
+        idle = self.idle_states()      # built here if not yet: a run holds it from its first idle
+        if idle is not None:
+            frames, states = idle
             out["idle_set"] = int(frames.nbytes + states.nbytes + len(frames) * self.features.n_dims * 4)
         return out
 

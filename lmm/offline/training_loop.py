@@ -36,9 +36,9 @@ class StageSettings:
 @dataclass
 class Recipe:
     """The training recipe. Defaults: the fast recipe measured to fit 45 minutes on 2 CPU cores."""
-    decompressor: StageSettings = field(default_factory=lambda: StageSettings(3000, 512, 2e-3))
+    decompressor: StageSettings = field(default_factory=lambda: StageSettings(2000, 512, 2e-3))
     stepper: StageSettings = field(default_factory=lambda: StageSettings(5000, 128, 2e-3))
-    projector: StageSettings = field(default_factory=lambda: StageSettings(24000, 512, 2e-3))
+    projector: StageSettings = field(default_factory=lambda: StageSettings(14000, 512, 2e-3))
     stepper_window: int = 20
     projector_noise: float = 0.5   # query noise level, x std of each feature (see noisy_queries)
     projector_neighbours: int = 16  # database neighbours per frame in the cell term (see train_projector)
