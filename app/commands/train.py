@@ -19,7 +19,7 @@ from app.cli import number_in
 
 STAGES = ("all", "decompressor", "stepper", "projector")
 
-# Accepted ranges. The recipe's longest stage is 24,000 iterations at ~20-40 per second on 2 cores:
+# Accepted ranges. The recipe's longest stage is 11,000 iterations at ~20 per second on 2 cores:
 # a million is half a day. A batch of 65,536 poses (668 floats each for the compressor) is ~175 MB per
 # tensor. Learning rates beyond 1 only diverge. Seeds are numpy's (uint32).
 MAX_ITERATIONS = 1_000_000

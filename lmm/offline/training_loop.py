@@ -35,10 +35,12 @@ class StageSettings:
 
 @dataclass
 class Recipe:
-    """The training recipe. Defaults: the fast recipe measured to fit 45 minutes on 2 CPU cores."""
-    decompressor: StageSettings = field(default_factory=lambda: StageSettings(2000, 512, 2e-3))
-    stepper: StageSettings = field(default_factory=lambda: StageSettings(5000, 128, 2e-3))
-    projector: StageSettings = field(default_factory=lambda: StageSettings(14000, 512, 2e-3))
+    """The training recipe. Defaults: measured to fit 20 minutes on a 2-core CPU machine with the default
+    processes (16.6 min there, 2026-11-27; lmm/data/weights/README.md) within the quality limits
+    (decompressor <= 2.0 cm mean joint error, projector agreement >= 0.8)."""
+    decompressor: StageSettings = field(default_factory=lambda: StageSettings(1500, 512, 2e-3))
+    stepper: StageSettings = field(default_factory=lambda: StageSettings(3500, 128, 2e-3))
+    projector: StageSettings = field(default_factory=lambda: StageSettings(11000, 512, 2e-3))
     stepper_window: int = 20
     projector_noise: float = 0.5   # query noise level, x std of each feature (see noisy_queries)
     projector_neighbours: int = 16  # database neighbours per frame in the cell term (see train_projector)
