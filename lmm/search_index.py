@@ -314,7 +314,8 @@ class SearchIndex:
         ``near`` > ``top_k``: the result's ``near_frames`` holds up to that many of the frames evaluated with
         the least totals, unordered, outside the exclusion windows of the playing frame and of the answer
         (which plays next: its neighbours advance with it and stay in its window): the controller's top-1
-        search at a tick keeps them as the next search's hint, in place of a ranked top K.
+        search at a tick keeps them as the next search's hint, in place of a ranked top K. The numpy
+        index's only: with the compiled filter, which needs no hint, ``near_frames`` is None.
         """
         q = np.asarray(query, dtype=np.float32)
         k = max(int(top_k), 1)
@@ -323,13 +324,16 @@ class SearchIndex:
         tc = np.float32(transition_cost)
         if current >= 0:  # exclude the window around the playing frame for this search only
             lo_w, hi_w = max(current - exclude_window, 0), current + exclude_window + 1
-            valid[lo_w:hi_w] = False
             frame_bias[lo_w:hi_w] = np.inf
         try:
-            found = self._native_group_search(q, frame_bias, all_bias, small_min, large_min, candidates, spread,
-                                              current, tc, k)
-            frames, costs, keys, cont, in_group, evaluated, seeds = found or self._group_search(
-                q, frame_bias, all_bias, small_min, large_min, valid, candidates, spread, current, tc, k, hint)
+            found = self._native_group_search(q, frame_bias, small_min, large_min, candidates, spread, current, tc,
+                                              k, all_bias)
+            if found is None:
+                if current >= 0:
+                    valid[lo_w:hi_w] = False
+                found = self._group_search(q, frame_bias, all_bias, small_min, large_min, valid, candidates, spread,
+                                           current, tc, k, hint)
+            frames, costs, keys, cont, in_group, evaluated, seeds = found
         finally:
             if current >= 0:
                 valid[lo_w:hi_w] = candidates[lo_w:hi_w]
@@ -341,7 +345,7 @@ class SearchIndex:
         else:
             f, total, bias = rank_groups(frames, costs, keys, frame_group, b32, current, cont, in_group, tc, k)
         result = make_result(self.X, q, slices, f, total, bias, current, cont, evaluated)
-        if near > k:
+        if near > k and seeds is not None:   # the numpy index's (the compiled filter needs no hint)
             # from the frames evaluated in blocks and the seeds (frames the hint kept, often far from the answer),
             # both ascending; ``keys`` is not read again, the seeds' totals (with the transition cost, as the
             # keys have it) are a new array
@@ -449,31 +453,34 @@ class SearchIndex:
         keys += frame_bias[frames]    # inf for frames that are not candidates (the window's included)
         return frames, costs, keys, cont, in_group, evaluated + frames.size, (seeds, c[:seeds.size])
 
-    def _native_group_search(self, q, frame_bias, all_bias, small_min, large_min, candidates, spread, current, tc,
-                             k):
-        """:meth:`_group_search`'s result from the compiled filter (:mod:`lmm.search_native`): the frames that
-        may reach the answer, costed here by the brute force's row reduction; None when the filter is off
-        or cannot say (then numpy searches). No seeds: the filter finds its own first bound."""
-        if self._native is None:
-            self._native = search_native.group_filter(self) or False
-        if not self._native:
+    def _native_group_search(self, q, frame_bias, small_min, large_min, candidates, spread, current, tc, k,
+                             all_bias):
+        """:meth:`_group_search`'s result from the compiled filter (:mod:`lmm.search_native`), seeds None (it
+        needs no hint): the frames that may reach the answer (ascending), and the playing frame when it
+        competes, costed here in one row gather by the brute force's row reduction; None when the filter is
+        off or cannot say (then numpy searches)."""
+        native = self._native
+        if native is None:
+            native = self._native = search_native.group_filter(self) or False
+        if not native:
             return None
         in_group = current >= 0 and bool(candidates[current])
-        cont, cont_key = float("nan"), np.inf
-        if in_group:
-            d = self.X[current:current + 1] - q
-            cont = float(np.einsum("ij,ij->i", d, d)[0])
-            cont_key = float(np.float32(cont) + all_bias[current])   # its total: no transition cost
-        frames = self._native(q, frame_bias, small_min, large_min, tc, spread, cont_key, k)
-        if frames is None:
+        n = native.tick(q, frame_bias, small_min, large_min, tc, spread, current if in_group else -1,
+                        all_bias[current] if in_group else 0.0, k)
+        if n < 0:
             return None
-        if not frames.size:      # the usual tick: no frame comes near the playing frame (no gather, no reduction)
+        if n == 0 and not in_group:    # nothing can be the answer
+            frames = np.zeros(0, dtype=np.int64)
             costs = np.zeros(0, dtype=np.float32)
-            return frames, costs, costs.copy(), cont, in_group, 0, (frames, costs)
-        frames.sort()                                # ascending, as ranking reads them (ties: the lower frame)
-        rows = self.X[frames]
+            return frames, costs, costs, float("nan"), False, 0, None
+        rows = self.X[native.out[:n + in_group]]
         rows -= q
         costs = np.einsum("ij,ij->i", rows, rows)   # the brute force's reduction: the same value per row
+        if in_group:
+            cont, costs = float(costs[n]), costs[:n]
+        else:
+            cont = float("nan")
+        frames = native.out[:n].copy()
         keys = costs + tc
         keys += frame_bias[frames]
-        return frames, costs, keys, cont, in_group, frames.size, (frames[:0], costs[:0])
+        return frames, costs, keys, cont, in_group, n, None

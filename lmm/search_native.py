@@ -80,7 +80,19 @@ def _build() -> tuple[ctypes.CDLL | None, str]:
     fn.argtypes = [P, P, P, ctypes.c_int64, I, P, P, P, P, ctypes.c_int64, I, I, I, P, P, P, P, F, F, P, I, F,
                    I, P, P, P, I]
     fn.restype = I
+    tick = dll.lmm_tick_filter
+    tick.argtypes = [P, F, F, ctypes.c_int64, F, I]
+    tick.restype = I
     return dll, ""
+
+
+class FilterArgs(ctypes.Structure):
+    """The source's ``filter_args``: what stays the same from one search to the next."""
+    P, I = ctypes.c_void_p, ctypes.c_int
+    _fields_ = [("rows", P), ("t_lo", P), ("t_hi", P), ("n_top", ctypes.c_int64), ("per_top", I),
+                ("g_lo", P), ("g_hi", P), ("l2_lo", P), ("l2_hi", P), ("n_large", ctypes.c_int64),
+                ("per", I), ("sb", I), ("dims", I), ("bias", P), ("small_min", P), ("large_min", P), ("q", P),
+                ("tb", P), ("out", P), ("out_key", P), ("max_out", I)]
 
 
 def library() -> ctypes.CDLL | None:
@@ -116,8 +128,8 @@ class GroupFilter:
     """The compiled filter bound to one :class:`lmm.search_index.SearchIndex`'s arrays (rebuild it after
     :meth:`~lmm.search_index.SearchIndex.update`)."""
 
-    def __init__(self, index, fn, top_block: int = TOP_BLOCK):
-        self.fn, self.index = fn, index
+    def __init__(self, index, fn, top_block: int = TOP_BLOCK, tick_fn=None):
+        self.fn, self.index, self.tick_fn = fn, index, tick_fn
         t_lo, t_hi, g_lo, g_hi = top_boxes(index, top_block)
         self._own = (t_lo, t_hi, g_lo, g_hi)
         self._keep = (np.ascontiguousarray(index.rows, dtype=np.float32), t_lo, t_hi, g_lo, g_hi, index.l2_lo,
@@ -130,9 +142,30 @@ class GroupFilter:
         self._tb = np.empty(n_top, dtype=np.float32)
         self._q = np.empty(index.n_dims, dtype=np.float32)
         self._biases = self._bias_ptrs = None
-        self._out = np.empty(_OUT, dtype=np.int64)
+        self._out = np.empty(_OUT + 1, dtype=np.int64)     # + 1: the tick filter's playing frame
         self._out_key = np.empty(_OUT, dtype=np.float32)
         self._tail = (_ptr(self._tb), _ptr(self._out), _ptr(self._out_key), _OUT)
+        s = self._static
+        self._args = FilterArgs(*s[:9], *s[9:13], 0, 0, 0, _ptr(self._q), *self._tail)
+        self._args_ptr = ctypes.addressof(self._args)
+        self._tick_biases = None                           # the bias arrays the struct points at
+        self.out = self._out                               # what tick() wrote: out[:n], then the playing frame
+
+    def tick(self, q: np.ndarray, frame_bias: np.ndarray, small_min: np.ndarray, large_min: np.ndarray,
+             tc: float, spread: float, cont_frame: int, cont_bias: float, k: int) -> int:
+        """The filter as a tick's search calls it: ``n``, the number of frames (ascending, in ``out[:n]``)
+        whose totals may be in the top ``k``, and ``out[n]`` the playing frame ``cont_frame`` when it
+        competes (>= 0; ``cont_bias`` its group's bias: the filter costs it itself for a first bound); -1
+        when the filter cannot say (numpy runs). ``out`` is overwritten by the next call."""
+        if k > MAX_K or self.tick_fn is None:
+            return -1
+        seen = self._tick_biases
+        if seen is None or seen[0] is not frame_bias or seen[1] is not small_min or seen[2] is not large_min:
+            # the index passes the same cached arrays every search: the struct is written when they change
+            self._tick_biases = (frame_bias, small_min, large_min)
+            self._args.bias, self._args.small_min, self._args.large_min = (_ptr(a) for a in self._tick_biases)
+        np.copyto(self._q, q)
+        return self.tick_fn(self._args_ptr, tc, spread, cont_frame, cont_bias, k)
 
     def nbytes(self) -> int:
         """Bytes of its own arrays (the top boxes and buffers; the index's arrays it reads are the index's)."""
@@ -174,4 +207,4 @@ def top_boxes(index, top_block: int) -> tuple[np.ndarray, np.ndarray, np.ndarray
 def group_filter(index) -> GroupFilter | None:
     """The compiled filter for ``index``, or None when the compiled path is off or missing."""
     dll = library()
-    return None if dll is None else GroupFilter(index, dll.lmm_group_filter)
+    return None if dll is None else GroupFilter(index, dll.lmm_group_filter, tick_fn=dll.lmm_tick_filter)

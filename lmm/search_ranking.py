@@ -131,11 +131,20 @@ def rank_groups(frames, costs, keys, frame_group, b32, current, cont_cost, in_gr
     if top_k == 1 and keys.size:
         # the controller's tick search: usually one least key, and the playing frame's total differs from
         # it; then the ranking below keeps that frame and the playing frame and sorts the two, which is
-        # what this does without building it (a tie falls through to the full ranking)
-        i = int(keys.argmin())
-        least = keys[i]
-        if least < np.inf and np.count_nonzero(keys == least) == 1:
-            row = (float(least), 1, int(frames[i]), float(tc + b32[frame_group[frames[i]]]))
+        # what this does without building it (a tie falls through to the full ranking); a few keys (the
+        # compiled filter's) as Python floats, the same values
+        if keys.size <= 16:
+            key_list = keys.tolist()
+            least = min(key_list)
+            unique = key_list.count(least) == 1
+            i = key_list.index(least)
+        else:
+            i = int(keys.argmin())
+            least = float(keys[i])
+            unique = np.count_nonzero(keys == keys[i]) == 1
+        if least < np.inf and unique:
+            f = int(frames[i])
+            row = (least, 1, f, float(tc + b32[frame_group[f]]))
             if cont_row is None:
                 return _rows_result([row])
             if cont_row[0] != row[0]:

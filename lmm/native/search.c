@@ -11,6 +11,7 @@
  */
 #include <math.h>
 #include <stdint.h>
+#include <stdlib.h>
 
 #if defined(__GNUC__) && !defined(__clang__) && (defined(__x86_64__) || defined(__i386__))
 /* dispatched on the CPU's features (an "arch=" clone would test the CPU model, not what it supports) */
@@ -151,6 +152,23 @@ INLINE int visit_top(scan *s, kbest *b, int64_t top) {
     return 1;
 }
 
+/* The filter's arguments that stay the same from one search to the next (see lmm_group_filter): the
+ * index's arrays, the bias arrays of the tag groups, the query buffer and the outputs; lmm_tick_filter
+ * reads them from one struct (lmm/search_native.py keeps it), so a call passes six values instead of 28. */
+typedef struct {
+    const float *rows, *t_lo, *t_hi;
+    int64_t n_top;
+    int per_top;
+    const float *g_lo, *g_hi, *l2_lo, *l2_hi;
+    int64_t n_large;
+    int per, sb, dims;
+    const float *bias, *small_min, *large_min, *q;
+    float *tb;
+    int64_t *out;
+    float *out_key;
+    int max_out;
+} filter_args;
+
 /* Frames (ascending within each visit, unordered overall) that may be in the top k; returns their count,
  * or -1 when more than max_out are within the margin (the caller falls back to numpy).
  *
@@ -167,14 +185,13 @@ INLINE int visit_top(scan *s, kbest *b, int64_t top) {
  * promising top block is visited first (a tight threshold early), then the others in order: visiting them
  * in ascending bound (a sort) visited 15% fewer but cost more than it saved.
  */
-CLONES
-int lmm_group_filter(const float *rows, const float *t_lo, const float *t_hi, int64_t n_top, int per_top,
-                     const float *g_lo, const float *g_hi,
-                     const float *l2_lo, const float *l2_hi, int64_t n_large, int per, int sb, int dims,
-                     const float *bias, const float *small_min, const float *large_min, const float *q,
-                     float tc, float spread, const int64_t *seeds, int n_seeds, float cont_key, int k,
-                     float *tb, int64_t *out, float *out_key, int max_out) {
-    if (k < 1 || k > MAX_K || per_top != PER_TOP) return -1;
+INLINE int filter(const filter_args *a, float tc, float spread, const int64_t *seeds, int n_seeds, float cont_key,
+                  int k) {
+    const int dims = a->dims;
+    const int64_t n_top = a->n_top, n_large = a->n_large;
+    const float *q = a->q, *bias = a->bias, *large_min = a->large_min;
+    float *tb = a->tb;
+    if (k < 1 || k > MAX_K || a->per_top != PER_TOP) return -1;
     kbest b;
     b.k = k;
     b.scale = fabsf(tc) + spread;
@@ -184,13 +201,13 @@ int lmm_group_filter(const float *rows, const float *t_lo, const float *t_hi, in
     for (int i = 0; i < n_seeds; i++) {
         int64_t f = seeds[i];
         if (isinf(bias[f])) continue;
-        kbest_push(&b, (row_cost(rows + f * dims, q, dims) + tc) + bias[f]);
+        kbest_push(&b, (row_cost(a->rows + f * dims, q, dims) + tc) + bias[f]);
     }
     /* 1. the bound of every top block, dimension by dimension (long loops along the blocks) */
     for (int64_t t = 0; t < n_top; t++) tb[t] = 0.0f;
     for (int j = 0; j < dims; j++) {
         const float qj = q[j];
-        const float *lo = t_lo + j * n_top, *hi = t_hi + j * n_top;
+        const float *lo = a->t_lo + j * n_top, *hi = a->t_hi + j * n_top;
         for (int64_t t = 0; t < n_top; t++) {
             float c = qj < lo[t] ? lo[t] : (qj > hi[t] ? hi[t] : qj);
             float g = qj - c;
@@ -207,12 +224,55 @@ int lmm_group_filter(const float *rows, const float *t_lo, const float *t_hi, in
         if (tb[t] < least) { least = tb[t]; first = t; }
     }
     if (isinf(least)) return 0;
-    scan s = {rows, g_lo, g_hi, l2_lo, l2_hi, bias, small_min, large_min, q, dims, per, sb, n_large, tc,
-              out, out_key, 0, max_out};
+    scan s = {a->rows, a->g_lo, a->g_hi, a->l2_lo, a->l2_hi, bias, a->small_min, large_min, q, dims, a->per, a->sb,
+              n_large, tc, a->out, a->out_key, 0, a->max_out};
     /* 2. the most promising block first (a tight threshold early), then every block that may hold a frame */
     if (!visit_top(&s, &b, first)) return -1;
     for (int64_t t = 0; t < n_top; t++)
         if (t != first && tb[t] <= b.thr && !visit_top(&s, &b, t)) return -1;
     compact(&s, &b);
     return s.n_out;
+}
+
+CLONES
+int lmm_group_filter(const float *rows, const float *t_lo, const float *t_hi, int64_t n_top, int per_top,
+                     const float *g_lo, const float *g_hi,
+                     const float *l2_lo, const float *l2_hi, int64_t n_large, int per, int sb, int dims,
+                     const float *bias, const float *small_min, const float *large_min, const float *q,
+                     float tc, float spread, const int64_t *seeds, int n_seeds, float cont_key, int k,
+                     float *tb, int64_t *out, float *out_key, int max_out) {
+    filter_args a = {rows, t_lo, t_hi, n_top, per_top, g_lo, g_hi, l2_lo, l2_hi, n_large, per, sb, dims,
+                     bias, small_min, large_min, q, tb, out, out_key, max_out};
+    return filter(&a, tc, spread, seeds, n_seeds, cont_key, k);
+}
+
+static int by_frame(const void *x, const void *y) {
+    int64_t a = *(const int64_t *)x, b = *(const int64_t *)y;
+    return (a > b) - (a < b);
+}
+
+/* The filter as a tick's search calls it (lmm.search_index.SearchIndex.group_search): the playing frame
+ * cont_frame (-1: it does not compete) with its group's bias cont_bias gives the first threshold (its
+ * approximate cost: the margin covers the rounding); the frames come back ascending in out[0..n), and
+ * out[n] is cont_frame when it competes, so that the caller costs them all with one row gather (out holds
+ * max_out + 1). Returns n, or -1 as lmm_group_filter does. */
+CLONES
+int lmm_tick_filter(const filter_args *a, float tc, float spread, int64_t cont_frame, float cont_bias, int k) {
+    float cont_key = cont_frame >= 0 ? row_cost(a->rows + cont_frame * a->dims, a->q, a->dims) + cont_bias
+                                     : INFINITY;
+    int n = filter(a, tc, spread, 0, 0, cont_key, k);
+    if (n < 0) return n;
+    int64_t *out = a->out;
+    if (n > 64) {
+        qsort(out, (size_t)n, sizeof *out, by_frame);
+    } else {
+        for (int i = 1; i < n; i++) {    /* usually a handful of frames, mostly ascending already */
+            int64_t f = out[i];
+            int j = i - 1;
+            while (j >= 0 && out[j] > f) { out[j + 1] = out[j]; j--; }
+            out[j + 1] = f;
+        }
+    }
+    if (cont_frame >= 0) out[n] = cont_frame;
+    return n;
 }

@@ -180,3 +180,42 @@ def test_nearest_frames_is_the_brute_force_nearest_frame(features, fresh_native)
 def test_nearest_frames_without_the_compiled_filter_is_none(features, fresh_native, monkeypatch):
     monkeypatch.setenv(search_native.ENV_SWITCH, "0")
     assert SearchIndex(features.normalized).nearest_frames(features.normalized[:4]) is None
+
+
+def test_the_tick_filter_returns_ascending_frames_and_the_playing_frame_after_them(db, features, fresh_native):
+    """``GroupFilter.tick``: the frames that may be in the answer, ascending in ``out[:n]``, and the playing
+    frame at ``out[n]`` when it competes (the caller costs them with one gather); the brute force's answer is
+    among them or is the playing frame."""
+    X = features.normalized
+    index = _compiled_index(X)
+    mask = candidate_mask(db.n_frames, db.range_starts, db.range_stops, 10)
+    frame_bias, _, small_min, large_min, *_ = index._groups([(0.0, mask)])
+    native = search_native.group_filter(index)
+    rng = np.random.default_rng(11)
+    playing = np.flatnonzero(mask)[rng.integers(0, mask.sum(), 40)]
+    for current in playing:
+        q = (X[current + 3] + rng.normal(0, 0.3, X.shape[1])).astype(np.float32)
+        n = native.tick(q, frame_bias, small_min, large_min, np.float32(0.02), 0.0, int(current), 0.0, 1)
+        assert n >= 0
+        out = native.out[:n + 1].copy()
+        assert np.all(np.diff(out[:n]) > 0) and out[n] == current
+        brute = brute_force_search(X, q, mask, current=int(current), transition_cost=0.02, exclude_window=0, top_k=1)
+        assert brute.best_frame in set(out.tolist())
+
+
+def test_more_tied_frames_than_the_filter_holds_fall_back_to_numpy(fresh_native, monkeypatch):
+    """Thousands of identical frames all tie with the answer: the filter gives up (more than it may return)
+    and the numpy index answers, the brute force's answer exactly."""
+    rng = np.random.default_rng(2)
+    X = np.concatenate([np.zeros((6000, 4), np.float32), rng.normal(3, 1, (500, 4)).astype(np.float32)])
+    index = _compiled_index(X)
+    calls = []
+    group_search = SearchIndex._group_search
+    monkeypatch.setattr(SearchIndex, "_group_search", lambda self, *a: calls.append(1) or group_search(self, *a))
+    mask = np.ones(len(X), bool)
+    q = np.full(4, 0.01, np.float32)
+    for current in (-1, 6100):
+        args = dict(current=current, transition_cost=0.1, exclude_window=5, top_k=3)
+        fast = index.group_search(q, [(0.0, mask)], **args)
+        assert _same(fast, brute_force_search(X, q, mask, **args))
+    assert index._native and len(calls) == 2
