@@ -120,7 +120,7 @@ class StatsPanel(Panel):
             memory = self.ctx.engine.memory()
             for name, parts in memory.items():
                 total = sum(parts.values())
-                inner = ", ".join(f"{k} {fmt_bytes(v)}" for k, v in parts.items())
+                inner = ", ".join(f"{k.replace('_', ' ')} {fmt_bytes(v)}" for k, v in parts.items())
                 lines.append(f"{SHORT.get(name, name)} {fmt_bytes(total)}" + (f" ({inner})" if inner else ""))
             totals = {n: sum(p.values()) for n, p in memory.items()}
             head = "memory  "

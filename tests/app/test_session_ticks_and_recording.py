@@ -187,7 +187,8 @@ def test_session_fills_projected_frame_and_mm_latents(dbf):
         s.history.window("lmm", "projected_frame", s.tick, 30))].tolist() == projected
     assert s.history.window("mm", "matched_latent", s.tick, 1)[0].tolist() == pytest.approx(
         table[mm.matched_frame].tolist())
-    assert set(s.memory["lmm"]) == {"decompressor", "stepper", "projector"}
+    # the networks and the idle set (the shipped weights have the compressor beside them that builds it)
+    assert set(s.memory["lmm"]) == {"decompressor", "stepper", "projector", "idle_set"}
 
 
 def test_reference_clip_loads_and_bad_files_raise(tmp_path):
