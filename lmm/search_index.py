@@ -25,7 +25,8 @@ from __future__ import annotations
 import numpy as np
 
 from lmm import search_native
-from lmm.search_ranking import SearchResult, continuing_cost, frame_costs, least_frames, make_result, rank, rank_groups
+from lmm.search_ranking import (SearchResult, continuing_cost, frame_costs, least_frames, make_result, rank, rank_groups,
+                                rank_top1)
 
 SMALL_BLOCK = 8   # frames per small box
 LARGE_BLOCK = 32  # frames per large box (a multiple of SMALL_BLOCK)
@@ -325,21 +326,33 @@ class SearchIndex:
         if current >= 0:  # exclude the window around the playing frame for this search only
             lo_w, hi_w = max(current - exclude_window, 0), current + exclude_window + 1
             frame_bias[lo_w:hi_w] = np.inf
+        marked = False          # whether valid lost the window as well (numpy's search reads it)
         try:
             found = self._native_group_search(q, frame_bias, small_min, large_min, candidates, spread, current, tc,
                                               k, all_bias)
             if found is None:
                 if current >= 0:
                     valid[lo_w:hi_w] = False
+                    marked = True
                 found = self._group_search(q, frame_bias, all_bias, small_min, large_min, valid, candidates, spread,
                                            current, tc, k, hint)
             frames, costs, keys, cont, in_group, evaluated, seeds = found
         finally:
             if current >= 0:
-                valid[lo_w:hi_w] = candidates[lo_w:hi_w]
                 frame_bias[lo_w:hi_w] = all_bias[lo_w:hi_w]
+                if marked:
+                    valid[lo_w:hi_w] = candidates[lo_w:hi_w]
         slices = slices if slices is not None else [slice(0, self.n_dims)]
-        if len(group_masks) == 1 and float(group_masks[0][0]) == 0.0:
+        ranked = None
+        if keys is None:      # the compiled filter's few frames: their keys only when the full ranking needs them
+            if k == 1:
+                ranked = rank_top1(frames, costs, frame_bias, frame_group, b32, current, cont, in_group, tc)
+            if ranked is None:
+                keys = costs + tc
+                keys += frame_bias[frames]
+        if ranked is not None:
+            f, total, bias = ranked
+        elif len(group_masks) == 1 and float(group_masks[0][0]) == 0.0:
             ok = keys < np.inf
             f, total, bias = rank(frames[ok], costs[ok], current, cont, transition_cost, k)
         else:
@@ -455,10 +468,11 @@ class SearchIndex:
 
     def _native_group_search(self, q, frame_bias, small_min, large_min, candidates, spread, current, tc, k,
                              all_bias):
-        """:meth:`_group_search`'s result from the compiled filter (:mod:`lmm.search_native`), seeds None (it
-        needs no hint): the frames that may reach the answer (ascending), and the playing frame when it
-        competes, costed here in one row gather by the brute force's row reduction; None when the filter is
-        off or cannot say (then numpy searches)."""
+        """:meth:`_group_search`'s result from the compiled filter (:mod:`lmm.search_native`), keys and seeds
+        None (the caller works out the keys only if its ranking needs them; the filter needs no hint): the
+        frames that may reach the answer (ascending), and the playing frame when it competes, costed here in
+        one row gather by the brute force's row reduction; None when the filter is off or cannot say (then
+        numpy searches)."""
         native = self._native
         if native is None:
             native = self._native = search_native.group_filter(self) or False
@@ -470,17 +484,17 @@ class SearchIndex:
         if n < 0:
             return None
         if n == 0 and not in_group:    # nothing can be the answer
-            frames = np.zeros(0, dtype=np.int64)
-            costs = np.zeros(0, dtype=np.float32)
-            return frames, costs, costs, float("nan"), False, 0, None
-        rows = self.X[native.out[:n + in_group]]
-        rows -= q
+            return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.float32), None, float("nan"), False, 0, None
+        m = n + in_group
+        if m <= search_native.DIFF_ROWS:
+            rows = native.diff[:m]                  # the rows minus the query, written by the filter
+        else:
+            rows = self.X[native.out[:m]]
+            rows -= q
         costs = np.einsum("ij,ij->i", rows, rows)   # the brute force's reduction: the same value per row
         if in_group:
             cont, costs = float(costs[n]), costs[:n]
         else:
             cont = float("nan")
-        frames = native.out[:n].copy()
-        keys = costs + tc
-        keys += frame_bias[frames]
-        return frames, costs, keys, cont, in_group, n, None
+        # a view of the filter's buffer: read by this search's ranking only (the next search overwrites it)
+        return native.out[:n], costs, None, cont, in_group, n, None

@@ -34,6 +34,7 @@ ENV_SWITCH = "LMM_STUDIO_NATIVE"
 MAX_K = 64          # the largest top K the C filter ranks (the source's MAX_K); above it numpy runs
 TOP_BLOCK = 8       # large blocks per top box (the source's PER_TOP): 256 frames with 32-frame blocks
 _OUT = 4096         # frames the filter may return before it gives up (many exact ties): numpy runs then
+DIFF_ROWS = 256     # frames whose rows minus the query the tick filter writes (more: the caller gathers them)
 
 _state: dict = {}   # "lib": the loaded library or None, "note": why not ("" when loaded or switched off)
 
@@ -92,7 +93,8 @@ class FilterArgs(ctypes.Structure):
     _fields_ = [("rows", P), ("t_lo", P), ("t_hi", P), ("n_top", ctypes.c_int64), ("per_top", I),
                 ("g_lo", P), ("g_hi", P), ("l2_lo", P), ("l2_hi", P), ("n_large", ctypes.c_int64),
                 ("per", I), ("sb", I), ("dims", I), ("bias", P), ("small_min", P), ("large_min", P), ("q", P),
-                ("tb", P), ("out", P), ("out_key", P), ("max_out", I)]
+                ("top_min", P), ("tb", P), ("out", P), ("out_key", P), ("max_out", I), ("diff", P),
+                ("diff_rows", I)]
 
 
 def library() -> ctypes.CDLL | None:
@@ -146,7 +148,9 @@ class GroupFilter:
         self._out_key = np.empty(_OUT, dtype=np.float32)
         self._tail = (_ptr(self._tb), _ptr(self._out), _ptr(self._out_key), _OUT)
         s = self._static
-        self._args = FilterArgs(*s[:9], *s[9:13], 0, 0, 0, _ptr(self._q), *self._tail)
+        self.diff = np.empty((DIFF_ROWS, index.n_dims), dtype=np.float32)   # see tick()
+        self._args = FilterArgs(*s[:9], *s[9:13], 0, 0, 0, _ptr(self._q), 0, *self._tail, _ptr(self.diff), DIFF_ROWS)
+        self._n_top = n_top
         self._args_ptr = ctypes.addressof(self._args)
         self._tick_biases = None                           # the bias arrays the struct points at
         self.out = self._out                               # what tick() wrote: out[:n], then the playing frame
@@ -156,20 +160,27 @@ class GroupFilter:
         """The filter as a tick's search calls it: ``n``, the number of frames (ascending, in ``out[:n]``)
         whose totals may be in the top ``k``, and ``out[n]`` the playing frame ``cont_frame`` when it
         competes (>= 0; ``cont_bias`` its group's bias: the filter costs it itself for a first bound); -1
-        when the filter cannot say (numpy runs). ``out`` is overwritten by the next call."""
+        when the filter cannot say (numpy runs). When those frames (the playing frame included) are at most
+        :data:`DIFF_ROWS`, ``diff[i]`` holds ``out[i]``'s features minus the query, float32 as numpy subtracts
+        them. ``out`` and ``diff`` are overwritten by the next call."""
         if k > MAX_K or self.tick_fn is None:
             return -1
         seen = self._tick_biases
         if seen is None or seen[0] is not frame_bias or seen[1] is not small_min or seen[2] is not large_min:
             # the index passes the same cached arrays every search: the struct is written when they change
+            # and each top block's least bias, worked out once for them (the filter's first pass reads it)
+            top = np.full(self._n_top * TOP_BLOCK, np.inf, dtype=np.float32)
+            top[:len(large_min)] = large_min
+            self._top_min = np.ascontiguousarray(top.reshape(self._n_top, TOP_BLOCK).min(axis=1))
             self._tick_biases = (frame_bias, small_min, large_min)
-            self._args.bias, self._args.small_min, self._args.large_min = (_ptr(a) for a in self._tick_biases)
+            self._args.bias, self._args.small_min, self._args.large_min, self._args.top_min = \
+                (_ptr(a) for a in (*self._tick_biases, self._top_min))
         np.copyto(self._q, q)
         return self.tick_fn(self._args_ptr, tc, spread, cont_frame, cont_bias, k)
 
     def nbytes(self) -> int:
         """Bytes of its own arrays (the top boxes and buffers; the index's arrays it reads are the index's)."""
-        return int(sum(a.nbytes for a in (*self._own, self._tb, self._out, self._out_key)))
+        return int(sum(a.nbytes for a in (*self._own, self._tb, self._out, self._out_key, self.diff)))
 
     def __call__(self, q: np.ndarray, frame_bias: np.ndarray, small_min: np.ndarray, large_min: np.ndarray,
                  tc: np.float32, spread: float, cont_key: float, k: int) -> np.ndarray | None:

@@ -189,6 +189,44 @@ def rank_groups(frames, costs, keys, frame_group, b32, current, cont_cost, in_gr
     return _rows_result(rows)
 
 
+_INF = float("inf")
+
+
+def rank_top1(frames, costs, frame_bias, frame_group, b32, current, cont_cost, in_group, tc):
+    """``rank_groups(..., top_k=1)`` (and, with one group of bias 0, ``rank``'s top 1) for a few frames,
+    the compiled filter's: their keys ``(cost + tc) + bias`` worked out here as float32 scalars, the same
+    float32 sums as the arrays' (no arrays for two or three frames). None when there are more than 8 or the
+    least key ties (another frame, or the playing frame's total): the caller then ranks in full."""
+    if len(frames) > 8:
+        return None
+    best_key, best_f, tie = _INF, -1, False
+    for c, f in zip(costs, frames.tolist()):      # float32 scalars: float32 sums
+        key = (c + tc) + frame_bias[f]
+        if key < best_key:
+            best_key, best_f, tie = key, f, False
+        elif key == best_key:
+            tie = True
+    cont_row = None
+    if in_group and cont_cost == cont_cost:                                  # NaN: not competing
+        g = int(frame_group[current])
+        # its bias: float32 0 + the group's bias, which is the bias itself (+0.0 for -0.0: so is x + 0.0)
+        cont_row = (float(np.float32(cont_cost) + b32[g]), 0, int(current), float(b32[g]) + 0.0)
+    if best_f < 0 or not best_key < _INF:        # no candidate: the playing frame, if it competes
+        if cont_row is None:
+            return _rows_result([])
+        row = cont_row
+    elif tie:
+        return None
+    else:
+        row = (float(best_key), 1, best_f, float(tc + b32[frame_group[best_f]]))
+        if cont_row is not None:
+            if cont_row[0] == row[0]:
+                return None
+            row = min(row, cont_row)
+    return (np.array((row[2],), dtype=np.int64), np.array((row[0],), dtype=np.float32),
+            np.array((row[3],), dtype=np.float32))
+
+
 def least_frames(frames: np.ndarray, keys: np.ndarray, n: int) -> np.ndarray:
     """Up to ``n`` of ``frames`` with the least finite ``keys``, unordered."""
     if keys.size > n:

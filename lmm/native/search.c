@@ -163,10 +163,13 @@ typedef struct {
     int64_t n_large;
     int per, sb, dims;
     const float *bias, *small_min, *large_min, *q;
+    const float *top_min;   /* the least bias of each top block's large blocks (n_top), or NULL: worked out here */
     float *tb;
     int64_t *out;
     float *out_key;
     int max_out;
+    float *diff;            /* lmm_tick_filter: (diff_rows, dims) rows minus the query of the frames it returns */
+    int diff_rows;
 } filter_args;
 
 /* Frames (ascending within each visit, unordered overall) that may be in the top k; returns their count,
@@ -218,8 +221,12 @@ INLINE int filter(const filter_args *a, float tc, float spread, const int64_t *s
     float least = INFINITY;
     for (int64_t t = 0; t < n_top; t++) {
         float m = INFINITY;
-        for (int64_t i = t * PER_TOP; i < (t + 1) * PER_TOP && i < n_large; i++)
-            m = large_min[i] < m ? large_min[i] : m;
+        if (a->top_min) {
+            m = a->top_min[t];
+        } else {
+            for (int64_t i = t * PER_TOP; i < (t + 1) * PER_TOP && i < n_large; i++)
+                m = large_min[i] < m ? large_min[i] : m;
+        }
         tb[t] = tb[t] * SLACK + tc + m;
         if (tb[t] < least) { least = tb[t]; first = t; }
     }
@@ -242,7 +249,7 @@ int lmm_group_filter(const float *rows, const float *t_lo, const float *t_hi, in
                      float tc, float spread, const int64_t *seeds, int n_seeds, float cont_key, int k,
                      float *tb, int64_t *out, float *out_key, int max_out) {
     filter_args a = {rows, t_lo, t_hi, n_top, per_top, g_lo, g_hi, l2_lo, l2_hi, n_large, per, sb, dims,
-                     bias, small_min, large_min, q, tb, out, out_key, max_out};
+                     bias, small_min, large_min, q, 0, tb, out, out_key, max_out, 0, 0};
     return filter(&a, tc, spread, seeds, n_seeds, cont_key, k);
 }
 
@@ -254,8 +261,9 @@ static int by_frame(const void *x, const void *y) {
 /* The filter as a tick's search calls it (lmm.search_index.SearchIndex.group_search): the playing frame
  * cont_frame (-1: it does not compete) with its group's bias cont_bias gives the first threshold (its
  * approximate cost: the margin covers the rounding); the frames come back ascending in out[0..n), and
- * out[n] is cont_frame when it competes, so that the caller costs them all with one row gather (out holds
- * max_out + 1). Returns n, or -1 as lmm_group_filter does. */
+ * out[n] is cont_frame when it competes (out holds max_out + 1); when those n (+ 1) frames fit diff_rows,
+ * diff holds their rows minus the query, which the caller reduces to their costs. Returns n, or -1 as
+ * lmm_group_filter does. */
 CLONES
 int lmm_tick_filter(const filter_args *a, float tc, float spread, int64_t cont_frame, float cont_bias, int k) {
     float cont_key = cont_frame >= 0 ? row_cost(a->rows + cont_frame * a->dims, a->q, a->dims) + cont_bias
@@ -274,5 +282,14 @@ int lmm_tick_filter(const filter_args *a, float tc, float spread, int64_t cont_f
         }
     }
     if (cont_frame >= 0) out[n] = cont_frame;
+    /* each returned frame's row minus the query, as numpy's float32 subtraction makes it (one rounding per
+     * element, whatever the order), for the caller's cost reduction: no row gather there */
+    const int m = n + (cont_frame >= 0), d = a->dims;
+    if (m <= a->diff_rows)
+        for (int i = 0; i < m; i++) {
+            const float *x = a->rows + out[i] * d;
+            float *o = a->diff + (int64_t)i * d;
+            for (int j = 0; j < d; j++) o[j] = x[j] - a->q[j];
+        }
     return n;
 }

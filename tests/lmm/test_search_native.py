@@ -203,19 +203,60 @@ def test_the_tick_filter_returns_ascending_frames_and_the_playing_frame_after_th
         assert brute.best_frame in set(out.tolist())
 
 
-def test_more_tied_frames_than_the_filter_holds_fall_back_to_numpy(fresh_native, monkeypatch):
+@pytest.mark.parametrize("tied", [6000, 300])
+def test_more_tied_frames_than_the_filter_holds_fall_back_to_numpy(tied, fresh_native, monkeypatch):
     """Thousands of identical frames all tie with the answer: the filter gives up (more than it may return)
-    and the numpy index answers, the brute force's answer exactly."""
+    and the numpy index answers, the brute force's answer exactly. A few hundred: more than the filter's
+    rows-minus-query buffer holds (``DIFF_ROWS``), so they are gathered, exactly as well."""
     rng = np.random.default_rng(2)
-    X = np.concatenate([np.zeros((6000, 4), np.float32), rng.normal(3, 1, (500, 4)).astype(np.float32)])
+    X = np.concatenate([np.zeros((tied, 4), np.float32), rng.normal(3, 1, (500, 4)).astype(np.float32)])
     index = _compiled_index(X)
     calls = []
     group_search = SearchIndex._group_search
     monkeypatch.setattr(SearchIndex, "_group_search", lambda self, *a: calls.append(1) or group_search(self, *a))
     mask = np.ones(len(X), bool)
     q = np.full(4, 0.01, np.float32)
-    for current in (-1, 6100):
+    for current in (-1, tied + 100):
         args = dict(current=current, transition_cost=0.1, exclude_window=5, top_k=3)
         fast = index.group_search(q, [(0.0, mask)], **args)
         assert _same(fast, brute_force_search(X, q, mask, **args))
-    assert index._native and len(calls) == 2
+    assert tied > search_native.DIFF_ROWS            # both gathered: more rows than the buffer holds
+    assert index._native and len(calls) == (2 if tied > 4096 else 0)
+
+
+def test_top_1_ranking_of_a_few_frames_is_the_full_rankings(fresh_native):
+    """``rank_top1`` (the compiled filter's few frames, keys as float32 scalars) gives ``rank_groups``'
+    top 1, and ``rank``'s with one group of bias 0, or None where the least key ties (another frame, or the
+    playing frame's total) and the full ranking must decide: random small cases with many exact ties."""
+    from lmm.search_ranking import rank, rank_groups, rank_top1
+
+    rng = np.random.default_rng(4)
+    decided = undecided = 0
+    for case in range(3000):
+        n_frames = 40
+        n = int(rng.integers(0, 7))
+        frames = np.sort(rng.choice(n_frames, n, replace=False)).astype(np.int64)
+        # costs on a coarse grid: equal costs and equal keys are common
+        costs = (rng.integers(0, 6, n) * np.float32(0.25) + np.float32(1e-3) * rng.integers(0, 2, n)).astype(np.float32)
+        one_group = case % 2 == 0
+        b32 = [np.float32(0.0)] if one_group else [np.float32(0.0), np.float32(rng.choice([0.25, -0.25, 0.5]))]
+        frame_group = rng.integers(0, len(b32), n_frames).astype(np.int64)
+        frame_bias = np.array([b32[g] for g in frame_group], dtype=np.float32)
+        tc = np.float32(rng.choice([0.0, 0.25, 0.02]))
+        current = int(rng.integers(-1, n_frames))
+        in_group = current >= 0 and current not in frames.tolist() and bool(rng.integers(0, 4))
+        cont = float(np.float32(rng.integers(0, 6) * 0.25)) if in_group else float("nan")
+        got = rank_top1(frames, costs, frame_bias, frame_group, b32, current, cont, in_group, tc)
+        keys = costs + tc
+        keys += frame_bias[frames]
+        if one_group:
+            want = rank(frames, costs, current, cont, float(tc), 1)
+        else:
+            want = rank_groups(frames, costs, keys, frame_group, b32, current, cont, in_group, tc, 1)
+        if got is None:
+            undecided += 1
+            continue
+        decided += 1
+        for a, b in zip(got, want):
+            assert a.dtype == b.dtype and np.array_equal(a, b), (case, got, want)
+    assert decided > 1000 and undecided > 100
