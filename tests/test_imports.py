@@ -36,7 +36,7 @@ LAYERS = {  # layer -> module prefixes (the longest matching prefix decides a mo
     "engine": ("lmm.features", "lmm.search", "lmm.search_index", "lmm.search_ranking", "lmm.search_native",
                "lmm.nn", "lmm.trajectory", "lmm.inertialize", "lmm.ik", "lmm.tuning", "lmm.controller"),
     "runtime": ("lmm.character", "lmm.source_pose", "lmm.root_motion", "lmm.ground", "lmm.pose_rows",
-                "lmm.tick_snapshot", "lmm.mm", "lmm.learned", "lmm.latents", "lmm.factory", "lmm.runner",
+                "lmm.tick_snapshot", "lmm.mm", "lmm.learned", "lmm.pose_decoding", "lmm.latents", "lmm.factory", "lmm.runner",
                 "lmm.metrics", "lmm.quality", "lmm.input_from_motion"),
     "analysis": ("lmm.coverage", "lmm.checks", "lmm.compare", "lmm.data_fit", "lmm.follow", "lmm.reconstruction",
                  "lmm.physics", "lmm.motion_search", "lmm.reporting", "lmm.session"),

@@ -106,7 +106,7 @@ def check_output(out: dict, mm, nets) -> str:
     """"" when the C++ frame did our work: each search it reports chose a frame whose cost is the exact
     least (numpy over every candidate, the rules of :mod:`lmm.search`), and its decoding of the start
     state gives our rotations; else the first difference, one line."""
-    from lmm.learned import PoseDecoder
+    from lmm.pose_decoding import PoseDecoder
 
     X = mm.features.normalized
     bias, mask, idle = search_sets(mm)

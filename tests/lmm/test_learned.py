@@ -6,7 +6,8 @@ import pytest
 from lmm.controller import InputState
 from lmm.data.build import load_or_build
 from lmm.features import build_features
-from lmm.learned import DEFAULT_WEIGHTS, LearnedMotionMatchingController, LMMNetworks, xform_xy_to_quat
+from lmm.learned import DEFAULT_WEIGHTS, LearnedMotionMatchingController, LMMNetworks
+from lmm.pose_decoding import xform_xy_to_quat
 from lmm.data.weights import WeightsError
 
 

@@ -149,7 +149,7 @@ def test_pose_decoding_matches_the_per_column_version():
     """Rotations within DECODE_TOLERANCE of the per-column version, with the same signs (exact zeros and
     ties of signed axis permutations included: those come out bit for bit), of unit length to rounding;
     bone 0 exactly the identity; positions, velocities and contacts bit for bit."""
-    from lmm.learned import PoseDecoder, xform_xy_to_quat
+    from lmm.pose_decoding import PoseDecoder, xform_xy_to_quat
     decoder = PoseDecoder(23)
     rng = np.random.default_rng(11)
     worst, typical = 0.0, []
@@ -194,7 +194,7 @@ def reference_decode(y: np.ndarray) -> dict:
 
 def test_decoded_poses_are_new_arrays_each_call():
     """Controllers keep source poses (the ghost reads one later): a decode never reuses earlier arrays."""
-    from lmm.learned import PoseDecoder
+    from lmm.pose_decoding import PoseDecoder
     decoder = PoseDecoder(23)
     y = np.random.default_rng(2).standard_normal(338).astype(np.float32)
     first, second = decoder(y), decoder(-y)
@@ -439,7 +439,7 @@ def test_split_decompressor_gives_the_whole_outputs_within_float32_rounding(ship
 def test_tick_decoding_is_the_whole_vectors_decoding_bit_for_bit():
     """PoseDecoder.tick on the tick columns, with the velocity columns given when read, decodes exactly
     what __call__ decodes from the whole vector; the velocities are made only when read, once."""
-    from lmm.learned import PoseDecoder
+    from lmm.pose_decoding import PoseDecoder
     from lmm.nn import pose_vector_tick_columns, pose_vector_velocity_columns
 
     decoder = PoseDecoder(23)
