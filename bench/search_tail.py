@@ -79,6 +79,10 @@ def against(rev, X, queries, groups, near, args, rounds) -> dict:
     indexes["against"]._native = old.group_filter(indexes["against"])
     indexes["this"]._native = search_native.group_filter(indexes["this"])
     assert indexes["against"]._native and indexes["this"]._native, "both compiled filters load"
+    if not hasattr(indexes["against"]._native, "tick"):
+        # before 5074663 the filter's interface and the Python around it were different: compare whole trees
+        raise SystemExit(f"--against {rev}: its filter predates this tree's interface; "
+                         f"use python bench/search_call_trees.py {rev}")
     per_round = []
     for r in range(rounds):
         times = {name: [] for name in indexes}

@@ -387,19 +387,18 @@ class SearchIndex:
         if all_frames is None:
             self._all_frames = all_frames = [(0.0, np.ones(self.n_frames, dtype=bool))]
         frame_bias, _, small_min, large_min, *_ = self._groups(all_frames)
+        native = self._native
         Q = np.ascontiguousarray(queries, dtype=np.float32)
         frames, costs = np.empty(len(Q), dtype=np.int64), np.empty(len(Q), dtype=np.float32)
         tc = np.float32(0.0)
         for i, q in enumerate(Q):
-            found = self._native(q, frame_bias, small_min, large_min, tc, 0.0, np.inf, 1)
-            if found is None or not found.size:
+            n = native.tick(q, frame_bias, small_min, large_min, tc, 0.0, -1, 0.0, 1)
+            if n <= 0:
                 return None
-            found.sort()
-            rows = self.X[found]
-            rows -= q
+            rows = self._candidate_rows(native, n, q)
             c = np.einsum("ij,ij->i", rows, rows)   # the brute force's reduction
-            j = int(c.argmin())                      # the first least: the lower frame on a tie
-            frames[i], costs[i] = found[j], c[j]
+            j = int(c.argmin())                      # the first least (ascending frames): the lower frame on a tie
+            frames[i], costs[i] = native.out[j], c[j]
         return frames, costs
 
     def _group_search(self, q, frame_bias, all_bias, small_min, large_min, valid, candidates, spread, current,
@@ -485,12 +484,7 @@ class SearchIndex:
             return None
         if n == 0 and not in_group:    # nothing can be the answer
             return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.float32), None, float("nan"), False, 0, None
-        m = n + in_group
-        if m <= search_native.DIFF_ROWS:
-            rows = native.diff[:m]                  # the rows minus the query, written by the filter
-        else:
-            rows = self.X[native.out[:m]]
-            rows -= q
+        rows = self._candidate_rows(native, n + in_group, q)
         costs = np.einsum("ij,ij->i", rows, rows)   # the brute force's reduction: the same value per row
         if in_group:
             cont, costs = float(costs[n]), costs[:n]
@@ -498,3 +492,12 @@ class SearchIndex:
             cont = float("nan")
         # a view of the filter's buffer: read by this search's ranking only (the next search overwrites it)
         return native.out[:n], costs, None, cont, in_group, n, None
+
+    def _candidate_rows(self, native, m: int, q: np.ndarray) -> np.ndarray:
+        """The first ``m`` frames the compiled filter returned, their features minus the query: the rows the
+        filter wrote, or gathered here when there were more than its buffer holds."""
+        if m <= search_native.DIFF_ROWS:
+            return native.diff[:m]
+        rows = self.X[native.out[:m]]
+        rows -= q
+        return rows

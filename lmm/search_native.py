@@ -76,25 +76,22 @@ def _build() -> tuple[ctypes.CDLL | None, str]:
         dll = ctypes.CDLL(str(lib))
     except OSError as exc:
         return None, f"loading {lib.name} failed: {exc}"
-    fn = dll.lmm_group_filter
-    P, I, F = ctypes.c_void_p, ctypes.c_int, ctypes.c_float
-    fn.argtypes = [P, P, P, ctypes.c_int64, I, P, P, P, P, ctypes.c_int64, I, I, I, P, P, P, P, F, F, P, I, F,
-                   I, P, P, P, I]
-    fn.restype = I
     tick = dll.lmm_tick_filter
-    tick.argtypes = [P, F, F, ctypes.c_int64, F, I]
-    tick.restype = I
+    tick.argtypes = [_P, ctypes.c_float, ctypes.c_float, _I64, ctypes.c_float, _I]
+    tick.restype = _I
     return dll, ""
+
+
+_P, _I, _I64 = ctypes.c_void_p, ctypes.c_int, ctypes.c_int64
 
 
 class FilterArgs(ctypes.Structure):
     """The source's ``filter_args``: what stays the same from one search to the next."""
-    P, I = ctypes.c_void_p, ctypes.c_int
-    _fields_ = [("rows", P), ("t_lo", P), ("t_hi", P), ("n_top", ctypes.c_int64), ("per_top", I),
-                ("g_lo", P), ("g_hi", P), ("l2_lo", P), ("l2_hi", P), ("n_large", ctypes.c_int64),
-                ("per", I), ("sb", I), ("dims", I), ("bias", P), ("small_min", P), ("large_min", P), ("q", P),
-                ("top_min", P), ("tb", P), ("out", P), ("out_key", P), ("max_out", I), ("diff", P),
-                ("diff_rows", I)]
+    _fields_ = [("rows", _P), ("t_lo", _P), ("t_hi", _P), ("n_top", _I64), ("per_top", _I),
+                ("g_lo", _P), ("g_hi", _P), ("l2_lo", _P), ("l2_hi", _P), ("n_large", _I64),
+                ("per", _I), ("sb", _I), ("dims", _I), ("bias", _P), ("small_min", _P), ("large_min", _P),
+                ("q", _P), ("top_min", _P), ("tb", _P), ("out", _P), ("out_key", _P), ("max_out", _I),
+                ("diff", _P), ("diff_rows", _I)]
 
 
 def library() -> ctypes.CDLL | None:
@@ -130,30 +127,27 @@ class GroupFilter:
     """The compiled filter bound to one :class:`lmm.search_index.SearchIndex`'s arrays (rebuild it after
     :meth:`~lmm.search_index.SearchIndex.update`)."""
 
-    def __init__(self, index, fn, top_block: int = TOP_BLOCK, tick_fn=None):
-        self.fn, self.index, self.tick_fn = fn, index, tick_fn
+    def __init__(self, index, tick_fn, top_block: int = TOP_BLOCK):
+        self.index, self.tick_fn = index, tick_fn
         t_lo, t_hi, g_lo, g_hi = top_boxes(index, top_block)
         self._own = (t_lo, t_hi, g_lo, g_hi)
         self._keep = (np.ascontiguousarray(index.rows, dtype=np.float32), t_lo, t_hi, g_lo, g_hi, index.l2_lo,
                       index.l2_hi)
         for a in self._keep[1:]:
             assert a.flags.c_contiguous
-        n_top = t_lo.shape[1]
-        self._static = [_ptr(a) for a in self._keep[:3]] + [n_top, top_block] + [_ptr(a) for a in self._keep[3:]] + \
-            [index.n_large, index.per_large, index.small_block, index.n_dims]
+        rows, t_lo, t_hi, g_lo, g_hi, l2_lo, l2_hi = (_ptr(a) for a in self._keep)
+        self._n_top = n_top = self._own[0].shape[1]
         self._tb = np.empty(n_top, dtype=np.float32)
         self._q = np.empty(index.n_dims, dtype=np.float32)
-        self._biases = self._bias_ptrs = None
-        self._out = np.empty(_OUT + 1, dtype=np.int64)     # + 1: the tick filter's playing frame
+        self.out = np.empty(_OUT + 1, dtype=np.int64)      # what tick() wrote: out[:n], then the playing frame
         self._out_key = np.empty(_OUT, dtype=np.float32)
-        self._tail = (_ptr(self._tb), _ptr(self._out), _ptr(self._out_key), _OUT)
-        s = self._static
         self.diff = np.empty((DIFF_ROWS, index.n_dims), dtype=np.float32)   # see tick()
-        self._args = FilterArgs(*s[:9], *s[9:13], 0, 0, 0, _ptr(self._q), 0, *self._tail, _ptr(self.diff), DIFF_ROWS)
-        self._n_top = n_top
+        # the bias pointers (and each top block's least bias) are set by tick() for the arrays it is given
+        self._args = FilterArgs(rows, t_lo, t_hi, n_top, top_block, g_lo, g_hi, l2_lo, l2_hi, index.n_large,
+                                index.per_large, index.small_block, index.n_dims, 0, 0, 0, _ptr(self._q), 0,
+                                _ptr(self._tb), _ptr(self.out), _ptr(self._out_key), _OUT, _ptr(self.diff), DIFF_ROWS)
         self._args_ptr = ctypes.addressof(self._args)
         self._tick_biases = None                           # the bias arrays the struct points at
-        self.out = self._out                               # what tick() wrote: out[:n], then the playing frame
 
     def tick(self, q: np.ndarray, frame_bias: np.ndarray, small_min: np.ndarray, large_min: np.ndarray,
              tc: float, spread: float, cont_frame: int, cont_bias: float, k: int) -> int:
@@ -163,7 +157,7 @@ class GroupFilter:
         when the filter cannot say (numpy runs). When those frames (the playing frame included) are at most
         :data:`DIFF_ROWS`, ``diff[i]`` holds ``out[i]``'s features minus the query, float32 as numpy subtracts
         them. ``out`` and ``diff`` are overwritten by the next call."""
-        if k > MAX_K or self.tick_fn is None:
+        if k > MAX_K:
             return -1
         seen = self._tick_biases
         if seen is None or seen[0] is not frame_bias or seen[1] is not small_min or seen[2] is not large_min:
@@ -180,23 +174,7 @@ class GroupFilter:
 
     def nbytes(self) -> int:
         """Bytes of its own arrays (the top boxes and buffers; the index's arrays it reads are the index's)."""
-        return int(sum(a.nbytes for a in (*self._own, self._tb, self._out, self._out_key, self.diff)))
-
-    def __call__(self, q: np.ndarray, frame_bias: np.ndarray, small_min: np.ndarray, large_min: np.ndarray,
-                 tc: np.float32, spread: float, cont_key: float, k: int) -> np.ndarray | None:
-        """The frames (unordered, a new array) whose totals may be in the top ``k``, ``cont_key`` being the
-        playing frame's total (inf when it does not compete); None when the filter cannot say (numpy runs)."""
-        if k > MAX_K:
-            return None
-        if self._biases is None or any(a is not b for a, b in zip(self._biases, (frame_bias, small_min, large_min))):
-            # the index passes the same cached arrays every search: their pointers are read once (a pointer
-            # costs a microsecond, the call's own overhead is 3)
-            self._biases = (frame_bias, small_min, large_min)
-            self._bias_ptrs = [_ptr(a) for a in self._biases] + [_ptr(self._q)]
-        np.copyto(self._q, q)
-        n = self.fn(*self._static, *self._bias_ptrs, float(tc), float(spread), None, 0, float(cont_key), int(k),
-                    *self._tail)
-        return None if n < 0 else self._out[:n].copy()
+        return int(sum(a.nbytes for a in (*self._own, self._tb, self.out, self._out_key, self.diff)))
 
 
 def top_boxes(index, top_block: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -218,4 +196,4 @@ def top_boxes(index, top_block: int) -> tuple[np.ndarray, np.ndarray, np.ndarray
 def group_filter(index) -> GroupFilter | None:
     """The compiled filter for ``index``, or None when the compiled path is off or missing."""
     dll = library()
-    return None if dll is None else GroupFilter(index, dll.lmm_group_filter, tick_fn=dll.lmm_tick_filter)
+    return None if dll is None else GroupFilter(index, dll.lmm_tick_filter)

@@ -126,25 +126,15 @@ def rank_groups(frames, costs, keys, frame_group, b32, current, cont_cost, in_gr
     of its group has a lower total, its key is above ``kth`` and it is cut in the merge either way).
     """
     cont_group = int(frame_group[current]) if in_group and cont_cost == cont_cost else -1  # NaN: not competing
-    cont_row = None if cont_group < 0 else (float(np.float32(cont_cost) + b32[cont_group]), 0, int(current),
-                                            float(np.float32(0.0) + b32[cont_group]))
+    cont_row = _cont_row(frame_group, b32, current, cont_cost, in_group)
     if top_k == 1 and keys.size:
         # the controller's tick search: usually one least key, and the playing frame's total differs from
         # it; then the ranking below keeps that frame and the playing frame and sorts the two, which is
-        # what this does without building it (a tie falls through to the full ranking); a few keys (the
-        # compiled filter's) as Python floats, the same values
-        if keys.size <= 16:
-            key_list = keys.tolist()
-            least = min(key_list)
-            unique = key_list.count(least) == 1
-            i = key_list.index(least)
-        else:
-            i = int(keys.argmin())
-            least = float(keys[i])
-            unique = np.count_nonzero(keys == keys[i]) == 1
-        if least < np.inf and unique:
-            f = int(frames[i])
-            row = (least, 1, f, float(tc + b32[frame_group[f]]))
+        # what this does without building it (a tie falls through to the full ranking)
+        i = int(keys.argmin())
+        least = keys[i]
+        if least < np.inf and np.count_nonzero(keys == least) == 1:
+            row = (float(least), 1, int(frames[i]), float(tc + b32[frame_group[frames[i]]]))
             if cont_row is None:
                 return _rows_result([row])
             if cont_row[0] != row[0]:
@@ -206,11 +196,7 @@ def rank_top1(frames, costs, frame_bias, frame_group, b32, current, cont_cost, i
             best_key, best_f, tie = key, f, False
         elif key == best_key:
             tie = True
-    cont_row = None
-    if in_group and cont_cost == cont_cost:                                  # NaN: not competing
-        g = int(frame_group[current])
-        # its bias: float32 0 + the group's bias, which is the bias itself (+0.0 for -0.0: so is x + 0.0)
-        cont_row = (float(np.float32(cont_cost) + b32[g]), 0, int(current), float(b32[g]) + 0.0)
+    cont_row = _cont_row(frame_group, b32, current, cont_cost, in_group)
     if best_f < 0 or not best_key < _INF:        # no candidate: the playing frame, if it competes
         if cont_row is None:
             return _rows_result([])
@@ -225,6 +211,16 @@ def rank_top1(frames, costs, frame_bias, frame_group, b32, current, cont_cost, i
             row = min(row, cont_row)
     return (np.array((row[2],), dtype=np.int64), np.array((row[0],), dtype=np.float32),
             np.array((row[3],), dtype=np.float32))
+
+
+def _cont_row(frame_group, b32, current, cont_cost, in_group):
+    """The playing frame's ranking row ``(total, 0, frame, bias)`` (its total: cost + its group's bias in
+    float32, no transition cost; its bias: float32 0 + the group's, which is the group's (+0.0 for -0.0, as
+    x + 0.0 gives)), or None when it does not compete (NaN cost or not a candidate)."""
+    if not (in_group and cont_cost == cont_cost):
+        return None
+    g = int(frame_group[current])
+    return float(np.float32(cont_cost) + b32[g]), 0, int(current), float(b32[g]) + 0.0
 
 
 def least_frames(frames: np.ndarray, keys: np.ndarray, n: int) -> np.ndarray:

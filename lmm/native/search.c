@@ -152,9 +152,9 @@ INLINE int visit_top(scan *s, kbest *b, int64_t top) {
     return 1;
 }
 
-/* The filter's arguments that stay the same from one search to the next (see lmm_group_filter): the
- * index's arrays, the bias arrays of the tag groups, the query buffer and the outputs; lmm_tick_filter
- * reads them from one struct (lmm/search_native.py keeps it), so a call passes six values instead of 28. */
+/* The filter's arguments that stay the same from one search to the next: the index's arrays, the bias
+ * arrays of the tag groups (and each top block's least bias), the query buffer and the outputs, in one
+ * struct that lmm/search_native.py keeps, so that a call passes six values. */
 typedef struct {
     const float *rows, *t_lo, *t_hi;
     int64_t n_top;
@@ -163,12 +163,12 @@ typedef struct {
     int64_t n_large;
     int per, sb, dims;
     const float *bias, *small_min, *large_min, *q;
-    const float *top_min;   /* the least bias of each top block's large blocks (n_top), or NULL: worked out here */
+    const float *top_min;   /* the least bias of each top block's large blocks (n_top) */
     float *tb;
     int64_t *out;
     float *out_key;
     int max_out;
-    float *diff;            /* lmm_tick_filter: (diff_rows, dims) rows minus the query of the frames it returns */
+    float *diff;            /* (diff_rows, dims): the rows minus the query of the frames returned */
     int diff_rows;
 } filter_args;
 
@@ -179,17 +179,15 @@ typedef struct {
  * (dims, n_top); large blocks grouped by top block, g_lo/g_hi (n_top, dims, per_top); small blocks,
  * l2_lo/l2_hi (n_large, per * dims).
  * rows (n_pad, dims) the features padded to whole large blocks; bias (n_pad) each frame's bias, INFINITY
- * for frames that are not candidates; small_min/large_min the least bias per block; seeds the frames whose
- * totals give a first threshold (in range); cont_key the playing frame's total (INFINITY when it does not
- * compete); tb scratch (n_top).
+ * for frames that are not candidates; small_min/large_min/top_min the least bias per block; cont_key the
+ * playing frame's total, the first threshold (INFINITY when it does not compete); tb scratch (n_top).
  *
  * The top bounds read a fifth of the memory that bounding every large block over 16 dims read (27 floats
  * per 256 frames against 16 per 32); a top block's large boxes are then one contiguous 1.7 kB piece. The most
  * promising top block is visited first (a tight threshold early), then the others in order: visiting them
  * in ascending bound (a sort) visited 15% fewer but cost more than it saved.
  */
-INLINE int filter(const filter_args *a, float tc, float spread, const int64_t *seeds, int n_seeds, float cont_key,
-                  int k) {
+INLINE int filter(const filter_args *a, float tc, float spread, float cont_key, int k) {
     const int dims = a->dims;
     const int64_t n_top = a->n_top, n_large = a->n_large;
     const float *q = a->q, *bias = a->bias, *large_min = a->large_min;
@@ -201,11 +199,6 @@ INLINE int filter(const filter_args *a, float tc, float spread, const int64_t *s
     for (int i = 0; i < k; i++) b.best[i] = INFINITY;
     kbest_set_thr(&b);
     kbest_push(&b, cont_key);
-    for (int i = 0; i < n_seeds; i++) {
-        int64_t f = seeds[i];
-        if (isinf(bias[f])) continue;
-        kbest_push(&b, (row_cost(a->rows + f * dims, q, dims) + tc) + bias[f]);
-    }
     /* 1. the bound of every top block, dimension by dimension (long loops along the blocks) */
     for (int64_t t = 0; t < n_top; t++) tb[t] = 0.0f;
     for (int j = 0; j < dims; j++) {
@@ -220,14 +213,7 @@ INLINE int filter(const filter_args *a, float tc, float spread, const int64_t *s
     int64_t first = 0;
     float least = INFINITY;
     for (int64_t t = 0; t < n_top; t++) {
-        float m = INFINITY;
-        if (a->top_min) {
-            m = a->top_min[t];
-        } else {
-            for (int64_t i = t * PER_TOP; i < (t + 1) * PER_TOP && i < n_large; i++)
-                m = large_min[i] < m ? large_min[i] : m;
-        }
-        tb[t] = tb[t] * SLACK + tc + m;
+        tb[t] = tb[t] * SLACK + tc + a->top_min[t];
         if (tb[t] < least) { least = tb[t]; first = t; }
     }
     if (isinf(least)) return 0;
@@ -241,18 +227,6 @@ INLINE int filter(const filter_args *a, float tc, float spread, const int64_t *s
     return s.n_out;
 }
 
-CLONES
-int lmm_group_filter(const float *rows, const float *t_lo, const float *t_hi, int64_t n_top, int per_top,
-                     const float *g_lo, const float *g_hi,
-                     const float *l2_lo, const float *l2_hi, int64_t n_large, int per, int sb, int dims,
-                     const float *bias, const float *small_min, const float *large_min, const float *q,
-                     float tc, float spread, const int64_t *seeds, int n_seeds, float cont_key, int k,
-                     float *tb, int64_t *out, float *out_key, int max_out) {
-    filter_args a = {rows, t_lo, t_hi, n_top, per_top, g_lo, g_hi, l2_lo, l2_hi, n_large, per, sb, dims,
-                     bias, small_min, large_min, q, 0, tb, out, out_key, max_out, 0, 0};
-    return filter(&a, tc, spread, seeds, n_seeds, cont_key, k);
-}
-
 static int by_frame(const void *x, const void *y) {
     int64_t a = *(const int64_t *)x, b = *(const int64_t *)y;
     return (a > b) - (a < b);
@@ -263,12 +237,12 @@ static int by_frame(const void *x, const void *y) {
  * approximate cost: the margin covers the rounding); the frames come back ascending in out[0..n), and
  * out[n] is cont_frame when it competes (out holds max_out + 1); when those n (+ 1) frames fit diff_rows,
  * diff holds their rows minus the query, which the caller reduces to their costs. Returns n, or -1 as
- * lmm_group_filter does. */
+ * filter() does. */
 CLONES
 int lmm_tick_filter(const filter_args *a, float tc, float spread, int64_t cont_frame, float cont_bias, int k) {
     float cont_key = cont_frame >= 0 ? row_cost(a->rows + cont_frame * a->dims, a->q, a->dims) + cont_bias
                                      : INFINITY;
-    int n = filter(a, tc, spread, 0, 0, cont_key, k);
+    int n = filter(a, tc, spread, cont_key, k);
     if (n < 0) return n;
     int64_t *out = a->out;
     if (n > 64) {
