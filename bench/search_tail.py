@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import importlib.util
+import inspect
 import json
 import subprocess
 import sys
@@ -79,8 +80,10 @@ def against(rev, X, queries, groups, near, args, rounds) -> dict:
     indexes["against"]._native = old.group_filter(indexes["against"])
     indexes["this"]._native = search_native.group_filter(indexes["this"])
     assert indexes["against"]._native and indexes["this"]._native, "both compiled filters load"
-    if not hasattr(indexes["against"]._native, "tick"):
-        # before 5074663 the filter's interface and the Python around it were different: compare whole trees
+    tick = getattr(indexes["against"]._native, "tick", None)
+    if tick is None or "wlo" not in inspect.signature(tick).parameters:
+        # before 5074663 the filter's interface and the Python around it were different, and until the filter
+        # took the exclusion window and ranked a top-1 search itself the Python around it was: compare whole trees
         raise SystemExit(f"--against {rev}: its filter predates this tree's interface; "
                          f"use python bench/search_call_trees.py {rev}")
     per_round = []

@@ -26,7 +26,7 @@ import numpy as np
 
 from lmm import search_native
 from lmm.search_ranking import (SearchResult, continuing_cost, frame_costs, least_frames, make_result, rank, rank_groups,
-                                rank_top1)
+                                rank_top1, top1_arrays)
 
 SMALL_BLOCK = 8   # frames per small box
 LARGE_BLOCK = 32  # frames per large box (a multiple of SMALL_BLOCK)
@@ -323,26 +323,26 @@ class SearchIndex:
         frame_bias, frame_group, small_min, large_min, valid, candidates, spread, all_bias, b32 = \
             self._groups(group_masks)
         tc = np.float32(transition_cost)
-        if current >= 0:  # exclude the window around the playing frame for this search only
-            lo_w, hi_w = max(current - exclude_window, 0), current + exclude_window + 1
-            frame_bias[lo_w:hi_w] = np.inf
-        marked = False          # whether valid lost the window as well (numpy's search reads it)
-        try:
-            found = self._native_group_search(q, frame_bias, small_min, large_min, candidates, spread, current, tc,
-                                              k, all_bias)
-            if found is None:
-                if current >= 0:
-                    valid[lo_w:hi_w] = False
-                    marked = True
+        slices = slices if slices is not None else [slice(0, self.n_dims)]
+        # the window around the playing frame is excluded for this search only
+        lo_w, hi_w = (max(current - exclude_window, 0), current + exclude_window + 1) if current >= 0 else (0, 0)
+        found = self._native_group_search(q, frame_bias, small_min, large_min, candidates, spread, current, tc, k,
+                                          all_bias, lo_w, hi_w)
+        if found is None:
+            if current >= 0:       # numpy reads the window from the bias and candidate arrays
+                frame_bias[lo_w:hi_w] = np.inf
+                valid[lo_w:hi_w] = False
+            try:
                 found = self._group_search(q, frame_bias, all_bias, small_min, large_min, valid, candidates, spread,
                                            current, tc, k, hint)
-            frames, costs, keys, cont, in_group, evaluated, seeds = found
-        finally:
-            if current >= 0:
-                frame_bias[lo_w:hi_w] = all_bias[lo_w:hi_w]
-                if marked:
+            finally:
+                if current >= 0:
+                    frame_bias[lo_w:hi_w] = all_bias[lo_w:hi_w]
                     valid[lo_w:hi_w] = candidates[lo_w:hi_w]
-        slices = slices if slices is not None else [slice(0, self.n_dims)]
+        elif len(found) == 3:      # the compiled filter ranked the top 1 itself
+            cont, evaluated, (f, total, bias) = found
+            return make_result(self.X, q, slices, f, total, bias, current, cont, evaluated)
+        frames, costs, keys, cont, in_group, evaluated, seeds = found
         ranked = None
         if keys is None:      # the compiled filter's few frames: their keys only when the full ranking needs them
             if k == 1:
@@ -395,6 +395,10 @@ class SearchIndex:
             n = native.tick(q, frame_bias, small_min, large_min, tc, 0.0, -1, 0.0, 1)
             if n <= 0:
                 return None
+            ranked, f, cost = native.res[:3].tolist()
+            if ranked:         # one least cost (its total: cost + 0 + 0), costed as numpy costs it
+                frames[i], costs[i] = int(f), cost
+                continue
             rows = self._candidate_rows(native, n, q)
             c = np.einsum("ij,ij->i", rows, rows)   # the brute force's reduction
             j = int(c.argmin())                      # the first least (ascending frames): the lower frame on a tie
@@ -466,12 +470,13 @@ class SearchIndex:
         return frames, costs, keys, cont, in_group, evaluated + frames.size, (seeds, c[:seeds.size])
 
     def _native_group_search(self, q, frame_bias, small_min, large_min, candidates, spread, current, tc, k,
-                             all_bias):
+                             all_bias, lo_w, hi_w):
         """:meth:`_group_search`'s result from the compiled filter (:mod:`lmm.search_native`), keys and seeds
         None (the caller works out the keys only if its ranking needs them; the filter needs no hint): the
         frames that may reach the answer (ascending), and the playing frame when it competes, costed here in
-        one row gather by the brute force's row reduction; None when the filter is off or cannot say (then
-        numpy searches)."""
+        one row gather by the brute force's row reduction; or, when the filter ranked a top-1 search itself,
+        ``(the playing frame's cost, frames evaluated, (frames, totals, biases))``; None when the filter is off
+        or cannot say (then numpy searches). The frames ``lo_w`` <= f < ``hi_w`` are not candidates."""
         native = self._native
         if native is None:
             native = self._native = search_native.group_filter(self) or False
@@ -479,9 +484,12 @@ class SearchIndex:
             return None
         in_group = current >= 0 and bool(candidates[current])
         n = native.tick(q, frame_bias, small_min, large_min, tc, spread, current if in_group else -1,
-                        all_bias[current] if in_group else 0.0, k)
+                        all_bias[current] if in_group else 0.0, k, lo_w, hi_w)
         if n < 0:
             return None
+        ranked, f, total, bias, cont = native.res.tolist()
+        if ranked:
+            return cont, n, top1_arrays(int(f), total, bias)
         if n == 0 and not in_group:    # nothing can be the answer
             return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.float32), None, float("nan"), False, 0, None
         rows = self._candidate_rows(native, n + in_group, q)

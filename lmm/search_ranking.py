@@ -213,6 +213,14 @@ def rank_top1(frames, costs, frame_bias, frame_group, b32, current, cont_cost, i
             np.array((row[3],), dtype=np.float32))
 
 
+def top1_arrays(frame: int, total: float, bias: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(frames, totals, biases) of a top-1 answer: one row, or none for ``frame`` -1."""
+    if frame < 0:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.float32), np.zeros(0, dtype=np.float32)
+    return (np.array((frame,), dtype=np.int64), np.array((total,), dtype=np.float32),
+            np.array((bias,), dtype=np.float32))
+
+
 def _cont_row(frame_group, b32, current, cont_cost, in_group):
     """The playing frame's ranking row ``(total, 0, frame, bias)`` (its total: cost + its group's bias in
     float32, no transition cost; its bias: float32 0 + the group's, which is the group's (+0.0 for -0.0, as

@@ -3,9 +3,9 @@
  * It walks three levels of bounding boxes (256, 32 and 8 frames) with a threshold that tightens as real
  * frames are costed, and returns every candidate frame whose approximate total (cost + transition cost +
  * bias) is within a relative 1e-4 of the approximate k-th best total: a superset of the frames that can be
- * in the exact answer, which numpy then costs and ranks exactly as the brute force does. Its own float sums may round
- * differently from numpy's (another order); the margin is far wider than that rounding, so only speed
- * depends on this file, never an answer.
+ * in the exact answer, which are then costed and ranked exactly as the brute force does: for a top-1 search here
+ * (numpy_row_cost, numpy's own sum, checked against numpy before it is used), else by numpy. The filter's own
+ * float sums may round differently from numpy's (another order); the margin is far wider than that rounding.
  *
  * One build runs at native speed on any x86-64: GCC's target_clones picks the widest instruction set at load.
  */
@@ -69,7 +69,7 @@ INLINE float box_bound(const float *lo, const float *hi, const float *q, int n) 
     return s + ((acc[0] + acc[1]) + (acc[2] + acc[3])) + ((acc[4] + acc[5]) + (acc[6] + acc[7]));
 }
 
-/* squared distance of a row to q over n dims */
+/* squared distance of a row to q over n dims, the filter's own (approximate) sum */
 INLINE float row_cost(const float *x, const float *q, int n) {
     float acc[8] = {0, 0, 0, 0, 0, 0, 0, 0};
     int d = 0;
@@ -86,11 +86,40 @@ INLINE float row_cost(const float *x, const float *q, int n) {
     return s + ((acc[0] + acc[1]) + (acc[2] + acc[3])) + ((acc[4] + acc[5]) + (acc[6] + acc[7]));
 }
 
+/* The squared distance of a row to q summed exactly as numpy's einsum("ij,ij->i") sums a float32 row of n
+ * values (numpy's 128-bit baseline loop: four lanes, each over elements l, l + 4, ...: per 16 elements the
+ * lanes take the products 12-15, 8-11, 4-7, 0-3 in that order, then the tail's products four at a time, the
+ * last four zero-filled; then (lane 0 + lane 1) + (lane 2 + lane 3)), with the same float32 roundings (the
+ * file is built with -ffp-contract=off: no fused multiply-adds). lmm/search_native.py checks it against numpy
+ * on the index's own rows before it is used; with another numpy that sums otherwise, numpy costs the frames. */
+INLINE float numpy_row_cost(const float *x, const float *q, int n) {
+    float v[4] = {0.0f, 0.0f, 0.0f, 0.0f};
+    int d = 0;
+    for (; n - d >= 16; d += 16)
+        for (int l = 0; l < 4; l++) {
+            float g0 = x[d + l] - q[d + l], g1 = x[d + 4 + l] - q[d + 4 + l];
+            float g2 = x[d + 8 + l] - q[d + 8 + l], g3 = x[d + 12 + l] - q[d + 12 + l];
+            float p0 = g0 * g0, p1 = g1 * g1, p2 = g2 * g2, p3 = g3 * g3;
+            v[l] = p0 + (p1 + (p2 + (p3 + v[l])));
+        }
+    for (; d < n; d += 4)
+        for (int l = 0; l < 4; l++) {
+            float p = 0.0f;
+            if (d + l < n) {
+                float g = x[d + l] - q[d + l];
+                p = g * g;
+            }
+            v[l] = p + v[l];
+        }
+    return (v[0] + v[1]) + (v[2] + v[3]);
+}
+
 typedef struct {
     const float *rows, *g_lo, *g_hi, *l2_lo, *l2_hi, *bias, *small_min, *large_min, *q;
     int dims, per, sb;
     int64_t n_large;
     float tc;
+    int64_t wlo, whi;   /* the exclusion window [wlo, whi): not candidates in this search */
     int64_t *out;
     float *out_key;
     int n_out, max_out;
@@ -116,7 +145,7 @@ INLINE int visit_large(scan *s, kbest *b, int64_t large) {
         for (int r = 0; r < sb; r++) {
             int64_t f = small * sb + r;
             float fb = s->bias[f];
-            if (isinf(fb)) continue;
+            if (isinf(fb) || (f >= s->wlo && f < s->whi)) continue;
             float key = (row_cost(s->rows + f * d, s->q, d) + s->tc) + fb;
             if (!(key <= b->thr)) continue;
             kbest_push(b, key);
@@ -170,6 +199,9 @@ typedef struct {
     int max_out;
     float *diff;            /* (diff_rows, dims): the rows minus the query of the frames returned */
     int diff_rows;
+    int exact;              /* 1: numpy_row_cost sums as numpy does here (checked), so a top-1 search ranks here */
+    double *res;            /* the top-1 answer: ranked (1, or 0: numpy ranks), frame (-1: none), total, bias,
+                             * the playing frame's cost (NaN when it does not compete) */
 } filter_args;
 
 /* Frames (ascending within each visit, unordered overall) that may be in the top k; returns their count,
@@ -187,7 +219,7 @@ typedef struct {
  * promising top block is visited first (a tight threshold early), then the others in order: visiting them
  * in ascending bound (a sort) visited 15% fewer but cost more than it saved.
  */
-INLINE int filter(const filter_args *a, float tc, float spread, float cont_key, int k) {
+INLINE int filter(const filter_args *a, float tc, float spread, float cont_key, int k, int64_t wlo, int64_t whi) {
     const int dims = a->dims;
     const int64_t n_top = a->n_top, n_large = a->n_large;
     const float *q = a->q, *bias = a->bias, *large_min = a->large_min;
@@ -218,7 +250,7 @@ INLINE int filter(const filter_args *a, float tc, float spread, float cont_key, 
     }
     if (isinf(least)) return 0;
     scan s = {a->rows, a->g_lo, a->g_hi, a->l2_lo, a->l2_hi, bias, a->small_min, large_min, q, dims, a->per, a->sb,
-              n_large, tc, a->out, a->out_key, 0, a->max_out};
+              n_large, tc, wlo, whi, a->out, a->out_key, 0, a->max_out};
     /* 2. the most promising block first (a tight threshold early), then every block that may hold a frame */
     if (!visit_top(&s, &b, first)) return -1;
     for (int64_t t = 0; t < n_top; t++)
@@ -232,17 +264,61 @@ static int by_frame(const void *x, const void *y) {
     return (a > b) - (a < b);
 }
 
+/* A top-1 search's answer from the filter's n frames (ascending in out) and the playing frame cont_frame
+ * (-1: it does not compete; cont_bias its group's bias), ranked as lmm.search_ranking.rank_top1 ranks them,
+ * every cost by numpy_row_cost: each frame's total (cost + tc) + its bias in float32; the least, unless it
+ * ties with another's or the playing frame's total (then 0: numpy ranks); the playing frame's total is its
+ * cost + its bias, and it wins when lower. Writes a->res and returns 1 when ranked. */
+INLINE int rank_top1(const filter_args *a, int n, float tc, int64_t cont_frame, float cont_bias) {
+    const int d = a->dims;
+    double *res = a->res;
+    float best = INFINITY;
+    int64_t best_f = -1;
+    int tie = 0;
+    for (int i = 0; i < n; i++) {
+        const int64_t f = a->out[i];
+        const float key = (numpy_row_cost(a->rows + f * d, a->q, d) + tc) + a->bias[f];
+        if (key < best) { best = key; best_f = f; tie = 0; }
+        else if (key == best) tie = 1;
+    }
+    res[4] = NAN;
+    float cont_total = INFINITY;
+    if (cont_frame >= 0) {
+        const float cost = numpy_row_cost(a->rows + cont_frame * d, a->q, d);
+        res[4] = cost;
+        if (cost == cost) cont_total = cost + cont_bias;   /* NaN: it does not compete */
+    }
+    const int cont = cont_frame >= 0 && res[4] == res[4];
+    res[0] = 1.0;
+    if (best_f < 0 || !(best < INFINITY)) {      /* no candidate: the playing frame, if it competes */
+        res[1] = cont ? (double)cont_frame : -1.0;
+        res[2] = cont_total;
+        res[3] = cont_bias + 0.0f;
+        return 1;
+    }
+    if (tie || (cont && cont_total == best)) { res[0] = 0.0; return 0; }
+    if (cont && cont_total < best) {
+        res[1] = (double)cont_frame; res[2] = cont_total; res[3] = cont_bias + 0.0f;
+    } else {
+        res[1] = (double)best_f; res[2] = best; res[3] = tc + a->bias[best_f];
+    }
+    return 1;
+}
+
 /* The filter as a tick's search calls it (lmm.search_index.SearchIndex.group_search): the playing frame
  * cont_frame (-1: it does not compete) with its group's bias cont_bias gives the first threshold (its
- * approximate cost: the margin covers the rounding); the frames come back ascending in out[0..n), and
- * out[n] is cont_frame when it competes (out holds max_out + 1); when those n (+ 1) frames fit diff_rows,
- * diff holds their rows minus the query, which the caller reduces to their costs. Returns n, or -1 as
- * filter() does. */
+ * approximate cost: the margin covers the rounding); the frames of the exclusion window [wlo, whi) are not
+ * candidates; the frames come back ascending in out[0..n), and out[n] is cont_frame when it competes (out
+ * holds max_out + 1). For a top-1 search with a->exact, the answer is ranked here (rank_top1: a->res); when
+ * it is not (another k, or a tie), and those n (+ 1) frames fit diff_rows, diff holds their rows minus the
+ * query, which the caller reduces to their costs. Returns n, or -1 as filter() does. */
 CLONES
-int lmm_tick_filter(const filter_args *a, float tc, float spread, int64_t cont_frame, float cont_bias, int k) {
+int lmm_tick_filter(const filter_args *a, float tc, float spread, int64_t cont_frame, float cont_bias, int k,
+                    int64_t wlo, int64_t whi) {
     float cont_key = cont_frame >= 0 ? row_cost(a->rows + cont_frame * a->dims, a->q, a->dims) + cont_bias
                                      : INFINITY;
-    int n = filter(a, tc, spread, cont_key, k);
+    a->res[0] = 0.0;
+    int n = filter(a, tc, spread, cont_key, k, wlo, whi);
     if (n < 0) return n;
     int64_t *out = a->out;
     if (n > 64) {
@@ -255,6 +331,7 @@ int lmm_tick_filter(const filter_args *a, float tc, float spread, int64_t cont_f
             out[j + 1] = f;
         }
     }
+    if (k == 1 && a->exact && rank_top1(a, n, tc, cont_frame, cont_bias)) return n;
     if (cont_frame >= 0) out[n] = cont_frame;
     /* each returned frame's row minus the query, as numpy's float32 subtraction makes it (one rounding per
      * element, whatever the order), for the caller's cost reduction: no row gather there */
@@ -266,4 +343,11 @@ int lmm_tick_filter(const filter_args *a, float tc, float spread, int64_t cont_f
             for (int j = 0; j < d; j++) o[j] = x[j] - a->q[j];
         }
     return n;
+}
+
+/* numpy_row_cost of each of n rows (n, dims) to q, into out: lmm/search_native.py compares them with
+ * numpy's before it lets the filter rank. */
+CLONES
+void lmm_numpy_costs(const float *rows, int64_t n, int dims, const float *q, float *out) {
+    for (int64_t i = 0; i < n; i++) out[i] = numpy_row_cost(rows + i * dims, q, dims);
 }

@@ -191,6 +191,7 @@ def test_the_tick_filter_returns_ascending_frames_and_the_playing_frame_after_th
     mask = candidate_mask(db.n_frames, db.range_starts, db.range_stops, 10)
     frame_bias, _, small_min, large_min, *_ = index._groups([(0.0, mask)])
     native = search_native.group_filter(index)
+    native._args.exact = 0           # numpy ranks: the frames and their rows come back
     rng = np.random.default_rng(11)
     playing = np.flatnonzero(mask)[rng.integers(0, mask.sum(), 40)]
     for current in playing:
@@ -198,9 +199,43 @@ def test_the_tick_filter_returns_ascending_frames_and_the_playing_frame_after_th
         n = native.tick(q, frame_bias, small_min, large_min, np.float32(0.02), 0.0, int(current), 0.0, 1)
         assert n >= 0
         out = native.out[:n + 1].copy()
-        assert np.all(np.diff(out[:n]) > 0) and out[n] == current
+        assert np.all(np.diff(out[:n]) > 0) and out[n] == current and native.res[0] == 0.0
+        assert np.array_equal(native.diff[:n + 1], X[out] - q)
         brute = brute_force_search(X, q, mask, current=int(current), transition_cost=0.02, exclude_window=0, top_k=1)
         assert brute.best_frame in set(out.tolist())
+
+
+def test_the_filter_ranks_a_top_1_search_with_numpys_own_costs(db, features, fresh_native, monkeypatch):
+    """The source's cost sum is numpy's row reduction bit for bit here, so a top-1 search is ranked in C (its
+    answer the brute force's); with a numpy that sums otherwise (einsum replaced by a pairwise sum, which
+    rounds differently) the check says so and numpy costs and ranks the frames, exactly as well."""
+    X = features.normalized
+    index = _compiled_index(X)
+    native = search_native.group_filter(index)
+    assert native.exact and search_native.sums_as_numpy(search_native.library(), X)
+    ranked = []
+    tick = search_native.GroupFilter.tick
+    monkeypatch.setattr(search_native.GroupFilter, "tick",
+                        lambda self, *a: (tick(self, *a), ranked.append(self.res[0]))[0])
+    for i, fast, brute in _runtime_queries(db, features, index, 200, 6):
+        assert _same(fast, brute), i
+    assert sum(ranked) > 80, "most top-1 searches (half of them) ranked by the filter"
+
+    einsum = np.einsum
+
+    def other_order(spec, a, b, **kw):         # numpy summing in another order (pairwise over halves)
+        if spec != "ij,ij->i" or a.shape[1] < 2:
+            return einsum(spec, a, b, **kw)
+        h = a.shape[1] // 2
+        return einsum(spec, a[:, :h], b[:, :h]) + einsum(spec, a[:, h:], b[:, h:])
+
+    monkeypatch.setattr(np, "einsum", other_order)
+    assert not search_native.sums_as_numpy(search_native.library(), X)
+    other = SearchIndex(X)
+    ranked.clear()
+    for i, fast, brute in _runtime_queries(db, features, other, 60, 7):
+        assert _same(fast, brute), i        # the brute force sums the other way as well
+    assert other._native and not other._native.exact and not any(ranked)
 
 
 @pytest.mark.parametrize("tied", [6000, 300])
