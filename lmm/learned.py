@@ -41,7 +41,7 @@ from lmm.controller import Candidates, Capabilities
 from lmm.mm import default_start_frame
 from lmm.nn import MLP, pose_vector_slices, pose_vector_tick_columns
 from lmm.pose_decoding import PoseDecoder
-from lmm.search import SearchIndex
+from lmm.search import SearchIndex, candidate_mask
 from lmm.tuning import IDLE_TAG, Tuning
 from lmm.data.weights import WeightsError, load as load_weights
 
@@ -151,6 +151,7 @@ class LearnedMotionMatchingController(CharacterController):
         self._idle = None            # (frames, their network states) of the idle set, built on first use
         self.idle_note = ""          # why the idle set cannot be used ("" when it can)
         self._idle_playing = False   # the state was last set from the idle set
+        self._idle_candidates = {}   # exclude_range_end_frames -> which idle frames may be jumped to
         self._calib_frame = -1       # a database frame like the playing state, for ground calibration
         self._calib_table = None     # (normalised features it was built from, every stride-th row of them)
         super().__init__(db, features, tuning)
@@ -235,15 +236,40 @@ class LearnedMotionMatchingController(CharacterController):
                     self._idle = (frames, np.concatenate([feats, latents], axis=1).astype(np.float32))
         return self._idle or None
 
-    def _idle_search(self, query_norm: np.ndarray):
-        """(state, frame, cost) of the idle frame nearest the query, or None without an idle set."""
+    def _idle_search(self, query_norm: np.ndarray, around: int | None = None):
+        """(state, frame, cost) of the idle frame nearest the query, or None without an idle set (or without a
+        candidate): not the last ``exclude_range_end_frames`` of a range, nor within
+        ``exclude_current_window_frames`` of ``around`` (the continuing frame), as motion matching's search."""
         idle = self.idle_states()
         if idle is None:
             return None
         frames, states = idle
         costs = np.sum((self.features.normalized[frames] - query_norm) ** 2, axis=1)
+        end = max(int(self.tuning.exclude_range_end_frames), 1)
+        ok = self._idle_candidates.get(end)
+        if ok is None:
+            ok = candidate_mask(self.db.n_frames, self.db.range_starts, self.db.range_stops, end)[frames]
+            self._idle_candidates = {end: ok}
+        costs[~ok] = np.inf
+        if around is not None:
+            w = int(self.tuning.exclude_current_window_frames)
+            costs[np.abs(frames - around) <= w] = np.inf
         k = int(np.argmin(costs))
+        if not costs[k] < np.inf:
+            return None
         return states[k], int(frames[k]), float(costs[k])
+
+    def _idle_continuation(self):
+        """``(frame, state)``: the idle take's frame the playing one has reached (the matched idle frame
+        advanced by the time played since) and its state, None when that frame is its range's last or not in
+        the idle set (the take ends: the search moves on to another idle frame)."""
+        frames, states = self.idle_states()
+        frame, stop, played_s = self._match
+        nxt = frame + int(round(played_s * self.db.fps))
+        k = int(np.searchsorted(frames, nxt))
+        if nxt >= stop - 1 or k >= len(frames) or frames[k] != nxt:
+            return nxt, None
+        return nxt, states[k]
 
     # -- hooks ----------------------------------------------------------------------------------
     def _reset_source(self, frame: int | None) -> None:
@@ -328,13 +354,26 @@ class LearnedMotionMatchingController(CharacterController):
     def _search(self, query_norm: np.ndarray, forced: bool) -> SearchOutcome:
         timings = {}
         t0 = time.perf_counter()
-        idle = self._idle_search(query_norm) if self.idle_set_active() else None
+        active = self.idle_set_active()
+        # in the idle set the learned controller searches as motion matching does there: the idle take's frame
+        # the playing one has reached competes as the continuing pose, the frames around it and the last ones of
+        # each range are not candidates
+        reached, follow = None, None
+        if active and self._idle_playing and self.tuning.idle_follow_take and self.idle_states() is not None:
+            reached, state = self._idle_continuation()
+            follow = None if state is None else (reached, state)
+        idle = self._idle_search(query_norm, reached) if active else None
+        if idle is None:
+            follow = None
         projected = self.project(query_norm) if idle is None else idle[0].copy()
         timings["projector" if idle is None else "idle_search"] = (time.perf_counter() - t0) * 1e6
         d = self.nets.n_features
         proj_norm = self.features.normalize(self.nets.from_network_space(projected[:d]))
         projected_cost = float(np.sum((query_norm - proj_norm) ** 2))
-        current_norm = self.features.normalize(self._source_features())
+        if follow is None:
+            current_norm = self.features.normalize(self._source_features())
+        else:
+            current_norm = self.features.normalized[follow[0]]
         current_cost = float(np.sum((query_norm - current_norm) ** 2))
         self._projected, self._projected_cost = proj_norm, projected_cost
         candidates = None
@@ -357,12 +396,21 @@ class LearnedMotionMatchingController(CharacterController):
         entering_idle = idle is not None and not self._idle_playing
         if idle is None:
             self._idle_playing = False
-        if entering_idle or projected_cost + float(self.tuning.transition_cost) < current_cost:
+        # the idle take ends (its last frames are not candidates): on to the best idle frame, as motion matching's
+        # end of a range forces a jump
+        ending = idle is not None and self._idle_playing and self.tuning.idle_follow_take and follow is None
+        jump = entering_idle or ending or projected_cost + float(self.tuning.transition_cost) < current_cost
+        if jump:
             self._idle_playing = idle is not None
             self.state[:] = projected
-            self._source_raw = None
-            self._take_match(self._projected_frame)
+            frame = self._projected_frame
             self._calib_frame = idle[1] if idle is not None else self._calibration_lookup(proj_norm)
+        elif follow is not None:
+            frame, self.state[:] = follow
+            self._calib_frame = frame
+        if jump or follow is not None:
+            self._source_raw = None
+            self._take_match(frame)
             t0 = time.perf_counter()
             target = self.decompress(self.state)
             timings["decompressor_transition"] = (time.perf_counter() - t0) * 1e6

@@ -194,6 +194,10 @@ class Tuning:
         "tagged 'idle' (as UE's chooser and MxM's idle sets); no such frame: an error and every frame.")
     idle_delay_s: float = _f(
         0.75, "search", 0.0, 5.0, "s", "Time without stick input before the search is restricted to the idle set.")
+    idle_follow_take: bool = _f(
+        True, "search", False, True, "", "Learned motion matching in the idle set: each search between jumps sets "
+        "the state to the idle take's frame that the playing one has reached (the stand follows the take, as motion "
+        "matching's does, instead of drifting with the stepper); a continuation, not a projector jump.")
     # -- keeping character and simulation together -----------------------------------------------------
     adjustment_enabled: bool = _f(
         True, "sync", False, True, "", "Pull the character root towards the simulation object every step.")

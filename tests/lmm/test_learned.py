@@ -292,6 +292,48 @@ def test_idle_set_jumps_the_state_to_an_idle_frame(dbf, nets):
     assert not ctrl.idle_set_active()
 
 
+@pytest.mark.parametrize("follow", [True, False])
+def test_in_the_idle_set_the_state_follows_the_idle_take(dbf, nets, follow):
+    """Between jumps in the idle set each search sets the state to the idle take's frame the playing one has
+    reached (its features and compressor latent, exactly), a continuation: not a projector jump, so the
+    snapshot says no transition. With ``idle_follow_take`` off the stepper runs on from the jump alone."""
+    from pathlib import Path
+
+    db, features = dbf
+    if not db.tag_mask("idle").any():
+        pytest.skip("the database has no idle range")
+    if not Path(nets.path).with_name("compressor.npz").is_file():
+        pytest.skip("no compressor beside the networks")
+    ctrl = LearnedMotionMatchingController(db, features, networks=nets)
+    ctrl.tuning.idle_follow_take = follow
+    frames, states = ctrl.idle_states()
+    followed = []
+    take_match = ctrl._take_match
+
+    def watch(frame):
+        expected = ctrl._source_frame()       # where the matched frame has got to, before this search
+        k = np.searchsorted(frames, frame)
+        on_take = k < len(frames) and frames[k] == frame and np.array_equal(ctrl.state, states[k])
+        take_match(frame)
+        followed.append((frame == expected and on_take, ctrl._jumped))
+
+    ctrl._take_match = watch
+    for _ in range(30):
+        ctrl.step(InputState(left_y=1.0), 1.0 / 60.0)
+    followed.clear()
+    transitions = 0
+    for _ in range(240):                      # 4 s standing: the idle set from 0.75 s on
+        _, snap = ctrl.step(InputState(), 1.0 / 60.0)
+        transitions += bool(snap.transitioned)
+    continuations = [f for f in followed if f[0]]
+    if follow:
+        assert len(continuations) >= 20, followed     # most of the 0.1 s searches of the last 3 s
+        assert not any(jumped for _, jumped in continuations)
+        assert transitions == sum(jumped for _, jumped in followed)
+    else:
+        assert not continuations
+
+
 def test_idle_set_without_compressor_is_a_note(dbf, nets, tmp_path):
     import shutil
 
