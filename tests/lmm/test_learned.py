@@ -262,18 +262,23 @@ def test_ten_minutes_of_random_input_stay_sane(dbf, nets):
     assert worst < 0.01, f"bone length off by {worst * 100:.2f} cm"
 
 
-def test_idle_set_jumps_the_state_to_an_idle_frame(dbf, nets):
-    """Stick released past idle_delay_s: the learned controller's next search is an exact search over the
-    idle-tagged frames and its state jumps to that frame's features and compressor latent (the projector
-    cannot keep to a subset). Without a compressor beside the weights the snapshot says why."""
+def _idle_controller(db, features, nets):
+    """A learned controller with an idle set (the test is skipped without idle frames or a compressor)."""
     from pathlib import Path
 
-    db, features = dbf
     if not db.tag_mask("idle").any():
         pytest.skip("the database has no idle range")
     if not Path(nets.path).with_name("compressor.npz").is_file():
         pytest.skip("no compressor beside the networks")
-    ctrl = LearnedMotionMatchingController(db, features, networks=nets)
+    return LearnedMotionMatchingController(db, features, networks=nets)
+
+
+def test_idle_set_jumps_the_state_to_an_idle_frame(dbf, nets):
+    """Stick released past idle_delay_s: the learned controller's next search is an exact search over the
+    idle-tagged frames and its state jumps to that frame's features and compressor latent (the projector
+    cannot keep to a subset). Without a compressor beside the weights the snapshot says why."""
+    db, features = dbf
+    ctrl = _idle_controller(db, features, nets)
     ctrl.tuning.search_interval_s = 0.05
     for _ in range(30):
         ctrl.step(InputState(left_y=1.0), 1.0 / 60.0)
@@ -297,14 +302,8 @@ def test_in_the_idle_set_the_state_follows_the_idle_take(dbf, nets, follow):
     """Between jumps in the idle set each search sets the state to the idle take's frame the playing one has
     reached (its features and compressor latent, exactly), a continuation: not a projector jump, so the
     snapshot says no transition. With ``idle_follow_take`` off the stepper runs on from the jump alone."""
-    from pathlib import Path
-
     db, features = dbf
-    if not db.tag_mask("idle").any():
-        pytest.skip("the database has no idle range")
-    if not Path(nets.path).with_name("compressor.npz").is_file():
-        pytest.skip("no compressor beside the networks")
-    ctrl = LearnedMotionMatchingController(db, features, networks=nets)
+    ctrl = _idle_controller(db, features, nets)
     ctrl.tuning.idle_follow_take = follow
     frames, states = ctrl.idle_states()
     followed = []
