@@ -199,7 +199,7 @@ def rank_top1(frames, costs, frame_bias, frame_group, b32, current, cont_cost, i
     cont_row = _cont_row(frame_group, b32, current, cont_cost, in_group)
     if best_f < 0 or not best_key < _INF:        # no candidate: the playing frame, if it competes
         if cont_row is None:
-            return _rows_result([])
+            return top1_arrays(-1, 0.0, 0.0)
         row = cont_row
     elif tie:
         return None
@@ -209,8 +209,7 @@ def rank_top1(frames, costs, frame_bias, frame_group, b32, current, cont_cost, i
             if cont_row[0] == row[0]:
                 return None
             row = min(row, cont_row)
-    return (np.array((row[2],), dtype=np.int64), np.array((row[0],), dtype=np.float32),
-            np.array((row[3],), dtype=np.float32))
+    return top1_arrays(row[2], row[0], row[3])
 
 
 def top1_arrays(frame: int, total: float, bias: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

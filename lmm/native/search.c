@@ -1,11 +1,12 @@
 /* The compiled filter of lmm.search_index.SearchIndex.group_search (see lmm/search_native.py).
  *
  * It walks three levels of bounding boxes (256, 32 and 8 frames) with a threshold that tightens as real
- * frames are costed, and returns every candidate frame whose approximate total (cost + transition cost +
- * bias) is within a relative 1e-4 of the approximate k-th best total: a superset of the frames that can be
- * in the exact answer, which are then costed and ranked exactly as the brute force does: for a top-1 search here
- * (numpy_row_cost, numpy's own sum, checked against numpy before it is used), else by numpy. The filter's own
- * float sums may round differently from numpy's (another order); the margin is far wider than that rounding.
+ * frames are costed, and returns every candidate frame whose total (cost + transition cost + bias) is within
+ * a relative 1e-4 of the k-th best total: a superset of the frames that can be in the exact answer, which are
+ * then ranked exactly as the brute force does: for a top-1 search here, else by numpy. Every cost is
+ * numpy_row_cost, numpy's own sum where lmm/search_native.py has checked that it is (only then does this file
+ * rank); where it is not, the margin is far wider than the rounding between the two sums, so the filter still
+ * keeps every frame of the answer.
  *
  * One build runs at native speed on any x86-64: GCC's target_clones picks the widest instruction set at load.
  */
@@ -64,23 +65,6 @@ INLINE float box_bound(const float *lo, const float *hi, const float *q, int n) 
     for (; d < n; d++) {
         float c = q[d] < lo[d] ? lo[d] : (q[d] > hi[d] ? hi[d] : q[d]);
         float g = q[d] - c;
-        s += g * g;
-    }
-    return s + ((acc[0] + acc[1]) + (acc[2] + acc[3])) + ((acc[4] + acc[5]) + (acc[6] + acc[7]));
-}
-
-/* squared distance of a row to q over n dims, the filter's own (approximate) sum */
-INLINE float row_cost(const float *x, const float *q, int n) {
-    float acc[8] = {0, 0, 0, 0, 0, 0, 0, 0};
-    int d = 0;
-    for (; d + 8 <= n; d += 8)
-        for (int j = 0; j < 8; j++) {
-            float g = x[d + j] - q[d + j];
-            acc[j] += g * g;
-        }
-    float s = 0.0f;
-    for (; d < n; d++) {
-        float g = x[d] - q[d];
         s += g * g;
     }
     return s + ((acc[0] + acc[1]) + (acc[2] + acc[3])) + ((acc[4] + acc[5]) + (acc[6] + acc[7]));
@@ -146,7 +130,7 @@ INLINE int visit_large(scan *s, kbest *b, int64_t large) {
             int64_t f = small * sb + r;
             float fb = s->bias[f];
             if (isinf(fb) || (f >= s->wlo && f < s->whi)) continue;
-            float key = (row_cost(s->rows + f * d, s->q, d) + s->tc) + fb;
+            float key = (numpy_row_cost(s->rows + f * d, s->q, d) + s->tc) + fb;
             if (!(key <= b->thr)) continue;
             kbest_push(b, key);
             if (s->n_out == s->max_out && !compact(s, b)) return 0;
@@ -265,11 +249,11 @@ static int by_frame(const void *x, const void *y) {
 }
 
 /* A top-1 search's answer from the filter's n frames (ascending in out) and the playing frame cont_frame
- * (-1: it does not compete; cont_bias its group's bias), ranked as lmm.search_ranking.rank_top1 ranks them,
+ * (-1: it does not compete; cont_cost its cost, cont_bias its group's bias), ranked as lmm.search_ranking.rank_top1 ranks them,
  * every cost by numpy_row_cost: each frame's total (cost + tc) + its bias in float32; the least, unless it
  * ties with another's or the playing frame's total (then 0: numpy ranks); the playing frame's total is its
  * cost + its bias, and it wins when lower. Writes a->res and returns 1 when ranked. */
-INLINE int rank_top1(const filter_args *a, int n, float tc, int64_t cont_frame, float cont_bias) {
+INLINE int rank_top1(const filter_args *a, int n, float tc, int64_t cont_frame, float cont_cost, float cont_bias) {
     const int d = a->dims;
     double *res = a->res;
     float best = INFINITY;
@@ -281,14 +265,9 @@ INLINE int rank_top1(const filter_args *a, int n, float tc, int64_t cont_frame, 
         if (key < best) { best = key; best_f = f; tie = 0; }
         else if (key == best) tie = 1;
     }
-    res[4] = NAN;
-    float cont_total = INFINITY;
-    if (cont_frame >= 0) {
-        const float cost = numpy_row_cost(a->rows + cont_frame * d, a->q, d);
-        res[4] = cost;
-        if (cost == cost) cont_total = cost + cont_bias;   /* NaN: it does not compete */
-    }
-    const int cont = cont_frame >= 0 && res[4] == res[4];
+    res[4] = cont_frame >= 0 ? cont_cost : NAN;
+    const int cont = cont_frame >= 0 && cont_cost == cont_cost;    /* NaN: it does not compete */
+    const float cont_total = cont ? cont_cost + cont_bias : INFINITY;
     res[0] = 1.0;
     if (best_f < 0 || !(best < INFINITY)) {      /* no candidate: the playing frame, if it competes */
         res[1] = cont ? (double)cont_frame : -1.0;
@@ -306,8 +285,7 @@ INLINE int rank_top1(const filter_args *a, int n, float tc, int64_t cont_frame, 
 }
 
 /* The filter as a tick's search calls it (lmm.search_index.SearchIndex.group_search): the playing frame
- * cont_frame (-1: it does not compete) with its group's bias cont_bias gives the first threshold (its
- * approximate cost: the margin covers the rounding); the frames of the exclusion window [wlo, whi) are not
+ * cont_frame (-1: it does not compete) with its group's bias cont_bias gives the first threshold; the frames of the exclusion window [wlo, whi) are not
  * candidates; the frames come back ascending in out[0..n), and out[n] is cont_frame when it competes (out
  * holds max_out + 1). For a top-1 search with a->exact, the answer is ranked here (rank_top1: a->res); when
  * it is not (another k, or a tie), and those n (+ 1) frames fit diff_rows, diff holds their rows minus the
@@ -315,8 +293,8 @@ INLINE int rank_top1(const filter_args *a, int n, float tc, int64_t cont_frame, 
 CLONES
 int lmm_tick_filter(const filter_args *a, float tc, float spread, int64_t cont_frame, float cont_bias, int k,
                     int64_t wlo, int64_t whi) {
-    float cont_key = cont_frame >= 0 ? row_cost(a->rows + cont_frame * a->dims, a->q, a->dims) + cont_bias
-                                     : INFINITY;
+    const float cont_cost = cont_frame >= 0 ? numpy_row_cost(a->rows + cont_frame * a->dims, a->q, a->dims) : NAN;
+    const float cont_key = cont_frame >= 0 ? cont_cost + cont_bias : INFINITY;
     a->res[0] = 0.0;
     int n = filter(a, tc, spread, cont_key, k, wlo, whi);
     if (n < 0) return n;
@@ -331,7 +309,7 @@ int lmm_tick_filter(const filter_args *a, float tc, float spread, int64_t cont_f
             out[j + 1] = f;
         }
     }
-    if (k == 1 && a->exact && rank_top1(a, n, tc, cont_frame, cont_bias)) return n;
+    if (k == 1 && a->exact && rank_top1(a, n, tc, cont_frame, cont_cost, cont_bias)) return n;
     if (cont_frame >= 0) out[n] = cont_frame;
     /* each returned frame's row minus the query, as numpy's float32 subtraction makes it (one rounding per
      * element, whatever the order), for the caller's cost reduction: no row gather there */
