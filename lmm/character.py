@@ -66,6 +66,8 @@ from lmm.trajectory import (SharpInputChange, SimulationState, StickWorld, desir
                             simulation_update, trajectory_offsets)
 from lmm.tuning import Tuning
 
+INERTIALIZATION_SLOW_M_S = 1.0   # at this simulation speed and over, pose jumps blend out with the (short) halflife
+
 
 class CharacterController(Controller):
     """The shared pipeline; subclasses implement the source hooks (see the module doc)."""
@@ -309,7 +311,7 @@ class CharacterController(Controller):
         t0 = time.perf_counter()
         src = self.source = self._advance_pose(dt)
         timings["advance"] = (time.perf_counter() - t0) * 1e6
-        self.offsets = offsets = inertialize_decay(self.offsets, tun.inertialization_halflife_s, dt)
+        self.offsets = offsets = inertialize_decay(self.offsets, self._inertialization_halflife(), dt)
         pos, rot = inertialize_apply_pose(offsets, src.positions, src.rotations, not src.unit_rotations)
         # the shown velocities: bone 0's now (root integration), every bone's when a transition reads them
         vel0, ang0 = inertialize_root_velocities(offsets, *src.root_velocity_floats())
@@ -318,6 +320,18 @@ class CharacterController(Controller):
             self._root_position_t, self._root_rotation_t, vel0, ang0, dt)
         self._set_root(*synchronize(tun, self.sim.state, root_pos, root_rot, root_vel_world, root_ang_world, dt))
         return src, pos, rot, (root_pos, root_rot)
+
+    def _inertialization_halflife(self) -> float:
+        """The offsets' halflife this tick: ``inertialization_slow_halflife_s`` with the simulation object at
+        rest, blended linearly to ``inertialization_halflife_s`` at :data:`INERTIALIZATION_SLOW_M_S` and over
+        (rounded to 0.01 s: the decay keeps its constants per halflife)."""
+        tun = self.tuning
+        fast, slow = tun.inertialization_halflife_s, tun.inertialization_slow_halflife_s
+        if slow <= 0.0 or slow == fast:
+            return fast
+        v = self.sim.state[1]
+        w = min(math.sqrt(v[0] * v[0] + v[2] * v[2]) / INERTIALIZATION_SLOW_M_S, 1.0)
+        return round((slow + (fast - slow) * w) * 100.0) / 100.0
 
     def _world_pose(self, rot, pos, contacts, integrated, dt, dtype=np.float64):
         """The shown local pose (``rot``/``pos``, bone 0 replaced by the character root) in world space,
@@ -360,7 +374,8 @@ class CharacterController(Controller):
                 toe_now, toe_vel, contacts.tolist() if isinstance(contacts, np.ndarray) else contacts,
                 min(tun.ik_unlock_radius_m, tun.ik_idle_unlock_radius_m) if standing else tun.ik_unlock_radius_m, tun.ik_blend_halflife_s, tun.ik_foot_height_m, dt, tun.ik_lift_height_m,
                 tun.ik_ground_blend_speed_m_s, tun.ik_step_height_m, shift, tun.ik_swing_clearance_m,
-                tun.ik_lock_max_speed_m_s)
+                tun.ik_lock_max_speed_m_s, tun.ik_lock_follow_m_s, tun.ik_step_halflife_s,
+                tun.ik_ground_blend_acceleration_m_s2)
             axes = self._toe_axes_floats
             if axes is None:
                 axes = self._toe_axes_floats = [tuple(a.tolist()) for a in self.toe_axes]

@@ -212,7 +212,7 @@ class FootLockState:
     Mutable and kept in plain floats (the controller advances it in place once per tick, see
     :meth:`update`); the fields read as numpy arrays (``locked`` (2,) bool, ``lock_position`` (2, 3), ...).
     """
-    __slots__ = ("_locked", "_released", "_lowest", "_lock", "_off", "_off_v", "_previous", "knees")
+    __slots__ = ("_locked", "_released", "_lowest", "_lock", "_off", "_off_v", "_previous", "knees", "_stepping")
 
     def __init__(self):
         self._locked = [False, False]
@@ -223,6 +223,7 @@ class FootLockState:
         self._off_v = [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]
         self._previous = None  # the last targets, 2 tuples
         self.knees = [KneeLimiter(), KneeLimiter()]
+        self._stepping = [False, False]   # blending back after a release by the radius (a step)
 
     def copy(self) -> "FootLockState":
         s = FootLockState()
@@ -232,6 +233,7 @@ class FootLockState:
         s._off_v = [list(v) for v in self._off_v]
         s._previous = None if self._previous is None else list(self._previous)
         s.knees = [copy.copy(k) for k in self.knees]
+        s._stepping = list(self._stepping)
         return s
 
     @property
@@ -267,16 +269,21 @@ class FootLockState:
 
     def update(self, anim, vel, contacts, unlock_radius: float, blend_halflife: float, foot_height: float,
                dt: float, lift_height: float = 0.02, ground_blend_speed: float = 0.1, step_height: float = 0.04,
-               root_shift=None, swing_clearance: float = 0.0, lock_speed: float = math.inf) -> list:
+               root_shift=None, swing_clearance: float = 0.0, lock_speed: float = math.inf,
+               lock_follow: float = 0.0, step_halflife: float = 0.0, ground_blend_acceleration: float = 0.0) -> list:
         """:func:`foot_lock_update` in place, on plain floats: ``anim``/``vel`` two 3-tuples each,
         ``contacts`` two bools, ``root_shift`` None or two 3-sequences. Returns the two targets (3-tuples)."""
         locked, released, lowest, lock = self._locked, self._released, self._lowest, self._lock
         off, off_v = self._off, self._off_v
-        y = float(halflife_to_damping(blend_halflife)) / 2.0
-        e = math.exp(-y * dt)
+        y0 = float(halflife_to_damping(blend_halflife)) / 2.0
+        e0 = math.exp(-y0 * dt)
+        ys = float(halflife_to_damping(step_halflife if step_halflife > 0.0 else blend_halflife)) / 2.0
+        es = math.exp(-ys * dt)
+        stepping = self._stepping
         targets = []
         for i in range(2):
             a, c = anim[i], contacts[i]
+            y, e = (ys, es) if stepping[i] else (y0, e0)
             if not c:
                 released[i] = False
             elif released[i] and (off_v[i][1] < 0.0 and off[i][1] < 0.25 * step_height if step_height > 0.0
@@ -285,6 +292,15 @@ class FootLockState:
             if locked[i]:
                 lx, ly, lz = lock[i]
                 lowest[i] = min(lowest[i], a[1])
+                if lock_follow > 0.0 and dt > 0.0:
+                    # the lock creeps after the animated toe, slower than skating shows (a smooth speed,
+                    # zero at the lock and lock_follow far from it): less to catch up when it lets go
+                    gx, gz = a[0] - lx, a[2] - lz
+                    g = math.hypot(gx, gz)
+                    if g > 1e-9:
+                        step = min(g, lock_follow * dt * g / (g + LOCK_FOLLOW_REACH_M))
+                        lx, lz = lx + gx * step / g, lz + gz * step / g
+                        lock[i] = (lx, ly, lz)
                 far = math.hypot(a[0] - lx, a[2] - lz) > unlock_radius
                 if far or (not c and a[1] > lowest[i] + lift_height):
                     # release: the offset carries the target from the lock (at rest) back to the animation
@@ -292,6 +308,9 @@ class FootLockState:
                     released[i] = c
                     off[i] = [lx - a[0], ly - a[1], lz - a[2]]
                     off_v[i] = [-vel[i][0], -vel[i][1], -vel[i][2]]
+                    stepping[i] = far
+                    if far:
+                        y, e = ys, es    # a step: its own (slower) blend, so catching up does not jerk
                     if far and step_height > 0.0:
                         # an upward kick whose critically damped arc peaks at about step_height: x(t) = V t e^-yt
                         off_v[i][1] += step_height * y * math.e
@@ -301,10 +320,10 @@ class FootLockState:
                 # (a toe shown moving faster than lock_speed, e.g. a transition's blend bringing a contact
                 # to a swinging foot, is not frozen at once: that is a pop; it locks once it has slowed)
                 # a contact (it began, or a transition brought one): lock where the toe is shown now
-                shown = (a[0] + off[i][0], max(a[1] + off[i][1], foot_height), a[2] + off[i][2])
                 locked[i] = True
-                lock[i] = shown
+                stepping[i] = False
                 lowest[i] = a[1]
+                lock[i] = (a[0] + off[i][0], max(a[1] + off[i][1], foot_height), a[2] + off[i][2])
                 off[i] = [0.0, 0.0, 0.0]
                 off_v[i] = [0.0, 0.0, 0.0]
             if locked[i]:
@@ -315,8 +334,11 @@ class FootLockState:
                 shift = root_shift[i]
                 cx, cz = off[i][0] - float(shift[0]), off[i][2] - float(shift[2])
                 n = math.hypot(cx, cz)
-                if n > unlock_radius:
-                    cx, cz = (cx * unlock_radius / n, cz * unlock_radius / n) if n > 0.0 else (0.0, 0.0)
+                # at most the unlock radius of it, but never cut to it: an offset already beyond it (a release
+                # by the radius, or a standing foot's smaller radius) is left to its blend, not moved at once
+                cap = max(unlock_radius, math.hypot(off[i][0], off[i][2]))
+                if n > cap:
+                    cx, cz = cx * cap / n, cz * cap / n
                 off[i][0], off[i][2] = cx, cz
             ox, oy, oz = off[i]
             vx, vy, vz = off_v[i]
@@ -329,8 +351,18 @@ class FootLockState:
                 cap = ground_blend_speed * dt
                 if step > cap:
                     k = cap / step
-                    nx, nz = ox + (nx - ox) * k, oz + (nz - oz) * k
-                    vx, vz = (nx - ox) / dt, (nz - oz) / dt
+                    cx, cz = (nx - ox) * k / dt, (nz - oz) * k / dt      # the capped offset velocity
+                    if ground_blend_acceleration > 0.0:
+                        # reached from the offset's velocity with a bounded acceleration, not at once: the
+                        # foot released at rest does not jump to the animation's speed in one tick
+                        px, pz = off_v[i][0], off_v[i][2]
+                        gx, gz = cx - px, cz - pz
+                        g = math.hypot(gx, gz)
+                        lim = ground_blend_acceleration * dt
+                        if g > lim:
+                            cx, cz = px + gx * lim / g, pz + gz * lim / g
+                    nx, nz = ox + cx * dt, oz + cz * dt
+                    vx, vz = cx, cz
             off[i] = [nx, ny, nz]
             off_v[i] = [vx, vy, vz]
             ty = a[1] + ny
@@ -341,6 +373,7 @@ class FootLockState:
         return targets
 
 
+LOCK_FOLLOW_REACH_M = 0.02     # a lock this far behind its animated toe creeps at half the follow speed
 SWING_SPEEDS_M_S = (0.5, 1.5)  # horizontal toe speed where the swing clearance starts and is complete
 
 
@@ -367,7 +400,9 @@ def soft_floor(y: float, floor: float, softness: float = 0.01) -> float:
 def foot_lock_update(state: FootLockState, toe_positions, toe_velocities, contacts, unlock_radius: float,
                      blend_halflife: float, foot_height: float, dt: float, lift_height: float = 0.02,
                      ground_blend_speed: float = 0.1, step_height: float = 0.04,
-                     root_shift=None, swing_clearance: float = 0.0) -> tuple[FootLockState, np.ndarray]:
+                     root_shift=None, swing_clearance: float = 0.0, lock_follow: float = 0.0,
+                     step_halflife: float = 0.0, ground_blend_acceleration: float = 0.0
+                     ) -> tuple[FootLockState, np.ndarray]:
     """Advance the locks one tick. Returns the new state (``state`` is left as it was) and the toe
     targets (2, 3), world space. (The controller calls :meth:`FootLockState.update` in place instead.)
 
@@ -377,20 +412,26 @@ def foot_lock_update(state: FootLockState, toe_positions, toe_velocities, contac
       does not pop), at least ``foot_height`` above the ground (y = 0);
     * **hold** while the contact lasts, and after it ends until the animated toe has risen
       ``lift_height`` above its lowest point during the lock: the foot leaves the ground when the
-      animation lifts it, not earlier;
+      animation lifts it, not earlier. With ``lock_follow`` > 0 the lock creeps horizontally after the
+      animated toe at up to that speed (zero at the lock, half of it 2 cm away): the blends and root
+      adjustment of the runtime slide an animated foot several times further during a contact than the
+      data does, and what the lock holds back must be caught up when it lets go;
     * **last resort**: release when the animated toe is further than ``unlock_radius`` (horizontally)
       from the lock; the foot then steps to the animation (its blend gets an upward kick of about
-      ``step_height``) instead of sliding there, and locks again where it comes down if the contact
-      still holds;
+      ``step_height`` and the halflife ``step_halflife``, when given) instead of sliding there, and locks
+      again where it comes down if the contact still holds;
     * **blend back** after a release: the target is the animated toe plus an offset that decays with a
       critically damped spring (``blend_halflife``), starting at the lock with zero velocity. While the
       target is near the ground (less than ``lift_height`` above the last lock) the offset may move
-      horizontally at most ``ground_blend_speed``: the rest is absorbed once the foot is in the air (or
-      by the next lock, which starts where the foot is shown).
+      horizontally at most ``ground_blend_speed``, a limit reached with at most
+      ``ground_blend_acceleration`` (when given: a foot released at rest does not take the animation's
+      speed in one tick); the rest is absorbed once the foot is in the air (or by the next lock, which
+      starts where the foot is shown).
     * **not dragged by the root**: ``root_shift`` (2, 3), when given, is how far this tick's root
       adjustment and clamping moved each animated toe. An unlocked foot near the ground does not follow
-      it horizontally (it goes into the offset, at most ``unlock_radius`` of it, and is blended out under
-      the same ground speed limit); a locked foot is held anyway.
+      it horizontally (it goes into the offset, up to ``unlock_radius`` of it or the offset it already
+      has if that is larger, and is blended out under the same ground speed limit); a locked foot is held
+      anyway.
     """
     anim = [tuple(float(v) for v in p) for p in np.asarray(toe_positions, dtype=np.float64)]
     vel = [tuple(float(v) for v in p) for p in np.asarray(toe_velocities, dtype=np.float64)]
@@ -399,7 +440,8 @@ def foot_lock_update(state: FootLockState, toe_positions, toe_velocities, contac
         root_shift = np.asarray(root_shift, dtype=np.float64).tolist()
     s = state.copy()
     targets = s.update(anim, vel, contacts, unlock_radius, blend_halflife, foot_height, dt, lift_height,
-                       ground_blend_speed, step_height, root_shift, swing_clearance)
+                       ground_blend_speed, step_height, root_shift, swing_clearance, math.inf, lock_follow,
+                       step_halflife, ground_blend_acceleration)
     return s, np.array(targets)
 
 

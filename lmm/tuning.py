@@ -159,6 +159,10 @@ class Tuning:
     # -- inertialization ------------------------------------------------------------------------------
     inertialization_halflife_s: float = _f(
         0.1, "inertialization", 0.0, 0.3, "s", "Halflife of the offsets that blend out a pose jump (0: no blend).")
+    inertialization_slow_halflife_s: float = _f(
+        0.2, "inertialization", 0.0, 0.5, "s", "Halflife of the offsets while the simulation object stands still, "
+        "blended to the halflife above at 1 m/s: a jump while standing, starting or stopping blends out slowly, "
+        "without a jerk (0: the halflife above at every speed).")
     # -- feature weights ------------------------------------------------------------------------------
     feature_weights: dict = field(default_factory=_default_feature_weights, metadata={
         "group": "features", "min": 0.0, "max": 5.0, "unit": "",
@@ -232,6 +236,12 @@ class Tuning:
         0.2, "ik", 0.0, 0.5, "m", "A locked foot unlocks once the animation has moved this far from the lock.")
     ik_blend_halflife_s: float = _f(
         0.1, "ik", 0.0, 0.5, "s", "Halflife of the blend back to the animated foot after unlocking.")
+    ik_step_halflife_s: float = _f(
+        0.15, "ik", 0.0, 0.5, "s", "Halflife of the blend back after a release by the unlock radius (a step: the "
+        "foot is far behind its animation and catches up more slowly, 0: the blend halflife above).")
+    ik_lock_follow_m_s: float = _f(
+        0.2, "ik", 0.0, 1.0, "m/s", "A locked foot creeps after its animated toe at up to this speed (below the 0.3 m/s "
+        "that reads as skating), so less is left to catch up when it lets go (0: held still).")
     ik_foot_height_m: float = _f(
         0.02, "ik", 0.0, 0.2, "m", "Toe joint height above the contact point; a locked toe is kept at least "
         "this high above the ground.")
@@ -244,6 +254,9 @@ class Tuning:
     ik_ground_blend_speed_m_s: float = _f(
         0.1, "ik", 0.0, 2.0, "m/s", "Fastest horizontal blend of an unlocked foot near the ground back to the "
         "animation; the rest of the blend happens in the air, so the foot does not glide.")
+    ik_ground_blend_acceleration_m_s2: float = _f(
+        10.0, "ik", 0.0, 100.0, "m/s2", "That speed limit is reached with at most this acceleration, so a foot released "
+        "at rest does not take the animation's speed in one tick (0: at once).")
     ik_step_height_m: float = _f(
         0.04, "ik", 0.0, 0.2, "m", "A foot unlocked by the unlock radius (the last resort, during a contact) "
         "steps back to the animation with about this much lift instead of sliding.")
@@ -257,7 +270,7 @@ class Tuning:
         7.0, "ik", 0.0, 45.0, "deg", "The IK never bends a knee straighter than this (the data's straightest "
         "knee is about 6 degrees) unless the animation itself is.")
     ik_knee_max_acceleration_deg_s2: float = _f(
-        18000.0, "ik", 0.0, 100000.0, "deg/s2", "The IK's knees never accelerate harder than this (the data's "
+        16500.0, "ik", 0.0, 100000.0, "deg/s2", "The IK's knees never accelerate harder than this (the data's "
         "knees stay under about 19,000 deg/s2): a leg let go by its lock catches up smoothly (0: no limit).")
     ik_soft_reach_m: float = _f(
         0.02, "ik", 0.0, 0.1, "m", "Soft reach: over this last distance before the longest leg, the leg "

@@ -1,5 +1,6 @@
 """Inertialization: a jump is invisible at the transition and the offsets decay to zero."""
 import numpy as np
+import pytest
 
 from lmm import quat
 from lmm.inertialize import Offsets, inertialize_apply, inertialize_decay, inertialize_transition
@@ -227,3 +228,28 @@ def test_apply_without_normalising_unit_rotations_stays_unit():
         assert np.abs(np.sum(rot * rot, axis=1) - 1.0).max() <= 1e-15
         worst = max(worst, float(np.abs(rot - rot_n).max()))
     assert 0.0 < worst <= 1e-15
+
+
+def test_pose_jumps_blend_out_slower_while_the_character_stands(db, features):
+    """The offsets' halflife is inertialization_slow_halflife_s with the simulation object at rest and
+    inertialization_halflife_s from 1 m/s, linear between (issue 34: a jump while standing or starting
+    blends out without a jerk); 0 turns it off."""
+    from lmm.character import INERTIALIZATION_SLOW_M_S
+    from lmm.factory import make_controller
+    from lmm.trajectory import SimulationState
+    from lmm.tuning import Tuning
+    tuning = Tuning()
+    c = make_controller("mm", db, features, tuning, None, debug_comparison=False)
+
+    def at(speed):
+        st = c.sim.state
+        c.sim = SimulationState((st[0], (speed, 0.0, 0.0), st[2], st[3], st[4]))
+        return c._inertialization_halflife()
+
+    fast, slow = tuning.inertialization_halflife_s, tuning.inertialization_slow_halflife_s
+    assert slow > fast
+    assert at(0.0) == pytest.approx(slow) and at(INERTIALIZATION_SLOW_M_S) == pytest.approx(fast)
+    assert at(3.5) == pytest.approx(fast)
+    assert at(0.5 * INERTIALIZATION_SLOW_M_S) == pytest.approx(0.5 * (slow + fast), abs=0.006)
+    tuning.inertialization_slow_halflife_s = 0.0
+    assert at(0.0) == fast
