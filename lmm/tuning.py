@@ -240,7 +240,7 @@ class Tuning:
         0.15, "ik", 0.0, 0.5, "s", "Halflife of the blend back after a release by the unlock radius (a step: the "
         "foot is far behind its animation and catches up more slowly, 0: the blend halflife above).")
     ik_lock_follow_m_s: float = _f(
-        0.2, "ik", 0.0, 1.0, "m/s", "A locked foot creeps after its animated toe at up to this speed (below the 0.3 m/s "
+        0.0, "ik", 0.0, 1.0, "m/s", "A locked foot creeps after its animated toe at up to this speed (below the 0.3 m/s "
         "that reads as skating), so less is left to catch up when it lets go (0: held still).")
     ik_foot_height_m: float = _f(
         0.02, "ik", 0.0, 0.2, "m", "Toe joint height above the contact point; a locked toe is kept at least "
@@ -273,7 +273,7 @@ class Tuning:
         16500.0, "ik", 0.0, 100000.0, "deg/s2", "The IK's knees never accelerate harder than this (the data's "
         "knees stay under about 19,000 deg/s2): a leg let go by its lock catches up smoothly (0: no limit).")
     ik_soft_reach_m: float = _f(
-        0.02, "ik", 0.0, 0.1, "m", "Soft reach: over this last distance before the longest leg, the leg "
+        0.06, "ik", 0.0, 0.1, "m", "Soft reach: over this last distance before the longest leg, the leg "
         "approaches it smoothly instead of snapping straight (0: a hard limit).")
 
     # -- change events ------------------------------------------------------------------------------
