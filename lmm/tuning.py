@@ -237,7 +237,7 @@ class Tuning:
     ik_blend_halflife_s: float = _f(
         0.1, "ik", 0.0, 0.5, "s", "Halflife of the blend back to the animated foot after unlocking.")
     ik_step_halflife_s: float = _f(
-        0.15, "ik", 0.0, 0.5, "s", "Halflife of the blend back after a release by the unlock radius (a step: the "
+        0.2, "ik", 0.0, 0.5, "s", "Halflife of the blend back after a release by the unlock radius (a step: the "
         "foot is far behind its animation and catches up more slowly, 0: the blend halflife above).")
     ik_lock_follow_m_s: float = _f(
         0.0, "ik", 0.0, 1.0, "m/s", "A locked foot creeps after its animated toe at up to this speed (below the 0.3 m/s "
@@ -249,7 +249,7 @@ class Tuning:
         0.15, "ik", 0.0, 0.3, "m", "Length from the toe joint to the tip of the foot; the tip is kept above "
         "the ground by rotating the toe.")
     ik_lift_height_m: float = _f(
-        0.02, "ik", 0.0, 0.2, "m", "After its contact ends a locked foot stays locked until the animated toe "
+        0.01, "ik", 0.0, 0.2, "m", "After its contact ends a locked foot stays locked until the animated toe "
         "has risen this far; an unlocked foot less than this above its last lock is near the ground.")
     ik_ground_blend_speed_m_s: float = _f(
         0.1, "ik", 0.0, 2.0, "m/s", "Fastest horizontal blend of an unlocked foot near the ground back to the "

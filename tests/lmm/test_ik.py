@@ -367,7 +367,7 @@ def test_standing_ends_in_the_idles_stance_not_a_frozen_stride(db, features):
     straighter knee is bent like the data's idles (12-23 degrees): a foot left planted where the stride put
     it steps to the standing pose (ik_idle_unlock_radius_m). (Before it, a leg stayed stretched to the knee
     floor on a tenth of those ticks; since the 6 cm soft reach and the slower blends of issue 34 the radius
-    alone no longer decides it: 13.6 degrees without it.)"""
+    alone no longer decides it: the straighter knee's 10th percentile was 13.6 degrees without it.)"""
     from lmm.data.inputs import open_input
     from lmm.factory import make_controller
     from lmm.quality import QualityJoints, knee_angles_deg
