@@ -60,6 +60,7 @@ from lmm.inertialize import (Offsets, ShownPose, inertialize_apply_pose, inertia
 from lmm.kinematics import PoseSkeleton, pose_forward_kinematics, pose_update_legs
 from lmm.pose_rows import pack_rows
 from lmm.root_motion import LazyRootShift, integrate_root, synchronize
+from lmm.search import candidate_mask
 from lmm.source_pose import SearchOutcome, SourcePose
 from lmm.tick_snapshot import SnapshotFeatures, TickQuery, array_of, ghost_positions
 from lmm.trajectory import (SharpInputChange, SimulationState, StickWorld, desired_rotation, desired_velocity,
@@ -75,6 +76,7 @@ class CharacterController(Controller):
     name = "character"
     _toe_axes_floats = None  # toe_axes as tuples (filled on first use)
     _fk_plan = None  # PoseSkeleton of the skeleton and its legs (made on first use)
+    _candidate_mask = None  # (exclude_range_end_frames, the mask it gave), made on first use
 
     @property
     def desired_velocity(self) -> np.ndarray:
@@ -320,6 +322,24 @@ class CharacterController(Controller):
             self._root_position_t, self._root_rotation_t, vel0, ang0, dt)
         self._set_root(*synchronize(tun, self.sim.state, root_pos, root_rot, root_vel_world, root_ang_world, dt))
         return src, pos, rot, (root_pos, root_rot)
+
+    # ------------------------------------------------------------------------------------------
+    # what the search may jump to (both controllers)
+    # ------------------------------------------------------------------------------------------
+    def candidate_mask(self) -> np.ndarray:
+        """Frames that may be jumped to under the current tuning (the last frame of a range never)."""
+        end = max(int(self.tuning.exclude_range_end_frames), 1)
+        cached = self._candidate_mask
+        if cached is None or cached[0] != end:
+            cached = self._candidate_mask = (end, candidate_mask(self.db.n_frames, self.db.range_starts,
+                                                                  self.db.range_stops, end))
+        return cached[1]
+
+    def idle_set_active(self) -> bool:
+        """The stick has been released long enough for the search to keep to the idle set (see
+        :class:`lmm.tuning.Tuning`)."""
+        tun = self.tuning
+        return bool(tun.idle_set_enabled) and self.stick_released_s >= tun.idle_delay_s - 1e-9
 
     def _inertialization_halflife(self) -> float:
         """The offsets' halflife this tick: ``inertialization_slow_halflife_s`` with the simulation object at

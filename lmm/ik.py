@@ -277,8 +277,11 @@ class FootLockState:
         off, off_v = self._off, self._off_v
         y0 = float(halflife_to_damping(blend_halflife)) / 2.0
         e0 = math.exp(-y0 * dt)
-        ys = float(halflife_to_damping(step_halflife if step_halflife > 0.0 else blend_halflife)) / 2.0
-        es = math.exp(-ys * dt)
+        if step_halflife > 0.0 and step_halflife != blend_halflife:
+            ys = float(halflife_to_damping(step_halflife)) / 2.0
+            es = math.exp(-ys * dt)
+        else:
+            ys, es = y0, e0
         stepping = self._stepping
         targets = []
         for i in range(2):

@@ -41,7 +41,7 @@ from lmm.controller import Candidates, Capabilities
 from lmm.mm import default_start_frame
 from lmm.nn import MLP, pose_vector_slices, pose_vector_tick_columns
 from lmm.pose_decoding import PoseDecoder
-from lmm.search import SearchIndex, candidate_mask
+from lmm.search import SearchIndex
 from lmm.tuning import IDLE_TAG, Tuning
 from lmm.data.weights import WeightsError, load as load_weights
 
@@ -151,7 +151,6 @@ class LearnedMotionMatchingController(CharacterController):
         self._idle = None            # (frames, their network states) of the idle set, built on first use
         self.idle_note = ""          # why the idle set cannot be used ("" when it can)
         self._idle_playing = False   # the state was last set from the idle set
-        self._idle_candidates = {}   # exclude_range_end_frames -> which idle frames may be jumped to
         self._calib_frame = -1       # a database frame like the playing state, for ground calibration
         self._calib_table = None     # (normalised features it was built from, every stride-th row of them)
         super().__init__(db, features, tuning)
@@ -205,11 +204,6 @@ class LearnedMotionMatchingController(CharacterController):
         self.idle_states()
 
     # -- the idle set ------------------------------------------------------------------------------
-    def idle_set_active(self) -> bool:
-        """The stick has been released long enough for the idle set (see :class:`lmm.tuning.Tuning`)."""
-        tun = self.tuning
-        return bool(tun.idle_set_enabled) and self.stick_released_s >= tun.idle_delay_s - 1e-9
-
     def idle_states(self):
         """``(frames, states)`` of the database's idle-tagged frames: each state is the frame's features
         (in the networks' space) and its compressor latent, what the projector would ideally output for
@@ -245,12 +239,7 @@ class LearnedMotionMatchingController(CharacterController):
             return None
         frames, states = idle
         costs = np.sum((self.features.normalized[frames] - query_norm) ** 2, axis=1)
-        end = max(int(self.tuning.exclude_range_end_frames), 1)
-        ok = self._idle_candidates.get(end)
-        if ok is None:
-            ok = candidate_mask(self.db.n_frames, self.db.range_starts, self.db.range_stops, end)[frames]
-            self._idle_candidates = {end: ok}
-        costs[~ok] = np.inf
+        costs[~self.candidate_mask()[frames]] = np.inf
         if around is not None:
             w = int(self.tuning.exclude_current_window_frames)
             costs[np.abs(frames - around) <= w] = np.inf

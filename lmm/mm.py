@@ -44,7 +44,6 @@ class MotionMatchingController(CharacterController):
 
     def __init__(self, db, features, tuning: Tuning | None = None):
         self.index: SearchIndex | None = None
-        self._masks: dict[int, np.ndarray] = {}
         self._root_vel, self._root_ang = root_local_velocities(db)
         self.frame = 0
         self.phase = 0.0
@@ -121,20 +120,6 @@ class MotionMatchingController(CharacterController):
         super()._on_tuning_change(change)
         if change.field in ("tag_bias", "tag_excluded"):
             self._tag_tuning = None
-
-    def candidate_mask(self) -> np.ndarray:
-        """Frames that may be jumped to under the current tuning (the last frame of a range never)."""
-        end = max(int(self.tuning.exclude_range_end_frames), 1)
-        mask = self._masks.get(end)
-        if mask is None:
-            mask = candidate_mask(self.db.n_frames, self.db.range_starts, self.db.range_stops, end)
-            self._masks = {end: mask}
-        return mask
-
-    def idle_set_active(self) -> bool:
-        """The stick has been released long enough for the search to keep to the idle set."""
-        tun = self.tuning
-        return bool(tun.idle_set_enabled) and self.stick_released_s >= tun.idle_delay_s - 1e-9
 
     def tag_groups(self) -> list[tuple[float, np.ndarray]]:
         """The candidate mask split into (tag bias, mask) groups under the current tuning: without the
