@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 
 from lmm.metrics import DurationStats, pose_problem
-from lmm.quality import MotionQuality, QualityJoints, reference_quality
+from lmm.quality import MotionQuality, PlayedAccelerations, QualityJoints, reference_quality
 
 SHORT = {"mm": "MM", "lmm": "LMM"}
 
@@ -21,6 +21,7 @@ class LiveQuality:
     def __init__(self, db):
         self.joints = QualityJoints.of_database(db)
         self.reference = reference_quality(db)
+        self.played = PlayedAccelerations(db)
         self.by_name: dict[str, MotionQuality] = {}
 
     def reset(self) -> None:
@@ -35,9 +36,9 @@ class LiveQuality:
                 continue
             q = self.by_name.get(name)
             if q is None:
-                q = self.by_name[name] = MotionQuality(self.joints, self.reference, DurationStats)
+                q = self.by_name[name] = MotionQuality(self.joints, self.reference, DurationStats, self.played)
             before = q.pops + q.knee_snaps + q.straight_knee_samples
-            q.add(time_s, pose.global_positions, snap.desired_velocity)
+            q.add(time_s, pose.global_positions, snap.desired_velocity, snap.matched_frame)
             flagged[name] = q.pops + q.knee_snaps + q.straight_knee_samples - before
         return flagged
 
@@ -51,6 +52,8 @@ class LiveQuality:
             lines.append(f"{SHORT.get(name, name)} quality: {_num(r['pops_per_min'], '.1f')} pops/min, "
                          f"{_num(r['knee_snaps_per_min'], '.1f')} knee snaps/min, straight knee "
                          f"{_num(100 * r['straight_knee_fraction'], '.1f')} %, jerk p99 "
-                         f"{_num(r['jerk_p99_ratio'], '.2f')}x data, stops {r['stops']} "
+                         f"{_num(r['jerk_p99_ratio'], '.2f')}x data, slow accel p99 "
+                         f"{_num(r['acceleration_p99_slow_ratio'], '.2f')}x (frames played "
+                         f"{_num(r['acceleration_p99_slow_played_ratio'], '.2f')}x), stops {r['stops']} "
                          f"({r['stops_unsettled']} slow to settle)")
         return "\n".join(lines)

@@ -22,7 +22,7 @@ import math
 import numpy as np
 
 from lmm.data.derived import cached
-from lmm.quality import QUALITY_FPS, MotionQuality, QualityJoints, reference_quality, resample
+from lmm.quality import QUALITY_FPS, MotionQuality, PlayedAccelerations, QualityJoints, reference_quality, resample
 
 
 class FootSkating:
@@ -282,7 +282,7 @@ class MotionMetrics:
         self.skating = FootSkating()
         self.ground = GroundSkating()   # fed the quality's 1/30 s samples: one time step for every figure
         joints = QualityJoints.of_database(db)
-        self.quality = MotionQuality(joints, reference_quality(db), DurationStats)
+        self.quality = MotionQuality(joints, reference_quality(db), DurationStats, PlayedAccelerations(db))
         toes = joints.toes
         self.quality.on_sample = lambda t, p: self.ground.add_frame(p[toes], self.quality.h)
         self._err_sum = 0.0
@@ -318,7 +318,8 @@ class MotionMetrics:
             if dt > 0:
                 self.skating.add(self._prev_toes, toes, snap.foot_contacts, dt)
                 self.seconds += dt
-        self.quality.add(snap.time_s, pose.global_positions, getattr(snap, "desired_velocity", None))
+        self.quality.add(snap.time_s, pose.global_positions, getattr(snap, "desired_velocity", None),
+                         getattr(snap, "matched_frame", -1))
         self._prev_toes, self._prev_time = toes, snap.time_s
         root = pose.global_positions[0].astype(np.float64)
         err = float(np.linalg.norm(root - snap.simulation_position))

@@ -14,7 +14,10 @@ memory). The database's own figures are the yardstick:
 * a **straight knee** is a knee bent less than the database's straightest knee (angle between thigh
   and shin, 0 = straight);
 * **acceleration p99 at low speed** (root slower than :data:`SLOW_ROOT_M_S`) and **jerk p99**, over
-  all joints, as ratios to the database's;
+  all joints, as ratios to the database's; beside the first, the same p99 of the database frames the
+  controller was playing at those samples, over the same step (:class:`PlayedAccelerations`): how hard
+  the motion it plays accelerates by itself there (starts, stops and turns accelerate more than the
+  idles that make up most of the database's slow samples), so a reader sees how much the runtime adds;
 * **response**: when the desired velocity (the stick, through the speeds) changes by at least
   :data:`STEP_M_S` in one tick (a start, a reversal, a 90-degree turn, a stop), the time until the root's
   velocity is within 1 - :data:`STEP_REACHED` of that change from the desired velocity (the desired
@@ -185,13 +188,44 @@ def reference_quality(db) -> dict:
 
 # -- a stream of poses -----------------------------------------------------------------------------------
 
+class PlayedAccelerations:
+    """The database's own joint accelerations (m/s^2, (J,)) at a frame, over the quality's step: second
+    differences of the frames 1/30 s before and after it (interpolated when the database's rate is not a
+    multiple of 30 fps), within the frame's range (None where the step leaves it, or for no frame). The
+    positions are the database's world positions (its own root path), as :func:`reference_quality` reads
+    them. A handful of frames' forward kinematics per call: made only for the low-speed samples."""
+
+    def __init__(self, db):
+        self.db = db
+        self.step = db.fps / QUALITY_FPS       # frames per 1/30 s
+
+    def __call__(self, frame: int):
+        db, r = self.db, self.step
+        if frame is None or frame < 0 or frame >= db.n_frames:
+            return None
+        k = int(db.range_index(frame))
+        lo, hi = int(db.range_starts[k]), int(db.range_stops[k])
+        if frame - r < lo or frame + r > hi - 1:
+            return None
+        i = int(math.floor(r))
+        w = r - i
+        frames = [frame - i, frame, frame + i] if w < 1e-9 else [frame - i - 1, frame - i, frame, frame + i, frame + i + 1]
+        _, pos = db.global_transforms(np.array(frames))
+        if w >= 1e-9:
+            # the positions r frames either side, linear between the frames around them
+            pos = np.stack([pos[1] * (1.0 - w) + pos[0] * w, pos[2], pos[3] * (1.0 - w) + pos[4] * w])
+        return joint_accelerations(pos, 1.0 / QUALITY_FPS)[0]
+
+
 class MotionQuality:
     """The figures of a stream of poses, fed one tick at a time (:meth:`add`) in bounded memory.
 
     ``reference``: the database's figures (:func:`reference_quality`). ``quantiles``: a factory of
-    streaming quantile accumulators (``add_many``, ``quantile``) for the p99s."""
+    streaming quantile accumulators (``add_many``, ``quantile``) for the p99s. ``played``: a
+    :class:`PlayedAccelerations` (or any frame -> accelerations or None), for the p99 of the frames played
+    at the low-speed samples; each :meth:`add` then names the database frame its pose plays."""
 
-    def __init__(self, joints: QualityJoints, reference: dict, quantiles):
+    def __init__(self, joints: QualityJoints, reference: dict, quantiles, played=None):
         self.joints, self.reference = joints, reference
         self.h = 1.0 / QUALITY_FPS
         self._window = deque(maxlen=4)       # the last samples, (J, 3) each
@@ -205,6 +239,10 @@ class MotionQuality:
         self.worst = {"pop": (0.0, -1.0), "knee_snap": (0.0, -1.0)}   # (largest value, its time)
         self._slow_acc = quantiles()
         self._jerk = quantiles()
+        self.played = played
+        self._slow_played = quantiles()
+        self._frames = deque(maxlen=4)       # the database frame each sample of the window plays (-1: none)
+        self._frame = -1                     # the frame of the tick being added
         # stops: the state machine of :meth:`_stop_step`
         self._peak_speed = 0.0
         self._stop_at = None                 # time the root stopped, while a stop is being watched
@@ -218,10 +256,12 @@ class MotionQuality:
         self._step = None                    # (time, start velocity, target velocity) of the step being timed
         self.responses = []                  # seconds to reach each step (inf: not within STEP_TIMEOUT_S)
 
-    def add(self, time_s: float, positions, desired_velocity=None) -> None:
+    def add(self, time_s: float, positions, desired_velocity=None, frame: int = -1) -> None:
         """One tick's world positions (J, 3) at ``time_s`` (increasing); ``desired_velocity`` (3,), when
-        given, times the response to its steps."""
+        given, times the response to its steps; ``frame``: the database frame the pose plays (-1: none),
+        for the played frames' figure (the samples this tick makes take it)."""
         p = np.asarray(positions, np.float64)
+        self._frame = int(frame)
         if desired_velocity is not None:
             d = (float(desired_velocity[0]), float(desired_velocity[2]))
             old = self._desired
@@ -250,6 +290,7 @@ class MotionQuality:
             self.on_sample(t, p)
         w, h, ref = self._window, self.h, self.reference
         w.append(p)
+        self._frames.append(self._frame)
         knees = knee_angles_deg(p[None], self.joints.legs)[0]
         self._knees.append(knees)
         if float(knees.min()) < ref["min_knee_angle"]:
@@ -265,6 +306,10 @@ class MotionQuality:
             root = horizontal_speeds(arr[:, self.joints.root], h)
             if 0.5 * (root[0] + root[1]) < SLOW_ROOT_M_S:
                 self._slow_acc.add_many(acc)
+                if self.played is not None:
+                    own = self.played(self._frames[-2])     # the frame of the middle sample
+                    if own is not None:
+                        self._slow_played.add_many(own)
             knee_acc = float(np.abs(second_differences(np.stack(self._knees), h)).max())
             if knee_acc > ref["max_knee_acceleration"]:
                 self.knee_snaps += 1
@@ -354,6 +399,7 @@ class MotionQuality:
             f"{prefix}straight_knee_fraction": self.straight_knee_samples / self.samples if self.samples
             else float("nan"),
             f"{prefix}acceleration_p99_slow_ratio": slow_p99 / ref["acceleration_p99_slow"],
+            f"{prefix}acceleration_p99_slow_played_ratio": self._slow_played.quantile(0.99) / ref["acceleration_p99_slow"],
             f"{prefix}jerk_p99_ratio": jerk_p99 / ref["jerk_p99"],
             f"{prefix}stops": len(self.stops),
             f"{prefix}settle_s_median": float(np.median(verdicts)) if verdicts else float("nan"),
@@ -371,10 +417,11 @@ class MotionQuality:
 
 
 def clip_quality(positions, fps: float, joints: QualityJoints, reference: dict, quantiles,
-                 prefix: str = "quality_") -> dict:
+                 prefix: str = "quality_", frames=None, played=None) -> dict:
     """:class:`MotionQuality`'s figures of a whole clip of world positions (F, J, 3) at ``fps`` (a
-    recording, a take): the stream fed frame by frame, so a clip and a run are measured alike."""
-    q = MotionQuality(joints, reference, quantiles)
+    recording, a take): the stream fed frame by frame, so a clip and a run are measured alike.
+    ``frames`` (F,), with ``played``: the database frame each pose plays (see :class:`MotionQuality`)."""
+    q = MotionQuality(joints, reference, quantiles, played)
     for i, p in enumerate(np.asarray(positions, np.float64)):
-        q.add(i / fps, p)
+        q.add(i / fps, p, None, -1 if frames is None else int(frames[i]))
     return q.result(prefix)

@@ -173,6 +173,7 @@ def main(args) -> int:
 #: well the path is followed, how often it searches and switches, the step cost, broken poses
 SUMMARY_METRICS = ("foot_skating_cm_s", "foot_skating_max_cm_s", "ground_skating_fraction",
                    "ground_skating_fraction_source", "quality_pops_per_min", "quality_knee_snaps_per_min",
+                   "quality_acceleration_p99_slow_ratio", "quality_acceleration_p99_slow_played_ratio",
                    "quality_jerk_p99_ratio", "trajectory_error_mean_m", "transitions_per_s", "searches_per_s",
                    "step_us_median", "non_finite_ticks")
 

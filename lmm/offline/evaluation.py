@@ -171,7 +171,7 @@ def run_controllers(controllers: dict, inputs, seconds: float, dt: float = 1.0 /
         runs[name] = {"positions": np.zeros((n, c.db.n_bones, 3), np.float32), "root_position": np.zeros((n, 3)),
                       "root_rotation": np.zeros((n, 4)),
                       "rotations": np.zeros((n, c.db.n_bones, 4), np.float32), "contacts": np.zeros((n, 2), bool), "latents": [],
-                      "queries": [], "step_us": np.zeros(n), "dt": dt}
+                      "queries": [], "step_us": np.zeros(n), "dt": dt, "frames": np.full(n, -1, np.int64)}
     for i in range(n):
         poses, snaps, ms = step_controllers(controllers, inputs.at(i * dt), dt)
         for name, run in runs.items():
@@ -182,6 +182,7 @@ def run_controllers(controllers: dict, inputs, seconds: float, dt: float = 1.0 /
             run["root_position"][i] = pose.global_positions[0]
             run["root_rotation"][i] = pose.global_rotations[0]
             run["contacts"][i] = pose.contacts
+            run["frames"][i] = snap.matched_frame
             if snap.latent is not None:
                 run["latents"].append(snap.latent)
             if snap.searched:
@@ -281,14 +282,17 @@ def evaluate(db, features, nets, compressor: MLP, inputs="builtin:random:1", sec
                              "lmm": ground_skating(lmm["positions"][:, toes], 1.0 / lmm["dt"])["fraction"],
                              "source": source_ground_skating(db)["fraction"]}
     from lmm.metrics import DurationStats
-    from lmm.quality import QualityJoints, clip_quality, reference_quality
-    joints, reference = QualityJoints.of_database(db), reference_quality(db)
+    from lmm.quality import PlayedAccelerations, QualityJoints, clip_quality, reference_quality
+    joints, reference, played = QualityJoints.of_database(db), reference_quality(db), PlayedAccelerations(db)
     out["quality"] = {"database": reference, **{
-        name: clip_quality(run["positions"], 1.0 / run["dt"], joints, reference, DurationStats, prefix="")
+        name: clip_quality(run["positions"], 1.0 / run["dt"], joints, reference, DurationStats, prefix="",
+                           frames=run["frames"], played=played)
         for name, run in (("mm", mm), ("lmm", lmm))}}
     log("quality: " + "; ".join(
         f"{name} {q['pops_per_min']:.1f} pops/min, {q['knee_snaps_per_min']:.1f} knee snaps/min, jerk p99 "
-        f"{q['jerk_p99_ratio']:.2f}x" for name, q in ((n, out["quality"][n]) for n in ("mm", "lmm"))))
+        f"{q['jerk_p99_ratio']:.2f}x, low-speed acceleration p99 {q['acceleration_p99_slow_ratio']:.2f}x (the "
+        f"frames played {q['acceleration_p99_slow_played_ratio']:.2f}x)"
+        for name, q in ((n, out["quality"][n]) for n in ("mm", "lmm"))))
     out["physics"] = physics_of_runs(db, runs)
     if out["physics"].get("available"):
         log("physics: root residual force median " + ", ".join(

@@ -183,3 +183,68 @@ def test_the_steps_input_stands_runs_reverses_turns_and_stops():
     assert speeds == pytest.approx([0, 1, 1, 1, 0, 0, 1])
     fwd, back, side = log(4.0), log(7.0), log(10.0)
     assert fwd.left_y == pytest.approx(1) and back.left_y == pytest.approx(-1) and abs(side.left_x) == pytest.approx(1)
+
+
+def test_played_frames_accelerations_are_the_databases_own(db):
+    """:class:`PlayedAccelerations` at a frame: the second differences of the database's world positions
+    1/30 s either side of it, written out here from the whole range; None where that step leaves the range
+    or for no frame."""
+    from lmm.quality import PlayedAccelerations
+
+    played = PlayedAccelerations(db)
+    r = int(np.argmax(db.range_stops - db.range_starts))
+    lo, hi = int(db.range_starts[r]), int(db.range_stops[r])
+    _, pos = db.global_transforms(slice(lo, hi))
+    k = int(round(db.fps / 30))
+    assert k * 30 == db.fps      # the shipped data is 60 fps: whole frames either side
+    for f in (lo + k, (lo + hi) // 2, hi - 1 - k):
+        i = f - lo
+        want = np.linalg.norm(pos[i + k] - 2 * pos[i] + pos[i - k], axis=-1) * 30.0 ** 2
+        np.testing.assert_allclose(played(f), want, rtol=1e-9, atol=1e-9)
+    assert played(lo + k - 1) is None and played(hi - k) is None and played(-1) is None
+
+
+def test_a_run_that_plays_the_database_has_its_played_figure(db):
+    """Fed a range of the database as it is, with the frames it plays, the low-speed acceleration p99 and
+    the played frames' p99 are the same values: the played frame of each sample lines up with it. Frames
+    a second off give another figure."""
+    from lmm.quality import PlayedAccelerations
+
+    joints, ref, played = QualityJoints.of_database(db), reference_quality(db), PlayedAccelerations(db)
+    best = None
+    for r in range(len(db.range_starts)):
+        lo, hi = int(db.range_starts[r]), int(db.range_stops[r])
+        if hi - lo < 600 or db.range_mirrored[r]:
+            continue
+        _, pos = db.global_transforms(slice(lo, hi))
+        speed = np.hypot(*(pos[2:, 0, [0, 2]] - pos[:-2, 0, [0, 2]]).T) * 30.0
+        slow = float(np.mean(speed < 0.5))
+        if 0.2 < slow < 0.8 and (best is None or hi - lo > best[1] - best[0]):
+            best = (lo, hi, pos)
+    assert best is not None, "no range that both stands and moves"
+    lo, hi, pos = best
+    frames = np.arange(lo, hi)
+    got = clip_quality(pos, db.fps, joints, ref, DurationStats, frames=frames, played=played)
+    assert math.isfinite(got["quality_acceleration_p99_slow_ratio"])
+    assert got["quality_acceleration_p99_slow_played_ratio"] == pytest.approx(
+        got["quality_acceleration_p99_slow_ratio"], rel=1e-12)
+    off = clip_quality(pos, db.fps, joints, ref, DurationStats, frames=np.clip(frames + 60, lo, hi - 1), played=played)
+    assert off["quality_acceleration_p99_slow_played_ratio"] != pytest.approx(
+        got["quality_acceleration_p99_slow_ratio"], rel=1e-3)
+    # without frames (a recording): no played figure
+    none = clip_quality(pos, db.fps, joints, ref, DurationStats)
+    assert math.isnan(none["quality_acceleration_p99_slow_played_ratio"])
+
+
+def test_runs_report_the_played_frames_figure(db):
+    """``run --metrics-json``'s metrics (:class:`lmm.metrics.MotionMetrics`) carry the played frames' p99
+    for both controllers' kind of run: a motion matching run that stands, starts and stops."""
+    from lmm.data.inputs import open_input
+    from lmm.factory import make_controller
+    from lmm.features import build_features
+    from lmm.runner import run_headless
+
+    c = make_controller("mm", db, build_features(db), None, None, debug_comparison=False)
+    m = run_headless(c, open_input("builtin:steps", 16.0), 16.0)
+    assert 0.0 < m["quality_acceleration_p99_slow_played_ratio"] < 10.0
+    assert m["quality_acceleration_p99_slow_ratio"] > 0.0

@@ -16,6 +16,7 @@ def test_quality_row_and_timeline_markers(run_studio, tmp_path, limits):
     assert r.rc == 0, r
     p = r.dump["labels"]["end"]["panels"]
     assert "MM quality:" in p["stats"]["quality"] and "knee snaps/min" in p["stats"]["quality"]
+    assert "slow accel p99" in p["stats"]["quality"] and "frames played" in p["stats"]["quality"]
     markers = p["timeline"]["markers"]
     assert markers["trans"]["mm"] > 5                      # MM's transitions over 8 s of turns
     if limits:
