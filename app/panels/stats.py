@@ -62,6 +62,8 @@ class StatsPanel(Panel):
         with self.window(window_kwargs):
             dpg.add_text("", tag="stats_fps", color=(140, 230, 140))
             dpg.add_text("", tag="stats_branch", color=(240, 180, 90), wrap=0)
+            # the motion quality first: what a user tuning the motion reads (the costs and memory below it)
+            dpg.add_text("", tag="stats_quality", color=(200, 190, 140), wrap=0)
             dpg.add_text("", tag="stats_memory")
             with dpg.table(header_row=False, borders_innerV=True, policy=dpg.mvTable_SizingStretchProp,
                            tag="stats_table"):
@@ -77,7 +79,6 @@ class StatsPanel(Panel):
             dpg.add_text("", tag="stats_detail", color=(170, 170, 180))
             dpg.add_text("", tag="stats_memory_detail", color=(150, 150, 160))
             dpg.add_text("", tag="stats_process", color=(150, 150, 160))
-            dpg.add_text("", tag="stats_quality", color=(200, 190, 140), wrap=0)
             with dpg.plot(tag="stats_plot", height=-1, width=-1, no_menus=True, no_mouse_pos=True):
                 dpg.add_plot_legend(location=dpg.mvPlot_Location_NorthWest, horizontal=True)
                 dpg.add_plot_axis(dpg.mvXAxis, tag="stats_x", no_tick_labels=True)
