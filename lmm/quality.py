@@ -198,6 +198,7 @@ class PlayedAccelerations:
     def __init__(self, db):
         self.db = db
         self.step = db.fps / QUALITY_FPS       # frames per 1/30 s
+        self.h = 1.0 / QUALITY_FPS
 
     def __call__(self, frame: int):
         db, r = self.db, self.step
@@ -209,12 +210,12 @@ class PlayedAccelerations:
             return None
         i = int(math.floor(r))
         w = r - i
-        frames = [frame - i, frame, frame + i] if w < 1e-9 else [frame - i - 1, frame - i, frame, frame + i, frame + i + 1]
-        _, pos = db.global_transforms(np.array(frames))
-        if w >= 1e-9:
-            # the positions r frames either side, linear between the frames around them
-            pos = np.stack([pos[1] * (1.0 - w) + pos[0] * w, pos[2], pos[3] * (1.0 - w) + pos[4] * w])
-        return joint_accelerations(pos, 1.0 / QUALITY_FPS)[0]
+        if w < 1e-9:
+            _, pos = db.global_transforms(np.array([frame - i, frame, frame + i]))
+        else:   # r frames either side fall between whole frames: linear between the two around each
+            _, p = db.global_transforms(np.array([frame - i - 1, frame - i, frame, frame + i, frame + i + 1]))
+            pos = np.stack([p[1] * (1.0 - w) + p[0] * w, p[2], p[3] * (1.0 - w) + p[4] * w])
+        return joint_accelerations(pos, self.h)[0]
 
 
 class MotionQuality:
@@ -393,13 +394,14 @@ class MotionQuality:
         verdicts = [s for _, s, *_ in self.stops if s is not None]      # inf: not settled in SETTLE_LIMIT_S
         settles = [s for s in verdicts if math.isfinite(s)]
         slow_p99, jerk_p99 = self._slow_acc.quantile(0.99), self._jerk.quantile(0.99)
+        played_p99 = self._slow_played.quantile(0.99)
         return {
             f"{prefix}pops_per_min": self.pops / minutes if minutes > 0 else float("nan"),
             f"{prefix}knee_snaps_per_min": self.knee_snaps / minutes if minutes > 0 else float("nan"),
             f"{prefix}straight_knee_fraction": self.straight_knee_samples / self.samples if self.samples
             else float("nan"),
             f"{prefix}acceleration_p99_slow_ratio": slow_p99 / ref["acceleration_p99_slow"],
-            f"{prefix}acceleration_p99_slow_played_ratio": self._slow_played.quantile(0.99) / ref["acceleration_p99_slow"],
+            f"{prefix}acceleration_p99_slow_played_ratio": played_p99 / ref["acceleration_p99_slow"],
             f"{prefix}jerk_p99_ratio": jerk_p99 / ref["jerk_p99"],
             f"{prefix}stops": len(self.stops),
             f"{prefix}settle_s_median": float(np.median(verdicts)) if verdicts else float("nan"),

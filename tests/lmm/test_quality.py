@@ -248,3 +248,31 @@ def test_runs_report_the_played_frames_figure(db):
     m = run_headless(c, open_input("builtin:steps", 16.0), 16.0)
     assert 0.0 < m["quality_acceleration_p99_slow_played_ratio"] < 10.0
     assert m["quality_acceleration_p99_slow_ratio"] > 0.0
+
+
+def test_played_frames_between_whole_frames_are_interpolated():
+    """At a rate that is not a multiple of 30 fps the frames 1/30 s either side fall between whole frames
+    and are linear between the two around each: on x = c n^2 (n the frame) that adds c w (1 - w) to each
+    side, so the second difference is (2 c r^2 + 2 c w (1 - w)) / h^2 with r = fps / 30 frames, w its
+    fraction."""
+    from types import SimpleNamespace
+
+    from lmm.quality import PlayedAccelerations
+
+    c, fps = 0.01, 50.0
+
+    def global_transforms(frames):
+        n = np.asarray(frames, np.float64)
+        pos = np.zeros((len(n), 2, 3))
+        pos[:, 1, 0] = c * n ** 2
+        return None, pos
+
+    db = SimpleNamespace(fps=fps, n_frames=100, range_starts=np.array([0]), range_stops=np.array([100]),
+                         range_index=lambda f: 0, global_transforms=global_transforms)
+    played = PlayedAccelerations(db)
+    r = fps / 30
+    w = r - math.floor(r)
+    got = played(50)
+    assert got[0] == 0.0
+    assert got[1] == pytest.approx((2 * c * r * r + 2 * c * w * (1 - w)) * 30.0 ** 2, rel=1e-9)
+    assert played(1) is None and played(98) is None
