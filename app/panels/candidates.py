@@ -99,6 +99,7 @@ class CandidatesPanel(Panel):
         self._rows_on_screen: list[dict] = []     # the rows of the picture a click was made on (see _on_click)
         self._held_status: str | None = None      # the status shown while the rows are held (None: not held)
         self._hovered_frame = -HOLD_GRACE_FRAMES - 1  # the last studio frame that found the pointer over a row
+        self._hover_age: int | None = None        # frames since then, at the last update (for the state dump)
         self.columns: list[str] = []
         self.why_frame: int | None = None     # the frame asked about (refreshed when the shown tick changes)
         self.why_text = ""
@@ -281,6 +282,7 @@ class CandidatesPanel(Panel):
         or another inspected controller (another key but the candidates') redraws at once."""
         if any(self.dpg.is_item_hovered(f"cand_{r}_rank") for r in range(min(len(self.rows), MAX_ROWS))):
             self._hovered_frame = view.frame
+        self._hover_age = view.frame - self._hovered_frame
         if view.paused or self._shown_for is None or key[1:] != self._shown_for[1:]:
             return False
         return 0 <= view.frame - self._hovered_frame <= HOLD_GRACE_FRAMES
@@ -336,7 +338,7 @@ class CandidatesPanel(Panel):
 
     def state(self) -> dict:
         return {"sort": self.sort_key, "descending": self.descending, "why_not": self.why_text,
-                "held": self._held_status is not None,
+                "held": self._held_status is not None, "hover_age": self._hover_age,
                 "status": self.text.get("cand_status"),
                 "what_if": None if self.what_if is None else {"tick": self.what_if["tick"],
                                                               "changes": self.what_if["changes"]},
