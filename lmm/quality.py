@@ -243,7 +243,6 @@ class MotionQuality:
         self.played = played
         self._slow_played = quantiles()
         self._frames = deque(maxlen=4)       # the database frame each sample of the window plays (-1: none)
-        self._frame = -1                     # the frame of the tick being added
         # stops: the state machine of :meth:`_stop_step`
         self._peak_speed = 0.0
         self._stop_at = None                 # time the root stopped, while a stop is being watched
@@ -262,7 +261,7 @@ class MotionQuality:
         given, times the response to its steps; ``frame``: the database frame the pose plays (-1: none),
         for the played frames' figure (the samples this tick makes take it)."""
         p = np.asarray(positions, np.float64)
-        self._frame = int(frame)
+        frame = int(frame)
         if desired_velocity is not None:
             d = (float(desired_velocity[0]), float(desired_velocity[2]))
             old = self._desired
@@ -274,7 +273,7 @@ class MotionQuality:
         last = self._last_tick
         if last is None:
             self._first = time_s
-            self._sample(time_s, p)
+            self._sample(time_s, p, frame)
         else:
             t0, p0 = last
             while True:
@@ -282,16 +281,16 @@ class MotionQuality:
                 if ts > time_s + 1e-9:
                     break
                 w = (ts - t0) / (time_s - t0) if time_s > t0 else 1.0
-                self._sample(ts, p if abs(1.0 - w) < 1e-6 else p0 + (p - p0) * w)
+                self._sample(ts, p if abs(1.0 - w) < 1e-6 else p0 + (p - p0) * w, frame)
         self._last_tick = (time_s, p)
 
-    def _sample(self, t: float, p: np.ndarray) -> None:
+    def _sample(self, t: float, p: np.ndarray, frame: int) -> None:
         self.samples += 1
         if self.on_sample is not None:
             self.on_sample(t, p)
         w, h, ref = self._window, self.h, self.reference
         w.append(p)
-        self._frames.append(self._frame)
+        self._frames.append(frame)
         knees = knee_angles_deg(p[None], self.joints.legs)[0]
         self._knees.append(knees)
         if float(knees.min()) < ref["min_knee_angle"]:

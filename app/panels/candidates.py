@@ -282,10 +282,10 @@ class CandidatesPanel(Panel):
         or another inspected controller (another key but the candidates') redraws at once."""
         if any(self.dpg.is_item_hovered(f"cand_{r}_rank") for r in range(min(len(self.rows), MAX_ROWS))):
             self._hovered_frame = view.frame
-        self._hover_age = view.frame - self._hovered_frame
+        age = self._hover_age = view.frame - self._hovered_frame
         if view.paused or self._shown_for is None or key[1:] != self._shown_for[1:]:
             return False
-        return 0 <= view.frame - self._hovered_frame <= HOLD_GRACE_FRAMES
+        return 0 <= age <= HOLD_GRACE_FRAMES
 
     def _follow_tick(self, view: View) -> None:
         """Ask again at a new shown tick of a reopened session, paused (only it can be asked: live, the
